@@ -1,0 +1,16 @@
+"""A small pure-Python behavior-tree engine that loads BehaviorTree.CPP v4 XML (as Groot2 saves it)
+and follows BT.CPP's semantics for the nodes it supports; ``tests/test_bt_conformance.py`` checks
+it tick by tick against BehaviorTree.CPP itself."""
+
+from agent_runtime.bt.blackboard import Blackboard
+from agent_runtime.bt.node import (BTError, Condition, InputPort, NodeConfig, OutputPort, Port, StatefulAction,
+                                   SyncAction, TreeNode)
+from agent_runtime.bt.palette import palette_xml
+from agent_runtime.bt.registry import NodeRegistry
+from agent_runtime.bt.status import Status
+from agent_runtime.bt.tree import Tree, load_tree
+
+__all__ = [
+    "Blackboard", "BTError", "Condition", "InputPort", "NodeConfig", "NodeRegistry", "OutputPort", "Port",
+    "StatefulAction", "Status", "SyncAction", "Tree", "TreeNode", "load_tree", "palette_xml",
+]

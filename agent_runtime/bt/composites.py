@@ -1,0 +1,170 @@
+"""Control nodes: Sequence, Fallback, their reactive variants, and Parallel (BehaviorTree.CPP v4)."""
+
+from __future__ import annotations
+
+from agent_runtime.bt.node import ControlNode, InputPort, Port, BTError
+from agent_runtime.bt.status import Status
+
+
+class Sequence(ControlNode):
+    """Ticks children in order, resuming at the RUNNING one; fails (and resets) at the first FAILURE."""
+
+    ID = "Sequence"
+
+    def __init__(self, name, config):
+        super().__init__(name, config)
+        self.current = 0
+
+    def tick(self) -> Status:
+        self.status = Status.RUNNING
+        while self.current < len(self._children):
+            child_status = self._children[self.current].execute_tick()
+            if child_status == Status.RUNNING:
+                return Status.RUNNING
+            if child_status == Status.FAILURE:
+                self.reset_children()
+                self.current = 0
+                return Status.FAILURE
+            self.current += 1
+        self.reset_children()
+        self.current = 0
+        return Status.SUCCESS
+
+    def halt(self) -> None:
+        self.current = 0
+        super().halt()
+
+
+class Fallback(ControlNode):
+    """Ticks children in order until one succeeds; fails when all fail."""
+
+    ID = "Fallback"
+
+    def __init__(self, name, config):
+        super().__init__(name, config)
+        self.current = 0
+
+    def tick(self) -> Status:
+        self.status = Status.RUNNING
+        while self.current < len(self._children):
+            child_status = self._children[self.current].execute_tick()
+            if child_status == Status.RUNNING:
+                return Status.RUNNING
+            if child_status == Status.SUCCESS:
+                self.reset_children()
+                self.current = 0
+                return Status.SUCCESS
+            self.current += 1
+        self.reset_children()
+        self.current = 0
+        return Status.FAILURE
+
+    def halt(self) -> None:
+        self.current = 0
+        super().halt()
+
+
+class ReactiveSequence(ControlNode):
+    """Re-ticks every child from the first on each tick; a RUNNING child halts all the others."""
+
+    ID = "ReactiveSequence"
+
+    def tick(self) -> Status:
+        self.status = Status.RUNNING
+        for index, child in enumerate(self._children):
+            child_status = child.execute_tick()
+            if child_status == Status.RUNNING:
+                for i in range(len(self._children)):
+                    if i != index:
+                        self.halt_child(i)
+                return Status.RUNNING
+            if child_status == Status.FAILURE:
+                self.reset_children()
+                return Status.FAILURE
+        self.reset_children()
+        return Status.SUCCESS
+
+
+class ReactiveFallback(ControlNode):
+    """Re-ticks every child from the first on each tick; a RUNNING child halts all the others."""
+
+    ID = "ReactiveFallback"
+
+    def tick(self) -> Status:
+        self.status = Status.RUNNING
+        for index, child in enumerate(self._children):
+            child_status = child.execute_tick()
+            if child_status == Status.RUNNING:
+                for i in range(len(self._children)):
+                    if i != index:
+                        self.halt_child(i)
+                return Status.RUNNING
+            if child_status == Status.SUCCESS:
+                self.reset_children()
+                return Status.SUCCESS
+        self.reset_children()
+        return Status.FAILURE
+
+
+class Parallel(ControlNode):
+    """Ticks all unfinished children; succeeds at ``success_count`` successes, fails at ``failure_count``
+    failures (negative counts are relative to the number of children: -1 means all)."""
+
+    ID = "Parallel"
+
+    def __init__(self, name, config):
+        super().__init__(name, config)
+        self._completed: set[int] = set()
+        self._successes = 0
+        self._failures = 0
+
+    @classmethod
+    def provided_ports(cls) -> dict[str, Port]:
+        return {
+            "success_count": InputPort(int, -1, "children that must succeed (-1: all)"),
+            "failure_count": InputPort(int, 1, "children that must fail to fail (-1: all)"),
+        }
+
+    def _threshold(self, value: int) -> int:
+        n = len(self._children)
+        return max(n + value + 1, 0) if value < 0 else value
+
+    def _clear(self) -> None:
+        self._completed.clear()
+        self._successes = 0
+        self._failures = 0
+
+    def tick(self) -> Status:
+        n = len(self._children)
+        need_success = self._threshold(self.get_input("success_count"))
+        need_failure = self._threshold(self.get_input("failure_count"))
+        if n < need_success:
+            raise BTError(f"{self.config.path}: fewer children than success_count: can never succeed")
+        if n < need_failure:
+            raise BTError(f"{self.config.path}: fewer children than failure_count: can never fail")
+        self.status = Status.RUNNING
+        for i, child in enumerate(self._children):
+            if i not in self._completed:
+                child_status = child.execute_tick()
+                if child_status == Status.SUCCESS:
+                    self._completed.add(i)
+                    self._successes += 1
+                elif child_status == Status.FAILURE:
+                    self._completed.add(i)
+                    self._failures += 1
+            if self._successes >= need_success:
+                self._clear()
+                self.reset_children()
+                return Status.SUCCESS
+            if n - self._failures < need_success or self._failures == need_failure:
+                self._clear()
+                self.reset_children()
+                return Status.FAILURE
+        return Status.RUNNING
+
+    def halt(self) -> None:
+        self._clear()
+        super().halt()
+
+
+CONTROLS = (Sequence, Fallback, ReactiveSequence, ReactiveFallback, Parallel)

@@ -1,0 +1,14 @@
+"""Node status, as in BehaviorTree.CPP."""
+
+import enum
+
+
+class Status(enum.Enum):
+    IDLE = "IDLE"
+    RUNNING = "RUNNING"
+    SUCCESS = "SUCCESS"
+    FAILURE = "FAILURE"
+
+    @property
+    def completed(self) -> bool:
+        return self in (Status.SUCCESS, Status.FAILURE)

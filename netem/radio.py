@@ -1,0 +1,138 @@
+"""The radio model: decides, per message and per intended receiver, what happens to each copy.
+
+Pure and deterministic: given the same parameters, seed, positions and messages, it books the same
+ledger and delivers the same inboxes. The proxy process drives it; tests drive it directly too.
+
+Order of the checks for one message sent at tick k (a copy gets the first reason that applies):
+
+1. addressing: a receiver that is not an agent of the run (or is the sender) -> ``no_such_receiver``;
+   one that is not alive at tick k -> ``receiver_dead``.
+2. sender queue (tc-netem ``limit``): if ``limit`` messages already wait behind the rate cap, the
+   whole message is tail-dropped -> ``queue_full`` for every copy.
+3. range: distance between sender and receiver at tick k greater than ``range`` -> ``out_of_range``.
+4. loss: an independent Bernoulli draw per copy -> ``loss``.
+
+A message that survives is scheduled. With a ``rate`` cap it is transmitted after the ones queued
+before it, taking ``size / rate`` seconds; idle time earns no credit (tc-netem ``rate``). It is
+delivered at the first tick at or after the end of its transmission, never before k+1, plus
+``latency`` ticks. At delivery, a receiver that died meanwhile -> ``receiver_dead``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict, deque
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from netem.ledger import DELIVERED, Ledger
+from netem.params import NetemParams
+from wire.codec import BROADCAST, RadioMessage
+
+_EPS = 1e-9
+
+
+class Radio:
+    def __init__(self, params: NetemParams, n_agents: int, dt: float, rng: np.random.Generator,
+                 ledger: Ledger | None = None) -> None:
+        self.params = params
+        self.n_agents = n_agents
+        self.dt = dt
+        self.rng = rng
+        self.ledger = ledger if ledger is not None else Ledger()
+        self._busy_until: dict[int, float] = defaultdict(float)
+        self._in_queue: dict[int, deque[float]] = defaultdict(deque)  # transmission end times
+        # delivery tick -> [(receivers, sender, kind, payload, send_tick)]
+        self._pending: dict[int, list[tuple[list[int], int, str, bytes, int]]] = defaultdict(list)
+
+    @property
+    def pending_copies(self) -> int:
+        return sum(len(r) for entries in self._pending.values() for r, *_ in entries)
+
+    def route(self, tick: int, ids: Sequence[int], xs: Sequence[float], ys: Sequence[float],
+              outs: Mapping[int, Iterable[RadioMessage]]) -> None:
+        """Take every message sent at ``tick``. ``ids``/``xs``/``ys``: agents alive at ``tick``."""
+        row_of = {a: i for i, a in enumerate(ids)}
+        alive_sorted = sorted(ids)
+        px = np.asarray(xs, dtype=float)
+        py = np.asarray(ys, dtype=float)
+        for sender in sorted(outs):
+            for msg in outs[sender]:
+                self._route_one(tick, sender, msg, row_of, alive_sorted, px, py)
+
+    def _route_one(self, tick: int, sender: int, msg: RadioMessage, row_of: dict[int, int],
+                   alive_sorted: list[int], px: np.ndarray, py: np.ndarray) -> None:
+        p, ledger, kind, size = self.params, self.ledger, msg.kind, len(msg.payload)
+        if msg.dest == BROADCAST:
+            receivers = [a for a in alive_sorted if a != sender]
+            ledger.sent(tick, sender, kind, size, len(receivers))
+        else:
+            wanted = msg.dest if isinstance(msg.dest, tuple) else (msg.dest,)
+            ledger.sent(tick, sender, kind, size, len(wanted))
+            receivers = []
+            for r in wanted:
+                if r == sender or not 0 <= r < self.n_agents:
+                    ledger.book(tick, sender, kind, size, "no_such_receiver")
+                elif r not in row_of:
+                    ledger.book(tick, sender, kind, size, "receiver_dead")
+                else:
+                    receivers.append(r)
+
+        t_now = tick * self.dt
+        end = t_now
+        if p.rate is not None:
+            queue = self._in_queue[sender]
+            while queue and queue[0] <= t_now + _EPS:
+                queue.popleft()
+            if p.limit is not None and len(queue) >= p.limit:
+                ledger.book(tick, sender, kind, size, "queue_full", len(receivers))
+                return
+            end = max(t_now, self._busy_until[sender]) + size / p.rate
+            self._busy_until[sender] = end
+            queue.append(end)
+        if not receivers:
+            return
+
+        if p.range is not None:
+            s = row_of[sender]
+            r_rows = np.fromiter((row_of[r] for r in receivers), dtype=np.intp, count=len(receivers))
+            dist = np.hypot(px[r_rows] - px[s], py[r_rows] - py[s])
+            near = dist <= p.range + _EPS
+            n_far = int(len(receivers) - near.sum())
+            if n_far:
+                ledger.book(tick, sender, kind, size, "out_of_range", n_far)
+                receivers = [r for r, ok in zip(receivers, near) if ok]
+        if p.loss > 0.0 and receivers:
+            kept = self.rng.random(len(receivers)) >= p.loss
+            n_lost = int(len(receivers) - kept.sum())
+            if n_lost:
+                ledger.book(tick, sender, kind, size, "loss", n_lost)
+                receivers = [r for r, ok in zip(receivers, kept) if ok]
+        if not receivers:
+            return
+        deliver = max(tick + 1, math.ceil(end / self.dt - _EPS)) + p.latency
+        self._pending[deliver].append((receivers, sender, kind, msg.payload, tick))
+
+    def deliver(self, tick: int, alive: Iterable[int]) -> dict[int, list[list]]:
+        """Inboxes for ``tick``: ``{receiver: [[sender, kind, payload], ...]}`` for agents in ``alive``."""
+        alive_set = set(alive)
+        inboxes: dict[int, list[list]] = {}
+        for receivers, sender, kind, payload, _sent in self._pending.pop(tick, ()):
+            size = len(payload)
+            dead = 0
+            for r in receivers:
+                if r in alive_set:
+                    inboxes.setdefault(r, []).append([sender, kind, payload])
+                else:
+                    dead += 1
+            self.ledger.book(tick, sender, kind, size, DELIVERED, len(receivers) - dead)
+            self.ledger.book(tick, sender, kind, size, "receiver_dead", dead)
+        return inboxes
+
+    def finish(self, last_tick: int) -> None:
+        """The run is over: copies still scheduled are booked ``run_ended`` at ``last_tick``."""
+        for due in sorted(self._pending):
+            for receivers, sender, kind, payload, _sent in self._pending[due]:
+                self.ledger.book(last_tick, sender, kind, len(payload), "run_ended", len(receivers))
+        self._pending.clear()

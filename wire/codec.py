@@ -1,0 +1,230 @@
+"""Message schemas and the msgpack codec.
+
+Messages are msgpack arrays (compact and fast to pack). Every decoder checks the shape it reads
+and raises :class:`WireError` on anything else, so a malformed sample is dropped and counted by
+the receiver instead of crashing it.
+
+A radio message's *size* is ``len(payload)``: the bytes of the encoded payload exactly as they
+cross Zenoh. The agent measures it when it encodes; the proxy measures it again when it receives.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+
+BROADCAST = -1
+
+TAG_TICK = 0
+TAG_STOP = 1
+
+
+class WireError(ValueError):
+    """A sample that does not follow the wire contract."""
+
+
+def pack(obj: Any) -> bytes:
+    return msgpack.packb(obj, use_bin_type=True)
+
+
+def unpack(data: bytes) -> Any:
+    try:
+        return msgpack.unpackb(data, raw=False, strict_map_key=False)
+    except Exception as exc:  # msgpack raises several unrelated exception types
+        raise WireError(f"not msgpack: {exc}") from exc
+
+
+def _expect(cond: bool, what: str) -> None:
+    if not cond:
+        raise WireError(what)
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+# --- radio messages -------------------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class RadioMessage:
+    """One message an agent hands to the radio. ``dest`` is BROADCAST, one id, or a tuple of ids."""
+
+    dest: int | tuple[int, ...]
+    kind: str
+    payload: bytes
+
+    def to_wire(self) -> list:
+        dest = list(self.dest) if isinstance(self.dest, tuple) else self.dest
+        return [dest, self.kind, self.payload]
+
+
+def _radio_from_wire(item: Any) -> RadioMessage:
+    _expect(isinstance(item, list) and len(item) == 3, "radio message must be [dest, kind, payload]")
+    dest, kind, payload = item
+    if isinstance(dest, list):
+        _expect(all(_is_int(d) and d >= 0 for d in dest), "multicast dest must be agent ids")
+        dest = tuple(dest)
+    else:
+        _expect(_is_int(dest) and dest >= BROADCAST, "dest must be -1 (broadcast) or an agent id")
+    _expect(isinstance(kind, str) and 0 < len(kind) <= 64, "kind must be a short string")
+    _expect(isinstance(payload, bytes), "payload must be bytes")
+    return RadioMessage(dest, kind, payload)
+
+
+@dataclass(frozen=True, slots=True)
+class Delivered:
+    """One message as it arrives in an inbox."""
+
+    sender: int
+    kind: str
+    payload: bytes
+
+
+def encode_inbox(items: list[list]) -> bytes:
+    """``items``: ``[sender, kind, payload]`` triples, in delivery order."""
+    return pack(items)
+
+
+EMPTY_INBOX = encode_inbox([])
+
+
+def decode_inbox(data: bytes) -> list[Delivered]:
+    items = unpack(data)
+    _expect(isinstance(items, list), "inbox must be a list")
+    out = []
+    for it in items:
+        _expect(isinstance(it, list) and len(it) == 3, "inbox entry must be [sender, kind, payload]")
+        sender, kind, payload = it
+        _expect(_is_int(sender) and isinstance(kind, str) and isinstance(payload, bytes), "bad inbox entry")
+        out.append(Delivered(sender, kind, payload))
+    return out
+
+
+# --- coordinator -> agent -------------------------------------------------------------------
+
+def encode_tick(tick: int, obs: dict, inbox: bytes) -> bytes:
+    return pack([TAG_TICK, tick, obs, inbox])
+
+
+def encode_stop(reason: str) -> bytes:
+    return pack([TAG_STOP, reason])
+
+
+@dataclass(frozen=True, slots=True)
+class TickIn:
+    tick: int
+    obs: dict
+    inbox: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class StopIn:
+    reason: str
+
+
+def decode_agent_in(data: bytes) -> TickIn | StopIn:
+    msg = unpack(data)
+    _expect(isinstance(msg, list) and msg and _is_int(msg[0]), "agent input must be [tag, ...]")
+    if msg[0] == TAG_TICK:
+        _expect(len(msg) == 4, "tick must be [0, tick, obs, inbox]")
+        _, tick, obs, inbox = msg
+        _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
+        _expect(isinstance(obs, dict), "obs must be a map")
+        _expect(isinstance(inbox, bytes), "inbox must be bytes")
+        return TickIn(tick, obs, inbox)
+    if msg[0] == TAG_STOP:
+        _expect(len(msg) == 2 and isinstance(msg[1], str), "stop must be [1, reason]")
+        return StopIn(msg[1])
+    raise WireError(f"unknown agent input tag {msg[0]}")
+
+
+# --- agent -> netem proxy -------------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class AgentOut:
+    tick: int
+    agent_id: int
+    action: list
+    messages: list[RadioMessage]
+
+
+def encode_agent_out(tick: int, agent_id: int, action: list, messages: list[RadioMessage]) -> bytes:
+    return pack([tick, agent_id, action, [m.to_wire() for m in messages]])
+
+
+def decode_agent_out(data: bytes) -> AgentOut:
+    msg = unpack(data)
+    _expect(isinstance(msg, list) and len(msg) == 4, "agent output must be [tick, id, action, messages]")
+    tick, agent_id, action, messages = msg
+    _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
+    _expect(_is_int(agent_id) and agent_id >= 0, "agent id must be a non-negative int")
+    _expect(isinstance(action, list) and action and isinstance(action[0], str), "action must be [name, ...]")
+    _expect(isinstance(messages, list), "messages must be a list")
+    return AgentOut(tick, agent_id, action, [_radio_from_wire(m) for m in messages])
+
+
+# --- coordinator -> netem proxy -------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class World:
+    """Positions of the agents alive at ``tick``; ``alive_next``: those still alive at tick+1."""
+
+    tick: int
+    ids: list[int]
+    xs: list[float]
+    ys: list[float]
+    alive_next: list[int]
+
+
+def encode_world(w: World) -> bytes:
+    return pack([w.tick, w.ids, w.xs, w.ys, w.alive_next])
+
+
+def decode_world(data: bytes) -> World:
+    msg = unpack(data)
+    _expect(isinstance(msg, list) and len(msg) == 5, "world must be [tick, ids, xs, ys, alive_next]")
+    tick, ids, xs, ys, alive_next = msg
+    _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
+    _expect(all(isinstance(v, list) for v in (ids, xs, ys, alive_next)), "world fields must be lists")
+    _expect(len(ids) == len(xs) == len(ys), "ids, xs and ys must have one entry per agent")
+    return World(tick, ids, [float(x) for x in xs], [float(y) for y in ys], alive_next)
+
+
+# --- netem proxy -> coordinator -------------------------------------------------------------
+
+@dataclass(frozen=True, slots=True)
+class NetemStep:
+    """What the proxy took at ``tick``: every agent's action, the inboxes of tick+1, counters."""
+
+    tick: int
+    actions: dict[int, list]
+    inboxes: dict[int, bytes]
+    counters: list[int]  # messages_sent, bytes_sent, copies, delivered, dropped (this tick)
+    lost: list[int]  # agents whose process vanished while the proxy waited for them
+
+
+def encode_netem_step(s: NetemStep) -> bytes:
+    return pack([s.tick, s.actions, s.inboxes, s.counters, s.lost])
+
+
+def decode_netem_step(data: bytes) -> NetemStep:
+    msg = unpack(data)
+    _expect(isinstance(msg, list) and len(msg) == 5, "netem step must be [tick, actions, inboxes, counters, lost]")
+    tick, actions, inboxes, counters, lost = msg
+    _expect(_is_int(tick) and isinstance(actions, dict) and isinstance(inboxes, dict), "bad netem step")
+    _expect(isinstance(counters, list) and len(counters) == 5 and isinstance(lost, list), "bad netem step")
+    return NetemStep(tick, actions, inboxes, counters, lost)
+
+
+# --- reports (maps: rare, and read by people too) ---------------------------------------------
+
+def encode_report(report: dict) -> bytes:
+    return pack(report)
+
+
+def decode_report(data: bytes) -> dict:
+    msg = unpack(data)
+    _expect(isinstance(msg, dict) and isinstance(msg.get("kind"), str), "report must be a map with a kind")
+    return msg
