@@ -45,10 +45,13 @@ class Radio:
         self._in_queue: dict[int, deque[float]] = defaultdict(deque)  # transmission end times
         # delivery tick -> [(receivers, sender, kind, payload, send_tick)]
         self._pending: dict[int, list[tuple[list[int], int, str, bytes, int]]] = defaultdict(list)
+        self._unconfirmed: list[tuple[int, int, str, int, int, int]] = []
 
     @property
     def pending_copies(self) -> int:
-        return sum(len(r) for entries in self._pending.values() for r, *_ in entries)
+        """Copies scheduled or handed out but not yet booked."""
+        scheduled = sum(len(r) for entries in self._pending.values() for r, *_ in entries)
+        return scheduled + sum(d + x for *_, d, x in self._unconfirmed)
 
     def route(self, tick: int, ids: Sequence[int], xs: Sequence[float], ys: Sequence[float],
               outs: Mapping[int, Iterable[RadioMessage]]) -> None:
@@ -115,7 +118,10 @@ class Radio:
         self._pending[deliver].append((receivers, sender, kind, msg.payload, tick))
 
     def deliver(self, tick: int, alive: Iterable[int]) -> dict[int, list[list]]:
-        """Inboxes for ``tick``: ``{receiver: [[sender, kind, payload], ...]}`` for agents in ``alive``."""
+        """Inboxes for ``tick``: ``{receiver: [[sender, kind, payload], ...]}`` for agents in ``alive``.
+
+        Their bookings stay tentative until :meth:`confirm` (the tick really happened) or
+        :meth:`finish` (the run ended first: ``run_ended``)."""
         alive_set = set(alive)
         inboxes: dict[int, list[list]] = {}
         for receivers, sender, kind, payload, _sent in self._pending.pop(tick, ()):
@@ -126,12 +132,21 @@ class Radio:
                     inboxes.setdefault(r, []).append([sender, kind, payload])
                 else:
                     dead += 1
-            self.ledger.book(tick, sender, kind, size, DELIVERED, len(receivers) - dead)
-            self.ledger.book(tick, sender, kind, size, "receiver_dead", dead)
+            self._unconfirmed.append((tick, sender, kind, size, len(receivers) - dead, dead))
         return inboxes
 
+    def confirm(self) -> None:
+        """The inboxes handed out by :meth:`deliver` reached their tick: book them."""
+        for tick, sender, kind, size, delivered, dead in self._unconfirmed:
+            self.ledger.book(tick, sender, kind, size, DELIVERED, delivered)
+            self.ledger.book(tick, sender, kind, size, "receiver_dead", dead)
+        self._unconfirmed.clear()
+
     def finish(self, last_tick: int) -> None:
-        """The run is over: copies still scheduled are booked ``run_ended`` at ``last_tick``."""
+        """The run is over after ``last_tick``: every copy not yet delivered is booked ``run_ended``."""
+        for _tick, sender, kind, size, delivered, dead in self._unconfirmed:
+            self.ledger.book(last_tick, sender, kind, size, "run_ended", delivered + dead)
+        self._unconfirmed.clear()
         for due in sorted(self._pending):
             for receivers, sender, kind, payload, _sent in self._pending[due]:
                 self.ledger.book(last_tick, sender, kind, len(payload), "run_ended", len(receivers))

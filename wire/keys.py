@@ -15,6 +15,16 @@ class Keys:
     def root(self) -> str:
         return f"{PREFIX}/{self.run_id}"
 
+    # queryable on the coordinator: the run's resolved experiment (YAML)
+    @property
+    def config(self) -> str:
+        return f"{self.root}/config"
+
+    # coordinator -> netem proxy: the run is over after the given tick
+    @property
+    def netem_stop(self) -> str:
+        return f"{self.root}/netem/stop"
+
     # coordinator -> agent i: one sample per tick (observation + inbox), or a stop order
     def agent_in(self, agent_id: int) -> str:
         return f"{self.root}/agent/{agent_id}/in"

@@ -1,0 +1,101 @@
+"""The SPACE behavior-tree nodes. They reach the agent through ``config.context`` (an
+:class:`~agent_runtime.runtime.AgentRuntime`): its view of this tick, its allocator, its action."""
+
+from __future__ import annotations
+
+import math
+
+from agent_runtime.bt import InputPort, NodeRegistry, OutputPort, StatefulAction, Status, SyncAction
+
+
+class LocalSensingNode(SyncAction):
+    """Publishes what the agent senses this tick (visible tasks, inbox) on the blackboard."""
+
+    ID = "LocalSensingNode"
+
+    @classmethod
+    def provided_ports(cls):
+        return {
+            "tasks": OutputPort(default="{local_tasks}", description="visible open tasks {id: TaskInfo}"),
+            "messages": OutputPort(default="{messages}", description="messages received this tick"),
+        }
+
+    def tick(self):
+        view = self.config.context.view
+        self.set_output("tasks", view.tasks)
+        self.set_output("messages", view.inbox)
+        return Status.SUCCESS
+
+
+class DecisionMakingNode(SyncAction):
+    """Runs the allocator plugin; SUCCESS with the chosen task, FAILURE when it chose none."""
+
+    ID = "DecisionMakingNode"
+
+    @classmethod
+    def provided_ports(cls):
+        return {"task_id": OutputPort(default="{assigned_task}", description="task chosen by the allocator")}
+
+    def tick(self):
+        ctx = self.config.context
+        task = ctx.allocator.decide(ctx.view)
+        self.set_output("task_id", task)
+        return Status.FAILURE if task is None else Status.SUCCESS
+
+
+class TaskExecutingNode(StatefulAction):
+    """Moves to the assigned task and works on it; SUCCESS once it is no longer open in view."""
+
+    ID = "TaskExecutingNode"
+
+    @classmethod
+    def provided_ports(cls):
+        return {"task_id": InputPort(int, "{assigned_task}", "task to execute")}
+
+    def on_start(self):
+        return self.on_running()
+
+    def on_running(self):
+        task = self.get_input("task_id")
+        ctx = self.config.context
+        if task is None or task not in ctx.view.tasks:
+            return Status.SUCCESS
+        ctx.act(["goto_task", int(task)])
+        return Status.RUNNING
+
+
+class ExplorationNode(StatefulAction):
+    """Heads to a random waypoint in the area; SUCCESS when there or after ``duration`` seconds."""
+
+    ID = "ExplorationNode"
+
+    @classmethod
+    def provided_ports(cls):
+        return {
+            "duration": InputPort(float, "{exploration_duration}", "seconds before a new waypoint"),
+            "reach": InputPort(float, "{arrival_radius}", "distance at which the waypoint counts as reached"),
+        }
+
+    def on_start(self):
+        ctx = self.config.context
+        self.waypoint = (float(ctx.rng.uniform(0, ctx.arena[0])), float(ctx.rng.uniform(0, ctx.arena[1])))
+        self.until = ctx.view.time + self.get_input("duration")
+        return self.on_running()
+
+    def on_running(self):
+        ctx = self.config.context
+        view = ctx.view
+        if view.time >= self.until or math.hypot(self.waypoint[0] - view.x, self.waypoint[1] - view.y) <= self.get_input("reach"):
+            return Status.SUCCESS
+        ctx.act(["goto", *self.waypoint])
+        return Status.RUNNING
+
+
+SPACE_NODES = (LocalSensingNode, DecisionMakingNode, TaskExecutingNode, ExplorationNode)
+
+
+def space_registry() -> NodeRegistry:
+    registry = NodeRegistry()
+    for node in SPACE_NODES:
+        registry.register(node)
+    return registry

@@ -1,0 +1,93 @@
+"""The agent process: one per agent, a Zenoh client of the run's coordinator.
+
+Per tick it waits for its one input sample (observation + inbox of tick k), ticks its tree once and
+publishes one output sample (action + radio messages). It needs nothing but an endpoint, the run id
+and its agent id: the experiment itself comes from the coordinator, so it can run on another host.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import queue
+import sys
+import traceback
+
+import zenoh
+
+from agent_runtime.runtime import AgentRuntime
+from experiments.config import from_yaml
+from wire.codec import StopIn, WireError, decode_agent_in, encode_agent_out, encode_report
+from wire.keys import Keys
+from wire.lifecycle import die_with_parent
+from wire.membership import fetch_config_text
+from wire.session import add_zenoh_args, open_from_args
+
+log = logging.getLogger("swarmbed.agent")
+
+EXIT_OK, EXIT_PLUGIN_ERROR, EXIT_COORDINATOR_GONE = 0, 1, 3
+
+
+def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
+    agent_id = runtime.agent_id
+    inbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+
+    def on_coordinator(sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            inbox.put(None)
+
+    sub = session.declare_subscriber(keys.agent_in(agent_id), lambda s: inbox.put(s.payload.to_bytes()))
+    watch = session.liveliness().declare_subscriber(keys.alive_coordinator, on_coordinator)
+    out = session.declare_publisher(keys.agent_out(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
+    report = session.declare_publisher(keys.agent_report(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
+    token = session.liveliness().declare_token(keys.alive_agent(agent_id))
+    malformed = 0
+    try:
+        while True:
+            data = inbox.get()
+            if data is None:
+                log.error("agent %d: the coordinator went away; exiting", agent_id)
+                return EXIT_COORDINATOR_GONE
+            try:
+                msg = decode_agent_in(data)
+            except WireError as exc:
+                malformed += 1
+                log.warning("agent %d: malformed sample on %s dropped: %s", agent_id, keys.agent_in(agent_id), exc)
+                continue
+            if isinstance(msg, StopIn):
+                final = runtime.report()
+                final["malformed"] += malformed
+                report.put(encode_report(final))
+                return EXIT_OK
+            try:
+                action, messages = runtime.step(msg.tick, msg.obs, msg.inbox)
+            except Exception as exc:  # a plugin or node raised: stop this agent, loudly
+                tb = traceback.format_exc()
+                log.error("agent %d: failed at tick %d:\n%s", agent_id, msg.tick, tb)
+                report.put(encode_report({"kind": "fatal", "agent": agent_id, "tick": msg.tick,
+                                          "error": f"{type(exc).__name__}: {exc}", "traceback": tb}))
+                return EXIT_PLUGIN_ERROR
+            out.put(encode_agent_out(msg.tick, agent_id, action, messages))
+    finally:
+        token.undeclare()
+        for entity in (sub, watch, out, report):
+            entity.undeclare()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="swarmbed agent", description="run one swarmbed agent process")
+    ap.add_argument("--run-id", required=True, help="the run to join (printed by the coordinator)")
+    ap.add_argument("--id", type=int, required=True, help="this agent's id, 0 <= id < agents.count")
+    ap.add_argument("--parent-pid", type=int, help="exit when this process exits (set by the launcher)")
+    add_zenoh_args(ap)
+    args = ap.parse_args(argv)
+    die_with_parent(args.parent_pid)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
+    keys = Keys(args.run_id)
+    with open_from_args(args) as session:
+        exp = from_yaml(fetch_config_text(session, keys), f"config of run {args.run_id}")
+        if not 0 <= args.id < exp.agents.count:
+            log.error("agent id %d is outside 0..%d", args.id, exp.agents.count - 1)
+            return 2
+        runtime = AgentRuntime(exp, args.id)
+        return serve(session, keys, runtime)

@@ -1,0 +1,96 @@
+"""One agent's per-tick work, free of any networking: decode the inbox, tick the tree once,
+encode the action and the outgoing messages. The process in ``agent_runtime.process`` wraps it in
+Zenoh; tests and the conformance kit drive it directly."""
+
+from __future__ import annotations
+
+import logging
+from collections import defaultdict
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from agent_runtime.bt import Blackboard, load_tree
+from agent_runtime.nodes import space_registry
+from experiments.config import Experiment
+from plugins import make
+from plugins.base import LocalView, Message, TaskInfo
+from wire.codec import RadioMessage, WireError, decode_inbox, pack, unpack
+from wire.lifecycle import agent_seeds
+
+log = logging.getLogger("swarmbed.agent")
+
+DEFAULT_TREE = "space_default.xml"
+
+
+def default_tree_path() -> Path:
+    return Path(str(resources.files("agent_runtime") / "trees" / DEFAULT_TREE))
+
+
+class AgentRuntime:
+    def __init__(self, exp: Experiment, agent_id: int) -> None:
+        self.exp = exp
+        self.agent_id = agent_id
+        n = exp.agents.count
+        runtime_seed, allocator_seed = agent_seeds(exp.run.seed, agent_id, n, 2)
+        self.rng = np.random.default_rng(runtime_seed)
+        self.allocator = make(exp.allocator.name, exp.allocator.params(), agent_id,
+                              np.random.default_rng(allocator_seed))
+        self.arena = (exp.scenario.width, exp.scenario.height)
+        bb = Blackboard()
+        bb.set("exploration_duration", exp.agents.exploration_duration)
+        bb.set("arrival_radius", exp.scenario.arrival_radius)
+        tree_path = default_tree_path() if exp.agents.behavior_tree == "default" else Path(exp.agents.behavior_tree)
+        self.tree = load_tree(tree_path, space_registry(), blackboard=bb, context=self)
+        self.view: LocalView | None = None
+        self._action: list = ["stop"]
+        self.sent: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # kind -> [messages, payload bytes]
+        self.malformed = 0
+        self.ticks = 0
+
+    def act(self, action: list) -> None:
+        """Called by action nodes: the one action this agent sends for this tick (last one wins)."""
+        self._action = action
+
+    def _inbox(self, data: bytes) -> list[Message]:
+        out = []
+        try:
+            delivered = decode_inbox(data)
+        except WireError as exc:
+            self.malformed += 1
+            log.warning("agent %d: malformed inbox dropped: %s", self.agent_id, exc)
+            return out
+        for d in delivered:
+            try:
+                out.append(Message(d.sender, d.kind, unpack(d.payload)))
+            except WireError as exc:
+                self.malformed += 1
+                log.warning("agent %d: malformed %r message from %d dropped: %s", self.agent_id, d.kind, d.sender, exc)
+        return out
+
+    def step(self, tick: int, obs: dict, inbox: bytes) -> tuple[list, list[RadioMessage]]:
+        me = obs["me"]
+        tasks = {int(t[0]): TaskInfo(int(t[0]), t[1], t[2], t[3]) for t in obs["tasks"]}
+        self.view = LocalView(self.agent_id, self.exp.agents.count, tick, float(obs["t"]), me[0], me[1], me[2],
+                              me[3], self.exp.agents.work_rate, tasks, self._inbox(inbox))
+        self._action = ["stop"]
+        self.tree.tick_once()
+        messages = []
+        for out in self.view.outbox:
+            payload = pack(out.data)
+            counter = self.sent[out.kind]
+            counter[0] += 1
+            counter[1] += len(payload)
+            messages.append(RadioMessage(out.dest, out.kind, payload))
+        self.ticks += 1
+        return self._action, messages
+
+    def report(self) -> dict:
+        return {
+            "kind": "final",
+            "agent": self.agent_id,
+            "ticks": self.ticks,
+            "sent": {k: list(v) for k, v in sorted(self.sent.items())},
+            "malformed": self.malformed,
+        }

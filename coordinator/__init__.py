@@ -1,0 +1,1 @@
+"""The coordinator: simulated time, the world, tasks, faults and metrics."""

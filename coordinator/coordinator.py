@@ -1,0 +1,280 @@
+"""The coordinator: owns simulated time and the world, drives the lock-step clock.
+
+Tick k: publish the world (positions, membership) to the proxy and one input sample to every live
+agent (its observation and its inbox of tick k); wait for the proxy's step (every live agent's
+action and message of tick k taken); apply the actions; record. The coordinator's session is the
+run's Zenoh hub: it listens, everyone else connects to it as a client.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import zenoh
+
+from coordinator import results
+from coordinator.mtsr import MTSRWorld
+from experiments.config import Experiment
+from wire.codec import (EMPTY_INBOX, NetemStep, World, WireError, decode_netem_step, decode_report, encode_stop,
+                        encode_tick, encode_world, pack)
+from wire.keys import Keys, agent_id_of
+from wire.lifecycle import WORLD, component_rng
+from wire.membership import serve_config
+
+BLOCK = zenoh.CongestionControl.BLOCK
+
+
+class RunError(RuntimeError):
+    """The run cannot go on; the message says which process, at which tick, and where its log is."""
+
+
+class Coordinator:
+    def __init__(self, exp: Experiment, keys: Keys, session: zenoh.Session, out_dir: Path, config_text: str) -> None:
+        self.exp = exp
+        self.keys = keys
+        self.session = session
+        self.out_dir = out_dir
+        self.config_text = config_text
+        self.n = exp.agents.count
+        self.world = MTSRWorld(exp, component_rng(exp.run.seed, WORLD))
+        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.joined: set[str] = set()
+        self.lost: dict[int, int] = {}  # agent -> tick at which it was lost
+        self.fatal: dict[int, dict] = {}
+        self.reports: dict[int, dict] = {}
+        self.netem_report: dict | None = None
+        self.malformed = 0
+        self.rows: list[list] = []
+        self.trajectories: list[tuple[int, int, float, float]] = []
+        self._row_columns = list(self.world.row()) + ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
+        self.net_cum = [0, 0, 0, 0, 0]
+        self.last_tick = -1
+        self.wall: dict[str, float] = {}
+        self._entities: list = []
+
+    # -- setup -----------------------------------------------------------------------------------
+    def declare(self) -> None:
+        s, k, put = self.session, self.keys, self.events.put
+        self._entities += [
+            serve_config(s, k, self.config_text),
+            s.declare_subscriber(k.netem_step, lambda x: put(("step", x.payload.to_bytes()))),
+            s.declare_subscriber(k.agent_report_all, lambda x: put(("report", x.payload.to_bytes()))),
+            s.declare_subscriber(k.netem_report, lambda x: put(("netem_report", x.payload.to_bytes()))),
+            s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True),
+        ]
+        self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
+        self.world_pub = s.declare_publisher(k.world, congestion_control=BLOCK)
+        self.stop_pub = s.declare_publisher(k.netem_stop, congestion_control=BLOCK)
+        self._entities += self.agent_pubs + [self.world_pub, self.stop_pub]
+        self._entities.append(s.liveliness().declare_token(k.alive_coordinator))
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        what = "join" if sample.kind == zenoh.SampleKind.PUT else "leave"
+        self.events.put((what, str(sample.key_expr)))
+
+    def close(self) -> None:
+        for e in reversed(self._entities):
+            try:
+                e.undeclare()
+            except Exception:
+                pass
+        self._entities.clear()
+
+    def _who(self, key: str) -> str:
+        return "netem" if key == self.keys.alive_netem else f"agent_{agent_id_of(key)}"
+
+    def wait_for_members(self, check_children: Callable[[], None]) -> None:
+        """Until the proxy and every agent hold a liveliness token; ``check_children`` raises if a
+        launched process already exited."""
+        wanted = {"netem"} | {f"agent_{i}" for i in range(self.n)}
+        deadline = time.monotonic() + self.exp.run.join_timeout
+        while not wanted <= self.joined:
+            check_children()
+            if time.monotonic() > deadline:
+                missing = sorted(wanted - self.joined)
+                raise RunError(f"not joined after {self.exp.run.join_timeout:.0f} s: {', '.join(missing[:10])}"
+                               f"{' ...' if len(missing) > 10 else ''}")
+            try:
+                what, data = self.events.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            if what == "join" and not data.endswith("/coordinator"):
+                self.joined.add(self._who(data))
+            elif what == "leave" and not data.endswith("/coordinator"):
+                self.joined.discard(self._who(data))
+            elif what == "report":
+                self._on_report(data, tick=-1)
+
+    # -- the lock-step loop ------------------------------------------------------------------------
+    def run(self, on_tick: Callable[[int, float], None] | None = None) -> None:
+        w = self.world
+        inboxes: dict[int, bytes] = {}
+        t0 = time.perf_counter()
+        for k in range(self.exp.ticks):
+            if w.finished and self.exp.run.stop_when_done:
+                break
+            ids, xs, ys = w.positions()
+            if self.exp.run.record_trajectories:
+                self.trajectories += [(k, i, x, y) for i, x, y in zip(ids, xs, ys)]
+            self.world_pub.put(encode_world(World(k, ids, xs, ys, ids)))
+            for i, obs in w.observations().items():
+                self.agent_pubs[i].put(encode_tick(k, obs, inboxes.get(i, EMPTY_INBOX)))
+            step = self._await_step(k)
+            for j in step.lost:
+                self._lose(j, k, "its process exited")
+            w.apply({a: act for a, act in step.actions.items() if w.alive[a]})
+            inboxes = step.inboxes
+            self.net_cum = [c + d for c, d in zip(self.net_cum, step.counters)]
+            self.last_tick = k
+            if w.tick % self.exp.run.record_every == 0 or w.finished:
+                row = w.row()
+                self.rows.append(list(row.values()) + self.net_cum)
+            if on_tick:
+                on_tick(w.tick, w.time)
+        self.wall["run_s"] = time.perf_counter() - t0
+
+    def _await_step(self, k: int) -> NetemStep:
+        timeout = self.exp.run.tick_timeout
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                what, data = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise RunError(f"tick {k}: no step from the netem proxy within {timeout:.0f} s "
+                               "(an agent or the proxy is stuck; see the logs)") from None
+            if what == "step":
+                try:
+                    step = decode_netem_step(data)
+                except WireError as exc:
+                    self._malformed(self.keys.netem_step, exc)
+                    continue
+                if step.tick == k:
+                    return step
+                self._malformed(self.keys.netem_step, WireError(f"step for tick {step.tick} while at tick {k}"))
+            elif what == "leave":
+                if data == self.keys.alive_netem:
+                    raise RunError(f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log")
+                if not data.endswith("/coordinator"):
+                    self._lose(agent_id_of(data), k, "its process exited")
+            elif what == "report":
+                self._on_report(data, k)
+
+    def _on_report(self, data: bytes, tick: int) -> None:
+        try:
+            rep = decode_report(data)
+        except WireError as exc:
+            self._malformed(self.keys.agent_report_all, exc)
+            return
+        agent = rep.get("agent")
+        if not isinstance(agent, int) or not 0 <= agent < self.n:
+            self._malformed(self.keys.agent_report_all, WireError(f"report names no agent of this run: {agent!r}"))
+        elif rep["kind"] == "fatal":
+            self.fatal[agent] = rep
+            self._lose(agent, rep.get("tick", tick), "it raised an exception")
+        elif rep["kind"] == "final":
+            self.reports[agent] = rep
+
+    def _lose(self, agent: int, tick: int, why: str) -> None:
+        if agent in self.lost:
+            return
+        fatal = self.fatal.get(agent)
+        detail = f"\n{fatal['error']}\n{fatal.get('traceback', '')}" if fatal else ""
+        if not self.exp.run.allow_agent_failures:
+            raise RunError(f"agent {agent} stopped at tick {tick} because {why}; see logs/agent_{agent}.log"
+                           f" (set run.allow_agent_failures to go on without it){detail}")
+        self.lost[agent] = tick
+        self.world.kill(agent)
+
+    def _malformed(self, key: str, exc: Exception) -> None:
+        self.malformed += 1
+
+    # -- shutdown and results ---------------------------------------------------------------------
+    def stop_and_collect(self, timeout: float = 30.0) -> None:
+        """Tell the proxy and every live agent that the run is over; collect their final reports."""
+        self.stop_pub.put(pack([self.last_tick]))
+        live = [i for i in range(self.n) if i not in self.lost]
+        for i in live:
+            self.agent_pubs[i].put(encode_stop("run complete"))
+        deadline = time.monotonic() + timeout
+        while self.netem_report is None or any(i not in self.reports for i in live):
+            try:
+                what, data = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                missing = [f"agent_{i}" for i in live if i not in self.reports]
+                if self.netem_report is None:
+                    missing.insert(0, "netem")
+                raise RunError(f"no final report within {timeout:.0f} s from: {', '.join(missing[:10])}") from None
+            if what == "report":
+                self._on_report(data, self.last_tick)
+            elif what == "netem_report":
+                try:
+                    self.netem_report = decode_report(data)
+                except WireError as exc:
+                    self._malformed(self.keys.netem_report, exc)
+
+    def summary(self) -> dict:
+        w, exp = self.world, self.exp
+        net = self.netem_report["totals"]
+        agent_bytes = sum(b for r in self.reports.values() for _, b in r["sent"].values())
+        all_reported = len(self.reports) == self.n
+        times = w.completion_times()
+        need = math.ceil(0.99 * w.tasks_total_planned)
+        per_sender = self.netem_report["per_sender"]
+        return {
+            "name": exp.name,
+            "seed": exp.run.seed,
+            "allocator": exp.allocator.name,
+            "agents": self.n,
+            "ticks": self.last_tick + 1,
+            "mission_time": w.time,
+            "all_tasks_completed": bool(w.finished),
+            "time_99": float(times[need - 1]) if need and len(times) >= need else None,
+            "tasks_total": w.tasks_total_planned,
+            "tasks_spawned": len(w.remaining),
+            "tasks_completed": w.tasks_completed,
+            "distance_total": float(w.distance.sum()),
+            "distance_per_agent": [float(d) for d in w.distance],
+            "work_total": float(w.work.sum()),
+            "work_per_agent": [float(x) for x in w.work],
+            "invalid_actions": int(w.invalid_actions.sum()),
+            "agents_lost": {str(a): t for a, t in sorted(self.lost.items())},
+            "network": {
+                **net,
+                "per_kind": self.netem_report["per_kind"],
+                "bytes_sent_by_agents": agent_bytes if all_reported else None,
+                "bytes_agree": (agent_bytes == net["bytes_sent"]) if all_reported else None,
+                "malformed": {
+                    "coordinator": self.malformed,
+                    "netem": self.netem_report["malformed"],
+                    "agents": sum(r["malformed"] for r in self.reports.values()),
+                },
+            },
+            "_per_sender": per_sender,
+        }
+
+    def write_results(self, timings: dict) -> dict:
+        out, w = self.out_dir, self.world
+        summary = self.summary()
+        per_sender = summary.pop("_per_sender")
+        results.write_csv(out / results.TIMESERIES, self._row_columns, self.rows)
+        if self.exp.run.record_trajectories:
+            results.write_csv(out / results.TRAJECTORIES, ["tick", "agent", "x", "y"], self.trajectories)
+        rows = []
+        for i in range(self.n):
+            s = per_sender.get(str(i), {})
+            rows.append([i, int(i not in self.lost), self.lost.get(i, ""), float(w.distance[i]), float(w.work[i]),
+                         int(w.invalid_actions[i]), s.get("messages", 0), s.get("bytes", 0), s.get("copies", 0),
+                         s.get("delivered", 0)])
+        results.write_csv(out / results.AGENTS, ["agent", "alive", "lost_at_tick", "distance", "work",
+                                                 "invalid_actions", "messages_sent", "bytes_sent", "copies",
+                                                 "delivered"], rows)
+        results.write_json(out / results.TIMINGS, {**timings, **self.wall,
+                                                   "ticks_per_s": (self.last_tick + 1) / self.wall["run_s"]
+                                                   if self.wall.get("run_s") else None})
+        results.write_json(out / results.SUMMARY, summary)
+        return summary

@@ -1,0 +1,169 @@
+"""The SPACE MT-SR workload scenario (SPACE paper, Table I).
+
+Rectangular area; tasks with a workload that agents reduce at their work rate; initial tasks plus
+periodic generations; point-mass agents. An agent works on a task while within ``arrival_radius``
+of it; the work rates of agents on one task add, and the workload never goes below zero (work
+beyond what was left is not counted). A task is done when its workload reaches zero.
+
+Agents act on the state of tick k, all at once: no agent sees another's move of the same tick.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from coordinator.kinematics import Limits, step
+from experiments.config import Experiment
+
+
+class MTSRWorld:
+    def __init__(self, exp: Experiment, rng: np.random.Generator) -> None:
+        self.exp = exp
+        self.sc = exp.scenario
+        self.dt = exp.run.dt
+        self.rng = rng
+        a = exp.agents
+        self.limits = Limits(a.max_speed, a.max_accel, a.max_turn_rate)
+        self.n = a.count
+        self.work_rate = a.work_rate
+        self.awareness = a.awareness_range
+        self.ax = rng.uniform(0, self.sc.width, self.n)
+        self.ay = rng.uniform(0, self.sc.height, self.n)
+        if self.sc.agent_positions is not None:
+            self.ax, self.ay = (np.array(c, dtype=float) for c in zip(*self.sc.agent_positions))
+        self.heading = rng.uniform(-math.pi, math.pi, self.n)
+        self.speed = np.zeros(self.n)
+        self.alive = np.ones(self.n, dtype=bool)
+        self.distance = np.zeros(self.n)
+        self.work = np.zeros(self.n)
+        self.invalid_actions = np.zeros(self.n, dtype=np.int64)
+        # tasks (grown by generations)
+        self.tx = np.zeros(0)
+        self.ty = np.zeros(0)
+        self.workload = np.zeros(0)
+        self.remaining = np.zeros(0)
+        self.spawned_at = np.zeros(0)
+        self.done_at = np.full(0, np.nan)
+        self.tick = 0
+        self._generations_done = 0
+        self._spawn(self.sc.initial_tasks)
+        if self.sc.task_positions is not None and self.sc.initial_tasks:
+            self.tx, self.ty = (np.array(c, dtype=float) for c in zip(*self.sc.task_positions))
+
+    # -- tasks ---------------------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        return self.tick * self.dt
+
+    @property
+    def tasks_total_planned(self) -> int:
+        g = self.sc.generations
+        return self.sc.initial_tasks + g.count * g.tasks
+
+    def _spawn(self, count: int) -> None:
+        if count <= 0:
+            return
+        lo, hi = self.sc.workload
+        self.tx = np.concatenate([self.tx, self.rng.uniform(0, self.sc.width, count)])
+        self.ty = np.concatenate([self.ty, self.rng.uniform(0, self.sc.height, count)])
+        w = self.rng.uniform(lo, hi, count)
+        self.workload = np.concatenate([self.workload, w])
+        self.remaining = np.concatenate([self.remaining, w])
+        self.spawned_at = np.concatenate([self.spawned_at, np.full(count, self.time)])
+        self.done_at = np.concatenate([self.done_at, np.full(count, np.nan)])
+
+    def _maybe_generate(self) -> None:
+        g = self.sc.generations
+        while self._generations_done < g.count and self.time + 1e-9 >= (self._generations_done + 1) * g.interval:
+            self._generations_done += 1
+            self._spawn(g.tasks)
+
+    @property
+    def tasks_completed(self) -> int:
+        return int(np.count_nonzero(~np.isnan(self.done_at)))
+
+    @property
+    def finished(self) -> bool:
+        """Every task there will ever be is done."""
+        return self._generations_done == self.sc.generations.count and self.tasks_completed == len(self.remaining)
+
+    # -- agents --------------------------------------------------------------------------------
+    def positions(self) -> tuple[list[int], list[float], list[float]]:
+        ids = [int(i) for i in np.flatnonzero(self.alive)]
+        return ids, [float(self.ax[i]) for i in ids], [float(self.ay[i]) for i in ids]
+
+    def kill(self, agent_id: int) -> None:
+        self.alive[agent_id] = False
+        self.speed[agent_id] = 0.0
+
+    def observations(self) -> dict[int, dict]:
+        """What each live agent senses at this tick: itself and the open tasks within awareness range."""
+        open_idx = np.flatnonzero(np.isnan(self.done_at))
+        ox, oy, orem = self.tx[open_idx], self.ty[open_idx], self.remaining[open_idx]
+        out = {}
+        for i in np.flatnonzero(self.alive):
+            near = np.flatnonzero(np.hypot(ox - self.ax[i], oy - self.ay[i]) <= self.awareness)
+            tasks = [[int(open_idx[j]), float(ox[j]), float(oy[j]), float(orem[j])] for j in near]
+            out[int(i)] = {
+                "t": self.time,
+                "me": [float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i])],
+                "tasks": tasks,
+            }
+        return out
+
+    def _target(self, i: int, action: list) -> tuple[tuple[float, float] | None, int | None]:
+        """Where agent i moves to and which task it may work on, from its action."""
+        name = action[0] if action else None
+        if name == "goto_task" and len(action) == 2 and isinstance(action[1], int):
+            t = action[1]
+            if 0 <= t < len(self.remaining) and np.isnan(self.done_at[t]):
+                return (float(self.tx[t]), float(self.ty[t])), t
+        elif name == "goto" and len(action) == 3 and all(isinstance(v, (int, float)) for v in action[1:]):
+            return (float(action[1]), float(action[2])), None
+        elif name == "stop" and len(action) == 1:
+            return None, None
+        self.invalid_actions[i] += 1
+        return None, None
+
+    def apply(self, actions: dict[int, list]) -> None:
+        """Advance one tick: every live agent moves or works on the state of this tick."""
+        dt = self.dt
+        working: dict[int, list[int]] = {}
+        for i in map(int, np.flatnonzero(self.alive)):
+            target, task = self._target(i, actions.get(i, ["stop"]))
+            if task is not None and math.hypot(self.tx[task] - self.ax[i], self.ty[task] - self.ay[i]) <= self.sc.arrival_radius:
+                working.setdefault(task, []).append(i)
+                target = None  # brake while working
+            x, y, h, v = step(float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i]),
+                              target, self.limits, dt)
+            self.distance[i] += math.hypot(x - self.ax[i], y - self.ay[i])
+            self.ax[i], self.ay[i], self.heading[i], self.speed[i] = x, y, h, v
+        for task in sorted(working):
+            agents = working[task]
+            capacity = self.work_rate * dt * len(agents)
+            done = min(capacity, float(self.remaining[task]))
+            for i in agents:
+                self.work[i] += done / len(agents)
+            self.remaining[task] -= done
+            if self.remaining[task] <= 1e-12:
+                self.remaining[task] = 0.0
+                self.done_at[task] = self.time + dt
+        self.tick += 1
+        self._maybe_generate()
+
+    # -- metrics -------------------------------------------------------------------------------
+    def row(self) -> dict:
+        return {
+            "tick": self.tick,
+            "time": round(self.time, 9),
+            "tasks_spawned": len(self.remaining),
+            "tasks_completed": self.tasks_completed,
+            "distance_total": float(self.distance.sum()),
+            "work_total": float(self.work.sum()),
+            "agents_alive": int(self.alive.sum()),
+        }
+
+    def completion_times(self) -> np.ndarray:
+        return np.sort(self.done_at[~np.isnan(self.done_at)])

@@ -1,0 +1,122 @@
+"""The ``swarmbed`` command."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from agent_runtime.bt import BTError, load_tree, palette_xml
+from agent_runtime.nodes import space_registry
+from coordinator.coordinator import RunError
+from experiments import config as cfg
+from plugins import names as allocator_names
+
+
+def _keys_epilog() -> str:
+    rows = cfg.describe_keys()
+    width = max(len(k) for k, _, _ in rows)
+    lines = ["experiment keys (override any with --set KEY=VALUE):"]
+    lines += [f"  {k:<{width}}  {d:<10}  {desc}" for k, d, desc in rows]
+    lines.append(f"registered allocators: {', '.join(allocator_names())}")
+    return "\n".join(lines)
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        return f"{v:,.1f}"
+    if isinstance(v, int):
+        return f"{v:,}"
+    return "-" if v is None else str(v)
+
+
+def print_summary(summary: dict, out_dir: Path, stream=sys.stdout) -> None:
+    net = summary["network"]
+    rows = [
+        ("mission time (sim s)", summary["mission_time"]),
+        ("all tasks completed", summary["all_tasks_completed"]),
+        ("time to 99% of tasks", summary["time_99"]),
+        ("tasks completed / total", f"{summary['tasks_completed']} / {summary['tasks_total']}"),
+        ("distance, all agents", summary["distance_total"]),
+        ("work, all agents", summary["work_total"]),
+        ("messages sent", net["messages_sent"]),
+        ("payload bytes sent", net["bytes_sent"]),
+        ("copies delivered / total", f"{net['delivered']:,} / {net['copies']:,}"),
+        ("copies dropped", ", ".join(f"{k} {v:,}" for k, v in net["dropped"].items() if v) or "0"),
+    ]
+    width = max(len(r[0]) for r in rows)
+    print(f"results: {out_dir}", file=stream)
+    for label, value in rows:
+        print(f"  {label:<{width}}  {_fmt(value)}", file=stream)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from experiments.runner import run_experiment
+
+    exp = cfg.load(args.experiment, args.set, args.seed)
+    out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    result = run_experiment(exp, out, progress=not args.no_progress)
+    print_summary(result.summary, out)
+    return 0
+
+
+def cmd_bt(args: argparse.Namespace) -> int:
+    registry = space_registry()
+    if args.bt_command == "palette":
+        sys.stdout.write(palette_xml(registry))
+        return 0
+    for path in args.files:
+        load_tree(path, registry)
+        print(f"{path}: ok")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="run one experiment", epilog=_keys_epilog(),
+                         formatter_class=argparse.RawDescriptionHelpFormatter)
+    run.add_argument("experiment", help="experiment YAML file")
+    run.add_argument("--seed", type=int, help="run seed (overrides run.seed)")
+    run.add_argument("--out", help="run directory (default: runs/<name>/seed<seed>-<time>)")
+    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.set_defaults(func=cmd_run)
+
+    bt = sub.add_parser("bt", help="behavior-tree tools")
+    bt_sub = bt.add_subparsers(dest="bt_command", required=True)
+    bt_sub.add_parser("palette", help="print a Groot2 <TreeNodesModel> of every registered node")
+    check = bt_sub.add_parser("check", help="load behavior-tree XML files and report errors")
+    check.add_argument("files", nargs="+")
+    bt.set_defaults(func=cmd_bt)
+
+    for name, module in (("agent", "agent_runtime.process"), ("netem", "netem.proxy")):
+        p = sub.add_parser(name, help=f"start one {name} process by hand (e.g. on another host)", add_help=False)
+        p.set_defaults(func=None, module=module)
+
+    args, rest = ap.parse_known_args(argv)
+    if args.command in ("agent", "netem"):
+        import importlib
+
+        return importlib.import_module(args.module).main(rest)
+    if rest:
+        ap.error(f"unrecognized arguments: {' '.join(rest)}")
+    try:
+        return args.func(args)
+    except (cfg.ConfigError, BTError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except RunError as exc:
+        print(f"run failed: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted: every process was stopped; no summary.json was written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,111 @@
+"""``swarmbed run``: one experiment, end to end, on this machine.
+
+Opens the run's Zenoh hub (the coordinator listens on a free loopback port, multicast scouting off),
+launches the netem proxy and one process per agent as clients of it, waits until all of them hold a
+liveliness token, runs the lock-step loop, stops everyone and writes the results.
+"""
+
+from __future__ import annotations
+
+import secrets
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import zenoh
+from tqdm import tqdm
+
+from coordinator import results
+from coordinator.coordinator import Coordinator, RunError
+from experiments.config import Experiment, to_yaml
+from experiments.launcher import ChildExited, Children
+from wire.keys import Keys
+from wire.session import free_loopback_endpoint, zenoh_config
+
+RESULT_FILES = (results.SUMMARY, results.TIMESERIES, results.AGENTS, results.TIMINGS, results.TRAJECTORIES,
+                "network_ledger.csv")
+
+
+@dataclass
+class RunResult:
+    out_dir: Path
+    summary: dict
+    timings: dict
+
+
+def open_hub(attempts: int = 5) -> tuple[zenoh.Session, str]:
+    """A router session listening on a free loopback TCP port."""
+    last: Exception | None = None
+    for _ in range(attempts):
+        endpoint = free_loopback_endpoint()
+        try:
+            return zenoh.open(zenoh_config("router", listen=[endpoint])), endpoint
+        except zenoh.ZError as exc:  # the port was taken between probe and bind
+            last = exc
+    raise RunError(f"could not listen on a loopback port: {last}")
+
+
+def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
+                   on_ready: Callable[[Keys, str], None] | None = None) -> RunResult:
+    """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
+    (tests use it to reach the run's keys from outside)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name in RESULT_FILES:  # a stale summary must never vouch for a new, unfinished run
+        (out_dir / name).unlink(missing_ok=True)
+    log_dir = out_dir / "logs"
+    log_dir.mkdir(exist_ok=True)
+    config_text = to_yaml(exp)
+    results.write_atomic(out_dir / results.CONFIG, config_text)
+
+    t_start = time.perf_counter()
+    keys = Keys(secrets.token_hex(6))
+    session, endpoint = open_hub()
+    children = Children(log_dir)
+    coord = Coordinator(exp, keys, session, out_dir, config_text)
+    try:
+        coord.declare()
+        common = ["--run-id", keys.run_id, "--connect", endpoint]
+        children.spawn("netem", "netem", [*common, "--out", str(out_dir)])
+        for i in range(exp.agents.count):
+            children.spawn(f"agent_{i}", "agent_runtime", [*common, "--id", str(i)])
+        try:
+            coord.wait_for_members(children.check)
+        except ChildExited as exc:
+            raise RunError(str(exc)) from None
+        t_joined = time.perf_counter()
+        if on_ready:
+            on_ready(keys, endpoint)
+
+        bar = tqdm(total=exp.run.duration, unit="sim s", desc=exp.name, disable=not progress, leave=False,
+                   bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+        shown = [0.0]
+
+        def on_tick(_tick: int, sim_time: float) -> None:
+            if sim_time - shown[0] >= exp.run.duration / 200:
+                bar.update(sim_time - shown[0])
+                shown[0] = sim_time
+
+        try:
+            coord.run(on_tick)
+        finally:
+            bar.close()
+        rss = children.rss_mb()
+        coord.stop_and_collect()
+        exit_codes = children.wait(timeout=15.0)
+        agent_rss = [v for k, v in rss.items() if k.startswith("agent_")]
+        timings = {
+            "run_id": keys.run_id,
+            "endpoint": endpoint,
+            "startup_s": t_joined - t_start,
+            "total_s": time.perf_counter() - t_start,
+            "rss_mb": rss,
+            "agent_rss_mb_mean": sum(agent_rss) / len(agent_rss) if agent_rss else None,
+            "exit_codes": exit_codes,
+        }
+        summary = coord.write_results(timings)
+        return RunResult(out_dir, summary, timings)
+    finally:
+        children.kill_all()
+        coord.close()
+        session.close()

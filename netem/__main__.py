@@ -1,0 +1,5 @@
+import sys
+
+from netem.proxy import main
+
+sys.exit(main())

@@ -1,0 +1,176 @@
+"""The netem proxy process: the emulated radio of one run.
+
+Per tick k it takes the coordinator's world sample (positions and membership of tick k) and one
+output sample from every live agent, routes their messages through :class:`~netem.radio.Radio`,
+and hands the coordinator one step sample: the agents' actions of tick k, the inboxes of tick k+1
+and this tick's counters. The ledger streams to ``network_ledger.csv`` in the run directory
+(written under a temporary name, renamed when the run is over and the ledger balances).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import queue
+import sys
+from pathlib import Path
+
+import zenoh
+
+from experiments.config import Experiment, from_yaml
+from netem.ledger import Ledger
+from netem.params import NetemParams
+from netem.radio import Radio
+from wire.codec import (AgentOut, NetemStep, World, WireError, decode_agent_out, decode_world, encode_inbox,
+                        encode_netem_step, encode_report, unpack)
+from wire.keys import Keys, agent_id_of
+from wire.lifecycle import NETEM, component_rng, die_with_parent
+from wire.membership import fetch_config_text
+from wire.session import add_zenoh_args, open_from_args
+
+log = logging.getLogger("swarmbed.netem")
+
+LEDGER_FILE = "network_ledger.csv"
+
+
+def params_of(exp: Experiment) -> NetemParams:
+    n = exp.network
+    return NetemParams(range=n.range, loss=n.loss, rate=n.rate, limit=n.limit, latency=n.latency)
+
+
+class Proxy:
+    def __init__(self, exp: Experiment, keys: Keys, session: zenoh.Session, out_dir: Path) -> None:
+        self.exp = exp
+        self.keys = keys
+        self.session = session
+        self.out_dir = out_dir
+        self.part = out_dir / (LEDGER_FILE + ".part")
+        self.sink = open(self.part, "w", newline="")
+        self.ledger = Ledger(self.sink)
+        self.radio = Radio(params_of(exp), exp.agents.count, exp.run.dt, component_rng(exp.run.seed, NETEM), self.ledger)
+        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.outs: dict[int, dict[int, AgentOut]] = {}
+        self.lost: set[int] = set()
+        self.lost_unreported: list[int] = []
+        self.world: World | None = None
+        self.malformed = 0
+        self._last = [0, 0, 0, 0, 0]
+
+    # -- events ----------------------------------------------------------------------------------
+    def _on_agent_alive(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            self.events.put(("lost", agent_id_of(str(sample.key_expr))))
+
+    def _on_coordinator(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            self.events.put(("gone", None))
+
+    def run(self) -> int:
+        s, k = self.session, self.keys
+        put = self.events.put
+        subs = [
+            s.declare_subscriber(k.world, lambda x: put(("world", x.payload.to_bytes()))),
+            s.declare_subscriber(k.agent_out_all, lambda x: put(("out", x.payload.to_bytes()))),
+            s.declare_subscriber(k.netem_stop, lambda x: put(("stop", x.payload.to_bytes()))),
+            s.liveliness().declare_subscriber(k.alive_agents, self._on_agent_alive),
+            s.liveliness().declare_subscriber(k.alive_coordinator, self._on_coordinator),
+        ]
+        self.step_pub = s.declare_publisher(k.netem_step, congestion_control=zenoh.CongestionControl.BLOCK)
+        self.report_pub = s.declare_publisher(k.netem_report, congestion_control=zenoh.CongestionControl.BLOCK)
+        token = s.liveliness().declare_token(k.alive_netem)
+        try:
+            return self._loop()
+        finally:
+            token.undeclare()
+            for sub in subs:
+                sub.undeclare()
+            self.sink.close()
+
+    def _loop(self) -> int:
+        while True:
+            what, data = self.events.get()
+            if what == "gone":
+                log.error("netem: the coordinator went away; exiting (ledger left as %s)", self.part.name)
+                return 3
+            if what == "stop":
+                self._finish(int(unpack(data)[0]))
+                return 0
+            if what == "lost":
+                if data not in self.lost:
+                    self.lost.add(data)
+                    self.lost_unreported.append(data)
+            elif what == "world":
+                try:
+                    world = decode_world(data)
+                except WireError as exc:
+                    self._malformed(self.keys.world, exc)
+                    continue
+                if self.world is not None:
+                    self._malformed(self.keys.world, WireError(f"tick {world.tick} before tick {self.world.tick} was done"))
+                    continue
+                self.radio.confirm()  # tick `world.tick` happens: the inboxes made for it arrived
+                self.world = world
+            elif what == "out":
+                try:
+                    out = decode_agent_out(data)
+                except WireError as exc:
+                    self._malformed(self.keys.agent_out_all, exc)
+                    continue
+                self.outs.setdefault(out.tick, {})[out.agent_id] = out
+            if self.world is not None and self._complete(self.world):
+                self._route(self.world)
+                self.world = None
+
+    def _malformed(self, key: str, exc: Exception) -> None:
+        self.malformed += 1
+        if self.malformed <= 20:
+            log.warning("netem: malformed sample on %s dropped: %s", key, exc)
+
+    def _complete(self, w: World) -> bool:
+        got = self.outs.get(w.tick, {})
+        return all(a in got or a in self.lost for a in w.ids)
+
+    def _route(self, w: World) -> None:
+        outs = self.outs.pop(w.tick, {})
+        members = set(w.ids)
+        self.radio.route(w.tick, w.ids, w.xs, w.ys, {a: o.messages for a, o in outs.items() if a in members})
+        alive_next = [a for a in w.alive_next if a not in self.lost]
+        inboxes = self.radio.deliver(w.tick + 1, alive_next)
+        self.ledger.close_tick(w.tick)
+        led = self.ledger
+        now = [led.messages_sent, led.bytes_sent, led.copies, led.delivered, led.dropped_total]
+        counters = [a - b for a, b in zip(now, self._last)]
+        self._last = now
+        step = NetemStep(w.tick, {a: o.action for a, o in outs.items() if a in members},
+                         {a: encode_inbox(v) for a, v in inboxes.items()}, counters, self.lost_unreported)
+        self.lost_unreported = []
+        self.step_pub.put(encode_netem_step(step))
+
+    def _finish(self, last_tick: int) -> None:
+        self.radio.finish(last_tick)
+        self.ledger.close_tick(1 << 62)
+        self.ledger.check()
+        self.sink.flush()
+        os.fsync(self.sink.fileno())
+        self.sink.close()
+        os.replace(self.part, self.out_dir / LEDGER_FILE)
+        report = {"kind": "netem", "totals": self.ledger.totals(),
+                  "per_sender": {str(k): v for k, v in self.ledger.per_sender().items()},
+                  "per_kind": self.ledger.per_kind(), "malformed": self.malformed, "ledger": LEDGER_FILE}
+        self.report_pub.put(encode_report(report))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="swarmbed netem", description="run the netem proxy of one swarmbed run")
+    ap.add_argument("--run-id", required=True)
+    ap.add_argument("--out", required=True, help="run directory where the ledger is written")
+    ap.add_argument("--parent-pid", type=int, help="exit when this process exits (set by the launcher)")
+    add_zenoh_args(ap)
+    args = ap.parse_args(argv)
+    die_with_parent(args.parent_pid)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
+    keys = Keys(args.run_id)
+    with open_from_args(args) as session:
+        exp = from_yaml(fetch_config_text(session, keys), f"config of run {args.run_id}")
+        return Proxy(exp, keys, session, Path(args.out)).run()

@@ -1,0 +1,92 @@
+"""What an allocation plugin sees and returns.
+
+SPACE's plugin shape: each tick the DecisionMakingNode calls :meth:`Allocator.decide` with the
+agent's :class:`LocalView` (its own state, the tasks its sensors see, the messages that reached it
+this tick). The plugin resolves conflicts using ``view.inbox``, decides, queues what it wants to
+share with ``view.broadcast`` / ``view.send``, and returns the task id it commits to (or None).
+
+A plugin never sees global truth: only what the view holds.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+from wire.codec import BROADCAST
+
+
+@dataclass(frozen=True, slots=True)
+class TaskInfo:
+    id: int
+    x: float
+    y: float
+    remaining: float  # workload still to do
+
+
+@dataclass(frozen=True, slots=True)
+class Message:
+    sender: int
+    kind: str
+    data: Any  # the decoded payload
+
+
+@dataclass(frozen=True, slots=True)
+class Outgoing:
+    dest: int | tuple[int, ...]
+    kind: str
+    data: Any
+
+
+@dataclass
+class LocalView:
+    agent_id: int
+    n_agents: int
+    tick: int
+    time: float
+    x: float
+    y: float
+    heading: float
+    speed: float
+    work_rate: float
+    tasks: dict[int, TaskInfo]
+    inbox: list[Message]
+    outbox: list[Outgoing] = field(default_factory=list)
+
+    def distance_to(self, task: TaskInfo) -> float:
+        return float(np.hypot(task.x - self.x, task.y - self.y))
+
+    def broadcast(self, kind: str, data: Any) -> None:
+        """Share ``data`` with every agent in radio range."""
+        self.outbox.append(Outgoing(BROADCAST, kind, data))
+
+    def send(self, to: int | list[int] | tuple[int, ...], kind: str, data: Any) -> None:
+        """Send ``data`` to one agent, or to a list of agents (multicast)."""
+        dest = to if isinstance(to, int) else tuple(to)
+        self.outbox.append(Outgoing(dest, kind, data))
+
+
+class NoParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Allocator(abc.ABC):
+    """Base class of allocation plugins. Subclasses declare ``Params`` (a pydantic model; unknown
+    keys are refused when the experiment is loaded) and implement :meth:`decide`."""
+
+    Params: ClassVar[type[BaseModel]] = NoParams
+    #: message kinds this plugin sends (documentation and conformance checks)
+    message_kinds: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator) -> None:
+        self.agent_id = agent_id
+        self.params = params
+        self.rng = rng
+
+    @abc.abstractmethod
+    def decide(self, view: LocalView) -> int | None:
+        """Return the task to work on now, or None (the tree then explores)."""

@@ -1,0 +1,30 @@
+"""An allocator that allocates nothing: for benchmarks of the runtime itself.
+
+With ``peers > 0`` it sends one small message per tick to the ``peers`` agents after it (by id,
+wrapping around), so that the radio and the inboxes carry traffic.
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from plugins.base import Allocator, LocalView
+
+
+class NoopParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    peers: int = Field(0, ge=0)
+    payload_bytes: int = Field(16, ge=0, le=65536)
+
+
+class NoopAllocator(Allocator):
+    Params = NoopParams
+    message_kinds = ("noop",)
+
+    def decide(self, view: LocalView) -> int | None:
+        p = self.params
+        if p.peers and view.n_agents > 1:
+            n = view.n_agents
+            peers = sorted({(self.agent_id + k) % n for k in range(1, min(p.peers, n - 1) + 1)})
+            view.send(peers, "noop", b"\0" * p.payload_bytes)
+        return None
