@@ -1,0 +1,39 @@
+import csv
+from collections import defaultdict
+from pathlib import Path
+
+import psutil
+import pytest
+
+from experiments import config as cfg
+
+ROOT = Path(__file__).resolve().parent.parent
+QUICKSTART = ROOT / "experiments" / "quickstart.yaml"
+
+
+def experiment(*overrides: str, base: Path = QUICKSTART) -> cfg.Experiment:
+    return cfg.load(base, list(overrides))
+
+
+def read_ledger(run_dir: Path) -> list[dict]:
+    with open(run_dir / "network_ledger.csv") as f:
+        return [{**r, "tick": int(r["tick"]), "sender": int(r["sender"]), "messages": int(r["messages"]),
+                 "bytes": int(r["bytes"])} for r in csv.DictReader(f)]
+
+
+def ledger_outcomes(rows: list[dict]) -> dict[str, int]:
+    out: dict[str, int] = defaultdict(int)
+    for r in rows:
+        out[r["outcome"]] += r["messages"]
+    return dict(out)
+
+
+@pytest.fixture(autouse=True)
+def no_orphans():
+    """Every process a test starts must be gone when it ends."""
+    yield
+    me = psutil.Process()
+    left = [p for p in me.children(recursive=True) if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    for p in left:
+        p.kill()
+    assert not left, f"processes left behind: {[(p.pid, p.cmdline()[:4]) for p in left]}"

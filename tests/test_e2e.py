@@ -1,0 +1,72 @@
+"""The quickstart experiment end to end: real processes, real Zenoh on loopback."""
+
+import json
+
+import pytest
+
+from experiments.runner import run_experiment
+from tests.conftest import experiment, ledger_outcomes, read_ledger
+
+DETERMINISTIC_FILES = ["summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv", "config.yaml"]
+
+
+@pytest.fixture(scope="module")
+def quickstart_runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("quickstart")
+    runs = {}
+    for name, seed in (("a", 1), ("b", 1), ("c", 2)):
+        runs[name] = run_experiment(experiment(f"run.seed={seed}"), base / name, progress=False)
+    return runs
+
+
+def test_quickstart_completes_every_task(quickstart_runs):
+    s = quickstart_runs["a"].summary
+    assert s["all_tasks_completed"] is True
+    assert s["tasks_completed"] == s["tasks_total"] == 20
+    assert s["time_99"] is not None and s["time_99"] <= s["mission_time"]
+    # the work done equals the workload of the tasks: nothing over-counted, nothing left
+    assert s["work_total"] > 20 * 6
+    assert s["network"]["messages_sent"] > 0
+    assert all(code == 0 for code in quickstart_runs["a"].timings["exit_codes"].values())
+
+
+def test_same_seed_gives_identical_result_files(quickstart_runs):
+    a, b = quickstart_runs["a"].out_dir, quickstart_runs["b"].out_dir
+    for name in DETERMINISTIC_FILES:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+
+
+def test_another_seed_gives_different_results(quickstart_runs):
+    a, c = quickstart_runs["a"].out_dir, quickstart_runs["c"].out_dir
+    assert (a / "summary.json").read_bytes() != (c / "summary.json").read_bytes()
+    assert (a / "network_ledger.csv").read_bytes() != (c / "network_ledger.csv").read_bytes()
+
+
+def test_ledger_conserves_every_copy(quickstart_runs):
+    for run in quickstart_runs.values():
+        net = run.summary["network"]
+        assert net["copies"] == net["delivered"] + sum(net["dropped"].values())
+        outcomes = ledger_outcomes(read_ledger(run.out_dir))
+        assert outcomes["sent"] == net["messages_sent"]
+        copies = sum(v for k, v in outcomes.items() if k != "sent")
+        assert copies == net["copies"]
+        assert outcomes.get("delivered", 0) == net["delivered"]
+
+
+def test_agents_and_proxy_agree_on_bytes(quickstart_runs):
+    net = quickstart_runs["a"].summary["network"]
+    assert net["bytes_agree"] is True
+    assert net["bytes_sent_by_agents"] == net["bytes_sent"] > 0
+
+
+def test_summary_is_written_last_and_names_its_metrics(quickstart_runs):
+    out = quickstart_runs["a"].out_dir
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("mission_time", "time_99", "tasks_total", "tasks_completed", "distance_total", "work_total",
+                "distance_per_agent", "work_per_agent", "ticks", "network"):
+        assert key in summary
+    for key in ("messages_sent", "bytes_sent", "copies", "delivered", "dropped"):
+        assert key in summary["network"]
+    assert not list(out.glob("*.part"))
+    assert (out / "summary.json").stat().st_mtime_ns >= max(
+        (out / f).stat().st_mtime_ns for f in ("timeseries.csv", "agents.csv", "timings.json", "network_ledger.csv"))

@@ -1,0 +1,108 @@
+"""Processes that die, plugins that raise, and garbage on the wire."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import psutil
+import pytest
+import zenoh
+
+from coordinator.coordinator import RunError
+from experiments.runner import run_experiment
+from tests.conftest import QUICKSTART, ROOT, experiment
+from wire.keys import Keys
+from wire.session import zenoh_config
+
+LONG_NOOP = ["--set", "allocator={name: noop, peers: 2}", "--set", "scenario.initial_tasks=0",
+             "--set", "run.stop_when_done=false", "--set", "run.duration=1000000"]
+
+
+def _agents_of(runner: psutil.Process) -> list[psutil.Process]:
+    return [p for p in runner.children() if "agent_runtime" in " ".join(p.cmdline())]
+
+
+@pytest.mark.parametrize("allow", [False, True])
+def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
+    cmd = [sys.executable, "-m", "experiments.cli", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
+           *LONG_NOOP, "--set", f"run.allow_agent_failures={str(allow).lower()}"]
+    if allow:
+        cmd[cmd.index("run.duration=1000000")] = "run.duration=3000"
+    runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = psutil.Process(runner.pid)
+    deadline = time.monotonic() + 60
+    while len(_agents_of(proc)) < 5 or not (tmp_path / "logs").exists():
+        assert runner.poll() is None and time.monotonic() < deadline, runner.communicate()
+        time.sleep(0.1)
+    time.sleep(1.5)  # well into the run
+    children = proc.children(recursive=True)
+    victim = next(p for p in _agents_of(proc) if "--id 2" in " ".join(p.cmdline()))
+    killed_at = time.monotonic()
+    victim.send_signal(signal.SIGKILL)
+    out, err = runner.communicate(timeout=120)
+    if allow:
+        assert runner.returncode == 0, err
+        import json
+        summary = json.loads((tmp_path / "summary.json").read_text())
+        assert "2" in summary["agents_lost"]
+        assert summary["network"]["copies"] == summary["network"]["delivered"] + summary["network"]["dropped_total"]
+    else:
+        noticed = time.monotonic() - killed_at
+        assert runner.returncode == 1
+        assert "agent 2 stopped at tick" in err and "logs/agent_2.log" in err
+        assert noticed < 10, f"took {noticed:.1f} s"
+        assert not (tmp_path / "summary.json").exists()
+    gone, alive = psutil.wait_procs(children, timeout=5)
+    assert not alive, f"orphans: {[p.pid for p in alive]}"
+
+
+BOOM = textwrap.dedent('''
+    from plugins.base import Allocator
+
+    class Boom(Allocator):
+        def decide(self, view):
+            if view.tick == 5 and self.agent_id == 1:
+                raise RuntimeError("boom at five")
+            return None
+''')
+
+
+def test_plugin_that_raises_stops_the_run_with_its_traceback(tmp_path):
+    plugin = tmp_path / "boom.py"
+    plugin.write_text(BOOM)
+    exp = experiment(f"allocator={{name: '{plugin}:Boom'}}")
+    with pytest.raises(RunError) as info:
+        run_experiment(exp, tmp_path / "run", progress=False)
+    msg = str(info.value)
+    assert "agent 1 stopped at tick 5" in msg and "boom at five" in msg and "Traceback" in msg
+    assert "boom at five" in (tmp_path / "run" / "logs" / "agent_1.log").read_text()
+    assert not (tmp_path / "run" / "summary.json").exists()
+
+
+def test_run_goes_on_without_a_failed_agent_when_allowed(tmp_path):
+    plugin = tmp_path / "boom.py"
+    plugin.write_text(BOOM)
+    exp = experiment(f"allocator={{name: '{plugin}:Boom'}}", "run.allow_agent_failures=true",
+                     "run.stop_when_done=false", "run.duration=40")
+    result = run_experiment(exp, tmp_path / "run", progress=False)
+    assert result.summary["agents_lost"] == {"1": 5}
+    assert result.summary["ticks"] == 40
+
+
+def test_malformed_samples_are_dropped_counted_and_survived(tmp_path):
+    def inject(keys: Keys, endpoint: str) -> None:
+        with zenoh.open(zenoh_config("client", connect=[endpoint])) as s:
+            for key in (keys.agent_in(0), keys.agent_out(0), keys.world, keys.netem_step, keys.agent_report(1)):
+                for junk in (b"\xc1", b"\x93\x01\x02", b"not msgpack at all"):
+                    s.put(key, junk, congestion_control=zenoh.CongestionControl.BLOCK)
+            time.sleep(0.3)
+
+    exp = experiment("allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
+                     "run.duration=400")
+    result = run_experiment(exp, tmp_path, progress=False, on_ready=inject)
+    bad = result.summary["network"]["malformed"]
+    assert bad["coordinator"] >= 6 and bad["netem"] >= 6 and bad["agents"] >= 3
+    assert result.summary["ticks"] == 400

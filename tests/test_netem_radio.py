@@ -1,0 +1,107 @@
+"""The radio model on crafted cases, checked against tc-netem's arithmetic written out here."""
+
+import math
+
+import numpy as np
+import pytest
+
+from netem import Ledger, NetemParams, Radio
+from wire.codec import BROADCAST, RadioMessage
+
+
+def radio(**kw) -> Radio:
+    return Radio(NetemParams(**kw), n_agents=4, dt=1.0, rng=np.random.default_rng(0))
+
+
+def msg(size: int, dest=BROADCAST, kind="k") -> RadioMessage:
+    return RadioMessage(dest, kind, b"x" * size)
+
+
+def run(r: Radio, ticks: int, per_tick, positions=((0, 0), (1, 0), (2, 0), (3, 0))):
+    """Agent 0 sends ``per_tick(k)`` messages each tick; returns {tick: inbox of agent 1}."""
+    ids = list(range(len(positions)))
+    xs, ys = [p[0] for p in positions], [p[1] for p in positions]
+    got = {}
+    for k in range(ticks):
+        r.confirm()
+        r.route(k, ids, xs, ys, {0: per_tick(k)})
+        got[k + 1] = r.deliver(k + 1, ids).get(1, [])
+    r.finish(ticks - 1)
+    return got
+
+
+def test_no_limits_delivers_next_tick():
+    r = radio()
+    got = run(r, 3, lambda k: [msg(10, dest=1)])
+    assert [len(got[t]) for t in (1, 2, 3)] == [1, 1, 1]
+    r.ledger.check()
+
+
+def test_rate_cap_queues_behind_earlier_messages_and_idle_earns_no_credit():
+    # 100-byte messages at 50 B/s take 2 s each; one per tick for 3 ticks, then silence, then one more.
+    r = radio(rate=50.0)
+    sends = {0: 1, 1: 1, 2: 1, 9: 1}
+    got = run(r, 14, lambda k: [msg(100, dest=1)] * sends.get(k, 0))
+    delivered_at = [t for t, inbox in got.items() for _ in inbox]
+    # tc rate: end_i = max(sent_i, end_{i-1}) + size/rate  ->  2, 4, 6; after idling, 9 + 2 = 11
+    assert delivered_at == [2, 4, 6, 11]
+
+
+def test_latency_adds_ticks():
+    r = radio(latency=3)
+    got = run(r, 6, lambda k: [msg(5, dest=1)] if k == 0 else [])
+    assert [t for t, inbox in got.items() if inbox] == [4]
+
+
+def test_queue_limit_tail_drops_whole_messages():
+    r = radio(rate=10.0, limit=2)  # 10-byte messages take 1 s each
+    run(r, 1, lambda k: [msg(10, dest=(1, 2))] * 5)
+    led = r.ledger
+    assert led.dropped["queue_full"] == 3 * 2  # messages 3..5 dropped, two copies each
+    led.check()
+
+
+def test_range_is_checked_per_receiver_at_the_send_tick():
+    r = radio(range=1.5)
+    run(r, 1, lambda k: [msg(8)])  # broadcast from x=0 to agents at x = 1, 2, 3
+    assert r.ledger.dropped["out_of_range"] == 2
+    assert r.ledger.delivered == 0  # the run ended before tick 1: in flight -> run_ended
+    assert r.ledger.dropped["run_ended"] == 1
+    r.ledger.check()
+
+
+def test_loss_rate_within_binomial_bound():
+    r = radio(loss=0.3)
+    n = 10_000
+    run(r, 1, lambda k: [msg(1, dest=1)] * n)
+    lost = r.ledger.dropped["loss"]
+    sd = math.sqrt(n * 0.3 * 0.7)
+    assert abs(lost - 0.3 * n) < 5 * sd
+
+
+def test_addressing_failures_are_booked():
+    r = radio()
+    ids = [0, 1]  # agents 2 and 3 are dead at this tick
+    r.route(0, ids, [0, 1], [0, 0], {0: [msg(4, dest=(1, 2, 7, 0))]})
+    led = r.ledger
+    assert led.dropped["receiver_dead"] == 1
+    assert led.dropped["no_such_receiver"] == 2  # id 7 is not an agent, 0 is the sender
+    assert r.deliver(1, [0]) == {}  # receiver 1 died before delivery
+    r.confirm()
+    assert led.dropped["receiver_dead"] == 2
+    led.check()
+
+
+def test_same_seed_same_fate():
+    outcomes = []
+    for _ in range(2):
+        r = Radio(NetemParams(loss=0.5), 4, 1.0, np.random.default_rng(42))
+        run(r, 5, lambda k: [msg(3)] * 4)
+        outcomes.append(r.ledger.totals())
+    assert outcomes[0] == outcomes[1]
+
+
+def test_params_reject_out_of_range_values():
+    for bad in ({"loss": 1.5}, {"rate": 0}, {"limit": 0}, {"latency": -1}, {"range": -2}):
+        with pytest.raises(ValueError):
+            NetemParams(**bad)
