@@ -7,10 +7,8 @@ and its agent id: the experiment itself comes from the coordinator, so it can ru
 
 from __future__ import annotations
 
-import argparse
 import logging
 import queue
-import sys
 import traceback
 
 import zenoh
@@ -19,9 +17,9 @@ from agent_runtime.runtime import AgentRuntime
 from experiments.config import from_yaml
 from wire.codec import StopIn, WireError, decode_agent_in, encode_agent_out, encode_report
 from wire.keys import Keys
-from wire.lifecycle import die_with_parent
+from wire.lifecycle import child_args
 from wire.membership import fetch_config_text
-from wire.session import add_zenoh_args, open_from_args
+from wire.session import open_from_args
 
 log = logging.getLogger("swarmbed.agent")
 
@@ -75,14 +73,9 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="swarmbed agent", description="run one swarmbed agent process")
-    ap.add_argument("--run-id", required=True, help="the run to join (printed by the coordinator)")
-    ap.add_argument("--id", type=int, required=True, help="this agent's id, 0 <= id < agents.count")
-    ap.add_argument("--parent-pid", type=int, help="exit when this process exits (set by the launcher)")
-    add_zenoh_args(ap)
-    args = ap.parse_args(argv)
-    die_with_parent(args.parent_pid)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
+    args = child_args("swarmbed agent", "run one swarmbed agent process",
+                      lambda ap: ap.add_argument("--id", type=int, required=True, help="0 <= id < agents.count"),
+                      argv)
     keys = Keys(args.run_id)
     with open_from_args(args) as session:
         exp = from_yaml(fetch_config_text(session, keys), f"config of run {args.run_id}")

@@ -273,8 +273,6 @@ class Coordinator:
         results.write_csv(out / results.AGENTS, ["agent", "alive", "lost_at_tick", "distance", "work",
                                                  "invalid_actions", "messages_sent", "bytes_sent", "copies",
                                                  "delivered"], rows)
-        results.write_json(out / results.TIMINGS, {**timings, **self.wall,
-                                                   "ticks_per_s": (self.last_tick + 1) / self.wall["run_s"]
-                                                   if self.wall.get("run_s") else None})
+        results.write_json(out / results.TIMINGS, timings)
         results.write_json(out / results.SUMMARY, summary)
         return summary

@@ -94,7 +94,10 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         coord.stop_and_collect()
         exit_codes = children.wait(timeout=15.0)
         agent_rss = [v for k, v in rss.items() if k.startswith("agent_")]
+        run_s = coord.wall["run_s"]
         timings = {
+            "run_s": run_s,
+            "ticks_per_s": (coord.last_tick + 1) / run_s if run_s > 0 else None,
             "run_id": keys.run_id,
             "endpoint": endpoint,
             "startup_s": t_joined - t_start,

@@ -9,11 +9,9 @@ and this tick's counters. The ledger streams to ``network_ledger.csv`` in the ru
 
 from __future__ import annotations
 
-import argparse
 import logging
 import os
 import queue
-import sys
 from pathlib import Path
 
 import zenoh
@@ -25,9 +23,9 @@ from netem.radio import Radio
 from wire.codec import (AgentOut, NetemStep, World, WireError, decode_agent_out, decode_world, encode_inbox,
                         encode_netem_step, encode_report, unpack)
 from wire.keys import Keys, agent_id_of
-from wire.lifecycle import NETEM, component_rng, die_with_parent
+from wire.lifecycle import NETEM, child_args, component_rng
 from wire.membership import fetch_config_text
-from wire.session import add_zenoh_args, open_from_args
+from wire.session import open_from_args
 
 log = logging.getLogger("swarmbed.netem")
 
@@ -162,14 +160,8 @@ class Proxy:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="swarmbed netem", description="run the netem proxy of one swarmbed run")
-    ap.add_argument("--run-id", required=True)
-    ap.add_argument("--out", required=True, help="run directory where the ledger is written")
-    ap.add_argument("--parent-pid", type=int, help="exit when this process exits (set by the launcher)")
-    add_zenoh_args(ap)
-    args = ap.parse_args(argv)
-    die_with_parent(args.parent_pid)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
+    args = child_args("swarmbed netem", "run the netem proxy of one swarmbed run",
+                      lambda ap: ap.add_argument("--out", required=True, help="run directory for the ledger"), argv)
     keys = Keys(args.run_id)
     with open_from_args(args) as session:
         exp = from_yaml(fetch_config_text(session, keys), f"config of run {args.run_id}")

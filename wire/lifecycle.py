@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import argparse
 import ctypes
+import logging
 import os
 import signal
 import sys
+from typing import Callable
 
 import numpy as np
 
@@ -36,3 +39,20 @@ def die_with_parent(parent_pid: int | None) -> None:
         return
     if os.getppid() != parent_pid:  # the parent died before prctl took effect
         os._exit(3)
+
+
+def child_args(prog: str, description: str, add_args: Callable[[argparse.ArgumentParser], None],
+               argv: list[str] | None) -> argparse.Namespace:
+    """Parse a child process's command line (its own flags, ``--run-id``, ``--parent-pid`` and the
+    zenoh flags), tie it to its parent and set up logging to stderr."""
+    from wire.session import add_zenoh_args
+
+    ap = argparse.ArgumentParser(prog=prog, description=description)
+    ap.add_argument("--run-id", required=True, help="the run to join (see the run's timings.json)")
+    add_args(ap)
+    ap.add_argument("--parent-pid", type=int, help="exit when this process exits (set by the launcher)")
+    add_zenoh_args(ap)
+    args = ap.parse_args(argv)
+    die_with_parent(args.parent_pid)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
+    return args

@@ -6,104 +6,81 @@ from agent_runtime.bt.node import ControlNode, InputPort, Port, BTError
 from agent_runtime.bt.status import Status
 
 
-class Sequence(ControlNode):
-    """Ticks children in order, resuming at the RUNNING one; fails (and resets) at the first FAILURE."""
+class _Ordered(ControlNode):
+    """Sequence and Fallback: tick children in order, resuming at the RUNNING one. A child that
+    returns ``NEXT`` moves on to the following child; any other completion ends the node with that
+    status; when every child returned ``NEXT`` the node returns ``NEXT`` too."""
+
+    NEXT = Status.SUCCESS
+
+    def __init__(self, name, config):
+        super().__init__(name, config)
+        self.current = 0
+
+    def tick(self) -> Status:
+        self.status = Status.RUNNING
+        while self.current < len(self._children):
+            child_status = self._children[self.current].execute_tick()
+            if child_status == Status.RUNNING:
+                return Status.RUNNING
+            if child_status != self.NEXT:
+                self.reset_children()
+                self.current = 0
+                return child_status
+            self.current += 1
+        self.reset_children()
+        self.current = 0
+        return self.NEXT
+
+    def halt(self) -> None:
+        self.current = 0
+        super().halt()
+
+
+class Sequence(_Ordered):
+    """Succeeds when every child succeeds; fails (and resets) at the first FAILURE."""
 
     ID = "Sequence"
-
-    def __init__(self, name, config):
-        super().__init__(name, config)
-        self.current = 0
-
-    def tick(self) -> Status:
-        self.status = Status.RUNNING
-        while self.current < len(self._children):
-            child_status = self._children[self.current].execute_tick()
-            if child_status == Status.RUNNING:
-                return Status.RUNNING
-            if child_status == Status.FAILURE:
-                self.reset_children()
-                self.current = 0
-                return Status.FAILURE
-            self.current += 1
-        self.reset_children()
-        self.current = 0
-        return Status.SUCCESS
-
-    def halt(self) -> None:
-        self.current = 0
-        super().halt()
+    NEXT = Status.SUCCESS
 
 
-class Fallback(ControlNode):
-    """Ticks children in order until one succeeds; fails when all fail."""
+class Fallback(_Ordered):
+    """Succeeds at the first child that succeeds; fails when all fail."""
 
     ID = "Fallback"
+    NEXT = Status.FAILURE
 
-    def __init__(self, name, config):
-        super().__init__(name, config)
-        self.current = 0
+
+class _Reactive(ControlNode):
+    """Reactive variants: every tick starts again from the first child; a RUNNING child halts all
+    the others (BT.CPP v4 halts every child but the running one)."""
+
+    NEXT = Status.SUCCESS
 
     def tick(self) -> Status:
         self.status = Status.RUNNING
-        while self.current < len(self._children):
-            child_status = self._children[self.current].execute_tick()
+        for index, child in enumerate(self._children):
+            child_status = child.execute_tick()
             if child_status == Status.RUNNING:
+                for i in range(len(self._children)):
+                    if i != index:
+                        self.halt_child(i)
                 return Status.RUNNING
-            if child_status == Status.SUCCESS:
+            if child_status != self.NEXT:
                 self.reset_children()
-                self.current = 0
-                return Status.SUCCESS
-            self.current += 1
+                return child_status
         self.reset_children()
-        self.current = 0
-        return Status.FAILURE
-
-    def halt(self) -> None:
-        self.current = 0
-        super().halt()
+        return self.NEXT
 
 
-class ReactiveSequence(ControlNode):
-    """Re-ticks every child from the first on each tick; a RUNNING child halts all the others."""
-
+class ReactiveSequence(_Reactive):
     ID = "ReactiveSequence"
-
-    def tick(self) -> Status:
-        self.status = Status.RUNNING
-        for index, child in enumerate(self._children):
-            child_status = child.execute_tick()
-            if child_status == Status.RUNNING:
-                for i in range(len(self._children)):
-                    if i != index:
-                        self.halt_child(i)
-                return Status.RUNNING
-            if child_status == Status.FAILURE:
-                self.reset_children()
-                return Status.FAILURE
-        self.reset_children()
-        return Status.SUCCESS
+    NEXT = Status.SUCCESS
 
 
-class ReactiveFallback(ControlNode):
-    """Re-ticks every child from the first on each tick; a RUNNING child halts all the others."""
-
+class ReactiveFallback(_Reactive):
     ID = "ReactiveFallback"
-
-    def tick(self) -> Status:
-        self.status = Status.RUNNING
-        for index, child in enumerate(self._children):
-            child_status = child.execute_tick()
-            if child_status == Status.RUNNING:
-                for i in range(len(self._children)):
-                    if i != index:
-                        self.halt_child(i)
-                return Status.RUNNING
-            if child_status == Status.SUCCESS:
-                self.reset_children()
-                return Status.SUCCESS
-        self.reset_children()
-        return Status.FAILURE
+    NEXT = Status.FAILURE
 
 
 class Parallel(ControlNode):
