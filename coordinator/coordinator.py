@@ -8,6 +8,7 @@ run's Zenoh hub: it listens, everyone else connects to it as a client.
 
 from __future__ import annotations
 
+import logging
 import math
 import queue
 import time
@@ -27,6 +28,7 @@ from wire.lifecycle import WORLD, component_rng
 from wire.membership import serve_config
 
 BLOCK = zenoh.CongestionControl.BLOCK
+log = logging.getLogger("swarmbed.coordinator")
 
 
 class RunError(RuntimeError):
@@ -56,6 +58,7 @@ class Coordinator:
         self.last_tick = -1
         self.wall: dict[str, float] = {}
         self._entities: list = []
+        self._pushback: list[tuple[str, object]] = []
 
     # -- setup -----------------------------------------------------------------------------------
     def declare(self) -> None:
@@ -143,7 +146,7 @@ class Coordinator:
         deadline = time.monotonic() + timeout
         while True:
             try:
-                what, data = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
+                what, data = self._next_event(deadline - time.monotonic())
             except queue.Empty:
                 raise RunError(f"tick {k}: no step from the netem proxy within {timeout:.0f} s "
                                "(an agent or the proxy is stuck; see the logs)") from None
@@ -160,9 +163,32 @@ class Coordinator:
                 if data == self.keys.alive_netem:
                     raise RunError(f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log")
                 if not data.endswith("/coordinator"):
-                    self._lose(agent_id_of(data), k, "its process exited")
+                    agent = agent_id_of(data)
+                    self._await_fatal_report(agent)
+                    self._lose(agent, k, "its process exited")
             elif what == "report":
                 self._on_report(data, k)
+
+    def _next_event(self, timeout: float) -> tuple[str, object]:
+        if self._pushback:
+            return self._pushback.pop(0)
+        return self.events.get(timeout=max(0.0, timeout))
+
+    def _await_fatal_report(self, agent: int, grace: float = 0.25) -> None:
+        """An agent left. Its fatal report (if it failed) travels apart from its liveliness token and
+        may come a little later: wait briefly for it, keeping every other event in order."""
+        deadline = time.monotonic() + grace
+        held = []
+        while agent not in self.fatal:
+            try:
+                event = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                break
+            if event[0] == "report":
+                self._on_report(event[1], -1)
+            else:
+                held.append(event)
+        self._pushback.extend(held)
 
     def _on_report(self, data: bytes, tick: int) -> None:
         try:
@@ -192,6 +218,8 @@ class Coordinator:
 
     def _malformed(self, key: str, exc: Exception) -> None:
         self.malformed += 1
+        if self.malformed <= 20:
+            log.warning("coordinator: malformed sample on %s dropped: %s", key, exc)
 
     # -- shutdown and results ---------------------------------------------------------------------
     def stop_and_collect(self, timeout: float = 30.0) -> None:
@@ -203,7 +231,7 @@ class Coordinator:
         deadline = time.monotonic() + timeout
         while self.netem_report is None or any(i not in self.reports for i in live):
             try:
-                what, data = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
+                what, data = self._next_event(deadline - time.monotonic())
             except queue.Empty:
                 missing = [f"agent_{i}" for i in live if i not in self.reports]
                 if self.netem_report is None:

@@ -59,6 +59,41 @@ def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
     assert not alive, f"orphans: {[p.pid for p in alive]}"
 
 
+def _start_long_run(tmp_path):
+    cmd = [sys.executable, "-m", "experiments.cli", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
+           *LONG_NOOP]
+    runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = psutil.Process(runner.pid)
+    deadline = time.monotonic() + 60
+    while len(_agents_of(proc)) < 5:
+        assert runner.poll() is None and time.monotonic() < deadline, runner.communicate()
+        time.sleep(0.1)
+    time.sleep(1.5)
+    return runner, proc, proc.children(recursive=True)
+
+
+def test_ctrl_c_stops_every_process_with_a_clear_message(tmp_path):
+    runner, _, children = _start_long_run(tmp_path)
+    runner.send_signal(signal.SIGINT)
+    _, err = runner.communicate(timeout=60)
+    assert runner.returncode == 130
+    assert "interrupted" in err and "no summary.json" in err
+    assert not (tmp_path / "summary.json").exists()
+    _, alive = psutil.wait_procs(children, timeout=5)
+    assert not alive
+
+
+def test_crashed_proxy_stops_the_run_with_a_clear_message(tmp_path):
+    runner, proc, children = _start_long_run(tmp_path)
+    proxy = next(p for p in proc.children() if "-m netem" in " ".join(p.cmdline()))
+    proxy.send_signal(signal.SIGKILL)
+    _, err = runner.communicate(timeout=60)
+    assert runner.returncode == 1
+    assert "netem proxy exited unexpectedly" in err and "logs/netem.log" in err
+    _, alive = psutil.wait_procs(children, timeout=5)
+    assert not alive
+
+
 BOOM = textwrap.dedent('''
     from plugins.base import Allocator
 
