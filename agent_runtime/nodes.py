@@ -44,7 +44,8 @@ class DecisionMakingNode(SyncAction):
 
 
 class TaskExecutingNode(StatefulAction):
-    """Moves to the assigned task and works on it; SUCCESS once it is no longer open in view."""
+    """Moves to the assigned task and works on it (RUNNING). The decision node before it runs every
+    tick and changes or drops the task; with no task it returns SUCCESS."""
 
     ID = "TaskExecutingNode"
 
@@ -58,7 +59,7 @@ class TaskExecutingNode(StatefulAction):
     def on_running(self):
         task = self.get_input("task_id")
         ctx = self.config.context
-        if task is None or task not in ctx.view.tasks:
+        if task is None:
             return Status.SUCCESS
         ctx.act(["goto_task", int(task)])
         return Status.RUNNING

@@ -16,7 +16,7 @@ from agent_runtime.nodes import space_registry
 from experiments.config import Experiment
 from plugins import make
 from plugins.base import LocalView, Message, TaskInfo
-from wire.codec import RadioMessage, WireError, decode_inbox, pack, unpack
+from wire.codec import RadioMessage, WireError, decode_inbox, unpack
 from wire.lifecycle import agent_seeds
 
 log = logging.getLogger("swarmbed.agent")
@@ -72,17 +72,18 @@ class AgentRuntime:
     def step(self, tick: int, obs: dict, inbox: bytes) -> tuple[list, list[RadioMessage]]:
         me = obs["me"]
         tasks = {int(t[0]): TaskInfo(int(t[0]), t[1], t[2], t[3]) for t in obs["tasks"]}
-        self.view = LocalView(self.agent_id, self.exp.agents.count, tick, float(obs["t"]), me[0], me[1], me[2],
-                              me[3], self.exp.agents.work_rate, tasks, self._inbox(inbox))
+        a = self.exp.agents
+        self.view = LocalView(self.agent_id, a.count, tick, float(obs["t"]), me[0], me[1], me[2], me[3],
+                              a.work_rate, tasks, self._inbox(inbox), a.max_speed, a.awareness_range)
         self._action = ["stop"]
         self.tree.tick_once()
         messages = []
         for out in self.view.outbox:
-            payload = pack(out.data)
+            msg = out.encode()
             counter = self.sent[out.kind]
             counter[0] += 1
-            counter[1] += len(payload)
-            messages.append(RadioMessage(out.dest, out.kind, payload))
+            counter[1] += len(msg.payload)
+            messages.append(msg)
         self.ticks += 1
         return self._action, messages
 

@@ -118,8 +118,8 @@ class MTSRWorld:
         name = action[0] if action else None
         if name == "goto_task" and len(action) == 2 and isinstance(action[1], int):
             t = action[1]
-            if 0 <= t < len(self.remaining) and np.isnan(self.done_at[t]):
-                return (float(self.tx[t]), float(self.ty[t])), t
+            if 0 <= t < len(self.remaining):  # head there even if done: the agent learns it on arrival
+                return (float(self.tx[t]), float(self.ty[t])), (t if np.isnan(self.done_at[t]) else None)
         elif name == "goto" and len(action) == 3 and all(isinstance(v, (int, float)) for v in action[1:]):
             return (float(action[1]), float(action[2])), None
         elif name == "stop" and len(action) == 1:

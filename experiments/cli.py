@@ -74,6 +74,27 @@ def cmd_bt(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_check_allocator(args: argparse.Namespace) -> int:
+    from plugins.conformance import GENERIC_CHECKS, ConformanceError
+    from plugins.registry import PluginError, validate_params
+
+    params = dict(cfg.parse_override(text) for text in args.set)
+    try:
+        validate_params(args.allocator, params)
+    except PluginError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    failed = 0
+    for check in GENERIC_CHECKS:
+        try:
+            result = check(args.allocator, params)
+            print(f"PASS {check.__name__}: {result}")
+        except ConformanceError as exc:
+            failed += 1
+            print(f"FAIL {check.__name__}: {exc}")
+    return 1 if failed else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -93,6 +114,11 @@ def main(argv: list[str] | None = None) -> int:
     check = bt_sub.add_parser("check", help="load behavior-tree XML files and report errors")
     check.add_argument("files", nargs="+")
     bt.set_defaults(func=cmd_bt)
+
+    chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
+    chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")
+    chk.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="an allocator parameter")
+    chk.set_defaults(func=cmd_check_allocator)
 
     for name, module in (("agent", "agent_runtime.process"), ("netem", "netem.proxy")):
         p = sub.add_parser(name, help=f"start one {name} process by hand (e.g. on another host)", add_help=False)

@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
-from wire.codec import BROADCAST
+from wire.codec import BROADCAST, RadioMessage, pack
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,6 +41,10 @@ class Outgoing:
     kind: str
     data: Any
 
+    def encode(self) -> RadioMessage:
+        """The message as it goes on the wire; its size is ``len(payload)``."""
+        return RadioMessage(self.dest, self.kind, pack(self.data))
+
 
 @dataclass
 class LocalView:
@@ -55,7 +59,13 @@ class LocalView:
     work_rate: float
     tasks: dict[int, TaskInfo]
     inbox: list[Message]
+    max_speed: float = 1.0
+    awareness_range: float = float("inf")  # tasks within it are all in ``tasks``
     outbox: list[Outgoing] = field(default_factory=list)
+
+    def sees(self, x: float, y: float) -> bool:
+        """Whether a point is within awareness range (an open task there would be in ``tasks``)."""
+        return float(np.hypot(x - self.x, y - self.y)) <= self.awareness_range
 
     def distance_to(self, task: TaskInfo) -> float:
         return float(np.hypot(task.x - self.x, task.y - self.y))

@@ -86,3 +86,5 @@ def make(name: str, params: Mapping[str, Any], agent_id: int, rng: np.random.Gen
 
 register("fcg", "plugins.fcg:FirstClaimedGreedy")
 register("noop", "plugins.noop:NoopAllocator")
+register("cbba", "plugins.cbba:CBBA")
+register("grape", "plugins.grape:GRAPE")

@@ -56,3 +56,15 @@ def test_bt_check_command_reports_errors(tmp_path, capsys):
     bad.write_text('<root BTCPP_format="4"><BehaviorTree ID="M"><Nope/></BehaviorTree></root>')
     assert main(["bt", "check", str(bad)]) == 2
     assert f"{bad}:1 <Nope>: unknown node type" in capsys.readouterr().err
+
+
+def test_check_allocator_command(capsys, tmp_path):
+    assert main(["check-allocator", "fcg", "--set", "mode=Random"]) == 0
+    assert capsys.readouterr().out.count("PASS") == 4
+    bad = tmp_path / "bad.py"
+    bad.write_text("from plugins.base import Allocator\n"
+                   "class Liar(Allocator):\n"
+                   "    def decide(self, view):\n"
+                   "        return 10**6\n")
+    assert main(["check-allocator", f"{bad}:Liar"]) == 1
+    assert "does not exist" in capsys.readouterr().out

@@ -70,3 +70,12 @@ def test_summary_is_written_last_and_names_its_metrics(quickstart_runs):
     assert not list(out.glob("*.part"))
     assert (out / "summary.json").stat().st_mtime_ns >= max(
         (out / f).stat().st_mtime_ns for f in ("timeseries.csv", "agents.csv", "timings.json", "network_ledger.csv"))
+
+
+@pytest.mark.parametrize("allocator", ["cbba", "grape"])
+def test_quickstart_completes_with_each_allocator(tmp_path, allocator):
+    result = run_experiment(experiment(f"allocator={{name: {allocator}}}"), tmp_path, progress=False)
+    s = result.summary
+    assert s["all_tasks_completed"] is True and s["tasks_completed"] == 20
+    assert s["network"]["per_kind"][allocator]["messages"] > 0
+    assert s["network"]["bytes_agree"] is True

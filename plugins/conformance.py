@@ -1,0 +1,164 @@
+"""Conformance kit for allocators, like PettingZoo's ``api_test`` / ``seed_test``.
+
+It runs allocators in-process on static instances: agents stand still, every round each agent
+decides with what it sees and what reached it, and its messages go through the real radio model
+(:class:`netem.Radio`), so loss, rate caps and queue limits behave exactly as in a run. Check any
+allocator, a user's own included:
+
+    swarmbed check-allocator fcg
+    swarmbed check-allocator my_algo.py:MyAllocator --set alpha=0.3
+
+Generic checks: determinism (same seed, same decisions and message bytes), messages serializable
+and bounded, keeps working under 30 % loss and under a tight rate cap, and never keeps an agent on
+a task that no longer exists.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+from netem import NetemParams, Radio
+from plugins.base import Allocator, LocalView, Message, TaskInfo
+from plugins.registry import make, resolve
+from wire.codec import unpack
+
+DEFAULT_MAX_BYTES = 64 * 1024
+
+
+class ConformanceError(AssertionError):
+    """An allocator broke a rule of the kit; the message says which and how."""
+
+
+@dataclass
+class Instance:
+    agents: list[tuple[float, float]]
+    tasks: dict[int, tuple[float, float, float]]  # id -> (x, y, workload)
+    max_speed: float = 1.0
+    work_rate: float = 1.0
+    awareness_range: float = math.inf
+
+
+def random_instance(seed: int, n_agents: int, n_tasks: int, size: float = 100.0,
+                    workload: tuple[float, float] = (6.0, 60.0)) -> Instance:
+    rng = np.random.default_rng(seed)
+    agents = [(float(x), float(y)) for x, y in rng.uniform(0, size, (n_agents, 2))]
+    tasks = {j: (float(x), float(y), float(w)) for j, (x, y, w) in
+             enumerate(zip(rng.uniform(0, size, n_tasks), rng.uniform(0, size, n_tasks),
+                           rng.uniform(*workload, n_tasks)))}
+    return Instance(agents, tasks)
+
+
+@dataclass
+class Trace:
+    allocators: list[Allocator]
+    decisions: list[dict[int, int | None]] = field(default_factory=list)  # per round
+    messages: list[list[tuple[int, str, bytes]]] = field(default_factory=list)  # per round
+    radio: Radio | None = None
+
+
+def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, seed: int = 0,
+             network: NetemParams = NetemParams(), remove_at: Mapping[int, list[int]] | None = None,
+             max_bytes: int = DEFAULT_MAX_BYTES) -> Trace:
+    """Run ``rounds`` rounds. ``remove_at[k]``: tasks that disappear (are done) before round k."""
+    n = len(inst.agents)
+    seeds = np.random.SeedSequence(seed).spawn(n + 1)
+    trace = Trace([make(name, params, i, np.random.default_rng(seeds[i])) for i in range(n)])
+    radio = Radio(network, n, 1.0, np.random.default_rng(seeds[n]))
+    trace.radio = radio
+    ids = list(range(n))
+    xs, ys = [a[0] for a in inst.agents], [a[1] for a in inst.agents]
+    tasks = dict(inst.tasks)
+    inboxes: dict[int, list[list]] = {}
+    kinds = set(type(trace.allocators[0]).message_kinds)
+    for k in range(rounds):
+        for t in (remove_at or {}).get(k, ()):
+            tasks.pop(t, None)
+        radio.confirm()
+        outs, decisions, sent = {}, {}, []
+        for i, (x, y) in enumerate(inst.agents):
+            visible = {t: TaskInfo(t, tx, ty, w) for t, (tx, ty, w) in tasks.items()
+                       if math.hypot(tx - x, ty - y) <= inst.awareness_range}
+            inbox = [Message(s, kind, unpack(payload)) for s, kind, payload in inboxes.get(i, [])]
+            view = LocalView(i, n, k, float(k), x, y, 0.0, 0.0, inst.work_rate, visible, inbox,
+                             inst.max_speed, inst.awareness_range)
+            decision = trace.allocators[i].decide(view)
+            if decision is not None and decision not in tasks:
+                raise ConformanceError(f"{name}: agent {i} chose task {decision!r} at round {k}, which does not exist")
+            decisions[i] = decision
+            encoded = [o.encode() for o in view.outbox]
+            for m in encoded:
+                if len(m.payload) > max_bytes:
+                    raise ConformanceError(f"{name}: agent {i} sent a {len(m.payload)}-byte {m.kind!r} message "
+                                           f"at round {k} (limit {max_bytes})")
+                if kinds and m.kind not in kinds:
+                    raise ConformanceError(f"{name}: message kind {m.kind!r} not in message_kinds {sorted(kinds)}")
+                unpack(m.payload)  # serializable both ways
+                sent.append((i, m.kind, m.payload))
+            outs[i] = encoded
+        radio.route(k, ids, xs, ys, outs)
+        inboxes = radio.deliver(k + 1, ids)
+        trace.decisions.append(decisions)
+        trace.messages.append(sent)
+    radio.finish(rounds - 1)
+    radio.ledger.check()
+    return trace
+
+
+# -- generic checks ---------------------------------------------------------------------------------
+
+def check_determinism(name: str, params: Mapping[str, Any], seeds=(0, 1, 2), rounds: int = 30) -> dict:
+    for seed in seeds:
+        inst = random_instance(seed, 5, 12)
+        a = simulate(name, params, inst, rounds, seed=seed)
+        b = simulate(name, params, inst, rounds, seed=seed)
+        if a.decisions != b.decisions or a.messages != b.messages:
+            raise ConformanceError(f"{name}: two runs with seed {seed} differ")
+    return {"seeds": len(seeds)}
+
+
+def check_messages(name: str, params: Mapping[str, Any], max_bytes: int = DEFAULT_MAX_BYTES) -> dict:
+    trace = simulate(name, params, random_instance(7, 8, 30), 40, max_bytes=max_bytes)
+    sizes = [len(p) for rnd in trace.messages for _, _, p in rnd]
+    return {"messages": len(sizes), "max_bytes": max(sizes, default=0)}
+
+
+def _assigned(trace: Trace) -> int:
+    return sum(1 for d in trace.decisions[-1].values() if d is not None)
+
+
+def check_degraded_network(name: str, params: Mapping[str, Any]) -> dict:
+    """Keeps working under 30 % loss and under a tight rate cap with a short queue."""
+    inst = random_instance(11, 6, 15)
+    clean = _assigned(simulate(name, params, inst, 60))
+    out = {"assigned_clean": clean}
+    for label, net in (("loss", NetemParams(loss=0.3)), ("rate", NetemParams(rate=300.0, limit=3))):
+        degraded = _assigned(simulate(name, params, inst, 60, network=net))
+        if clean and not degraded:
+            raise ConformanceError(f"{name}: assigns {clean} agents on a clean network but none under {label}")
+        out[f"assigned_{label}"] = degraded
+    return out
+
+
+def check_vanishing_tasks(name: str, params: Mapping[str, Any], patience: int = 3) -> dict:
+    """Tasks that disappear (done by someone) are dropped within ``patience`` rounds."""
+    inst = random_instance(5, 6, 15)
+    before = simulate(name, params, inst, 20)
+    chosen = sorted({d for d in before.decisions[-1].values() if d is not None})
+    trace = simulate(name, params, inst, 20 + patience + 10, remove_at={20: chosen})
+    for k in range(20 + patience, len(trace.decisions)):
+        stuck = {i: d for i, d in trace.decisions[k].items() if d in chosen}
+        if stuck:
+            raise ConformanceError(f"{name}: at round {k}, agents still on vanished tasks: {stuck}")
+    return {"vanished": len(chosen)}
+
+
+GENERIC_CHECKS = (check_determinism, check_messages, check_degraded_network, check_vanishing_tasks)
+
+
+def run_all(name: str, params: Mapping[str, Any] | None = None) -> dict[str, dict]:
+    resolve(name)
+    return {check.__name__: check(name, params or {}) for check in GENERIC_CHECKS}

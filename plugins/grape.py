@@ -1,0 +1,127 @@
+"""GRAPE (Jang, Shin, Tsourdos 2018, IEEE T-RO 34(6)): task allocation as an anonymous hedonic game,
+with SPACE's additions for dynamic MT-SR scenarios.
+
+Each agent holds a partition (agent -> task, or the void task), an evolution number and a random
+timestamp. Each tick: (1) distributed mutex (Algorithm 2): adopt the partition with the highest
+evolution number among its own and its neighbours' (ties: the higher timestamp); if the adopted
+partition differs from the one it held, the agent becomes unsatisfied; (2) if unsatisfied, the
+decision (Algorithm 1): join the coalition of highest utility among the tasks it sees, the void
+task (utility 0) included; a move increments the evolution number and draws a fresh timestamp;
+then the agent is satisfied; (3) broadcast its (evolution number, timestamp, partition).
+
+Utility (SPACE Eq. 1): ``u_i(t_j, |S_j|) = R_j / |S_j| - cost_weight * d_ij * |S_j| ** social_inhibition``
+with R_j the task's remaining workload and d_ij the distance to it. SPACE's additions: the initial
+partition puts the agent on its nearest task, and it does so again when its task completes;
+convergence is judged locally (satisfied and unchanged by the mutex).
+"""
+
+from __future__ import annotations
+
+import math
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from plugins.base import Allocator, LocalView
+from plugins.taskbook import TaskBook
+
+KIND = "grape"
+VOID = -1
+
+
+class GRAPEParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    cost_weight: float = Field(1.0, ge=0, description="weight of the distance cost")
+    social_inhibition: float = Field(100.0, ge=0, description="f_s: exponent on the coalition size")
+    nearest_start: bool = Field(True, description="start (and restart after completion) at the nearest task")
+
+
+class GRAPE(Allocator):
+    Params = GRAPEParams
+    message_kinds = (KIND,)
+
+    def __init__(self, agent_id, params, rng):
+        super().__init__(agent_id, params, rng)
+        self.partition: dict[int, int] = {}  # agent -> task (absent: void)
+        self.evolution = 0
+        self.stamp = float(rng.random())
+        self.satisfied = False
+        self.book = TaskBook()
+        self.started = False
+
+    # -- utility ----------------------------------------------------------------------------------
+    def utility(self, view: LocalView, task: int, size: int) -> float:
+        if task == VOID:
+            return 0.0
+        t = view.tasks[task]
+        try:
+            inhibition = float(size) ** self.params.social_inhibition
+        except OverflowError:
+            inhibition = math.inf
+        cost = self.params.cost_weight * view.distance_to(t)
+        return t.remaining / size - (cost * inhibition if cost else 0.0)
+
+    def coalition_size(self, task: int, with_me: bool) -> int:
+        others = sum(1 for a, t in self.partition.items() if t == task and a != self.agent_id)
+        return others + (1 if with_me else 0)
+
+    # -- the tick -------------------------------------------------------------------------------
+    def decide(self, view: LocalView) -> int | None:
+        me = self.agent_id
+        finished = set(self.book.update(view))
+        if finished:
+            for a, t in list(self.partition.items()):
+                if t in finished:
+                    del self.partition[a]
+        if not self.started or (finished and self.partition.get(me, VOID) == VOID and self.params.nearest_start):
+            self.started = True
+            if self.params.nearest_start and view.tasks:
+                nearest = min(view.tasks.values(), key=lambda t: (view.distance_to(t), t.id))
+                self._move(nearest.id)
+        self.mutex(view)
+        if not self.satisfied:
+            self.choose(view)
+        view.broadcast(KIND, [self.evolution, self.stamp, sorted(self.partition.items())])
+        task = self.partition.get(me, VOID)
+        return task if task != VOID and task in view.tasks else None
+
+    def _move(self, task: int) -> None:
+        if task == VOID:
+            self.partition.pop(self.agent_id, None)
+        else:
+            self.partition[self.agent_id] = task
+        self.evolution += 1
+        self.stamp = float(self.rng.random())
+
+    def mutex(self, view: LocalView) -> None:
+        """Algorithm 2: the partition with the highest (evolution number, timestamp) wins."""
+        best = (self.evolution, self.stamp)
+        chosen = None
+        for msg in view.inbox:
+            if msg.kind != KIND:
+                continue
+            evolution, stamp, pairs = msg.data
+            if (evolution, stamp) > best:
+                best, chosen = (evolution, stamp), pairs
+        if chosen is None:
+            return
+        adopted = {int(a): int(t) for a, t in chosen if int(t) not in self.book.done}
+        if adopted != self.partition:
+            self.satisfied = False
+        self.partition = adopted
+        self.evolution, self.stamp = best
+
+    def choose(self, view: LocalView) -> None:
+        """Algorithm 1: move to the coalition of highest utility if it beats the current one."""
+        current = self.partition.get(self.agent_id, VOID)
+        if current != VOID and current not in view.tasks:
+            current_u = -math.inf  # out of sight or done: any choice is better
+        else:
+            current_u = self.utility(view, current, self.coalition_size(current, True))
+        best_task, best_u = VOID, 0.0
+        for task in sorted(view.tasks):
+            u = self.utility(view, task, self.coalition_size(task, True))
+            if u > best_u:
+                best_task, best_u = task, u
+        if best_task != current and best_u > current_u:
+            self._move(best_task)
+        self.satisfied = True

@@ -1,0 +1,121 @@
+"""Algorithm properties on random static instances with full connectivity (fixed seeds)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from plugins import names
+from plugins.cbba import CBBA
+from plugins.conformance import random_instance, run_all, simulate
+from plugins.grape import GRAPE, VOID
+
+
+@pytest.mark.parametrize("name", names())
+def test_every_registered_allocator_passes_the_kit(name):
+    run_all(name)
+
+
+def _state(a: CBBA):
+    return (tuple(a.bundle), tuple(sorted(a.z.items())), tuple(sorted(a.y.items())))
+
+
+def sequential_greedy(inst, max_tasks, discount, speed):
+    """Centralized SGA with a path-independent score: repeatedly give the best (agent, task) pair."""
+    score = {(i, j): discount ** (math.hypot(tx - ax, ty - ay) / speed) * w
+             for i, (ax, ay) in enumerate(inst.agents) for j, (tx, ty, w) in inst.tasks.items()}
+    load = {i: 0 for i in range(len(inst.agents))}
+    assigned = {}
+    while True:
+        free = [(s, -i, -j) for (i, j), s in score.items() if j not in assigned and load[i] < max_tasks and s > 0]
+        if not free:
+            return assigned
+        s, i, j = max(free)
+        assigned[-j] = -i
+        load[-i] += 1
+
+
+@pytest.mark.parametrize("score", ["time_discounted", "distance_discounted"])
+def test_cbba_converges_conflict_free_within_the_bound(score):
+    rng = np.random.default_rng(2009)
+    for case in range(150):
+        n_a, n_t, l_t = int(rng.integers(2, 7)), int(rng.integers(1, 13)), int(rng.integers(1, 5))
+        inst = random_instance(case, n_a, n_t)
+        bound = min(n_t, l_t * n_a) * 1  # diameter 1: full connectivity
+        params = {"max_tasks": l_t, "score": score, "reset_after": None}
+        # round 0 builds bundles before any message can arrive, so CBBA's iteration t ends at round t+1
+        trace = simulate("cbba", params, inst, bound + 1, seed=case)
+        agents = trace.allocators
+        # converged: nothing changes in the extra rounds after the bound
+        states = [_state(a) for a in agents]
+        extra = simulate("cbba", params, inst, bound + 12, seed=case).allocators
+        assert states == [_state(a) for a in extra], f"case {case}: still changing after {bound} rounds"
+        owners = {}
+        for a in agents:
+            for t in a.bundle:
+                assert t not in owners, f"case {case}: task {t} in the bundles of {owners[t]} and {a.agent_id}"
+                owners[t] = a.agent_id
+        for a in agents:
+            assert a.z == agents[0].z, f"case {case}: agents disagree on winners"
+        assert {t: w for t, w in agents[0].z.items()} == owners
+        # every task is taken unless every bundle is full
+        if len(owners) < n_t:
+            assert all(len(a.bundle) == l_t for a in agents), f"case {case}: tasks left while bundles had room"
+
+
+def test_cbba_matches_sequential_greedy_with_a_path_independent_score():
+    for case in range(200):
+        rng = np.random.default_rng(case)
+        n_a, n_t, l_t = int(rng.integers(2, 6)), int(rng.integers(1, 15)), int(rng.integers(1, 4))
+        inst = random_instance(1000 + case, n_a, n_t)
+        params = {"max_tasks": l_t, "score": "distance_discounted", "discount": 0.99, "reset_after": None}
+        agents = simulate("cbba", params, inst, min(n_t, l_t * n_a) + 4, seed=case).allocators
+        got = {t: a.agent_id for a in agents for t in a.bundle}
+        assert got == sequential_greedy(inst, l_t, 0.99, inst.max_speed), f"case {case}"
+
+
+def test_cbba_receiver_table_entries():
+    """A few of Table 1's 17 cases, receiver i=0, sender k=1, third agent m=2, fourth n=3."""
+    t = CBBA._table
+    newer_all = lambda m: 1  # noqa: E731  sender's information is newer about everyone
+    older_all = lambda m: -1  # noqa: E731
+    assert t(0, 1, 1, 5.0, 0, 4.0, older_all) == "update"  # 1: sender outbids
+    assert t(0, 1, 1, 4.0, 0, 4.0, older_all) == "leave"  # 1: tie goes to the lower id (receiver 0)
+    assert t(0, 1, 0, 1.0, 1, 9.0, older_all) == "reset"  # 6
+    assert t(0, 1, -1, 0.0, 1, 9.0, older_all) == "update"  # 15
+    assert t(0, 1, -1, 0.0, 0, 9.0, newer_all) == "leave"  # 14
+    assert t(0, 1, 2, 3.0, 1, 9.0, older_all) == "reset"  # 10
+    assert t(0, 1, 2, 3.0, 1, 9.0, newer_all) == "update"  # 10
+    assert t(0, 1, 2, 3.0, 3, 9.0, newer_all) == "update"  # 12
+    assert t(0, 1, 2, 3.0, 3, 9.0, lambda a: 1 if a == 3 else -1) == "reset"  # 12
+    assert t(0, 1, 2, 3.0, 3, 9.0, older_all) == "leave"  # 12
+
+
+def _grape_utility(inst, params, agent, task, size):
+    if task == VOID:
+        return 0.0
+    tx, ty, w = inst.tasks[task]
+    ax, ay = inst.agents[agent]
+    return w / size - params["cost_weight"] * math.hypot(tx - ax, ty - ay) * size ** params["social_inhibition"]
+
+
+@pytest.mark.parametrize("params", [
+    {"cost_weight": 1.0, "social_inhibition": 100.0},
+    {"cost_weight": 0.05, "social_inhibition": 1.0},
+])
+def test_grape_ends_in_a_nash_stable_partition(params):
+    for case in range(150):
+        rng = np.random.default_rng(case)
+        inst = random_instance(500 + case, int(rng.integers(2, 9)), int(rng.integers(1, 7)), size=50.0)
+        agents = simulate("grape", params, inst, 150, seed=case).allocators
+        partition = agents[0].partition
+        assert all(a.partition == partition for a in agents), f"case {case}: agents disagree"
+        assert all(a.satisfied for a in agents)
+        sizes = {t: sum(1 for v in partition.values() if v == t) for t in inst.tasks}
+        for i in range(len(inst.agents)):
+            mine = partition.get(i, VOID)
+            u_now = _grape_utility(inst, params, i, mine, sizes.get(mine, 0))
+            for other in [VOID, *inst.tasks]:
+                if other != mine:
+                    u = _grape_utility(inst, params, i, other, sizes[other] + 1 if other != VOID else 0)
+                    assert u <= u_now + 1e-9, f"case {case}: agent {i} prefers {other} ({u}) to {mine} ({u_now})"
