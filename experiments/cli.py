@@ -74,6 +74,34 @@ def cmd_bt(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from experiments.sweep import load_sweep, run_sweep
+
+    sweep = load_sweep(args.sweep, args.runs, args.grid, args.set, args.seed)
+    out = Path(args.out) if args.out else Path("runs") / sweep.name
+    table = run_sweep(sweep, out, args.jobs, progress=not args.no_progress)
+    ok = table[table["status"] == "ok"]
+    print(f"sweep: {out}/sweep.csv  ({len(ok)} of {len(table)} runs complete, "
+          f"{len(sweep.scenarios)} scenarios x {sweep.runs} runs)")
+    shown = [c for c in ("mission_time", "time_99", "tasks_completed", "network.messages_sent") if c in ok]
+    if shown:
+        print(ok.groupby("scenario")[shown].mean().round(1).to_string())
+    return 0 if len(ok) == len(table) else 1
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    from experiments.analyze import AnalyzeError, analyze
+
+    try:
+        written = analyze(Path(args.sweep_dir))
+    except AnalyzeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for path in written:
+        print(path)
+    return 0
+
+
 def cmd_check_allocator(args: argparse.Namespace) -> int:
     from plugins.conformance import GENERIC_CHECKS, ConformanceError
     from plugins.registry import PluginError, validate_params
@@ -114,6 +142,21 @@ def main(argv: list[str] | None = None) -> int:
     check = bt_sub.add_parser("check", help="load behavior-tree XML files and report errors")
     check.add_argument("files", nargs="+")
     bt.set_defaults(func=cmd_bt)
+
+    sw = sub.add_parser("sweep", help="Monte Carlo runs over scenarios, in parallel and resumable")
+    sw.add_argument("sweep", help="sweep YAML (base + scenarios/grid + runs) or a plain experiment")
+    sw.add_argument("--out", help="sweep directory (default: runs/<name>)")
+    sw.add_argument("--jobs", "-j", type=int, help="runs at once (default: one per core)")
+    sw.add_argument("--runs", "-n", type=int, help="runs per scenario (overrides the file)")
+    sw.add_argument("--seed", type=int, help="sweep seed (overrides the file)")
+    sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")
+    sw.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every run")
+    sw.add_argument("--no-progress", action="store_true")
+    sw.set_defaults(func=cmd_sweep)
+
+    an = sub.add_parser("analyze", help="tables and figures from a sweep directory")
+    an.add_argument("sweep_dir")
+    an.set_defaults(func=cmd_analyze)
 
     chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
     chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")

@@ -116,6 +116,18 @@ def _set_dotted(data: dict, dotted: str, value: Any, where: str) -> None:
     node[keys[-1]] = value
 
 
+def apply_overrides(data: dict, pairs: list[tuple[str, Any]], where: str) -> None:
+    """Set each dotted key. Naming another allocator drops the file's parameters of the old one
+    (they belong to that plugin); parameters given alongside the new name are kept."""
+    alloc = data.get("allocator")
+    old_name = alloc.get("name", "fcg") if isinstance(alloc, dict) else None
+    new_name = dict(pairs).get("allocator.name")
+    if new_name is not None and new_name != old_name:
+        data["allocator"] = {"name": new_name}
+    for key, value in pairs:
+        _set_dotted(data, key, value, where)
+
+
 def parse_override(text: str) -> tuple[str, Any]:
     """``a.b=value`` with ``value`` read as YAML (so numbers, booleans, lists and null work)."""
     key, sep, raw = text.partition("=")
@@ -162,9 +174,7 @@ def load(path: str | Path, overrides: list[str] = (), seed: int | None = None) -
         data = {}
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: the top level must be a mapping of sections")
-    for text in overrides:
-        key, value = parse_override(text)
-        _set_dotted(data, key, value, str(path))
+    apply_overrides(data, [parse_override(text) for text in overrides], str(path))
     if seed is not None:
         _set_dotted(data, "run.seed", seed, str(path))
     bt = data.get("agents", {}).get("behavior_tree") if isinstance(data.get("agents"), dict) else None

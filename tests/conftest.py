@@ -33,7 +33,9 @@ def no_orphans():
     """Every process a test starts must be gone when it ends."""
     yield
     me = psutil.Process()
-    left = [p for p in me.children(recursive=True) if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    left = [p for p in me.children(recursive=True) if p.is_running() and p.status() != psutil.STATUS_ZOMBIE
+            # the standard library's helper for spawned pools: it lives as long as this process does
+            and "multiprocessing.resource_tracker" not in " ".join(p.cmdline())]
     for p in left:
         p.kill()
     assert not left, f"processes left behind: {[(p.pid, p.cmdline()[:4]) for p in left]}"

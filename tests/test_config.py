@@ -54,3 +54,10 @@ def test_every_key_is_described():
     keys = [k for k, _, _ in cfg.describe_keys()]
     for key in ("run.seed", "run.duration", "agents.count", "network.loss", "network.rate", "scenario.width"):
         assert key in keys
+
+
+def test_naming_another_allocator_drops_the_old_ones_parameters():
+    exp = cfg.load(QUICKSTART, ["allocator.name=cbba"])  # quickstart sets fcg's mode
+    assert exp.allocator.name == "cbba" and exp.allocator.params() == {}
+    exp = cfg.load(QUICKSTART, ["allocator.name=cbba", "allocator.max_tasks=3"])
+    assert exp.allocator.params() == {"max_tasks": 3}

@@ -1,0 +1,240 @@
+"""``swarmbed sweep``: Monte Carlo runs over scenarios, in parallel, resumable.
+
+A sweep file names a base experiment, the scenarios (an explicit list, a grid over dotted keys, or
+both: every listed scenario crossed with every grid point) and the runs per scenario:
+
+    name: space_fig3
+    base: space_mtsr.yaml
+    seed: 0
+    runs: 100
+    grid:
+      agents.count: [10, 30, 50]
+      network.range: [100, 200, 300]
+      allocator: [{name: cbba}, {name: grape}, {name: fcg}]
+
+A plain experiment file works too, with the grid on the command line (Hydra-multirun style):
+``swarmbed sweep experiments/quickstart.yaml --grid allocator.name=cbba,grape --runs 5``.
+
+Run r of every scenario gets the same seed, the r-th child of ``SeedSequence(seed)``: the
+scenarios are compared on common random numbers (paired runs), and runs within a scenario are
+independent. Each run has its own directory ``<out>/<scenario>/run_<r>``; a run whose directory
+holds a ``summary.json`` is complete and is kept when the sweep is started again, anything else is
+redone. A failed run writes ``error.txt`` and does not stop the sweep. The sweep ends with
+``sweep.csv``: one row per run with the scenario parameters, the seed and every summary metric.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import itertools
+import json
+import multiprocessing
+import os
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from tqdm import tqdm
+
+from coordinator import results
+from experiments import config as cfg
+
+TABLE = "sweep.csv"
+SPEC = "sweep.json"
+ERROR = "error.txt"
+
+
+class ScenarioEntry(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str
+    set: dict[str, Any] = Field(default_factory=dict)
+
+
+class SweepFile(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str = "sweep"
+    base: str
+    seed: int = Field(0, ge=0)
+    runs: int = Field(1, ge=1)
+    scenarios: list[ScenarioEntry] = Field(default_factory=list)
+    grid: dict[str, list[Any]] = Field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    overrides: tuple[tuple[str, Any], ...]
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    base: str
+    scenario: Scenario
+    index: int
+    seed: int
+    out_dir: str
+    extra: tuple[str, ...]  # --set overrides from the command line
+
+
+@dataclass
+class Sweep:
+    name: str
+    base: Path
+    seed: int
+    runs: int
+    scenarios: list[Scenario]
+    factors: list[str]
+    extra: list[str]
+
+
+def _label(value: Any) -> str:
+    if isinstance(value, dict):
+        value = value.get("name", "-".join(f"{k}{v}" for k, v in value.items()))
+    return str(value).replace("/", "-").replace(" ", "")
+
+
+def _parse_grid(text: str) -> tuple[str, list[Any]]:
+    key, sep, raw = text.partition("=")
+    if not sep:
+        raise cfg.ConfigError(f"--grid {text!r}: expected dotted.key=v1,v2,...")
+    return key.strip(), [yaml.safe_load(v) for v in raw.split(",")]
+
+
+def load_sweep(path: str | Path, runs: int | None = None, grid: list[str] = (), extra: list[str] = (),
+               seed: int | None = None) -> Sweep:
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise cfg.ConfigError(f"{path}: cannot read sweep: {exc}") from None
+    if not isinstance(data, dict):
+        raise cfg.ConfigError(f"{path}: the top level must be a mapping")
+    if "base" not in data:  # a plain experiment: sweep over it
+        data = {"name": data.get("name", path.stem), "base": path.name}
+    try:
+        spec = SweepFile.model_validate(data)
+    except ValidationError as exc:
+        raise cfg.ConfigError("\n".join(f"{path}: {'.'.join(map(str, e['loc']))}: {e['msg']}"
+                                        for e in exc.errors())) from None
+    grid_spec = dict(spec.grid)
+    grid_spec.update(_parse_grid(g) for g in grid)
+    entries = [Scenario(e.name, tuple(e.set.items())) for e in spec.scenarios] or [Scenario("", ())]
+    keys = list(grid_spec)
+    scenarios = []
+    for entry in entries:
+        for combo in itertools.product(*(grid_spec[k] for k in keys)):
+            parts = [entry.name] if entry.name else []
+            parts += [f"{k.split('.')[-1]}-{_label(v)}" for k, v in zip(keys, combo)]
+            scenarios.append(Scenario("_".join(parts) or "base", entry.overrides + tuple(zip(keys, combo))))
+    names = [s.name for s in scenarios]
+    if len(set(names)) != len(names):
+        raise cfg.ConfigError(f"{path}: two scenarios share a name")
+    factors = sorted({k for s in scenarios for k, _ in s.overrides})
+    return Sweep(spec.name, (path.parent / spec.base).resolve(), spec.seed if seed is None else seed,
+                 runs or spec.runs, scenarios, factors, list(extra))
+
+
+def run_seeds(sweep_seed: int, runs: int) -> list[int]:
+    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(sweep_seed).spawn(runs)]
+
+
+def experiment_for(base: str | Path, scenario: Scenario, seed: int, extra: list[str] | tuple[str, ...]) -> cfg.Experiment:
+    pairs = list(scenario.overrides) + [cfg.parse_override(t) for t in extra] + [("run.seed", seed)]
+    return cfg.load(base, [f"{k}={json.dumps(v)}" for k, v in pairs])
+
+
+def plan(sweep: Sweep, out: Path) -> list[RunSpec]:
+    seeds = run_seeds(sweep.seed, sweep.runs)
+    return [RunSpec(str(sweep.base), sc, r, seeds[r], str(out / sc.name / f"run_{r:03d}"), tuple(sweep.extra))
+            for sc in sweep.scenarios for r in range(sweep.runs)]
+
+
+def _execute(spec: RunSpec) -> tuple[str, str]:
+    """One run, in a worker process. Returns (status, detail)."""
+    from experiments.runner import run_experiment
+
+    out = Path(spec.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / ERROR).unlink(missing_ok=True)
+    try:
+        run_experiment(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra), out, progress=False)
+        return "ok", ""
+    except BaseException as exc:  # a failed run is recorded, the sweep goes on
+        detail = f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}"
+        results.write_atomic(out / ERROR, detail)
+        return "failed", f"{type(exc).__name__}: {exc}"
+
+
+def flatten(summary: dict, prefix: str = "") -> dict[str, Any]:
+    """Scalar metrics of a summary, nested keys dotted; per-agent lists become their mean."""
+    row: dict[str, Any] = {}
+    for key, value in summary.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            if key in ("per_kind", "agents_lost"):
+                continue
+            row.update(flatten(value, f"{name}."))
+        elif isinstance(value, list):
+            if value and all(isinstance(v, (int, float)) for v in value):
+                row[f"{name}_mean"] = float(np.mean(value))
+        else:
+            row[name] = value
+    return row
+
+
+def collect(sweep: Sweep, out: Path) -> pd.DataFrame:
+    rows = []
+    for spec in plan(sweep, out):
+        run_dir = Path(spec.out_dir)
+        row = {"scenario": spec.scenario.name, "run": spec.index, "seed": spec.seed}
+        row.update({k: json.dumps(v) if isinstance(v, (dict, list)) else v for k, v in spec.scenario.overrides})
+        summary = run_dir / results.SUMMARY
+        if summary.exists():
+            row["status"] = "ok"
+            row.update(flatten(json.loads(summary.read_text())))
+        else:
+            row["status"] = "failed" if (run_dir / ERROR).exists() else "missing"
+            if (run_dir / ERROR).exists():
+                lines = [ln for ln in (run_dir / ERROR).read_text().split("\n\n", 1)[0].splitlines() if ln.strip()]
+                row["error"] = " | ".join(dict.fromkeys([lines[0], lines[-1]])) if lines else "unknown error"
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool = True) -> pd.DataFrame:
+    out.mkdir(parents=True, exist_ok=True)
+    specs = plan(sweep, out)
+    for spec in specs[: len(sweep.scenarios)]:  # every scenario is valid before anything starts
+        experiment_for(spec.base, spec.scenario, spec.seed, spec.extra)
+    results.write_json(out / SPEC, {"name": sweep.name, "base": str(sweep.base), "seed": sweep.seed,
+                                    "runs": sweep.runs, "factors": sweep.factors, "extra": sweep.extra,
+                                    "scenarios": {s.name: dict(s.overrides) for s in sweep.scenarios}})
+    todo = [s for s in specs if not (Path(s.out_dir) / results.SUMMARY).exists()]
+    jobs = jobs or os.cpu_count() or 1
+    bar = tqdm(total=len(specs), initial=len(specs) - len(todo), unit="run", desc=sweep.name, disable=not progress)
+    failed = 0
+    with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = {pool.submit(_execute, s): s for s in todo}
+        try:
+            for fut in cf.as_completed(futures):
+                status, detail = fut.result()
+                if status != "ok":
+                    failed += 1
+                    bar.write(f"failed: {futures[fut].out_dir}: {detail}")
+                bar.update(1)
+        except KeyboardInterrupt:
+            for f in futures:
+                f.cancel()
+            raise
+        finally:
+            bar.close()
+    table = collect(sweep, out)
+    tmp = out / (TABLE + ".part")
+    table.to_csv(tmp, index=False)
+    os.replace(tmp, out / TABLE)
+    return table
