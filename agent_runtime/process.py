@@ -18,7 +18,7 @@ from experiments.config import from_yaml
 from wire.codec import StopIn, WireError, decode_agent_in, encode_agent_out, encode_report
 from wire.keys import Keys
 from wire.lifecycle import child_args
-from wire.membership import fetch_config_text
+from wire.membership import fetch_config_text, hand_over
 from wire.session import open_from_args
 
 log = logging.getLogger("swarmbed.agent")
@@ -37,7 +37,10 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
     sub = session.declare_subscriber(keys.agent_in(agent_id), lambda s: inbox.put(s.payload.to_bytes()))
     watch = session.liveliness().declare_subscriber(keys.alive_coordinator, on_coordinator)
     out = session.declare_publisher(keys.agent_out(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
-    report = session.declare_publisher(keys.agent_report(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def report(data: dict) -> None:
+        if not hand_over(session, keys.agent_report(agent_id), encode_report(data)):
+            log.error("agent %d: the coordinator did not take the %s report", agent_id, data["kind"])
     token = session.liveliness().declare_token(keys.alive_agent(agent_id))
     malformed = 0
     try:
@@ -55,20 +58,20 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
             if isinstance(msg, StopIn):
                 final = runtime.report()
                 final["malformed"] += malformed
-                report.put(encode_report(final))
+                report(final)
                 return EXIT_OK
             try:
                 action, messages = runtime.step(msg.tick, msg.obs, msg.inbox)
             except Exception as exc:  # a plugin or node raised: stop this agent, loudly
                 tb = traceback.format_exc()
                 log.error("agent %d: failed at tick %d:\n%s", agent_id, msg.tick, tb)
-                report.put(encode_report({"kind": "fatal", "agent": agent_id, "tick": msg.tick,
-                                          "error": f"{type(exc).__name__}: {exc}", "traceback": tb}))
+                report({"kind": "fatal", "agent": agent_id, "tick": msg.tick,
+                        "error": f"{type(exc).__name__}: {exc}", "traceback": tb})
                 return EXIT_PLUGIN_ERROR
             out.put(encode_agent_out(msg.tick, agent_id, action, messages))
     finally:
         token.undeclare()
-        for entity in (sub, watch, out, report):
+        for entity in (sub, watch, out):
             entity.undeclare()
 
 

@@ -25,7 +25,7 @@ from wire.codec import (EMPTY_INBOX, NetemStep, World, WireError, decode_netem_s
                         encode_tick, encode_world, pack)
 from wire.keys import Keys, agent_id_of
 from wire.lifecycle import WORLD, component_rng
-from wire.membership import serve_config
+from wire.membership import accept_handovers, serve_config
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
@@ -66,8 +66,8 @@ class Coordinator:
         self._entities += [
             serve_config(s, k, self.config_text),
             s.declare_subscriber(k.netem_step, lambda x: put(("step", x.payload.to_bytes()))),
-            s.declare_subscriber(k.agent_report_all, lambda x: put(("report", x.payload.to_bytes()))),
-            s.declare_subscriber(k.netem_report, lambda x: put(("netem_report", x.payload.to_bytes()))),
+            accept_handovers(s, k.agent_report_all, lambda _key, data: put(("report", data))),
+            accept_handovers(s, k.netem_report, lambda _key, data: put(("netem_report", data))),
             s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True),
         ]
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]

@@ -60,6 +60,19 @@ class Children:
                 pass
         return out
 
+    def peak_rss_mb(self) -> dict[str, float]:
+        """Each live child's peak resident set so far (Linux VmHWM)."""
+        out = {}
+        for name, proc in self.procs.items():
+            try:
+                with open(f"/proc/{proc.pid}/status") as f:
+                    for line in f:
+                        if line.startswith("VmHWM:"):
+                            out[name] = int(line.split()[1]) / 1024
+            except OSError:
+                pass
+        return out
+
     def wait(self, timeout: float) -> dict[str, int]:
         """Wait for every child to exit; terminate (then kill) whatever is left at ``timeout``."""
         deadline = time.monotonic() + timeout

@@ -7,6 +7,7 @@ liveliness token, runs the lock-step loop, stops everyone and writes the results
 
 from __future__ import annotations
 
+import resource
 import secrets
 import time
 from dataclasses import dataclass
@@ -91,6 +92,8 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         finally:
             bar.close()
         rss = children.rss_mb()
+        peak = children.peak_rss_mb()
+        peak["coordinator"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         coord.stop_and_collect()
         exit_codes = children.wait(timeout=15.0)
         agent_rss = [v for k, v in rss.items() if k.startswith("agent_")]
@@ -103,6 +106,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             "startup_s": t_joined - t_start,
             "total_s": time.perf_counter() - t_start,
             "rss_mb": rss,
+            "peak_rss_mb": peak,
             "agent_rss_mb_mean": sum(agent_rss) / len(agent_rss) if agent_rss else None,
             "exit_codes": exit_codes,
         }

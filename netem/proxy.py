@@ -24,7 +24,7 @@ from wire.codec import (AgentOut, NetemStep, World, WireError, decode_agent_out,
                         encode_netem_step, encode_report, unpack)
 from wire.keys import Keys, agent_id_of
 from wire.lifecycle import NETEM, child_args, component_rng
-from wire.membership import fetch_config_text
+from wire.membership import fetch_config_text, hand_over
 from wire.session import open_from_args
 
 log = logging.getLogger("swarmbed.netem")
@@ -75,7 +75,6 @@ class Proxy:
             s.liveliness().declare_subscriber(k.alive_coordinator, self._on_coordinator),
         ]
         self.step_pub = s.declare_publisher(k.netem_step, congestion_control=zenoh.CongestionControl.BLOCK)
-        self.report_pub = s.declare_publisher(k.netem_report, congestion_control=zenoh.CongestionControl.BLOCK)
         token = s.liveliness().declare_token(k.alive_netem)
         try:
             return self._loop()
@@ -92,7 +91,10 @@ class Proxy:
                 log.error("netem: the coordinator went away; exiting (ledger left as %s)", self.part.name)
                 return 3
             if what == "stop":
-                self._finish(int(unpack(data)[0]))
+                last = int(unpack(data)[0])
+                log.info("netem: run over after tick %d; closing the ledger", last)
+                self._finish(last)
+                log.info("netem: ledger balanced and written; report sent")
                 return 0
             if what == "lost":
                 if data not in self.lost:
@@ -156,7 +158,8 @@ class Proxy:
         report = {"kind": "netem", "totals": self.ledger.totals(),
                   "per_sender": {str(k): v for k, v in self.ledger.per_sender().items()},
                   "per_kind": self.ledger.per_kind(), "malformed": self.malformed, "ledger": LEDGER_FILE}
-        self.report_pub.put(encode_report(report))
+        if not hand_over(self.session, self.keys.netem_report, encode_report(report)):
+            log.error("netem: the coordinator did not take the final report")
 
 
 def main(argv: list[str] | None = None) -> int:

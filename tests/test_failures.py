@@ -15,6 +15,7 @@ from coordinator.coordinator import RunError
 from experiments.runner import run_experiment
 from tests.conftest import QUICKSTART, ROOT, experiment
 from wire.keys import Keys
+from wire.membership import hand_over
 from wire.session import zenoh_config
 
 LONG_NOOP = ["--set", "allocator={name: noop, peers: 2}", "--set", "scenario.initial_tasks=0",
@@ -130,9 +131,11 @@ def test_run_goes_on_without_a_failed_agent_when_allowed(tmp_path):
 def test_malformed_samples_are_dropped_counted_and_survived(tmp_path):
     def inject(keys: Keys, endpoint: str) -> None:
         with zenoh.open(zenoh_config("client", connect=[endpoint])) as s:
-            for key in (keys.agent_in(0), keys.agent_out(0), keys.world, keys.netem_step, keys.agent_report(1)):
+            for key in (keys.agent_in(0), keys.agent_out(0), keys.world, keys.netem_step):
                 for junk in (b"\xc1", b"\x93\x01\x02", b"not msgpack at all"):
                     s.put(key, junk, congestion_control=zenoh.CongestionControl.BLOCK)
+            for junk in (b"\xc1", b"\x93\x01\x02", b"not msgpack at all"):  # reports are handed over as queries
+                assert hand_over(s, keys.agent_report(1), junk, timeout=5)
             time.sleep(0.3)
 
     exp = experiment("allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
