@@ -16,7 +16,7 @@ from agent_runtime.nodes import space_registry
 from experiments.config import Experiment
 from plugins import make
 from plugins.base import LocalView, Message, TaskInfo
-from wire.codec import RadioMessage, WireError, decode_inbox, unpack
+from wire.codec import RadioMessage, WireError, decode_inbox, decode_task_table, unpack
 from wire.lifecycle import agent_seeds
 
 log = logging.getLogger("swarmbed.agent")
@@ -71,7 +71,7 @@ class AgentRuntime:
 
     def step(self, tick: int, obs: dict, inbox: bytes) -> tuple[list, list[RadioMessage]]:
         me = obs["me"]
-        tasks = {int(t[0]): TaskInfo(int(t[0]), t[1], t[2], t[3]) for t in obs["tasks"]}
+        tasks = {t[0]: TaskInfo(*t) for t in decode_task_table(obs["tasks"]).tolist()}
         a = self.exp.agents
         self.view = LocalView(self.agent_id, a.count, tick, float(obs["t"]), me[0], me[1], me[2], me[3],
                               a.work_rate, tasks, self._inbox(inbox), a.max_speed, a.awareness_range)

@@ -16,6 +16,7 @@ import numpy as np
 
 from coordinator.kinematics import Limits, step
 from experiments.config import Experiment
+from wire.codec import TASK_DTYPE, encode_task_table
 
 
 class MTSRWorld:
@@ -99,19 +100,21 @@ class MTSRWorld:
         self.speed[agent_id] = 0.0
 
     def observations(self) -> dict[int, dict]:
-        """What each live agent senses at this tick: itself and the open tasks within awareness range."""
+        """What each live agent senses at this tick: itself and the open tasks within awareness range
+        (as a binary task table, see ``wire.codec.TASK_DTYPE``)."""
         open_idx = np.flatnonzero(np.isnan(self.done_at))
-        ox, oy, orem = self.tx[open_idx], self.ty[open_idx], self.remaining[open_idx]
-        out = {}
-        for i in np.flatnonzero(self.alive):
-            near = np.flatnonzero(np.hypot(ox - self.ax[i], oy - self.ay[i]) <= self.awareness)
-            tasks = [[int(open_idx[j]), float(ox[j]), float(oy[j]), float(orem[j])] for j in near]
-            out[int(i)] = {
-                "t": self.time,
-                "me": [float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i])],
-                "tasks": tasks,
-            }
-        return out
+        table = np.empty(len(open_idx), dtype=TASK_DTYPE)
+        table["id"], table["x"], table["y"] = open_idx, self.tx[open_idx], self.ty[open_idx]
+        table["remaining"] = self.remaining[open_idx]
+        alive = np.flatnonzero(self.alive)
+        near = np.hypot(table["x"][None, :] - self.ax[alive, None],
+                        table["y"][None, :] - self.ay[alive, None]) <= self.awareness
+        t = self.time
+        return {
+            int(i): {"t": t, "me": [float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i])],
+                     "tasks": encode_task_table(table[near[row]])}
+            for row, i in enumerate(alive)
+        }
 
     def _target(self, i: int, action: list) -> tuple[tuple[float, float] | None, int | None]:
         """Where agent i moves to and which task it may work on, from its action."""

@@ -60,6 +60,17 @@ class Children:
                 pass
         return out
 
+    def cpu_s(self) -> dict[str, float]:
+        """CPU seconds (user + system) each live child has used so far."""
+        out = {}
+        for name, proc in self.procs.items():
+            try:
+                t = psutil.Process(proc.pid).cpu_times()
+                out[name] = t.user + t.system
+            except psutil.Error:
+                pass
+        return out
+
     def peak_rss_mb(self) -> dict[str, float]:
         """Each live child's peak resident set so far (Linux VmHWM)."""
         out = {}

@@ -93,7 +93,10 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             bar.close()
         rss = children.rss_mb()
         peak = children.peak_rss_mb()
-        peak["coordinator"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        usage = resource.getrusage(resource.RUSAGE_SELF)
+        peak["coordinator"] = usage.ru_maxrss / 1024
+        cpu = children.cpu_s()
+        agent_cpu = [v for k, v in cpu.items() if k.startswith("agent_")]
         coord.stop_and_collect()
         exit_codes = children.wait(timeout=15.0)
         agent_rss = [v for k, v in rss.items() if k.startswith("agent_")]
@@ -107,6 +110,8 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             "total_s": time.perf_counter() - t_start,
             "rss_mb": rss,
             "peak_rss_mb": peak,
+            "cpu_s": {"coordinator": usage.ru_utime + usage.ru_stime, "netem": cpu.get("netem"),
+                      "agents_total": sum(agent_cpu), "agent_max": max(agent_cpu, default=None)},
             "agent_rss_mb_mean": sum(agent_rss) / len(agent_rss) if agent_rss else None,
             "exit_codes": exit_codes,
         }

@@ -56,31 +56,36 @@ class Radio:
     def route(self, tick: int, ids: Sequence[int], xs: Sequence[float], ys: Sequence[float],
               outs: Mapping[int, Iterable[RadioMessage]]) -> None:
         """Take every message sent at ``tick``. ``ids``/``xs``/``ys``: agents alive at ``tick``."""
-        row_of = {a: i for i, a in enumerate(ids)}
-        alive_sorted = sorted(ids)
-        px = np.asarray(xs, dtype=float)
-        py = np.asarray(ys, dtype=float)
+        order = np.argsort(np.asarray(ids, dtype=np.int64), kind="stable")
+        alive = np.asarray(ids, dtype=np.int64)[order]
+        px = np.asarray(xs, dtype=float)[order]
+        py = np.asarray(ys, dtype=float)[order]
+        row_of = {int(a): i for i, a in enumerate(alive)}
+        near = None
+        if self.params.range is not None and len(alive):
+            near = np.hypot(px[:, None] - px[None, :], py[:, None] - py[None, :]) <= self.params.range + _EPS
         for sender in sorted(outs):
             for msg in outs[sender]:
-                self._route_one(tick, sender, msg, row_of, alive_sorted, px, py)
+                self._route_one(tick, sender, msg, row_of, alive, near)
 
     def _route_one(self, tick: int, sender: int, msg: RadioMessage, row_of: dict[int, int],
-                   alive_sorted: list[int], px: np.ndarray, py: np.ndarray) -> None:
+                   alive: np.ndarray, near: np.ndarray | None) -> None:
         p, ledger, kind, size = self.params, self.ledger, msg.kind, len(msg.payload)
         if msg.dest == BROADCAST:
-            receivers = [a for a in alive_sorted if a != sender]
+            receivers = alive[alive != sender]
             ledger.sent(tick, sender, kind, size, len(receivers))
         else:
             wanted = msg.dest if isinstance(msg.dest, tuple) else (msg.dest,)
             ledger.sent(tick, sender, kind, size, len(wanted))
-            receivers = []
+            ok = []
             for r in wanted:
                 if r == sender or not 0 <= r < self.n_agents:
                     ledger.book(tick, sender, kind, size, "no_such_receiver")
                 elif r not in row_of:
                     ledger.book(tick, sender, kind, size, "receiver_dead")
                 else:
-                    receivers.append(r)
+                    ok.append(r)
+            receivers = np.asarray(ok, dtype=np.int64)
 
         t_now = tick * self.dt
         end = t_now
@@ -94,28 +99,25 @@ class Radio:
             end = max(t_now, self._busy_until[sender]) + size / p.rate
             self._busy_until[sender] = end
             queue.append(end)
-        if not receivers:
+        if not len(receivers):
             return
 
-        if p.range is not None:
-            s = row_of[sender]
-            r_rows = np.fromiter((row_of[r] for r in receivers), dtype=np.intp, count=len(receivers))
-            dist = np.hypot(px[r_rows] - px[s], py[r_rows] - py[s])
-            near = dist <= p.range + _EPS
-            n_far = int(len(receivers) - near.sum())
+        if near is not None:
+            in_range = near[row_of[sender], [row_of[int(r)] for r in receivers]]
+            n_far = int(len(receivers) - in_range.sum())
             if n_far:
                 ledger.book(tick, sender, kind, size, "out_of_range", n_far)
-                receivers = [r for r, ok in zip(receivers, near) if ok]
-        if p.loss > 0.0 and receivers:
+                receivers = receivers[in_range]
+        if p.loss > 0.0 and len(receivers):
             kept = self.rng.random(len(receivers)) >= p.loss
             n_lost = int(len(receivers) - kept.sum())
             if n_lost:
                 ledger.book(tick, sender, kind, size, "loss", n_lost)
-                receivers = [r for r, ok in zip(receivers, kept) if ok]
-        if not receivers:
+                receivers = receivers[kept]
+        if not len(receivers):
             return
         deliver = max(tick + 1, math.ceil(end / self.dt - _EPS)) + p.latency
-        self._pending[deliver].append((receivers, sender, kind, msg.payload, tick))
+        self._pending[deliver].append((receivers.tolist(), sender, kind, msg.payload, tick))
 
     def deliver(self, tick: int, alive: Iterable[int]) -> dict[int, list[list]]:
         """Inboxes for ``tick``: ``{receiver: [[sender, kind, payload], ...]}`` for agents in ``alive``.

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import msgpack
+import numpy as np
 
 BROADCAST = -1
 
@@ -103,6 +104,20 @@ def decode_inbox(data: bytes) -> list[Delivered]:
 
 
 # --- coordinator -> agent -------------------------------------------------------------------
+
+#: the tasks of an observation travel as one binary table of these records (little-endian)
+TASK_DTYPE = np.dtype([("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("remaining", "<f8")])
+
+
+def encode_task_table(table: np.ndarray) -> bytes:
+    return np.ascontiguousarray(table, dtype=TASK_DTYPE).tobytes()
+
+
+def decode_task_table(data: bytes) -> np.ndarray:
+    if not isinstance(data, bytes) or len(data) % TASK_DTYPE.itemsize:
+        raise WireError(f"task table must be bytes, a multiple of {TASK_DTYPE.itemsize}")
+    return np.frombuffer(data, dtype=TASK_DTYPE)
+
 
 def encode_tick(tick: int, obs: dict, inbox: bytes) -> bytes:
     return pack([TAG_TICK, tick, obs, inbox])
