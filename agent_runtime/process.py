@@ -8,14 +8,13 @@ and its agent id: the experiment itself comes from the coordinator, so it can ru
 from __future__ import annotations
 
 import logging
-import queue
 import traceback
 
 import zenoh
 
 from agent_runtime.runtime import AgentRuntime
 from experiments.config import from_yaml
-from wire.codec import StopIn, WireError, decode_agent_in, encode_agent_out, encode_report
+from wire.codec import StopIn, WireError, decode_agent_in, encode_agent_out, encode_report, encode_stop
 from wire.keys import Keys
 from wire.lifecycle import child_args
 from wire.membership import fetch_config_text, hand_over
@@ -24,38 +23,42 @@ from wire.session import open_from_args
 log = logging.getLogger("swarmbed.agent")
 
 EXIT_OK, EXIT_PLUGIN_ERROR, EXIT_COORDINATOR_GONE = 0, 1, 3
+COORDINATOR_GONE = "coordinator gone"
 
 
 def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
     agent_id = runtime.agent_id
-    inbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+    in_key = keys.agent_in(agent_id)
+    # A channel subscriber wakes this thread directly (no Python callback thread in between): the
+    # per-tick wake-up is what lock-step pays for, once per agent per tick.
+    sub = session.declare_subscriber(in_key)
 
     def on_coordinator(sample: zenoh.Sample) -> None:
-        if sample.kind == zenoh.SampleKind.DELETE:
-            inbox.put(None)
+        if sample.kind == zenoh.SampleKind.DELETE:  # wake the loop with a local stop order
+            session.put(in_key, encode_stop(COORDINATOR_GONE))
 
-    sub = session.declare_subscriber(keys.agent_in(agent_id), lambda s: inbox.put(s.payload.to_bytes()))
     watch = session.liveliness().declare_subscriber(keys.alive_coordinator, on_coordinator)
     out = session.declare_publisher(keys.agent_out(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
 
     def report(data: dict) -> None:
         if not hand_over(session, keys.agent_report(agent_id), encode_report(data)):
             log.error("agent %d: the coordinator did not take the %s report", agent_id, data["kind"])
+
     token = session.liveliness().declare_token(keys.alive_agent(agent_id))
     malformed = 0
     try:
         while True:
-            data = inbox.get()
-            if data is None:
-                log.error("agent %d: the coordinator went away; exiting", agent_id)
-                return EXIT_COORDINATOR_GONE
+            data = sub.recv().payload.to_bytes()
             try:
                 msg = decode_agent_in(data)
             except WireError as exc:
                 malformed += 1
-                log.warning("agent %d: malformed sample on %s dropped: %s", agent_id, keys.agent_in(agent_id), exc)
+                log.warning("agent %d: malformed sample on %s dropped: %s", agent_id, in_key, exc)
                 continue
             if isinstance(msg, StopIn):
+                if msg.reason == COORDINATOR_GONE:
+                    log.error("agent %d: the coordinator went away; exiting", agent_id)
+                    return EXIT_COORDINATOR_GONE
                 final = runtime.report()
                 final["malformed"] += malformed
                 report(final)

@@ -11,6 +11,7 @@ A plugin never sees global truth: only what the view holds.
 from __future__ import annotations
 
 import abc
+import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -65,10 +66,10 @@ class LocalView:
 
     def sees(self, x: float, y: float) -> bool:
         """Whether a point is within awareness range (an open task there would be in ``tasks``)."""
-        return float(np.hypot(x - self.x, y - self.y)) <= self.awareness_range
+        return math.hypot(x - self.x, y - self.y) <= self.awareness_range
 
     def distance_to(self, task: TaskInfo) -> float:
-        return float(np.hypot(task.x - self.x, task.y - self.y))
+        return math.hypot(task.x - self.x, task.y - self.y)
 
     def broadcast(self, kind: str, data: Any) -> None:
         """Share ``data`` with every agent in radio range."""

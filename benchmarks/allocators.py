@@ -1,0 +1,58 @@
+"""CBBA, GRAPE and FCG on the SPACE MT-SR scenario: simulated seconds per wall second and the peak
+RSS of the largest process, at 10, 50 and 100 agents over 3000 simulated seconds.
+
+    python benchmarks/allocators.py                 # the full table (about 10 minutes)
+    python benchmarks/allocators.py --n 10 --duration 500
+
+Printed next to the public SPACE simulator's own figures, measured on this machine kind
+(single process, v1.2.12): 50 agents CBBA 130, GRAPE 230, FCG 640; 100 agents 19, 84, 264.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from experiments import config as cfg  # noqa: E402
+from experiments.runner import run_experiment  # noqa: E402
+
+SPACE_REFERENCE = {(50, "cbba"): 130, (50, "grape"): 230, (50, "fcg"): 640,
+                   (100, "cbba"): 19, (100, "grape"): 84, (100, "fcg"): 264}
+
+
+def measure(n: int, allocator: str, duration: float) -> dict:
+    exp = cfg.load(ROOT / "experiments" / "space_mtsr.yaml",
+                   [f"agents.count={n}", f"allocator.name={allocator}", f"run.duration={duration}",
+                    "run.stop_when_done=false"])
+    with tempfile.TemporaryDirectory() as out:
+        result = run_experiment(exp, Path(out), progress=False)
+    t = result.timings
+    return {"sim_per_wall": exp.run.dt * (result.summary["ticks"]) / t["run_s"],
+            "peak_rss_mb": max(t["peak_rss_mb"].values()), "startup_s": t["startup_s"],
+            "bytes": result.summary["network"]["bytes_sent"]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--n", type=int, nargs="+", default=[10, 50, 100])
+    ap.add_argument("--allocators", nargs="+", default=["cbba", "grape", "fcg"])
+    ap.add_argument("--duration", type=float, default=3000.0)
+    args = ap.parse_args()
+    print(f"{'N':>4} {'allocator':>9} {'sim s/wall s':>13} {'SPACE':>6} {'ratio':>6} {'peak RSS MB':>12} "
+          f"{'start-up s':>10} {'payload MB':>10}")
+    for n in args.n:
+        for name in args.allocators:
+            m = measure(n, name, args.duration)
+            ref = SPACE_REFERENCE.get((n, name))
+            ratio = f"{m['sim_per_wall'] / ref:6.2f}" if ref else f"{'-':>6}"
+            print(f"{n:>4} {name:>9} {m['sim_per_wall']:>13.1f} {ref or '-':>6} {ratio} {m['peak_rss_mb']:>12.0f} "
+                  f"{m['startup_s']:>10.1f} {m['bytes'] / 1e6:>10.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
