@@ -79,7 +79,7 @@ class ExplorationNode(StatefulAction):
 
     def on_start(self):
         ctx = self.config.context
-        self.waypoint = (float(ctx.rng.uniform(0, ctx.arena[0])), float(ctx.rng.uniform(0, ctx.arena[1])))
+        self.waypoint = ctx.exp.scenario.random_point(ctx.rng)
         self.until = ctx.view.time + self.get_input("duration")
         return self.on_running()
 

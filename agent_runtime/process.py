@@ -64,14 +64,14 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
                 report(final)
                 return EXIT_OK
             try:
-                action, messages = runtime.step(msg.tick, msg.obs, msg.inbox)
+                action, messages, events = runtime.step(msg.tick, msg.obs, msg.inbox)
             except Exception as exc:  # a plugin or node raised: stop this agent, loudly
                 tb = traceback.format_exc()
                 log.error("agent %d: failed at tick %d:\n%s", agent_id, msg.tick, tb)
                 report({"kind": "fatal", "agent": agent_id, "tick": msg.tick,
                         "error": f"{type(exc).__name__}: {exc}", "traceback": tb})
                 return EXIT_PLUGIN_ERROR
-            out.put(encode_agent_out(msg.tick, agent_id, action, messages))
+            out.put(encode_agent_out(msg.tick, agent_id, action, messages, events))
     finally:
         token.undeclare()
         for entity in (sub, watch, out):

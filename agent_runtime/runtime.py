@@ -13,7 +13,7 @@ import numpy as np
 
 from agent_runtime.bt import Blackboard, load_tree
 from agent_runtime.nodes import space_registry
-from experiments.config import Experiment
+from experiments.config import Experiment, scenario_sensing
 from plugins import make
 from plugins.base import LocalView, Message, TaskInfo
 from wire.codec import RadioMessage, WireError, decode_inbox, decode_task_table, unpack
@@ -36,13 +36,22 @@ class AgentRuntime:
         runtime_seed, allocator_seed = agent_seeds(exp.run.seed, agent_id, n, 2)
         self.rng = np.random.default_rng(runtime_seed)
         self.allocator = make(exp.allocator.name, exp.allocator.params(), agent_id,
-                              np.random.default_rng(allocator_seed))
-        self.arena = (exp.scenario.width, exp.scenario.height)
+                              np.random.default_rng(allocator_seed), exp.run.seed)
+        sc = exp.scenario
+        self.sensing = scenario_sensing(exp)
         bb = Blackboard()
         bb.set("exploration_duration", exp.agents.exploration_duration)
-        bb.set("arrival_radius", exp.scenario.arrival_radius)
-        tree_path = default_tree_path() if exp.agents.behavior_tree == "default" else Path(exp.agents.behavior_tree)
-        self.tree = load_tree(tree_path, space_registry(), blackboard=bb, context=self)
+        bb.set("arrival_radius", getattr(sc, "arrival_radius", getattr(sc, "inspect_range", 1.0)))
+        registry = space_registry()
+        for node in type(self.allocator).bt_nodes:
+            registry.register(node)
+        if exp.agents.behavior_tree != "default":
+            tree_path = Path(exp.agents.behavior_tree)
+        elif type(self.allocator).default_tree:
+            tree_path = Path(type(self.allocator).default_tree)
+        else:
+            tree_path = default_tree_path()
+        self.tree = load_tree(tree_path, registry, blackboard=bb, context=self)
         self.view: LocalView | None = None
         self._action: list = ["stop"]
         self.sent: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # kind -> [messages, payload bytes]
@@ -69,13 +78,15 @@ class AgentRuntime:
                 log.warning("agent %d: malformed %r message from %d dropped: %s", self.agent_id, d.kind, d.sender, exc)
         return out
 
-    def step(self, tick: int, obs: dict, inbox: bytes) -> tuple[list, list[RadioMessage]]:
+    def step(self, tick: int, obs: dict, inbox: bytes) -> tuple[list, list[RadioMessage], dict[str, int]]:
         me = obs["me"]
         tasks = {t[0]: TaskInfo(*t) for t in decode_task_table(obs["tasks"]).tolist()}
-        a = self.exp.agents
+        a, sense = self.exp.agents, self.sensing
         self.view = LocalView(self.agent_id, a.count, tick, float(obs["t"]), me[0], me[1], me[2], me[3],
-                              a.work_rate, tasks, self._inbox(inbox), a.max_speed, a.awareness_range)
+                              a.work_rate, tasks, self._inbox(inbox), sense.max_speed, sense.range, sense.angle,
+                              int(obs.get("color", -1)), obs)
         self._action = ["stop"]
+        self.allocator.observe(self.view)
         self.tree.tick_once()
         messages = []
         for out in self.view.outbox:
@@ -85,7 +96,8 @@ class AgentRuntime:
             counter[1] += len(msg.payload)
             messages.append(msg)
         self.ticks += 1
-        return self._action, messages
+        events, self.allocator.events = self.allocator.events, {}
+        return self._action, messages, events
 
     def report(self) -> dict:
         return {

@@ -9,7 +9,6 @@ run's Zenoh hub: it listens, everyone else connects to it as a client.
 from __future__ import annotations
 
 import logging
-import math
 import queue
 import time
 from pathlib import Path
@@ -19,7 +18,8 @@ import numpy as np
 import zenoh
 
 from coordinator import results
-from coordinator.mtsr import MTSRWorld
+from coordinator.scenarios import make_world
+from plugins import resolve
 from experiments.config import Experiment
 from wire.codec import (EMPTY_INBOX, NetemStep, World, WireError, decode_netem_step, decode_report, encode_stop,
                         encode_tick, encode_world, pack)
@@ -43,17 +43,21 @@ class Coordinator:
         self.out_dir = out_dir
         self.config_text = config_text
         self.n = exp.agents.count
-        self.world = MTSRWorld(exp, component_rng(exp.run.seed, WORLD))
+        self.world = make_world(exp, component_rng(exp.run.seed, WORLD))
+        self.event_names = list(resolve(exp.allocator.name).event_names)
+        self.event_totals: dict[str, int] = {}
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.joined: set[str] = set()
         self.lost: dict[int, int] = {}  # agent -> tick at which it was lost
+        self.retired: set[int] = set()  # lost by the scenario (agent loss), not by a crash
         self.fatal: dict[int, dict] = {}
         self.reports: dict[int, dict] = {}
         self.netem_report: dict | None = None
         self.malformed = 0
         self.rows: list[list] = []
         self.trajectories: list[tuple[int, int, float, float]] = []
-        self._row_columns = list(self.world.row()) + ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
+        self._row_columns = (list(self.world.row()) + ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
+                             + self.event_names)
         self.net_cum = [0, 0, 0, 0, 0]
         self.last_tick = -1
         self.wall: dict[str, float] = {}
@@ -124,19 +128,24 @@ class Coordinator:
             ids, xs, ys = w.positions()
             if self.exp.run.record_trajectories:
                 self.trajectories += [(k, i, x, y) for i, x, y in zip(ids, xs, ys)]
-            self.world_pub.put(encode_world(World(k, ids, xs, ys, ids)))
+            doomed = w.draw_losses()  # lost at tick k+1: the proxy must not deliver to them then
+            self.world_pub.put(encode_world(World(k, ids, xs, ys, [i for i in ids if i not in doomed])))
             for i, obs in w.observations().items():
                 self.agent_pubs[i].put(encode_tick(k, obs, inboxes.get(i, EMPTY_INBOX)))
             step = self._await_step(k)
             for j in step.lost:
                 self._lose(j, k, "its process exited")
             w.apply({a: act for a, act in step.actions.items() if w.alive[a]})
+            for name, n in step.events.items():
+                self.event_totals[name] = self.event_totals.get(name, 0) + n
+            for j in doomed:
+                self._retire(j, k + 1)
             inboxes = step.inboxes
             self.net_cum = [c + d for c, d in zip(self.net_cum, step.counters)]
             self.last_tick = k
             if w.tick % self.exp.run.record_every == 0 or w.finished:
                 row = w.row()
-                self.rows.append(list(row.values()) + self.net_cum)
+                self.rows.append(list(row.values()) + self.net_cum + [self.event_totals.get(e, 0) for e in self.event_names])
             if on_tick:
                 on_tick(w.tick, w.time)
         self.wall["run_s"] = time.perf_counter() - t0
@@ -216,6 +225,13 @@ class Coordinator:
         self.lost[agent] = tick
         self.world.kill(agent)
 
+    def _retire(self, agent: int, tick: int) -> None:
+        """Scheduled agent loss: the robot is gone from ``tick`` on and its process is stopped."""
+        self.lost[agent] = tick
+        self.retired.add(agent)
+        self.world.kill(agent)
+        self.agent_pubs[agent].put(encode_stop("agent lost"))
+
     def _malformed(self, key: str, exc: Exception) -> None:
         self.malformed += 1
         if self.malformed <= 20:
@@ -225,9 +241,11 @@ class Coordinator:
     def stop_and_collect(self, timeout: float = 30.0) -> None:
         """Tell the proxy and every live agent that the run is over; collect their final reports."""
         self.stop_pub.put(pack([self.last_tick]))
+        retired = sorted(self.retired)
         live = [i for i in range(self.n) if i not in self.lost]
         for i in live:
             self.agent_pubs[i].put(encode_stop("run complete"))
+        live += retired  # stopped earlier, but they report too
         deadline = time.monotonic() + timeout
         while self.netem_report is None or any(i not in self.reports for i in live):
             try:
@@ -250,26 +268,16 @@ class Coordinator:
         net = self.netem_report["totals"]
         agent_bytes = sum(b for r in self.reports.values() for _, b in r["sent"].values())
         all_reported = len(self.reports) == self.n
-        times = w.completion_times()
-        need = math.ceil(0.99 * w.tasks_total_planned)
-        per_sender = self.netem_report["per_sender"]
         return {
             "name": exp.name,
+            "scenario_kind": exp.scenario.kind,
             "seed": exp.run.seed,
             "allocator": exp.allocator.name,
             "agents": self.n,
             "ticks": self.last_tick + 1,
-            "mission_time": w.time,
-            "all_tasks_completed": bool(w.finished),
-            "time_99": float(times[need - 1]) if need and len(times) >= need else None,
-            "tasks_total": w.tasks_total_planned,
-            "tasks_spawned": len(w.remaining),
-            "tasks_completed": w.tasks_completed,
-            "distance_total": float(w.distance.sum()),
-            "distance_per_agent": [float(d) for d in w.distance],
-            "work_total": float(w.work.sum()),
-            "work_per_agent": [float(x) for x in w.work],
-            "invalid_actions": int(w.invalid_actions.sum()),
+            **w.summary(),
+            **{name: self.event_totals.get(name, 0) for name in self.event_names},
+            "events": dict(sorted(self.event_totals.items())),
             "agents_lost": {str(a): t for a, t in sorted(self.lost.items())},
             "network": {
                 **net,
@@ -282,25 +290,24 @@ class Coordinator:
                     "agents": sum(r["malformed"] for r in self.reports.values()),
                 },
             },
-            "_per_sender": per_sender,
         }
 
     def write_results(self, timings: dict) -> dict:
         out, w = self.out_dir, self.world
         summary = self.summary()
-        per_sender = summary.pop("_per_sender")
+        per_sender = self.netem_report["per_sender"]
         results.write_csv(out / results.TIMESERIES, self._row_columns, self.rows)
         if self.exp.run.record_trajectories:
             results.write_csv(out / results.TRAJECTORIES, ["tick", "agent", "x", "y"], self.trajectories)
+        columns = w.per_agent()
+        net_cols = ["messages", "bytes", "copies", "delivered"]
         rows = []
         for i in range(self.n):
             s = per_sender.get(str(i), {})
-            rows.append([i, int(i not in self.lost), self.lost.get(i, ""), float(w.distance[i]), float(w.work[i]),
-                         int(w.invalid_actions[i]), s.get("messages", 0), s.get("bytes", 0), s.get("copies", 0),
-                         s.get("delivered", 0)])
-        results.write_csv(out / results.AGENTS, ["agent", "alive", "lost_at_tick", "distance", "work",
-                                                 "invalid_actions", "messages_sent", "bytes_sent", "copies",
-                                                 "delivered"], rows)
+            rows.append([i, int(i not in self.lost), self.lost.get(i, "")] + [col[i] for col in columns.values()]
+                        + [s.get(c, 0) for c in net_cols])
+        results.write_csv(out / results.AGENTS, ["agent", "alive", "lost_at_tick", *columns,
+                                                 "messages_sent", "bytes_sent", "copies", "delivered"], rows)
         results.write_json(out / results.TIMINGS, timings)
         results.write_json(out / results.SUMMARY, summary)
         return summary

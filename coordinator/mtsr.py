@@ -99,6 +99,9 @@ class MTSRWorld:
         self.alive[agent_id] = False
         self.speed[agent_id] = 0.0
 
+    def draw_losses(self) -> list[int]:
+        return []  # MT-SR has no scheduled agent loss
+
     def observations(self) -> dict[int, dict]:
         """What each live agent senses at this tick: itself and the open tasks within awareness range
         (as a binary task table, see ``wire.codec.TASK_DTYPE``)."""
@@ -168,5 +171,23 @@ class MTSRWorld:
             "agents_alive": int(self.alive.sum()),
         }
 
-    def completion_times(self) -> np.ndarray:
-        return np.sort(self.done_at[~np.isnan(self.done_at)])
+    def summary(self) -> dict:
+        times = np.sort(self.done_at[~np.isnan(self.done_at)])
+        need = math.ceil(0.99 * self.tasks_total_planned)
+        return {
+            "mission_time": self.time,
+            "all_tasks_completed": bool(self.finished),
+            "time_99": float(times[need - 1]) if need and len(times) >= need else None,
+            "tasks_total": self.tasks_total_planned,
+            "tasks_spawned": len(self.remaining),
+            "tasks_completed": self.tasks_completed,
+            "distance_total": float(self.distance.sum()),
+            "distance_per_agent": [float(d) for d in self.distance],
+            "work_total": float(self.work.sum()),
+            "work_per_agent": [float(x) for x in self.work],
+            "invalid_actions": int(self.invalid_actions.sum()),
+        }
+
+    def per_agent(self) -> dict[str, list]:
+        return {"distance": [float(d) for d in self.distance], "work": [float(x) for x in self.work],
+                "invalid_actions": [int(v) for v in self.invalid_actions]}

@@ -6,8 +6,10 @@ out-of-range value is refused with the dotted key and the file it came from.
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -43,6 +45,8 @@ class Generations(_Strict):
 
 
 class MTSRScenario(_Strict):
+    """The SPACE MT-SR workload scenario (SPACE paper, Table I)."""
+
     kind: Literal["mtsr"] = "mtsr"
     width: float = Field(1400.0, gt=0)
     height: float = Field(1000.0, gt=0)
@@ -61,6 +65,36 @@ class MTSRScenario(_Strict):
         if self.task_positions is not None and len(self.task_positions) != self.initial_tasks:
             raise ValueError("task_positions needs one [x, y] per initial task")
         return self
+
+    def random_point(self, rng) -> tuple[float, float]:
+        return float(rng.uniform(0, self.width)), float(rng.uniform(0, self.height))
+
+
+class SARScenario(_Strict):
+    """Search and rescue (CBBA-ETC paper, Section 5.1 and Table 1)."""
+
+    kind: Literal["sar"]
+    arena_radius: float = Field(32.0, gt=0, description="radius of the circular arena (m)")
+    victims: int = Field(100, ge=0, description="victims at any time (steady state) or in all (finite)")
+    lifetime: float = Field(100.0, gt=0, description="seconds a victim lives before it expires")
+    replace: bool = Field(True, description="steady state: a rescued or expired victim is replaced")
+    colors: int = Field(3, ge=1, le=3, description="RED, GREEN, BLUE")
+    vision_range: float = Field(12.0, gt=0, description="conical vision: range (m)")
+    vision_angle: float = Field(math.pi / 2, gt=0, le=2 * math.pi, description="conical vision: full angle (rad)")
+    inspect_range: float = Field(5.0, gt=0, description="distance within which a robot can inspect/rescue (m)")
+    move_fail: float = Field(0.0, ge=0, le=1, description="probability that a move fails")
+    inspect_fail: float = Field(0.0, ge=0, le=1, description="probability that an inspection fails")
+    rescue_fail: float = Field(0.0, ge=0, le=1, description="probability that a rescue fails")
+    move_penalty: float = Field(0.5, ge=0, description="seconds a robot is stuck after a failed move")
+    agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
+    agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
+    colors_for_bidding: Literal["auto", "always", "never"] = Field(
+        "auto", description="show victims' colours to bidders (auto: when the allocator bids with colours)")
+
+    def random_point(self, rng) -> tuple[float, float]:
+        r = self.arena_radius * math.sqrt(float(rng.random()))
+        a = float(rng.uniform(-math.pi, math.pi))
+        return r * math.cos(a), r * math.sin(a)
 
 
 class AgentsSection(_Strict):
@@ -95,7 +129,7 @@ class NetworkSection(_Strict):
 class Experiment(_Strict):
     name: str = "experiment"
     run: RunSection = RunSection()
-    scenario: MTSRScenario = MTSRScenario()
+    scenario: Annotated[MTSRScenario | SARScenario, Field(discriminator="kind")] = MTSRScenario()
     agents: AgentsSection = AgentsSection()
     allocator: AllocatorSection = AllocatorSection()
     network: NetworkSection = NetworkSection()
@@ -103,6 +137,21 @@ class Experiment(_Strict):
     @property
     def ticks(self) -> int:
         return int(round(self.run.duration / self.run.dt))
+
+
+@dataclass(frozen=True)
+class Sensing:
+    range: float
+    angle: float
+    max_speed: float
+
+
+def scenario_sensing(exp: Experiment) -> Sensing:
+    """What an agent's sensors cover, by scenario."""
+    sc = exp.scenario
+    if isinstance(sc, SARScenario):
+        return Sensing(sc.vision_range, sc.vision_angle, exp.agents.max_speed)
+    return Sensing(exp.agents.awareness_range, 2 * math.pi, exp.agents.max_speed)
 
 
 def _set_dotted(data: dict, dotted: str, value: Any, where: str) -> None:
@@ -141,12 +190,17 @@ def parse_override(text: str) -> tuple[str, Any]:
 
 
 def validate(data: dict, where: str) -> Experiment:
+    if isinstance(data.get("scenario"), dict) and "kind" not in data["scenario"]:
+        data = {**data, "scenario": {"kind": "mtsr", **data["scenario"]}}
     try:
         exp = Experiment.model_validate(data)
     except ValidationError as exc:
         lines = []
         for e in exc.errors():
-            loc = ".".join(str(p) for p in e["loc"])
+            parts = [str(p) for p in e["loc"]]
+            if parts[:1] == ["scenario"] and parts[1:2] in (["mtsr"], ["sar"]):
+                del parts[1]  # the discriminator's tag is not a key the user wrote
+            loc = ".".join(parts)
             msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
             lines.append(f"{where}: {loc}: {msg}")
         raise ConfigError("\n".join(lines)) from None
@@ -154,7 +208,7 @@ def validate(data: dict, where: str) -> Experiment:
         validate_params(exp.allocator.name, exp.allocator.params())
     except PluginError as exc:
         raise ConfigError(f"{where}: {exc}") from None
-    positions = exp.scenario.agent_positions
+    positions = getattr(exp.scenario, "agent_positions", None)
     if positions is not None and len(positions) != exp.agents.count:
         raise ConfigError(f"{where}: scenario.agent_positions: needs one [x, y] per agent ({exp.agents.count})")
     if exp.agents.behavior_tree != "default" and not Path(exp.agents.behavior_tree).is_file():
@@ -198,7 +252,10 @@ def describe_keys() -> list[tuple[str, str, str]]:
     def walk(model: type[BaseModel], prefix: str) -> None:
         for name, field in model.model_fields.items():
             ann = field.annotation
-            if isinstance(ann, type) and issubclass(ann, BaseModel) and ann is not AllocatorSection:
+            if name == "scenario":
+                walk(MTSRScenario, "scenario.")
+                walk(SARScenario, "scenario.")
+            elif isinstance(ann, type) and issubclass(ann, BaseModel) and ann is not AllocatorSection:
                 walk(ann, f"{prefix}{name}.")
             else:
                 rows.append((f"{prefix}{name}", repr(field.default), field.description or ""))

@@ -142,8 +142,12 @@ class Proxy:
         now = [led.messages_sent, led.bytes_sent, led.copies, led.delivered, led.dropped_total]
         counters = [a - b for a, b in zip(now, self._last)]
         self._last = now
+        events: dict[str, int] = {}
+        for a in sorted(outs):
+            for name, n in outs[a].events.items():
+                events[name] = events.get(name, 0) + n
         step = NetemStep(w.tick, {a: o.action for a, o in outs.items() if a in members},
-                         {a: encode_inbox(v) for a, v in inboxes.items()}, counters, self.lost_unreported)
+                         {a: encode_inbox(v) for a, v in inboxes.items()}, counters, self.lost_unreported, events)
         self.lost_unreported = []
         self.step_pub.put(encode_netem_step(step))
 

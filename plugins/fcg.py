@@ -28,8 +28,8 @@ class FirstClaimedGreedy(Allocator):
     Params = FCGParams
     message_kinds = (CLAIM,)
 
-    def __init__(self, agent_id, params, rng):
-        super().__init__(agent_id, params, rng)
+    def __init__(self, agent_id, params, rng, run_seed=0):
+        super().__init__(agent_id, params, rng, run_seed)
         self.task: int | None = None
         self.claimed_at = 0
         self.abandoned = 0

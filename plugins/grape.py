@@ -39,8 +39,8 @@ class GRAPE(Allocator):
     Params = GRAPEParams
     message_kinds = (KIND,)
 
-    def __init__(self, agent_id, params, rng):
-        super().__init__(agent_id, params, rng)
+    def __init__(self, agent_id, params, rng, run_seed=0):
+        super().__init__(agent_id, params, rng, run_seed)
         self.partition: dict[int, int] = {}  # agent -> task (absent: void)
         self.evolution = 0
         self.stamp = float(rng.random())

@@ -79,9 +79,10 @@ def validate_params(name: str, params: Mapping[str, Any]) -> BaseModel:
         raise PluginError(problems) from None
 
 
-def make(name: str, params: Mapping[str, Any], agent_id: int, rng: np.random.Generator) -> Allocator:
+def make(name: str, params: Mapping[str, Any], agent_id: int, rng: np.random.Generator,
+         run_seed: int = 0) -> Allocator:
     cls = resolve(name)
-    return cls(agent_id, validate_params(name, params), rng)
+    return cls(agent_id, validate_params(name, params), rng, run_seed)
 
 
 register("fcg", "plugins.fcg:FirstClaimedGreedy")

@@ -7,6 +7,7 @@ import pytest
 
 from plugins import names
 from plugins.cbba import CBBA
+from plugins.consensus import table
 from plugins.conformance import random_instance, run_all, simulate
 from plugins.grape import GRAPE, VOID
 
@@ -76,7 +77,7 @@ def test_cbba_matches_sequential_greedy_with_a_path_independent_score():
 
 def test_cbba_receiver_table_entries():
     """A few of Table 1's 17 cases, receiver i=0, sender k=1, third agent m=2, fourth n=3."""
-    t = CBBA._table
+    t = table
     newer_all = lambda m: 1  # noqa: E731  sender's information is newer about everyone
     older_all = lambda m: -1  # noqa: E731
     assert t(0, 1, 1, 5.0, 0, 4.0, older_all) == "update"  # 1: sender outbids

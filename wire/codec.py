@@ -163,21 +163,25 @@ class AgentOut:
     agent_id: int
     action: list
     messages: list[RadioMessage]
+    events: dict[str, int]  # what the allocator counted this tick (e.g. negotiations)
 
 
-def encode_agent_out(tick: int, agent_id: int, action: list, messages: list[RadioMessage]) -> bytes:
-    return pack([tick, agent_id, action, [m.to_wire() for m in messages]])
+def encode_agent_out(tick: int, agent_id: int, action: list, messages: list[RadioMessage],
+                     events: dict[str, int] | None = None) -> bytes:
+    return pack([tick, agent_id, action, [m.to_wire() for m in messages], events or {}])
 
 
 def decode_agent_out(data: bytes) -> AgentOut:
     msg = unpack(data)
-    _expect(isinstance(msg, list) and len(msg) == 4, "agent output must be [tick, id, action, messages]")
-    tick, agent_id, action, messages = msg
+    _expect(isinstance(msg, list) and len(msg) == 5, "agent output must be [tick, id, action, messages, events]")
+    tick, agent_id, action, messages, events = msg
     _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
     _expect(_is_int(agent_id) and agent_id >= 0, "agent id must be a non-negative int")
     _expect(isinstance(action, list) and action and isinstance(action[0], str), "action must be [name, ...]")
     _expect(isinstance(messages, list), "messages must be a list")
-    return AgentOut(tick, agent_id, action, [_radio_from_wire(m) for m in messages])
+    _expect(isinstance(events, dict) and all(isinstance(k, str) and _is_int(v) for k, v in events.items()),
+            "events must map names to counts")
+    return AgentOut(tick, agent_id, action, [_radio_from_wire(m) for m in messages], events)
 
 
 # --- coordinator -> netem proxy -------------------------------------------------------------
@@ -218,19 +222,22 @@ class NetemStep:
     inboxes: dict[int, bytes]
     counters: list[int]  # messages_sent, bytes_sent, copies, delivered, dropped (this tick)
     lost: list[int]  # agents whose process vanished while the proxy waited for them
+    events: dict[str, int]  # the agents' event counts of this tick, summed
 
 
 def encode_netem_step(s: NetemStep) -> bytes:
-    return pack([s.tick, s.actions, s.inboxes, s.counters, s.lost])
+    return pack([s.tick, s.actions, s.inboxes, s.counters, s.lost, s.events])
 
 
 def decode_netem_step(data: bytes) -> NetemStep:
     msg = unpack(data)
-    _expect(isinstance(msg, list) and len(msg) == 5, "netem step must be [tick, actions, inboxes, counters, lost]")
-    tick, actions, inboxes, counters, lost = msg
+    _expect(isinstance(msg, list) and len(msg) == 6,
+            "netem step must be [tick, actions, inboxes, counters, lost, events]")
+    tick, actions, inboxes, counters, lost, events = msg
     _expect(_is_int(tick) and isinstance(actions, dict) and isinstance(inboxes, dict), "bad netem step")
     _expect(isinstance(counters, list) and len(counters) == 5 and isinstance(lost, list), "bad netem step")
-    return NetemStep(tick, actions, inboxes, counters, lost)
+    _expect(isinstance(events, dict), "bad netem step")
+    return NetemStep(tick, actions, inboxes, counters, lost, events)
 
 
 # --- reports (maps: rare, and read by people too) ---------------------------------------------

@@ -1,0 +1,219 @@
+"""The search-and-rescue scenario (CBBA-ETC paper, Section 5.1 and Table 1).
+
+Circular arena; robots of colour RED/GREEN/BLUE (robot i has colour i mod 3) moving holonomically
+at ``agents.max_speed``; victims at uniform random positions with a hidden wall colour and a
+lifetime. A robot sees victims and robots in its vision cone (range and full angle around its
+heading, the direction it last moved in), not their colours. Within ``inspect_range`` it can
+inspect a victim (learns the colour: a mismatch counts as a failed rescue), then rescue it if the
+colours match. Moves, inspections and rescues fail with their probabilities; a failed move leaves
+the robot stuck for ``move_penalty`` seconds. In steady state a rescued or expired victim is
+replaced at once; in finite mode it is not. After ``agent_loss_grace`` seconds each robot is lost
+for good with probability ``agent_loss`` per step (tick).
+
+For the consensus strategies colours are known when bidding ("bid-then-verify"): their
+observations carry the victims' colours, but a rescue still needs the robot's own inspection.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from experiments.config import Experiment, SARScenario
+from wire.codec import TASK_DTYPE, encode_task_table
+
+ALIVE, RESCUED, EXPIRED = 0, 1, 2
+
+
+class SARWorld:
+    def __init__(self, exp: Experiment, rng: np.random.Generator, bids_with_colors: bool) -> None:
+        sc: SARScenario = exp.scenario
+        self.exp, self.sc, self.dt = exp, sc, exp.run.dt
+        self.spawn_rng, self.fail_rng, self.loss_rng = rng.spawn(3)
+        self.n = exp.agents.count
+        self.speed = exp.agents.max_speed
+        self.show_colors = {"always": True, "never": False}.get(sc.colors_for_bidding, bids_with_colors)
+        start = [sc.random_point(self.spawn_rng) for _ in range(self.n)]
+        self.ax = np.array([p[0] for p in start])
+        self.ay = np.array([p[1] for p in start])
+        self.heading = self.spawn_rng.uniform(-math.pi, math.pi, self.n)
+        self.color = np.arange(self.n) % sc.colors
+        self.alive = np.ones(self.n, dtype=bool)
+        self.busy_until = np.zeros(self.n, dtype=np.int64)
+        self.distance = np.zeros(self.n)
+        self.rescues = np.zeros(self.n, dtype=np.int64)
+        self.invalid_actions = np.zeros(self.n, dtype=np.int64)
+        self.counts = {"rescued": 0, "expired": 0, "failed_rescues": 0, "inspections": 0, "inspect_failures": 0,
+                       "rescue_failures": 0, "move_failures": 0, "abandons": 0}
+        self.vx, self.vy = np.zeros(0), np.zeros(0)
+        self.vcolor = np.zeros(0, dtype=np.int64)
+        self.vspawn = np.zeros(0)
+        self.vstatus = np.zeros(0, dtype=np.int64)
+        self.inspected: dict[int, set[int]] = {}  # victim -> robots that inspected it
+        self.results: dict[int, list[list[int]]] = {}  # robot -> inspection results for its next observation
+        self.tick = 0
+        self._spawn(sc.victims)
+
+    # -- victims ---------------------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        return self.tick * self.dt
+
+    def _spawn(self, count: int) -> None:
+        for _ in range(count):
+            x, y = self.sc.random_point(self.spawn_rng)
+            self.vx = np.append(self.vx, x)
+            self.vy = np.append(self.vy, y)
+            self.vcolor = np.append(self.vcolor, int(self.spawn_rng.integers(self.sc.colors)))
+            self.vspawn = np.append(self.vspawn, self.time)
+            self.vstatus = np.append(self.vstatus, ALIVE)
+
+    def _end(self, victim: int, status: int) -> None:
+        self.vstatus[victim] = status
+        self.counts["rescued" if status == RESCUED else "expired"] += 1
+        if self.sc.replace:
+            self._spawn(1)
+
+    @property
+    def victims_alive(self) -> int:
+        return int(np.count_nonzero(self.vstatus == ALIVE))
+
+    @property
+    def finished(self) -> bool:
+        return not self.sc.replace and self.victims_alive == 0
+
+    # -- agents ----------------------------------------------------------------------------------
+    def positions(self) -> tuple[list[int], list[float], list[float]]:
+        ids = [int(i) for i in np.flatnonzero(self.alive)]
+        return ids, [float(self.ax[i]) for i in ids], [float(self.ay[i]) for i in ids]
+
+    def kill(self, agent_id: int) -> None:
+        self.alive[agent_id] = False
+
+    def draw_losses(self) -> list[int]:
+        """Robots lost at the next tick (one draw per live robot once the grace period is over)."""
+        p = self.sc.agent_loss
+        if p <= 0 or self.time < self.sc.agent_loss_grace:
+            return []
+        return [int(i) for i in np.flatnonzero(self.alive) if self.loss_rng.random() < p]
+
+    def _in_cone(self, i: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        dx, dy = x - self.ax[i], y - self.ay[i]
+        near = np.hypot(dx, dy) <= self.sc.vision_range
+        off = (np.arctan2(dy, dx) - self.heading[i] + math.pi) % (2 * math.pi) - math.pi
+        return near & ((np.abs(off) <= self.sc.vision_angle / 2) | ((dx == 0) & (dy == 0)))
+
+    def observations(self) -> dict[int, dict]:
+        live = np.flatnonzero(self.vstatus == ALIVE)
+        lx, ly = self.vx[live], self.vy[live]
+        left = self.vspawn[live] + self.sc.lifetime - self.time
+        robots = np.flatnonzero(self.alive)
+        out = {}
+        for i in map(int, robots):
+            seen = np.flatnonzero(self._in_cone(i, lx, ly))
+            table = np.empty(len(seen), dtype=TASK_DTYPE)
+            ids = live[seen]
+            table["id"], table["x"], table["y"], table["remaining"] = ids, lx[seen], ly[seen], left[seen]
+            known = [int(self.vcolor[v]) if (self.show_colors or i in self.inspected.get(int(v), ())) else -1
+                     for v in ids]
+            table["color"] = known
+            others = [int(j) for j in robots if j != i]
+            visible = self._in_cone(i, self.ax[others], self.ay[others]) if others else []
+            obs = {
+                "t": self.time,
+                "me": [float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), self.speed],
+                "color": int(self.color[i]),
+                "tasks": encode_task_table(table),
+                "robots": [[j, float(self.ax[j]), float(self.ay[j])] for j, v in zip(others, visible) if v],
+                "inspected": self.results.pop(i, []),
+                "busy": int(max(0, self.busy_until[i] - self.tick)),
+            }
+            if self.tick == 0:  # where the team starts: known before deployment
+                obs["team"] = [[int(j), float(self.ax[j]), float(self.ay[j])] for j in range(self.n)]
+            out[i] = obs
+        return out
+
+    def _victim(self, action: list) -> int | None:
+        if len(action) == 2 and isinstance(action[1], int) and 0 <= action[1] < len(self.vstatus):
+            return action[1]
+        return None
+
+    def _move(self, i: int, tx: float, ty: float) -> None:
+        if self.fail_rng.random() < self.sc.move_fail:
+            self.counts["move_failures"] += 1
+            self.busy_until[i] = self.tick + 1 + math.ceil(self.sc.move_penalty / self.dt - 1e-9)
+            return
+        dx, dy = tx - self.ax[i], ty - self.ay[i]
+        dist = math.hypot(dx, dy)
+        if dist < 1e-12:
+            return
+        step = min(self.speed * self.dt, dist)
+        self.heading[i] = math.atan2(dy, dx)
+        self.ax[i] += dx / dist * step
+        self.ay[i] += dy / dist * step
+        self.distance[i] += step
+
+    def _in_reach(self, i: int, v: int) -> bool:
+        return (self.vstatus[v] == ALIVE and
+                math.hypot(self.vx[v] - self.ax[i], self.vy[v] - self.ay[i]) <= self.sc.inspect_range + 1e-9)
+
+    def apply(self, actions: dict[int, list]) -> None:
+        """Advance one tick; robots act in id order on the state of this tick."""
+        for i in map(int, np.flatnonzero(self.alive)):
+            if self.busy_until[i] > self.tick:
+                continue
+            action = actions.get(i, ["stop"])
+            name = action[0] if action else None
+            v = self._victim(action)
+            if name == "goto" and len(action) == 3 and all(isinstance(c, (int, float)) for c in action[1:]):
+                self._move(i, float(action[1]), float(action[2]))
+            elif name == "goto_task" and v is not None:
+                self._move(i, float(self.vx[v]), float(self.vy[v]))
+            elif name == "inspect" and v is not None and self._in_reach(i, v):
+                if self.fail_rng.random() < self.sc.inspect_fail:
+                    self.counts["inspect_failures"] += 1
+                    continue
+                self.counts["inspections"] += 1
+                if i not in self.inspected.setdefault(v, set()):
+                    self.inspected[v].add(i)
+                    if self.vcolor[v] != self.color[i]:
+                        self.counts["failed_rescues"] += 1
+                self.results.setdefault(i, []).append([v, int(self.vcolor[v])])
+            elif (name == "rescue" and v is not None and self._in_reach(i, v) and i in self.inspected.get(v, ())
+                  and self.vcolor[v] == self.color[i]):
+                if self.fail_rng.random() < self.sc.rescue_fail:
+                    self.counts["rescue_failures"] += 1
+                    continue
+                self.rescues[i] += 1
+                self._end(v, RESCUED)
+            elif name == "abandon" and v is not None:
+                self.counts["abandons"] += 1
+            elif name != "stop":
+                self.invalid_actions[i] += 1
+        self.tick += 1
+        for v in map(int, np.flatnonzero((self.vstatus == ALIVE) & (self.vspawn + self.sc.lifetime <= self.time + 1e-9))):
+            self._end(v, EXPIRED)
+
+    # -- metrics -----------------------------------------------------------------------------------
+    def row(self) -> dict:
+        return {"tick": self.tick, "time": round(self.time, 9), "spawned": len(self.vstatus),
+                "rescued": self.counts["rescued"], "expired": self.counts["expired"],
+                "failed_rescues": self.counts["failed_rescues"], "victims_alive": self.victims_alive,
+                "agents_alive": int(self.alive.sum())}
+
+    def summary(self) -> dict:
+        spawned, alive = len(self.vstatus), self.victims_alive
+        c = self.counts
+        if c["rescued"] + c["expired"] + alive != spawned:
+            raise AssertionError(f"victims unaccounted: rescued {c['rescued']} + expired {c['expired']} + "
+                                 f"alive {alive} != spawned {spawned}")
+        return {**c, "spawned": spawned, "victims_alive": alive, "victims_accounted": True,
+                "distance_total": float(self.distance.sum()),
+                "distance_per_agent": [float(d) for d in self.distance],
+                "rescues_per_agent": [int(r) for r in self.rescues],
+                "invalid_actions": int(self.invalid_actions.sum())}
+
+    def per_agent(self) -> dict[str, list]:
+        return {"color": [int(c) for c in self.color], "distance": [float(d) for d in self.distance],
+                "rescues": [int(r) for r in self.rescues], "invalid_actions": [int(v) for v in self.invalid_actions]}

@@ -1,0 +1,18 @@
+"""Worlds by scenario kind. A world owns the ground truth of one run and offers the coordinator:
+``positions()``, ``observations()``, ``apply(actions)``, ``draw_losses()``, ``kill(i)``,
+``finished``, ``tick``/``time``/``alive``, and ``row()`` / ``summary()`` / ``per_agent()`` for results."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from coordinator.mtsr import MTSRWorld
+from coordinator.sar import SARWorld
+from experiments.config import Experiment, MTSRScenario
+from plugins import resolve
+
+
+def make_world(exp: Experiment, rng: np.random.Generator) -> MTSRWorld | SARWorld:
+    if isinstance(exp.scenario, MTSRScenario):
+        return MTSRWorld(exp, rng)
+    return SARWorld(exp, rng, bids_with_colors=resolve(exp.allocator.name).bids_with_colors)

@@ -1,0 +1,152 @@
+"""CBBA's consensus state, shared by every CBBA-family allocator: winning bids ``y``, winners ``z``,
+information timestamps ``s`` (simulated time), the receiver action table (Choi, Brunet, How 2009,
+Table 1, all 17 cases), and the bundle release of Eqs. 6-7."""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, Iterable
+
+NONE = -1
+_NEVER = -math.inf
+
+
+def better(y1: float, z1: int, y2: float, z2: int) -> bool:
+    """Bid (y1 by z1) beats bid (y2 by z2): higher, or equal and by the lower agent id."""
+    return y1 > y2 or (y1 == y2 and z1 < z2)
+
+
+def table(i: int, k: int, zk: int, yk: float, zi: int, yi: float, compare: Callable[[int], int]) -> str:
+    """Receiver i's action on one task, given sender k's belief (zk, yk) and its own (zi, yi):
+    "update", "reset" or "leave". ``compare(m)`` > 0 when k's information about agent m is newer
+    than i's (s_km > s_im), < 0 when older."""
+
+    def newer(m: int) -> bool:
+        return compare(m) > 0
+
+    if zk == k:  # sender thinks it wins
+        if zi == i:
+            return "update" if better(yk, k, yi, i) else "leave"  # 1
+        if zi == k or zi == NONE:
+            return "update"  # 2, 4
+        return "update" if newer(zi) or better(yk, k, yi, zi) else "leave"  # 3
+    if zk == i:  # sender thinks the receiver wins
+        if zi == k:
+            return "reset"  # 6
+        if zi not in (i, NONE) and newer(zi):
+            return "reset"  # 7
+        return "leave"  # 5, 7, 8
+    if zk == NONE:  # sender thinks nobody wins
+        if zi == k:
+            return "update"  # 15
+        if zi not in (i, NONE) and newer(zi):
+            return "update"  # 16
+        return "leave"  # 14, 16, 17
+    m = zk  # sender thinks a third agent m wins
+    if zi == i:
+        return "update" if newer(m) and better(yk, m, yi, i) else "leave"  # 9
+    if zi == k:
+        return "update" if newer(m) else "reset"  # 10
+    if zi == m or zi == NONE:
+        return "update" if newer(m) else "leave"  # 11, 13
+    n = zi  # 12: receiver thinks a fourth agent n wins
+    if newer(m) and (newer(n) or better(yk, m, yi, n)):
+        return "update"
+    if newer(n) and compare(m) < 0:
+        return "reset"
+    return "leave"
+
+
+class ConsensusState:
+    """One agent's CBBA knowledge and bundle."""
+
+    def __init__(self, agent_id: int) -> None:
+        self.agent_id = agent_id
+        self.y: dict[int, float] = {}
+        self.z: dict[int, int] = {}
+        self.s: dict[int, float] = {}  # agent -> simulated time of the latest information from it
+        self.bundle: list[int] = []
+        self.path: list[int] = []
+        self.now = 0.0
+
+    def message(self) -> dict:
+        return {
+            "t": self.now,
+            "w": [[t, self.z[t], self.y[t]] for t in sorted(self.z)],
+            "s": [[a, ts] for a, ts in sorted(self.s.items())],
+        }
+
+    def receive(self, sender: int, data: dict, ignore: Iterable[int] = ()) -> None:
+        """Apply Table 1 to every task in a neighbour's message, then merge its timestamps."""
+        i, k = self.agent_id, sender
+        theirs = {int(t): (int(w), float(b)) for t, w, b in data["w"]}
+        sk = {int(a): float(ts) for a, ts in data["s"]}
+        sk[k] = float(data["t"])
+        skip = set(ignore)
+
+        def compare(m: int) -> int:
+            mine = self.now if m == i else self.s.get(m, _NEVER)
+            their = sk.get(m, _NEVER)
+            return (their > mine) - (their < mine)
+
+        for j in sorted(set(theirs) | set(self.z)):
+            if j in skip:
+                continue
+            zk, yk = theirs.get(j, (NONE, 0.0))
+            zi, yi = self.z.get(j, NONE), self.y.get(j, 0.0)
+            if zk == zi and yk == yi:
+                continue  # every table entry leaves identical information unchanged
+            action = table(i, k, zk, yk, zi, yi, compare)
+            if action == "update":
+                if zk == NONE:
+                    self.reset(j)
+                else:
+                    self.z[j], self.y[j] = zk, yk
+            elif action == "reset":
+                self.reset(j)
+        for m, ts in sk.items():
+            if m != i and ts > self.s.get(m, _NEVER):
+                self.s[m] = ts
+
+    def reset(self, task: int) -> None:
+        self.z.pop(task, None)
+        self.y.pop(task, None)
+
+    def forget(self, task: int) -> None:
+        """The task is gone (done): drop it everywhere."""
+        self.reset(task)
+        if task in self.bundle:
+            self.bundle.remove(task)
+            self.path.remove(task)
+
+    def release(self) -> int:
+        """Eqs. 6-7: from the first task this agent no longer wins, the bundle is cut; the tasks
+        after that one had bids that depended on it, so their bids and winners are reset.
+        Returns how many bundle tasks were lost to other agents' bids."""
+        for n, task in enumerate(self.bundle):
+            if self.z.get(task) != self.agent_id:
+                for later in self.bundle[n + 1:]:
+                    if self.z.get(later) == self.agent_id:
+                        self.reset(later)
+                cut = set(self.bundle[n:])
+                self.bundle = self.bundle[:n]
+                self.path = [t for t in self.path if t not in cut]
+                return 1
+        return 0
+
+    def add(self, task: int, bid: float, position: int | None = None) -> None:
+        self.bundle.append(task)
+        self.path.insert(len(self.path) if position is None else position, task)
+        self.y[task] = bid
+        self.z[task] = self.agent_id
+
+    def eligible(self, task: int, bid: float) -> bool:
+        """Algorithm 3's h_ij: the bid beats the known winning bid (ties to the lower id)."""
+        known = self.y.get(task, 0.0)
+        return bid > known or (bid == known and self.agent_id < self.z.get(task, self.agent_id + 1))
+
+    def drop_stale_winners(self, older_than: float) -> None:
+        """Forget wins by agents not heard from since ``older_than`` (lost agents stop mattering)."""
+        for task, winner in list(self.z.items()):
+            if winner != self.agent_id and self.s.get(winner, _NEVER) < older_than:
+                self.reset(task)
