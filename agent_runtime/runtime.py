@@ -36,7 +36,7 @@ class AgentRuntime:
         runtime_seed, allocator_seed = agent_seeds(exp.run.seed, agent_id, n, 2)
         self.rng = np.random.default_rng(runtime_seed)
         self.allocator = make(exp.allocator.name, exp.allocator.params(), agent_id,
-                              np.random.default_rng(allocator_seed), exp.run.seed)
+                              np.random.default_rng(allocator_seed), exp.run.seed, exp.scenario.kind)
         sc = exp.scenario
         self.sensing = scenario_sensing(exp)
         bb = Blackboard()

@@ -44,7 +44,7 @@ class Coordinator:
         self.config_text = config_text
         self.n = exp.agents.count
         self.world = make_world(exp, component_rng(exp.run.seed, WORLD))
-        self.event_names = list(resolve(exp.allocator.name).event_names)
+        self.event_names = list(resolve(exp.allocator.name, exp.scenario.kind).event_names)
         self.event_totals: dict[str, int] = {}
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.joined: set[str] = set()

@@ -109,6 +109,7 @@ class MTSRWorld:
         table = np.empty(len(open_idx), dtype=TASK_DTYPE)
         table["id"], table["x"], table["y"] = open_idx, self.tx[open_idx], self.ty[open_idx]
         table["remaining"] = self.remaining[open_idx]
+        table["color"] = -1
         alive = np.flatnonzero(self.alive)
         near = np.hypot(table["x"][None, :] - self.ax[alive, None],
                         table["y"][None, :] - self.ay[alive, None]) <= self.awareness

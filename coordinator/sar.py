@@ -5,7 +5,8 @@ at ``agents.max_speed``; victims at uniform random positions with a hidden wall 
 lifetime. A robot sees victims and robots in its vision cone (range and full angle around its
 heading, the direction it last moved in), not their colours. Within ``inspect_range`` it can
 inspect a victim (learns the colour: a mismatch counts as a failed rescue), then rescue it if the
-colours match. Moves, inspections and rescues fail with their probabilities; a failed move leaves
+colours match (a robot turns to the victim it inspects or rescues, and learns the outcome of its
+own actions). Moves, inspections and rescues fail with their probabilities; a failed move leaves
 the robot stuck for ``move_penalty`` seconds. In steady state a rescued or expired victim is
 replaced at once; in finite mode it is not. After ``agent_loss_grace`` seconds each robot is lost
 for good with probability ``agent_loss`` per step (tick).
@@ -44,6 +45,7 @@ class SARWorld:
         self.distance = np.zeros(self.n)
         self.rescues = np.zeros(self.n, dtype=np.int64)
         self.invalid_actions = np.zeros(self.n, dtype=np.int64)
+        self.stale_actions = np.zeros(self.n, dtype=np.int64)  # aimed at a victim already gone
         self.counts = {"rescued": 0, "expired": 0, "failed_rescues": 0, "inspections": 0, "inspect_failures": 0,
                        "rescue_failures": 0, "move_failures": 0, "abandons": 0}
         self.vx, self.vy = np.zeros(0), np.zeros(0)
@@ -52,6 +54,7 @@ class SARWorld:
         self.vstatus = np.zeros(0, dtype=np.int64)
         self.inspected: dict[int, set[int]] = {}  # victim -> robots that inspected it
         self.results: dict[int, list[list[int]]] = {}  # robot -> inspection results for its next observation
+        self.rescued_by: dict[int, list[int]] = {}  # robot -> victims it rescued, for its next observation
         self.tick = 0
         self._spawn(sc.victims)
 
@@ -124,9 +127,11 @@ class SARWorld:
                 "t": self.time,
                 "me": [float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), self.speed],
                 "color": int(self.color[i]),
+                "reach": self.sc.inspect_range,
                 "tasks": encode_task_table(table),
                 "robots": [[j, float(self.ax[j]), float(self.ay[j])] for j, v in zip(others, visible) if v],
                 "inspected": self.results.pop(i, []),
+                "rescued": self.rescued_by.pop(i, []),
                 "busy": int(max(0, self.busy_until[i] - self.tick)),
             }
             if self.tick == 0:  # where the team starts: known before deployment
@@ -154,6 +159,12 @@ class SARWorld:
         self.ay[i] += dy / dist * step
         self.distance[i] += step
 
+    def _face(self, i: int, v: int) -> None:
+        """A robot that inspects or rescues a victim turns to it (its vision cone covers it)."""
+        dx, dy = self.vx[v] - self.ax[i], self.vy[v] - self.ay[i]
+        if dx or dy:
+            self.heading[i] = math.atan2(dy, dx)
+
     def _in_reach(self, i: int, v: int) -> bool:
         return (self.vstatus[v] == ALIVE and
                 math.hypot(self.vx[v] - self.ax[i], self.vy[v] - self.ay[i]) <= self.sc.inspect_range + 1e-9)
@@ -166,6 +177,8 @@ class SARWorld:
             action = actions.get(i, ["stop"])
             name = action[0] if action else None
             v = self._victim(action)
+            if name in ("inspect", "rescue") and v is not None:
+                self._face(i, v)  # it looks where the victim is (or was)
             if name == "goto" and len(action) == 3 and all(isinstance(c, (int, float)) for c in action[1:]):
                 self._move(i, float(action[1]), float(action[2]))
             elif name == "goto_task" and v is not None:
@@ -186,9 +199,12 @@ class SARWorld:
                     self.counts["rescue_failures"] += 1
                     continue
                 self.rescues[i] += 1
+                self.rescued_by.setdefault(i, []).append(v)
                 self._end(v, RESCUED)
             elif name == "abandon" and v is not None:
                 self.counts["abandons"] += 1
+            elif name in ("inspect", "rescue") and v is not None and self.vstatus[v] != ALIVE:
+                self.stale_actions[i] += 1  # someone was faster, or it expired: not the robot's fault
             elif name != "stop":
                 self.invalid_actions[i] += 1
         self.tick += 1
@@ -212,8 +228,10 @@ class SARWorld:
                 "distance_total": float(self.distance.sum()),
                 "distance_per_agent": [float(d) for d in self.distance],
                 "rescues_per_agent": [int(r) for r in self.rescues],
-                "invalid_actions": int(self.invalid_actions.sum())}
+                "invalid_actions": int(self.invalid_actions.sum()),
+                "stale_actions": int(self.stale_actions.sum())}
 
     def per_agent(self) -> dict[str, list]:
         return {"color": [int(c) for c in self.color], "distance": [float(d) for d in self.distance],
-                "rescues": [int(r) for r in self.rescues], "invalid_actions": [int(v) for v in self.invalid_actions]}
+                "rescues": [int(r) for r in self.rescues], "invalid_actions": [int(v) for v in self.invalid_actions],
+                "stale_actions": [int(v) for v in self.stale_actions]}

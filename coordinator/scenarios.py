@@ -15,4 +15,4 @@ from plugins import resolve
 def make_world(exp: Experiment, rng: np.random.Generator) -> MTSRWorld | SARWorld:
     if isinstance(exp.scenario, MTSRScenario):
         return MTSRWorld(exp, rng)
-    return SARWorld(exp, rng, bids_with_colors=resolve(exp.allocator.name).bids_with_colors)
+    return SARWorld(exp, rng, bids_with_colors=resolve(exp.allocator.name, "sar").bids_with_colors)

@@ -35,13 +35,25 @@ def _fmt(v) -> str:
 
 def print_summary(summary: dict, out_dir: Path, stream=sys.stdout) -> None:
     net = summary["network"]
-    rows = [
-        ("mission time (sim s)", summary["mission_time"]),
-        ("all tasks completed", summary["all_tasks_completed"]),
-        ("time to 99% of tasks", summary["time_99"]),
-        ("tasks completed / total", f"{summary['tasks_completed']} / {summary['tasks_total']}"),
-        ("distance, all agents", summary["distance_total"]),
-        ("work, all agents", summary["work_total"]),
+    if summary.get("scenario_kind") == "sar":
+        rows = [
+            ("rescued", summary["rescued"]),
+            ("expired", summary["expired"]),
+            ("failed rescues (mismatch found)", summary["failed_rescues"]),
+            ("victims spawned / still alive", f"{summary['spawned']} / {summary['victims_alive']}"),
+            ("negotiations", summary.get("negotiations", "-")),
+            ("agents lost", len(summary["agents_lost"])),
+        ]
+    else:
+        rows = [
+            ("mission time (sim s)", summary["mission_time"]),
+            ("all tasks completed", summary["all_tasks_completed"]),
+            ("time to 99% of tasks", summary["time_99"]),
+            ("tasks completed / total", f"{summary['tasks_completed']} / {summary['tasks_total']}"),
+            ("distance, all agents", summary["distance_total"]),
+            ("work, all agents", summary["work_total"]),
+        ]
+    rows += [
         ("messages sent", net["messages_sent"]),
         ("payload bytes sent", net["bytes_sent"]),
         ("copies delivered / total", f"{net['delivered']:,} / {net['copies']:,}"),

@@ -205,7 +205,7 @@ def validate(data: dict, where: str) -> Experiment:
             lines.append(f"{where}: {loc}: {msg}")
         raise ConfigError("\n".join(lines)) from None
     try:
-        validate_params(exp.allocator.name, exp.allocator.params())
+        validate_params(exp.allocator.name, exp.allocator.params(), exp.scenario.kind)
     except PluginError as exc:
         raise ConfigError(f"{where}: {exc}") from None
     positions = getattr(exp.scenario, "agent_positions", None)

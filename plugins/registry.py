@@ -2,7 +2,8 @@
 
 ``allocator.name`` in an experiment is either a registered name (``fcg``) or a ``module:Class``
 reference, where ``module`` is an importable module or a path to a ``.py`` file, so that a user's
-own algorithm needs no change to swarmbed.
+own algorithm needs no change to swarmbed. A name may have one implementation per scenario kind
+(``cbba`` is SPACE's CBBA in MT-SR and the CBBA-ETC paper's reactive CBBA in search and rescue).
 """
 
 from __future__ import annotations
@@ -18,22 +19,30 @@ from pydantic import BaseModel, ValidationError
 
 from plugins.base import Allocator
 
-_REGISTRY: dict[str, str] = {}
+ANY = "*"
+_REGISTRY: dict[str, dict[str, str]] = {}  # name -> scenario kind (or ANY) -> "module:Class"
 
 
 class PluginError(ValueError):
     """An allocator that cannot be found, loaded or configured."""
 
 
-def register(name: str, target: str) -> None:
-    """Register ``target`` (``"package.module:Class"``) under ``name``; imported only when used."""
-    if name in _REGISTRY and _REGISTRY[name] != target:
-        raise PluginError(f"allocator {name!r} is already registered as {_REGISTRY[name]}")
-    _REGISTRY[name] = target
+def register(name: str, target: str, scenario: str = ANY) -> None:
+    """Register ``target`` (``"package.module:Class"``) under ``name`` for one scenario kind (or
+    all); imported only when used."""
+    known = _REGISTRY.setdefault(name, {})
+    if known.get(scenario, target) != target:
+        raise PluginError(f"allocator {name!r} is already registered as {known[scenario]}")
+    known[scenario] = target
 
 
 def names() -> list[str]:
     return sorted(_REGISTRY)
+
+
+def entries() -> list[tuple[str, str]]:
+    """(name, scenario kind) of every registration."""
+    return sorted((n, k) for n, kinds in _REGISTRY.items() for k in kinds)
 
 
 def _import_module(ref: str):
@@ -52,8 +61,14 @@ def _import_module(ref: str):
     return importlib.import_module(ref)
 
 
-def resolve(name: str) -> type[Allocator]:
-    target = _REGISTRY.get(name, name)
+def resolve(name: str, scenario: str | None = None) -> type[Allocator]:
+    kinds = _REGISTRY.get(name, {})
+    if kinds and scenario is not None and scenario not in kinds and ANY not in kinds:
+        raise PluginError(f"allocator {name!r} has no implementation for scenario {scenario!r} "
+                          f"(it has: {', '.join(sorted(kinds))})")
+    target = kinds.get(scenario, kinds.get(ANY)) if kinds else name
+    if target is None:  # no scenario given: the only (or first) implementation
+        target = kinds[sorted(kinds)[0]]
     if ":" not in target:
         raise PluginError(f"unknown allocator {name!r}; registered: {', '.join(names())}; "
                           "or give 'module:Class' / 'path/to/file.py:Class'")
@@ -68,8 +83,8 @@ def resolve(name: str) -> type[Allocator]:
     return cls
 
 
-def validate_params(name: str, params: Mapping[str, Any]) -> BaseModel:
-    cls = resolve(name)
+def validate_params(name: str, params: Mapping[str, Any], scenario: str | None = None) -> BaseModel:
+    cls = resolve(name, scenario)
     try:
         return cls.Params.model_validate(dict(params))
     except ValidationError as exc:
@@ -80,12 +95,19 @@ def validate_params(name: str, params: Mapping[str, Any]) -> BaseModel:
 
 
 def make(name: str, params: Mapping[str, Any], agent_id: int, rng: np.random.Generator,
-         run_seed: int = 0) -> Allocator:
-    cls = resolve(name)
-    return cls(agent_id, validate_params(name, params), rng, run_seed)
+         run_seed: int = 0, scenario: str | None = None) -> Allocator:
+    cls = resolve(name, scenario)
+    return cls(agent_id, validate_params(name, params, scenario), rng, run_seed)
 
 
-register("fcg", "plugins.fcg:FirstClaimedGreedy")
+register("fcg", "plugins.fcg:FirstClaimedGreedy", "mtsr")
 register("noop", "plugins.noop:NoopAllocator")
-register("cbba", "plugins.cbba:CBBA")
-register("grape", "plugins.grape:GRAPE")
+register("cbba", "plugins.cbba:CBBA", "mtsr")
+register("grape", "plugins.grape:GRAPE", "mtsr")
+# the six coordination strategies of the CBBA-ETC evaluation (search and rescue)
+register("tree", "plugins.sar.reactive:TreeStrategy", "sar")
+register("comm", "plugins.sar.reactive:CommStrategy", "sar")
+register("cbba", "plugins.sar.consensus:ReactiveCBBA", "sar")
+register("cbba-tree", "plugins.sar.consensus:CBBATree", "sar")
+register("cbba-etc", "plugins.sar.consensus:CBBAETC", "sar")
+register("c-cbba", "plugins.sar.ccbba:ClusteringCBBA", "sar")

@@ -106,7 +106,7 @@ def decode_inbox(data: bytes) -> list[Delivered]:
 # --- coordinator -> agent -------------------------------------------------------------------
 
 #: the tasks of an observation travel as one binary table of these records (little-endian)
-TASK_DTYPE = np.dtype([("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("remaining", "<f8")])
+TASK_DTYPE = np.dtype([("id", "<i4"), ("x", "<f8"), ("y", "<f8"), ("remaining", "<f8"), ("color", "i1")])
 
 
 def encode_task_table(table: np.ndarray) -> bytes:

@@ -1,0 +1,127 @@
+"""``c-cbba``: Clustering-CBBA (Dong, Liu, Mai 2025) as the CBBA-ETC paper runs it.
+
+At the start every robot clusters the team's starting positions with k-means++ into ``clusters``
+groups, with a random stream drawn from the run seed, so that every robot computes the same
+clusters; the lowest id of each cluster leads it. Consensus is two-tiered: a member sends its bids
+only to its leader (unicast, when its bundle changed or ``period`` passed); a leader merges its
+members' bids, exchanges its view with the other leaders, and sends the result back to its
+members (multicast) whenever its view changed or ``period`` passed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field
+
+from plugins.base import LocalView
+from plugins.sar.base import TREES
+from plugins.sar.consensus import ConsensusParams, SARConsensus
+
+BIDS, LEADERS, RESULT = "bids", "leaders", "result"
+CLUSTER_STREAM = 0xCCBBA  # a fixed entropy word: every robot draws the same clustering stream
+
+
+def kmeans_pp(points: np.ndarray, k: int, rng: np.random.Generator, iterations: int = 50) -> np.ndarray:
+    """Cluster labels by k-means with k-means++ seeding (Arthur and Vassilvitskii 2007)."""
+    n = len(points)
+    k = max(1, min(k, n))
+    centers = [points[int(rng.integers(n))]]
+    for _ in range(1, k):
+        d2 = np.min([np.sum((points - c) ** 2, axis=1) for c in centers], axis=0)
+        total = d2.sum()
+        pick = int(rng.choice(n, p=d2 / total)) if total > 0 else int(rng.integers(n))
+        centers.append(points[pick])
+    centers = np.array(centers, dtype=float)
+    labels = np.zeros(n, dtype=int)
+    for _ in range(iterations):
+        labels = np.argmin(((points[:, None, :] - centers[None, :, :]) ** 2).sum(axis=2), axis=1)
+        moved = np.array([points[labels == c].mean(axis=0) if np.any(labels == c) else centers[c] for c in range(k)])
+        if np.allclose(moved, centers):
+            break
+        centers = moved
+    return labels
+
+
+class CCBBAParams(ConsensusParams):
+    clusters: int = Field(2, ge=1, description="k of k-means++")
+
+
+class ClusteringCBBA(SARConsensus):
+    Params = CCBBAParams
+    message_kinds = (BIDS, LEADERS, RESULT)
+    default_tree = str(TREES / "c_cbba.xml")
+
+    def __init__(self, agent_id, params, rng, run_seed=0):
+        super().__init__(agent_id, params, rng, run_seed)
+        self.leader: int | None = None
+        self.members: list[int] = []  # the leader's cluster, itself excluded
+        self.leaders: list[int] = []
+        self.dirty = False
+        self.last_relay = -1e18
+
+    @property
+    def is_leader(self) -> bool:
+        return self.leader == self.agent_id
+
+    def setup(self, team: list) -> None:
+        ids = [int(t[0]) for t in team]
+        points = np.array([[t[1], t[2]] for t in team], dtype=float)
+        rng = np.random.default_rng(np.random.SeedSequence([self.run_seed, CLUSTER_STREAM]))
+        labels = kmeans_pp(points, self.params.clusters, rng)
+        groups: dict[int, list[int]] = {}
+        for agent, label in zip(ids, labels):
+            groups.setdefault(int(label), []).append(agent)
+        heads = {label: min(group) for label, group in groups.items()}
+        self.leaders = sorted(heads.values())
+        mine = next(label for label, group in groups.items() if self.agent_id in group)
+        self.leader = heads[mine]
+        self.members = [a for a in sorted(groups[mine]) if a != self.leader]
+
+    def observe(self, view: LocalView) -> None:
+        if self.leader is None and "team" in view.obs:
+            self.setup(view.obs["team"])
+        super().observe(view)
+        if self.is_leader:
+            self.relay(view)
+
+    def consensus_kinds(self, sender: int) -> tuple[str, ...]:
+        if self.is_leader:
+            return (BIDS, LEADERS)
+        return (RESULT,) if sender == self.leader else ()
+
+    def receive(self, view: LocalView) -> None:
+        if self.is_leader and any(m.kind in (BIDS, LEADERS) for m in view.inbox):
+            self.dirty = True
+        super().receive(view)
+
+    def relay(self, view: LocalView) -> None:
+        """Leader: pass the merged view to the other leaders and back to the cluster."""
+        if not (self.dirty or self.now - self.last_relay >= self.params.period):
+            return
+        message = self.state.message()
+        others = [a for a in self.leaders if a != self.agent_id]
+        if others:
+            view.send(others, LEADERS, message)
+        if self.members:
+            view.send(self.members, RESULT, message)
+        self.count("negotiations")
+        self.dirty = False
+        self.last_relay = self.now
+
+    def should_trigger(self, view: LocalView) -> bool:
+        return self.state.bundle != self.bundle_at_round or self.now - self.last_round >= self.params.period
+
+    def broadcast_round(self, view: LocalView) -> None:
+        if self.is_leader or self.leader is None:
+            self.dirty = True  # its own bundle changed: relay it
+        else:
+            view.send(self.leader, BIDS, self.state.message())
+
+    def run_consensus(self, view: LocalView) -> None:
+        if self.is_leader:  # a leader's rounds are its relays
+            self.broadcast_round(view)
+            self.last_round = self.now
+            self.bundle_at_round = list(self.state.bundle)
+            self.lost_before, self.lost_last, self.lost = self.lost_last, self.lost, 0
+            return
+        super().run_consensus(view)

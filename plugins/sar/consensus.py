@@ -1,0 +1,210 @@
+"""The CBBA-family strategies of the CBBA-ETC evaluation: ``cbba`` (reactive state machine),
+``cbba-tree`` (periodic consensus inside a behavior tree) and ``cbba-etc`` (event-triggered,
+Algorithms 1 to 4), on one shared base.
+
+Bundle (CBBA-ETC Algorithm 3): greedily add the remembered victim of highest utility
+``U = 1 / (d + epsilon)``, times ``mismatch_factor`` when its colour is known not to match, while
+the bid beats the known winning bid (ties to the lower id) and the bundle has room (``max_tasks``).
+Colours are known when bidding ("bid-then-verify"), but the robot still inspects before rescuing.
+
+A consensus round: the robot broadcasts its winners, bids and timestamps once ("completed in a
+single communication round"). Receiving is passive: every robot applies CBBA's receiver table
+(plugins.consensus) to whatever reaches it, then releases the bundle tasks it lost. Winners not
+heard from for ``winner_timeout`` seconds are forgotten, so the claims of a lost robot stop
+mattering. ``negotiations`` counts the rounds a robot starts.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pydantic import Field
+
+from agent_runtime.nodes import ExplorationNode
+from plugins.base import LocalView
+from plugins.consensus import ConsensusState
+from plugins.sar.base import TREES, SARParams, SARStrategy
+from plugins.sar.interval import IntervalParams, next_interval
+from plugins.sar.nodes import SAR_NODES
+
+BIDS = "bids"
+
+
+class ConsensusParams(SARParams):
+    max_tasks: int = Field(3, ge=1, description="L_i: victims per bundle")
+    epsilon: float = Field(1e-3, gt=0, description="the utility's epsilon")
+    mismatch_factor: float = Field(0.1, ge=0, description="utility factor for a known colour mismatch")
+    period: float = Field(100.0, gt=0, description="cbba: forced round after this many seconds; cbba-tree: period")
+    winner_timeout: float = Field(300.0, gt=0, description="forget wins by robots silent this long (s)")
+
+
+class SARConsensus(SARStrategy):
+    Params = ConsensusParams
+    message_kinds = (BIDS,)
+    event_names = ("negotiations",)
+    bids_with_colors = True
+    bt_nodes = SAR_NODES + (ExplorationNode,)
+
+    def __init__(self, agent_id, params, rng, run_seed=0):
+        super().__init__(agent_id, params, rng, run_seed)
+        self.state = ConsensusState(agent_id)
+        self.last_round = -math.inf
+        self.bundle_at_round: list[int] | None = None
+        self.lost = 0  # bundle victims lost to others' bids since the last round
+        self.lost_last = 0  # Lc: lost in the last round
+        self.lost_before = 0  # Lc of the round before
+
+    # -- knowledge -------------------------------------------------------------------------------
+    def observe(self, view: LocalView) -> None:
+        self.state.now = view.time
+        super().observe(view)
+
+    def forget(self, victim: int) -> None:
+        super().forget(victim)
+        self.state.forget(victim)
+
+    def receive(self, view: LocalView) -> None:
+        for msg in view.inbox:
+            if msg.kind in self.consensus_kinds(msg.sender):
+                self.state.receive(msg.sender, msg.data, ignore=self.gone)
+        self.state.drop_stale_winners(self.now - self.params.winner_timeout)
+        self.release_outbid()
+
+    def consensus_kinds(self, sender: int) -> tuple[str, ...]:
+        return (BIDS,)
+
+    def release_outbid(self) -> None:
+        st = self.state
+        self.lost += sum(1 for v in st.bundle if st.z.get(v) != self.agent_id)
+        st.release()
+
+    def holds(self, v: int) -> bool:
+        return self.state.z.get(v) == self.agent_id
+
+    def released(self, victim: int, view: LocalView) -> None:
+        self.state.forget(victim)  # let others bid on it; the next round says so
+
+    # -- Algorithm 3 -------------------------------------------------------------------------------
+    def utility(self, view: LocalView, v: int) -> float:
+        u = 1.0 / (self.distance(view, v) + self.params.epsilon)
+        known = self.colors.get(v, -1)
+        return u * self.params.mismatch_factor if known >= 0 and known != self.my_color else u
+
+    def build_bundle(self, view: LocalView) -> bool:
+        st = self.state
+        while len(st.bundle) < self.params.max_tasks:
+            best, best_u = None, 0.0
+            for v in self.candidates():
+                if v in st.bundle:
+                    continue
+                u = self.utility(view, v)
+                if u > best_u and st.eligible(v, u):
+                    best, best_u = v, u
+            if best is None:
+                break
+            st.add(best, best_u)
+        return bool(st.bundle)
+
+    def select_new_target(self, view: LocalView) -> bool:
+        self.target = self.state.bundle[0] if self.state.bundle else None
+        return self.target is not None
+
+    # -- consensus -----------------------------------------------------------------------------------
+    def run_consensus(self, view: LocalView) -> None:
+        self.broadcast_round(view)
+        self.count("negotiations")
+        self.last_round = self.now
+        self.bundle_at_round = list(self.state.bundle)
+        self.lost_before, self.lost_last, self.lost = self.lost_last, self.lost, 0
+
+    def broadcast_round(self, view: LocalView) -> None:
+        view.broadcast(BIDS, self.state.message())
+
+    def should_trigger(self, view: LocalView) -> bool:
+        raise NotImplementedError
+
+    def adapt_interval(self) -> None:
+        """Only cbba-etc adapts its interval."""
+
+    def acquire(self, view: LocalView) -> bool:
+        """The acquisition branch in one call: build, consensus if triggered, select."""
+        self.build_bundle(view)
+        if self.should_trigger(view):
+            self.run_consensus(view)
+            self.adapt_interval()
+        return self.select_new_target(view)
+
+
+class ReactiveCBBA(SARConsensus):
+    """``cbba``: a state machine. Each tick it keeps its bundle full, starts a round whenever the
+    bundle changed since its last one (or ``period`` seconds passed), and works its first victim."""
+
+    default_tree = str(TREES / "cbba_fsm.xml")
+
+    def should_trigger(self, view: LocalView) -> bool:
+        return self.state.bundle != self.bundle_at_round or self.now - self.last_round >= self.params.period
+
+    def fsm_step(self, view: LocalView) -> list | None:
+        self.build_bundle(view)
+        if not self.target_valid(view):
+            self.select_new_target(view)
+        if self.should_trigger(view):
+            self.run_consensus(view)
+        return self.execute(view)
+
+
+class CBBATree(SARConsensus):
+    """``cbba-tree``: CBBA inside the behavior tree; consensus only when ``period`` has elapsed."""
+
+    default_tree = str(TREES / "cbba_tree.xml")
+
+    def should_trigger(self, view: LocalView) -> bool:
+        return self.now - self.last_round >= self.params.period
+
+
+class ETCParams(ConsensusParams, IntervalParams):
+    theta_bid_change: float = Field(0.1, ge=0, description="Tr_delta_bid: utility change of the primary task")
+    theta_outbid_margin: float = Field(0.05, ge=0, description="Tr_conflict: margin over a known winning bid")
+
+
+class CBBAETC(SARConsensus):
+    """``cbba-etc``: consensus only on events (Algorithm 4). Tr_init: a new non-empty bundle after
+    an empty one; Tr_delta_bid: the primary task's utility moved more than ``theta_bid_change``
+    since the last cycle; Tr_conflict: this robot could outbid a known winner by more than
+    ``theta_outbid_margin``; Tr_fallback: the adaptive interval has elapsed."""
+
+    Params = ETCParams
+    event_names = ("negotiations", "tr_init", "tr_delta_bid", "tr_conflict", "tr_fallback")
+    default_tree = str(TREES / "cbba_etc.xml")
+
+    def __init__(self, agent_id, params, rng, run_seed=0):
+        super().__init__(agent_id, params, rng, run_seed)
+        self.interval = params.base_interval * params.phi_min
+        self.u_prev: dict[int, float] = {}
+        self.last_triggers: dict[str, bool] = {}
+
+    def triggers(self, view: LocalView) -> dict[str, bool]:
+        p, st = self.params, self.state
+        bundle = st.bundle
+        primary = bundle[0] if bundle else None
+        return {
+            "tr_init": bool(bundle) and not self.bundle_at_round,
+            "tr_delta_bid": primary is not None and primary in self.u_prev
+            and abs(self.utility(view, primary) - self.u_prev[primary]) > p.theta_bid_change,
+            "tr_conflict": any(v not in bundle and st.z.get(v, self.agent_id) != self.agent_id
+                               and self.utility(view, v) > st.y[v] + p.theta_outbid_margin
+                               for v in self.candidates()),
+            "tr_fallback": self.now - self.last_round >= self.interval,
+        }
+
+    def should_trigger(self, view: LocalView) -> bool:
+        fired = self.triggers(view)
+        self.last_triggers = fired
+        for name, on in fired.items():
+            if on:
+                self.count(name)
+        self.u_prev = {v: self.utility(view, v) for v in self.state.bundle}  # Algorithm 4, line 16
+        return any(fired.values())
+
+    def adapt_interval(self) -> None:
+        self.interval = next_interval(self.interval, self.lost_last, self.lost_last - self.lost_before, self.params)
