@@ -105,8 +105,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     from experiments.analyze import AnalyzeError, analyze
 
     try:
-        written = analyze(Path(args.sweep_dir))
-    except AnalyzeError as exc:
+        written = analyze([Path(d) for d in args.sweep_dir], control=args.control)
+    except (AnalyzeError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     for path in written:
@@ -120,14 +120,14 @@ def cmd_check_allocator(args: argparse.Namespace) -> int:
 
     params = dict(cfg.parse_override(text) for text in args.set)
     try:
-        validate_params(args.allocator, params)
+        validate_params(args.allocator, params, args.scenario)
     except PluginError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     failed = 0
     for check in GENERIC_CHECKS:
         try:
-            result = check(args.allocator, params)
+            result = check(args.allocator, params, args.scenario)
             print(f"PASS {check.__name__}: {result}")
         except ConformanceError as exc:
             failed += 1
@@ -167,12 +167,14 @@ def main(argv: list[str] | None = None) -> int:
     sw.set_defaults(func=cmd_sweep)
 
     an = sub.add_parser("analyze", help="tables and figures from a sweep directory")
-    an.add_argument("sweep_dir")
+    an.add_argument("sweep_dir", nargs="+", help="sweep directories (outputs go to the first)")
+    an.add_argument("--control", default="cbba-etc", help="control strategy for Dunnett and Cohen's d")
     an.set_defaults(func=cmd_analyze)
 
     chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
     chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")
     chk.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="an allocator parameter")
+    chk.add_argument("--scenario", default="mtsr", choices=["mtsr", "sar"], help="the scenario kind it is for")
     chk.set_defaults(func=cmd_check_allocator)
 
     for name, module in (("agent", "agent_runtime.process"), ("netem", "netem.proxy")):

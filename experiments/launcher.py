@@ -20,6 +20,14 @@ class ChildExited(RuntimeError):
     pass
 
 
+def _peak_rss_mb(pid: int) -> float:
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    raise ValueError("no VmHWM")
+
+
 class Children:
     def __init__(self, log_dir: Path) -> None:
         self.log_dir = log_dir
@@ -51,38 +59,26 @@ class Children:
                 raise ChildExited(f"{name} exited with code {rc} before the run started; "
                                   f"logs/{name}.log ends with:\n{self.log_tail(name)}")
 
-    def rss_mb(self) -> dict[str, float]:
+    def _each(self, read) -> dict[str, float]:
+        """``read(pid)`` for every child still there."""
         out = {}
         for name, proc in self.procs.items():
             try:
-                out[name] = psutil.Process(proc.pid).memory_info().rss / 2**20
-            except psutil.Error:
+                out[name] = read(proc.pid)
+            except (psutil.Error, OSError, ValueError):
                 pass
         return out
+
+    def rss_mb(self) -> dict[str, float]:
+        return self._each(lambda pid: psutil.Process(pid).memory_info().rss / 2**20)
 
     def cpu_s(self) -> dict[str, float]:
-        """CPU seconds (user + system) each live child has used so far."""
-        out = {}
-        for name, proc in self.procs.items():
-            try:
-                t = psutil.Process(proc.pid).cpu_times()
-                out[name] = t.user + t.system
-            except psutil.Error:
-                pass
-        return out
+        """CPU seconds (user + system) each child has used so far."""
+        return self._each(lambda pid: sum(psutil.Process(pid).cpu_times()[:2]))
 
     def peak_rss_mb(self) -> dict[str, float]:
-        """Each live child's peak resident set so far (Linux VmHWM)."""
-        out = {}
-        for name, proc in self.procs.items():
-            try:
-                with open(f"/proc/{proc.pid}/status") as f:
-                    for line in f:
-                        if line.startswith("VmHWM:"):
-                            out[name] = int(line.split()[1]) / 1024
-            except OSError:
-                pass
-        return out
+        """Each child's peak resident set so far (Linux VmHWM)."""
+        return self._each(_peak_rss_mb)
 
     def wait(self, timeout: float) -> dict[str, int]:
         """Wait for every child to exit; terminate (then kill) whatever is left at ``timeout``."""

@@ -1,7 +1,8 @@
 """``swarmbed sweep``: Monte Carlo runs over scenarios, in parallel, resumable.
 
-A sweep file names a base experiment, the scenarios (an explicit list, a grid over dotted keys, or
-both: every listed scenario crossed with every grid point) and the runs per scenario:
+A sweep file names a base experiment, overrides for every run (``set``), the scenarios (an
+explicit list, a grid over dotted keys, or both: every listed scenario crossed with every grid
+point) and the runs per scenario:
 
     name: space_fig3
     base: space_mtsr.yaml
@@ -61,6 +62,7 @@ class SweepFile(BaseModel):
     base: str
     seed: int = Field(0, ge=0)
     runs: int = Field(1, ge=1)
+    set: dict[str, Any] = Field(default_factory=dict)  # overrides for every run
     scenarios: list[ScenarioEntry] = Field(default_factory=list)
     grid: dict[str, list[Any]] = Field(default_factory=dict)
 
@@ -121,6 +123,7 @@ def load_sweep(path: str | Path, runs: int | None = None, grid: list[str] = (), 
     except ValidationError as exc:
         raise cfg.ConfigError("\n".join(f"{path}: {'.'.join(map(str, e['loc']))}: {e['msg']}"
                                         for e in exc.errors())) from None
+    common = tuple(spec.set.items())
     grid_spec = dict(spec.grid)
     grid_spec.update(_parse_grid(g) for g in grid)
     entries = [Scenario(e.name, tuple(e.set.items())) for e in spec.scenarios] or [Scenario("", ())]
@@ -130,11 +133,13 @@ def load_sweep(path: str | Path, runs: int | None = None, grid: list[str] = (), 
         for combo in itertools.product(*(grid_spec[k] for k in keys)):
             parts = [entry.name] if entry.name else []
             parts += [f"{k.split('.')[-1]}-{_label(v)}" for k, v in zip(keys, combo)]
-            scenarios.append(Scenario("_".join(parts) or "base", entry.overrides + tuple(zip(keys, combo))))
+            scenarios.append(Scenario("_".join(parts) or "base", common + entry.overrides + tuple(zip(keys, combo))))
     names = [s.name for s in scenarios]
     if len(set(names)) != len(names):
         raise cfg.ConfigError(f"{path}: two scenarios share a name")
-    factors = sorted({k for s in scenarios for k, _ in s.overrides})
+    varying = {k for s in scenarios for k, _ in s.overrides if k not in spec.set or
+               any(dict(s2.overrides).get(k) != spec.set[k] for s2 in scenarios)}
+    factors = sorted(varying)
     return Sweep(spec.name, (path.parent / spec.base).resolve(), spec.seed if seed is None else seed,
                  runs or spec.runs, scenarios, factors, list(extra))
 

@@ -36,20 +36,25 @@ class ConformanceError(AssertionError):
 @dataclass
 class Instance:
     agents: list[tuple[float, float]]
-    tasks: dict[int, tuple[float, float, float]]  # id -> (x, y, workload)
+    tasks: dict[int, tuple[float, float, float]]  # id -> (x, y, workload or lifetime)
     max_speed: float = 1.0
     work_rate: float = 1.0
     awareness_range: float = math.inf
+    agent_colors: list[int] | None = None  # search and rescue: robots' colours
+    task_colors: dict[int, int] | None = None  # and victims' colours, shown as when bidding
 
 
 def random_instance(seed: int, n_agents: int, n_tasks: int, size: float = 100.0,
-                    workload: tuple[float, float] = (6.0, 60.0)) -> Instance:
+                    workload: tuple[float, float] = (6.0, 60.0), scenario: str = "mtsr") -> Instance:
     rng = np.random.default_rng(seed)
     agents = [(float(x), float(y)) for x, y in rng.uniform(0, size, (n_agents, 2))]
     tasks = {j: (float(x), float(y), float(w)) for j, (x, y, w) in
              enumerate(zip(rng.uniform(0, size, n_tasks), rng.uniform(0, size, n_tasks),
                            rng.uniform(*workload, n_tasks)))}
-    return Instance(agents, tasks)
+    if scenario != "sar":
+        return Instance(agents, tasks)
+    return Instance(agents, tasks, agent_colors=[i % 3 for i in range(n_agents)],
+                    task_colors={j: int(rng.integers(3)) for j in tasks})
 
 
 @dataclass
@@ -62,11 +67,14 @@ class Trace:
 
 def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, seed: int = 0,
              network: NetemParams = NetemParams(), remove_at: Mapping[int, list[int]] | None = None,
-             max_bytes: int = DEFAULT_MAX_BYTES) -> Trace:
-    """Run ``rounds`` rounds. ``remove_at[k]``: tasks that disappear (are done) before round k."""
+             max_bytes: int = DEFAULT_MAX_BYTES, scenario: str | None = None) -> Trace:
+    """Run ``rounds`` rounds. ``remove_at[k]``: tasks that disappear (are done) before round k.
+    Each round every agent is shown its view (``observe``, then ``decide``), as in a run; the first
+    view lists the team's starting positions (``obs["team"]``), as the SAR scenario does."""
     n = len(inst.agents)
     seeds = np.random.SeedSequence(seed).spawn(n + 1)
-    trace = Trace([make(name, params, i, np.random.default_rng(seeds[i])) for i in range(n)])
+    trace = Trace([make(name, params, i, np.random.default_rng(seeds[i]), seed, scenario) for i in range(n)])
+    team = [[i, x, y] for i, (x, y) in enumerate(inst.agents)]
     radio = Radio(network, n, 1.0, np.random.default_rng(seeds[n]))
     trace.radio = radio
     ids = list(range(n))
@@ -80,11 +88,15 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
         radio.confirm()
         outs, decisions, sent = {}, {}, []
         for i, (x, y) in enumerate(inst.agents):
-            visible = {t: TaskInfo(t, tx, ty, w) for t, (tx, ty, w) in tasks.items()
+            colors = inst.task_colors or {}
+            visible = {t: TaskInfo(t, tx, ty, w, colors.get(t, -1)) for t, (tx, ty, w) in tasks.items()
                        if math.hypot(tx - x, ty - y) <= inst.awareness_range}
             inbox = [Message(s, kind, unpack(payload)) for s, kind, payload in inboxes.get(i, [])]
+            color = inst.agent_colors[i] if inst.agent_colors else -1
             view = LocalView(i, n, k, float(k), x, y, 0.0, 0.0, inst.work_rate, visible, inbox,
-                             inst.max_speed, inst.awareness_range)
+                             inst.max_speed, inst.awareness_range, color=color,
+                             obs={"team": team} if k == 0 else {})
+            trace.allocators[i].observe(view)
             decision = trace.allocators[i].decide(view)
             if decision is not None and decision not in tasks:
                 raise ConformanceError(f"{name}: agent {i} chose task {decision!r} at round {k}, which does not exist")
@@ -110,18 +122,21 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
 
 # -- generic checks ---------------------------------------------------------------------------------
 
-def check_determinism(name: str, params: Mapping[str, Any], seeds=(0, 1, 2), rounds: int = 30) -> dict:
+def check_determinism(name: str, params: Mapping[str, Any], scenario: str = "mtsr", seeds=(0, 1, 2),
+                      rounds: int = 30) -> dict:
     for seed in seeds:
-        inst = random_instance(seed, 5, 12)
-        a = simulate(name, params, inst, rounds, seed=seed)
-        b = simulate(name, params, inst, rounds, seed=seed)
+        inst = random_instance(seed, 5, 12, scenario=scenario)
+        a = simulate(name, params, inst, rounds, seed=seed, scenario=scenario)
+        b = simulate(name, params, inst, rounds, seed=seed, scenario=scenario)
         if a.decisions != b.decisions or a.messages != b.messages:
             raise ConformanceError(f"{name}: two runs with seed {seed} differ")
     return {"seeds": len(seeds)}
 
 
-def check_messages(name: str, params: Mapping[str, Any], max_bytes: int = DEFAULT_MAX_BYTES) -> dict:
-    trace = simulate(name, params, random_instance(7, 8, 30), 40, max_bytes=max_bytes)
+def check_messages(name: str, params: Mapping[str, Any], scenario: str = "mtsr",
+                   max_bytes: int = DEFAULT_MAX_BYTES) -> dict:
+    trace = simulate(name, params, random_instance(7, 8, 30, scenario=scenario), 40, max_bytes=max_bytes,
+                     scenario=scenario)
     sizes = [len(p) for rnd in trace.messages for _, _, p in rnd]
     return {"messages": len(sizes), "max_bytes": max(sizes, default=0)}
 
@@ -130,25 +145,25 @@ def _assigned(trace: Trace) -> int:
     return sum(1 for d in trace.decisions[-1].values() if d is not None)
 
 
-def check_degraded_network(name: str, params: Mapping[str, Any]) -> dict:
+def check_degraded_network(name: str, params: Mapping[str, Any], scenario: str = "mtsr") -> dict:
     """Keeps working under 30 % loss and under a tight rate cap with a short queue."""
-    inst = random_instance(11, 6, 15)
-    clean = _assigned(simulate(name, params, inst, 60))
+    inst = random_instance(11, 6, 15, scenario=scenario)
+    clean = _assigned(simulate(name, params, inst, 60, scenario=scenario))
     out = {"assigned_clean": clean}
     for label, net in (("loss", NetemParams(loss=0.3)), ("rate", NetemParams(rate=300.0, limit=3))):
-        degraded = _assigned(simulate(name, params, inst, 60, network=net))
+        degraded = _assigned(simulate(name, params, inst, 60, network=net, scenario=scenario))
         if clean and not degraded:
             raise ConformanceError(f"{name}: assigns {clean} agents on a clean network but none under {label}")
         out[f"assigned_{label}"] = degraded
     return out
 
 
-def check_vanishing_tasks(name: str, params: Mapping[str, Any], patience: int = 3) -> dict:
+def check_vanishing_tasks(name: str, params: Mapping[str, Any], scenario: str = "mtsr", patience: int = 3) -> dict:
     """Tasks that disappear (done by someone) are dropped within ``patience`` rounds."""
-    inst = random_instance(5, 6, 15)
-    before = simulate(name, params, inst, 20)
+    inst = random_instance(5, 6, 15, scenario=scenario)
+    before = simulate(name, params, inst, 20, scenario=scenario)
     chosen = sorted({d for d in before.decisions[-1].values() if d is not None})
-    trace = simulate(name, params, inst, 20 + patience + 10, remove_at={20: chosen})
+    trace = simulate(name, params, inst, 20 + patience + 10, remove_at={20: chosen}, scenario=scenario)
     for k in range(20 + patience, len(trace.decisions)):
         stuck = {i: d for i, d in trace.decisions[k].items() if d in chosen}
         if stuck:
@@ -159,6 +174,6 @@ def check_vanishing_tasks(name: str, params: Mapping[str, Any], patience: int = 
 GENERIC_CHECKS = (check_determinism, check_messages, check_degraded_network, check_vanishing_tasks)
 
 
-def run_all(name: str, params: Mapping[str, Any] | None = None) -> dict[str, dict]:
-    resolve(name)
-    return {check.__name__: check(name, params or {}) for check in GENERIC_CHECKS}
+def run_all(name: str, params: Mapping[str, Any] | None = None, scenario: str = "mtsr") -> dict[str, dict]:
+    resolve(name, scenario)
+    return {check.__name__: check(name, params or {}, scenario) for check in GENERIC_CHECKS}

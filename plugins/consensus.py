@@ -79,23 +79,25 @@ class ConsensusState:
     def receive(self, sender: int, data: dict, ignore: Iterable[int] = ()) -> None:
         """Apply Table 1 to every task in a neighbour's message, then merge its timestamps."""
         i, k = self.agent_id, sender
-        theirs = {int(t): (int(w), float(b)) for t, w, b in data["w"]}
-        sk = {int(a): float(ts) for a, ts in data["s"]}
-        sk[k] = float(data["t"])
-        skip = set(ignore)
+        theirs = {t: (w, b) for t, w, b in data["w"]}
+        sk = dict(data["s"])
+        sk[k] = data["t"]
+        skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
+        z, y = self.z, self.y
 
         def compare(m: int) -> int:
             mine = self.now if m == i else self.s.get(m, _NEVER)
             their = sk.get(m, _NEVER)
             return (their > mine) - (their < mine)
 
-        for j in sorted(set(theirs) | set(self.z)):
+        for j in sorted(theirs.keys() | z.keys()):
+            zk, yk = theirs.get(j, (NONE, 0.0))
+            zi = z.get(j, NONE)
+            if zk == zi and yk == y.get(j, 0.0):
+                continue  # every table entry leaves identical information unchanged
             if j in skip:
                 continue
-            zk, yk = theirs.get(j, (NONE, 0.0))
-            zi, yi = self.z.get(j, NONE), self.y.get(j, 0.0)
-            if zk == zi and yk == yi:
-                continue  # every table entry leaves identical information unchanged
+            yi = y.get(j, 0.0)
             action = table(i, k, zk, yk, zi, yi, compare)
             if action == "update":
                 if zk == NONE:
@@ -104,9 +106,10 @@ class ConsensusState:
                     self.z[j], self.y[j] = zk, yk
             elif action == "reset":
                 self.reset(j)
+        mine = self.s
         for m, ts in sk.items():
-            if m != i and ts > self.s.get(m, _NEVER):
-                self.s[m] = ts
+            if ts > mine.get(m, _NEVER) and m != i:
+                mine[m] = ts
 
     def reset(self, task: int) -> None:
         self.z.pop(task, None)

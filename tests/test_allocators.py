@@ -5,16 +5,16 @@ import math
 import numpy as np
 import pytest
 
-from plugins import names
+from plugins.registry import entries
 from plugins.cbba import CBBA
 from plugins.consensus import table
 from plugins.conformance import random_instance, run_all, simulate
 from plugins.grape import GRAPE, VOID
 
 
-@pytest.mark.parametrize("name", names())
-def test_every_registered_allocator_passes_the_kit(name):
-    run_all(name)
+@pytest.mark.parametrize("name, scenario", [(n, "mtsr" if k == "*" else k) for n, k in entries()])
+def test_every_registered_allocator_passes_the_kit(name, scenario):
+    run_all(name, scenario=scenario)
 
 
 def _state(a: CBBA):

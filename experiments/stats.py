@@ -1,0 +1,48 @@
+"""Comparing strategies (CBBA-ETC paper, Section 5.4): per metric, a one-way ANOVA across the
+strategies, then Dunnett's test of every strategy against a control, and Cohen's d against the
+control (pooled standard deviation; positive when the strategy's mean is above the control's)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+
+def cohens_d(a: np.ndarray, b: np.ndarray) -> float:
+    """Effect size of ``a`` against ``b`` with the pooled standard deviation."""
+    na, nb = len(a), len(b)
+    if na < 2 or nb < 2:
+        return float("nan")
+    pooled = np.sqrt(((na - 1) * a.var(ddof=1) + (nb - 1) * b.var(ddof=1)) / (na + nb - 2))
+    if pooled == 0:
+        return 0.0 if a.mean() == b.mean() else float("inf") * np.sign(a.mean() - b.mean())
+    return float((a.mean() - b.mean()) / pooled)
+
+
+def compare(df: pd.DataFrame, group: str, metrics: list[str], control: str) -> pd.DataFrame:
+    """One row per (metric, strategy other than the control): means, ANOVA F and p (the same for
+    every row of a metric), Dunnett's p against the control and Cohen's d."""
+    rows = []
+    names = sorted(df[group].unique())
+    if control not in names:
+        raise ValueError(f"control {control!r} is not among {names}")
+    others = [g for g in names if g != control]
+    for metric in metrics:
+        if metric not in df:
+            continue
+        samples = {g: df.loc[df[group] == g, metric].dropna().to_numpy(dtype=float) for g in names}
+        if any(len(v) < 2 for v in samples.values()):
+            continue
+        constant = all(np.all(v == v[0]) for v in samples.values()) and len({float(v[0]) for v in samples.values()}) == 1
+        if constant:
+            f, p_anova, dunnett_p = float("nan"), 1.0, [1.0] * len(others)
+        else:
+            f, p_anova = stats.f_oneway(*samples.values())
+            dunnett_p = list(stats.dunnett(*[samples[g] for g in others], control=samples[control]).pvalue)
+        for g, p in zip(others, dunnett_p):
+            rows.append({"metric": metric, "strategy": g, "mean": samples[g].mean(), "sd": samples[g].std(ddof=1),
+                         "control": control, "control_mean": samples[control].mean(),
+                         "anova_F": float(f), "anova_p": float(p_anova), "dunnett_p": float(p),
+                         "cohens_d": cohens_d(samples[g], samples[control]), "n": len(samples[g])})
+    return pd.DataFrame(rows)
