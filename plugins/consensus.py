@@ -11,6 +11,11 @@ NONE = -1
 _NEVER = -math.inf
 
 
+def _compact(t: float) -> float | int:
+    """A whole-second timestamp travels as an int (1-5 msgpack bytes instead of 9); same value."""
+    return int(t) if float(t).is_integer() else t
+
+
 def better(y1: float, z1: int, y2: float, z2: int) -> bool:
     """Bid (y1 by z1) beats bid (y2 by z2): higher, or equal and by the lower agent id."""
     return y1 > y2 or (y1 == y2 and z1 < z2)
@@ -71,9 +76,9 @@ class ConsensusState:
 
     def message(self) -> dict:
         return {
-            "t": self.now,
+            "t": _compact(self.now),
             "w": [[t, self.z[t], self.y[t]] for t in sorted(self.z)],
-            "s": [[a, ts] for a, ts in sorted(self.s.items())],
+            "s": [[a, _compact(ts)] for a, ts in sorted(self.s.items())],
         }
 
     def receive(self, sender: int, data: dict, ignore: Iterable[int] = ()) -> None:
