@@ -84,7 +84,10 @@ class ConsensusState:
     def receive(self, sender: int, data: dict, ignore: Iterable[int] = ()) -> None:
         """Apply Table 1 to every task in a neighbour's message, then merge its timestamps."""
         i, k = self.agent_id, sender
-        theirs = {t: (w, b) for t, w, b in data["w"]}
+        entries = set(map(tuple, data["w"]))
+        mine = {(t, w, y_t) for (t, w), y_t in zip(self.z.items(), (self.y[t] for t in self.z))}
+        differing = {e[0] for e in entries ^ mine}  # identical entries leave every table case unchanged
+        theirs = {t: (w, b) for t, w, b in entries if t in differing}
         sk = dict(data["s"])
         sk[k] = data["t"]
         skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
@@ -95,14 +98,13 @@ class ConsensusState:
             their = sk.get(m, _NEVER)
             return (their > mine) - (their < mine)
 
-        for j in sorted(theirs.keys() | z.keys()):
-            zk, yk = theirs.get(j, (NONE, 0.0))
-            zi = z.get(j, NONE)
-            if zk == zi and yk == y.get(j, 0.0):
-                continue  # every table entry leaves identical information unchanged
+        for j in sorted(differing):
             if j in skip:
                 continue
-            yi = y.get(j, 0.0)
+            zk, yk = theirs.get(j, (NONE, 0.0))
+            zi, yi = z.get(j, NONE), y.get(j, 0.0)
+            if zk == zi and yk == yi:
+                continue
             action = table(i, k, zk, yk, zi, yi, compare)
             if action == "update":
                 if zk == NONE:
@@ -111,10 +113,10 @@ class ConsensusState:
                     self.z[j], self.y[j] = zk, yk
             elif action == "reset":
                 self.reset(j)
-        mine = self.s
+        stamps = self.s
         for m, ts in sk.items():
-            if ts > mine.get(m, _NEVER) and m != i:
-                mine[m] = ts
+            if ts > stamps.get(m, _NEVER) and m != i:
+                stamps[m] = ts
 
     def reset(self, task: int) -> None:
         self.z.pop(task, None)
