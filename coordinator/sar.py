@@ -144,10 +144,15 @@ class SARWorld:
             return action[1]
         return None
 
+    def _busy(self, i: int, seconds: float) -> None:
+        """The robot does nothing for ``seconds`` after this tick (whole ticks, rounded up)."""
+        if seconds > 0:
+            self.busy_until[i] = self.tick + 1 + math.ceil(seconds / self.dt - 1e-9)
+
     def _move(self, i: int, tx: float, ty: float) -> None:
         if self.fail_rng.random() < self.sc.move_fail:
             self.counts["move_failures"] += 1
-            self.busy_until[i] = self.tick + 1 + math.ceil(self.sc.move_penalty / self.dt - 1e-9)
+            self._busy(i, self.sc.move_penalty)
             return
         dx, dy = tx - self.ax[i], ty - self.ay[i]
         dist = math.hypot(dx, dy)
@@ -188,6 +193,7 @@ class SARWorld:
                     self.counts["inspect_failures"] += 1
                     continue
                 self.counts["inspections"] += 1
+                self._busy(i, self.sc.inspect_time)
                 if i not in self.inspected.setdefault(v, set()):
                     self.inspected[v].add(i)
                     if self.vcolor[v] != self.color[i]:
@@ -199,6 +205,7 @@ class SARWorld:
                     self.counts["rescue_failures"] += 1
                     continue
                 self.rescues[i] += 1
+                self._busy(i, self.sc.rescue_time)
                 self.rescued_by.setdefault(i, []).append(v)
                 self._end(v, RESCUED)
             elif name == "abandon" and v is not None:

@@ -86,6 +86,8 @@ class SARScenario(_Strict):
     inspect_fail: float = Field(0.0, ge=0, le=1, description="probability that an inspection fails")
     rescue_fail: float = Field(0.0, ge=0, le=1, description="probability that a rescue fails")
     move_penalty: float = Field(0.5, ge=0, description="seconds a robot is stuck after a failed move")
+    inspect_time: float = Field(0.0, ge=0, description="extra seconds an inspection keeps the robot busy (0: one tick)")
+    rescue_time: float = Field(0.0, ge=0, description="extra seconds a rescue keeps the robot busy (0: one tick)")
     agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
     agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
     colors_for_bidding: Literal["auto", "always", "never"] = Field(
