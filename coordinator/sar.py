@@ -24,7 +24,7 @@ import numpy as np
 from experiments.config import Experiment, SARScenario
 from wire.codec import TASK_DTYPE, encode_task_table
 
-ALIVE, RESCUED, EXPIRED = 0, 1, 2
+ALIVE, RESCUED, EXPIRED, UNUSED = 0, 1, 2, 3
 
 
 class SARWorld:
@@ -48,9 +48,10 @@ class SARWorld:
         self.stale_actions = np.zeros(self.n, dtype=np.int64)  # aimed at a victim already gone
         self.counts = {"rescued": 0, "expired": 0, "failed_rescues": 0, "inspections": 0, "inspect_failures": 0,
                        "rescue_failures": 0, "move_failures": 0, "abandons": 0}
-        self.vx, self.vy = np.zeros(0), np.zeros(0)
+        # victims, in arrays that double when full (a steady-state run spawns tens of thousands)
+        self.nv = 0
+        self.vx, self.vy, self.vspawn = np.zeros(0), np.zeros(0), np.zeros(0)
         self.vcolor = np.zeros(0, dtype=np.int64)
-        self.vspawn = np.zeros(0)
         self.vstatus = np.zeros(0, dtype=np.int64)
         self.inspected: dict[int, set[int]] = {}  # victim -> robots that inspected it
         self.results: dict[int, list[list[int]]] = {}  # robot -> inspection results for its next observation
@@ -65,12 +66,17 @@ class SARWorld:
 
     def _spawn(self, count: int) -> None:
         for _ in range(count):
-            x, y = self.sc.random_point(self.spawn_rng)
-            self.vx = np.append(self.vx, x)
-            self.vy = np.append(self.vy, y)
-            self.vcolor = np.append(self.vcolor, int(self.spawn_rng.integers(self.sc.colors)))
-            self.vspawn = np.append(self.vspawn, self.time)
-            self.vstatus = np.append(self.vstatus, ALIVE)
+            if self.nv == len(self.vstatus):
+                grow = max(64, len(self.vstatus))
+                self.vx, self.vy, self.vspawn = (np.concatenate([a, np.zeros(grow)]) for a in (self.vx, self.vy, self.vspawn))
+                self.vcolor = np.concatenate([self.vcolor, np.zeros(grow, dtype=np.int64)])
+                self.vstatus = np.concatenate([self.vstatus, np.full(grow, UNUSED, dtype=np.int64)])
+            v = self.nv
+            self.vx[v], self.vy[v] = self.sc.random_point(self.spawn_rng)
+            self.vcolor[v] = int(self.spawn_rng.integers(self.sc.colors))
+            self.vspawn[v] = self.time
+            self.vstatus[v] = ALIVE
+            self.nv += 1
 
     def _end(self, victim: int, status: int) -> None:
         self.vstatus[victim] = status
@@ -140,7 +146,7 @@ class SARWorld:
         return out
 
     def _victim(self, action: list) -> int | None:
-        if len(action) == 2 and isinstance(action[1], int) and 0 <= action[1] < len(self.vstatus):
+        if len(action) == 2 and isinstance(action[1], int) and 0 <= action[1] < self.nv:
             return action[1]
         return None
 
@@ -220,13 +226,13 @@ class SARWorld:
 
     # -- metrics -----------------------------------------------------------------------------------
     def row(self) -> dict:
-        return {"tick": self.tick, "time": round(self.time, 9), "spawned": len(self.vstatus),
+        return {"tick": self.tick, "time": round(self.time, 9), "spawned": self.nv,
                 "rescued": self.counts["rescued"], "expired": self.counts["expired"],
                 "failed_rescues": self.counts["failed_rescues"], "victims_alive": self.victims_alive,
                 "agents_alive": int(self.alive.sum())}
 
     def summary(self) -> dict:
-        spawned, alive = len(self.vstatus), self.victims_alive
+        spawned, alive = self.nv, self.victims_alive
         c = self.counts
         if c["rescued"] + c["expired"] + alive != spawned:
             raise AssertionError(f"victims unaccounted: rescued {c['rescued']} + expired {c['expired']} + "

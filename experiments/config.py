@@ -230,6 +230,9 @@ def load(path: str | Path, overrides: list[str] = (), seed: int | None = None) -
         data = {}
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: the top level must be a mapping of sections")
+    if "base" in data and "run" not in data:
+        raise ConfigError(f"{path}: this is a sweep file (it names a base experiment): "
+                          f"run it with `swarmbed sweep {path}`")
     apply_overrides(data, [parse_override(text) for text in overrides], str(path))
     if seed is not None:
         _set_dotted(data, "run.seed", seed, str(path))

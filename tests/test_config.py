@@ -61,3 +61,8 @@ def test_naming_another_allocator_drops_the_old_ones_parameters():
     assert exp.allocator.name == "cbba" and exp.allocator.params() == {}
     exp = cfg.load(QUICKSTART, ["allocator.name=cbba", "allocator.max_tasks=3"])
     assert exp.allocator.params() == {"max_tasks": 3}
+
+
+def test_a_sweep_file_given_to_run_says_so():
+    with pytest.raises(cfg.ConfigError, match="swarmbed sweep"):
+        cfg.load(QUICKSTART.parent / "space_fig3.yaml")
