@@ -1,0 +1,49 @@
+"""Strategy comparison statistics on data with known effects, and a real two-sweep SAR analysis."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from experiments.analyze import analyze
+from experiments.stats import cohens_d, compare
+from experiments.sweep import load_sweep, run_sweep
+from tests.conftest import ROOT
+
+
+def test_anova_dunnett_and_cohens_d_find_the_shifted_group():
+    rng = np.random.default_rng(0)
+    df = pd.DataFrame({
+        "allocator": ["control"] * 40 + ["same"] * 40 + ["better"] * 40,
+        "rescued": np.concatenate([rng.normal(100, 5, 40), rng.normal(100, 5, 40), rng.normal(110, 5, 40)]),
+    })
+    table = compare(df, "allocator", ["rescued"], control="control").set_index("strategy")
+    assert table.loc["better", "anova_p"] < 1e-6
+    assert table.loc["better", "dunnett_p"] < 1e-6 and table.loc["same", "dunnett_p"] > 0.05
+    assert table.loc["better", "cohens_d"] == pytest.approx(2.0, abs=0.6)
+    assert abs(table.loc["same", "cohens_d"]) < 0.6
+    with pytest.raises(ValueError, match="control"):
+        compare(df, "allocator", ["rescued"], control="missing")
+
+
+def test_cohens_d_uses_the_pooled_standard_deviation():
+    a, b = np.array([2.0, 4.0, 6.0]), np.array([1.0, 3.0, 5.0])
+    assert cohens_d(a, b) == pytest.approx(0.5)  # means differ by 1, pooled sd is 2
+
+
+def test_sar_analysis_of_two_sweeps(tmp_path):
+    base = ROOT / "experiments" / "sar" / "_base.yaml"
+    dirs = []
+    for victims in (10, 20):
+        spec = tmp_path / f"v{victims}.yaml"
+        spec.write_text(f"name: v{victims}\nbase: {base}\nruns: 2\nset: {{scenario.victims: {victims}}}\n"
+                        "grid: {allocator.name: [tree, cbba-etc]}\n")
+        sweep = load_sweep(spec, extra=["agents.count=4", "run.duration=15"])
+        run_sweep(sweep, tmp_path / f"out{victims}", jobs=2, progress=False)
+        dirs.append(tmp_path / f"out{victims}")
+    names = {p.name for p in analyze(dirs, control="cbba-etc")}
+    assert {"statistics.csv", "statistics.md", "fig_rescued_expired.png", "fig_boxplots.png",
+            "fig_rescued_vs_messages.png", "fig_messages_vs_victims.png"} <= names
+    stats = pd.read_csv(dirs[0] / "statistics.csv")
+    assert set(stats["sweep"]) == {"v10", "v20"} and set(stats["strategy"]) == {"tree"}
+    row = stats[(stats["sweep"] == "v10") & (stats["metric"] == "network.messages_sent")].iloc[0]
+    assert row["mean"] == 0 and row["control_mean"] > 0 and row["cohens_d"] < 0
