@@ -9,7 +9,7 @@ from plugins.registry import entries
 from plugins.cbba import CBBA
 from plugins.consensus import table
 from plugins.conformance import random_instance, run_all, simulate
-from plugins.grape import GRAPE, VOID
+from plugins.grape import VOID
 
 
 @pytest.mark.parametrize("name, scenario", [(n, "mtsr" if k == "*" else k) for n, k in entries()])

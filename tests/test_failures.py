@@ -1,6 +1,5 @@
 """Processes that die, plugins that raise, and garbage on the wire."""
 
-import os
 import signal
 import subprocess
 import sys

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from netem import Ledger, NetemParams, Radio
+from netem import NetemParams, Radio
 from wire.codec import BROADCAST, RadioMessage
 
 

@@ -1,6 +1,5 @@
 """Sweeps (parallel, resumable, failures recorded) and their analysis, on small real runs."""
 
-import json
 import textwrap
 
 import pandas as pd

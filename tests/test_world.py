@@ -13,8 +13,10 @@ def test_kinematics_honour_speed_acceleration_and_turn_rate():
     lim = Limits(max_speed=0.25, max_accel=0.01, max_turn_rate=0.25)
     rng = np.random.default_rng(3)
     x, y, h, v = 0.0, 0.0, 0.0, 0.0
+    target = (0.0, 0.0)
     for k in range(3000):
-        target = (float(rng.uniform(-50, 50)), float(rng.uniform(-50, 50))) if k % 200 == 0 else target
+        if k % 200 == 0:
+            target = (float(rng.uniform(-50, 50)), float(rng.uniform(-50, 50)))
         nx, ny, nh, nv = step(x, y, h, v, target, lim, 1.0)
         assert nv <= lim.max_speed + 1e-12
         assert abs(nv - v) <= lim.max_accel + 1e-12

@@ -118,10 +118,8 @@ class ClusteringCBBA(SARConsensus):
             view.send(self.leader, BIDS, self.state.message())
 
     def run_consensus(self, view: LocalView) -> None:
-        if self.is_leader:  # a leader's rounds are its relays
+        if self.is_leader:  # a leader's rounds are its relays (counted there)
             self.broadcast_round(view)
-            self.last_round = self.now
-            self.bundle_at_round = list(self.state.bundle)
-            self.lost_before, self.lost_last, self.lost = self.lost_last, self.lost, 0
+            self.close_round()
             return
         super().run_consensus(view)

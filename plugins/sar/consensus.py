@@ -113,6 +113,10 @@ class SARConsensus(SARStrategy):
     def run_consensus(self, view: LocalView) -> None:
         self.broadcast_round(view)
         self.count("negotiations")
+        self.close_round()
+
+    def close_round(self) -> None:
+        """Book a round: when, the bundle it announced, and the tasks lost since the last one (Lc)."""
         self.last_round = self.now
         self.bundle_at_round = list(self.state.bundle)
         self.lost_before, self.lost_last, self.lost = self.lost_last, self.lost, 0
