@@ -1,5 +1,5 @@
 import sys
 
-from agent_runtime.process import main
+from swarmbed.agent_runtime.process import main
 
 sys.exit(main())

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from agent_runtime.bt import InputPort, NodeRegistry, OutputPort, StatefulAction, Status, SyncAction
+from swarmbed.agent_runtime.bt import InputPort, NodeRegistry, OutputPort, StatefulAction, Status, SyncAction
 
 
 class LocalSensingNode(SyncAction):

@@ -12,13 +12,13 @@ import traceback
 
 import zenoh
 
-from agent_runtime.runtime import AgentRuntime
-from experiments.config import from_yaml
-from wire.codec import StopIn, WireError, decode_agent_in, encode_agent_out, encode_report, encode_stop
-from wire.keys import Keys
-from wire.lifecycle import child_args
-from wire.membership import fetch_config_text, hand_over
-from wire.session import open_from_args
+from swarmbed.agent_runtime.runtime import AgentRuntime
+from swarmbed.experiments.config import from_yaml
+from swarmbed.wire.codec import StopIn, WireError, decode_agent_in, encode_agent_out, encode_report, encode_stop
+from swarmbed.wire.keys import Keys
+from swarmbed.wire.lifecycle import child_args
+from swarmbed.wire.membership import fetch_config_text, hand_over
+from swarmbed.wire.session import open_from_args
 
 log = logging.getLogger("swarmbed.agent")
 

@@ -11,13 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
-from agent_runtime.bt import Blackboard, load_tree
-from agent_runtime.nodes import space_registry
-from experiments.config import Experiment, scenario_sensing
-from plugins import make
-from plugins.base import LocalView, Message, TaskInfo
-from wire.codec import RadioMessage, WireError, decode_inbox, decode_task_table, unpack
-from wire.lifecycle import agent_seeds
+from swarmbed.agent_runtime.bt import Blackboard, load_tree
+from swarmbed.agent_runtime.nodes import space_registry
+from swarmbed.experiments.config import Experiment, scenario_sensing
+from swarmbed.plugins import make
+from swarmbed.plugins.base import LocalView, Message, TaskInfo
+from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, decode_task_table, unpack
+from swarmbed.wire.lifecycle import agent_seeds
 
 log = logging.getLogger("swarmbed.agent")
 
@@ -25,7 +25,7 @@ DEFAULT_TREE = "space_default.xml"
 
 
 def default_tree_path() -> Path:
-    return Path(str(resources.files("agent_runtime") / "trees" / DEFAULT_TREE))
+    return Path(str(resources.files("swarmbed.agent_runtime") / "trees" / DEFAULT_TREE))
 
 
 class AgentRuntime:

@@ -16,10 +16,9 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from experiments import config as cfg  # noqa: E402
-from experiments.runner import run_experiment  # noqa: E402
+from swarmbed.experiments import config as cfg
+from swarmbed.experiments.runner import run_experiment
 
 SPACE_REFERENCE = {(50, "cbba"): 130, (50, "grape"): 230, (50, "fcg"): 640,
                    (100, "cbba"): 19, (100, "grape"): 84, (100, "fcg"): 264}

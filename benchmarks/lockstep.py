@@ -22,10 +22,9 @@ from pathlib import Path
 import zenoh
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from experiments import config as cfg  # noqa: E402
-from experiments.runner import open_hub, run_experiment  # noqa: E402
+from swarmbed.experiments import config as cfg
+from swarmbed.experiments.runner import open_hub, run_experiment
 
 BLOCK = zenoh.CongestionControl.BLOCK
 

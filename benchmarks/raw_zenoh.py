@@ -7,7 +7,7 @@ import struct
 
 import zenoh
 
-from wire.session import zenoh_config
+from swarmbed.wire.session import zenoh_config
 
 BLOCK = zenoh.CongestionControl.BLOCK
 

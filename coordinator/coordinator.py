@@ -16,15 +16,15 @@ from typing import Callable
 
 import zenoh
 
-from coordinator import results
-from coordinator.scenarios import make_world
-from plugins import resolve
-from experiments.config import Experiment
-from wire.codec import (EMPTY_INBOX, NetemStep, World, WireError, decode_netem_step, decode_report, encode_stop,
+from swarmbed.coordinator import results
+from swarmbed.coordinator.scenarios import make_world
+from swarmbed.plugins import resolve
+from swarmbed.experiments.config import Experiment
+from swarmbed.wire.codec import (EMPTY_INBOX, NetemStep, World, WireError, decode_netem_step, decode_report, encode_stop,
                         encode_tick, encode_world, pack)
-from wire.keys import Keys, agent_id_of
-from wire.lifecycle import WORLD, component_rng
-from wire.membership import accept_handovers, serve_config
+from swarmbed.wire.keys import Keys, agent_id_of
+from swarmbed.wire.lifecycle import WORLD, component_rng
+from swarmbed.wire.membership import accept_handovers, serve_config
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")

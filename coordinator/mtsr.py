@@ -14,9 +14,9 @@ import math
 
 import numpy as np
 
-from coordinator.kinematics import Limits, step
-from experiments.config import Experiment
-from wire.codec import TASK_DTYPE, encode_task_table
+from swarmbed.coordinator.kinematics import Limits, step
+from swarmbed.experiments.config import Experiment
+from swarmbed.wire.codec import TASK_DTYPE, encode_task_table
 
 
 class MTSRWorld:

@@ -21,8 +21,8 @@ import math
 
 import numpy as np
 
-from experiments.config import Experiment, SARScenario
-from wire.codec import TASK_DTYPE, encode_task_table
+from swarmbed.experiments.config import Experiment, SARScenario
+from swarmbed.wire.codec import TASK_DTYPE, encode_task_table
 
 ALIVE, RESCUED, EXPIRED, UNUSED = 0, 1, 2, 3
 

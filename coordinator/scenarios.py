@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from coordinator.mtsr import MTSRWorld
-from coordinator.sar import SARWorld
-from experiments.config import Experiment, MTSRScenario
-from plugins import resolve
+from swarmbed.coordinator.mtsr import MTSRWorld
+from swarmbed.coordinator.sar import SARWorld
+from swarmbed.experiments.config import Experiment, MTSRScenario
+from swarmbed.plugins import resolve
 
 
 def make_world(exp: Experiment, rng: np.random.Generator) -> MTSRWorld | SARWorld:

@@ -27,8 +27,8 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from experiments.stats import compare  # noqa: E402
-from experiments.sweep import SPEC, TABLE  # noqa: E402
+from swarmbed.experiments.stats import compare  # noqa: E402
+from swarmbed.experiments.sweep import SPEC, TABLE  # noqa: E402
 
 METRICS = {
     "mission_time": "mission completion time (s)",

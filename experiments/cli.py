@@ -8,11 +8,11 @@ import sys
 import time
 from pathlib import Path
 
-from agent_runtime.bt import BTError, load_tree, palette_xml
-from agent_runtime.nodes import space_registry
-from coordinator.coordinator import RunError
-from experiments import config as cfg
-from plugins import names as allocator_names
+from swarmbed.agent_runtime.bt import BTError, load_tree, palette_xml
+from swarmbed.agent_runtime.nodes import space_registry
+from swarmbed.coordinator.coordinator import RunError
+from swarmbed.experiments import config as cfg
+from swarmbed.plugins import names as allocator_names
 
 
 def _keys_epilog() -> str:
@@ -67,7 +67,7 @@ def print_summary(summary: dict, out_dir: Path, stream=sys.stdout) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from experiments.runner import run_experiment
+    from swarmbed.experiments.runner import run_experiment
 
     exp = cfg.load(args.experiment, args.set, args.seed)
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
@@ -88,7 +88,7 @@ def cmd_bt(args: argparse.Namespace) -> int:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from experiments.sweep import load_sweep, run_sweep
+    from swarmbed.experiments.sweep import load_sweep, run_sweep
 
     sweep = load_sweep(args.sweep, args.runs, args.grid, args.set, args.seed)
     out = Path(args.out) if args.out else Path("runs") / sweep.name
@@ -103,7 +103,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from experiments.analyze import AnalyzeError, analyze
+    from swarmbed.experiments.analyze import AnalyzeError, analyze
 
     try:
         written = analyze([Path(d) for d in args.sweep_dir], control=args.control)
@@ -116,8 +116,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def cmd_check_allocator(args: argparse.Namespace) -> int:
-    from plugins.conformance import GENERIC_CHECKS, ConformanceError
-    from plugins.registry import PluginError, validate_params
+    from swarmbed.plugins.conformance import GENERIC_CHECKS, ConformanceError
+    from swarmbed.plugins.registry import PluginError, validate_params
 
     params = dict(cfg.parse_override(text) for text in args.set)
     try:
@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     chk.add_argument("--scenario", default="mtsr", choices=["mtsr", "sar"], help="the scenario kind it is for")
     chk.set_defaults(func=cmd_check_allocator)
 
-    for name, module in (("agent", "agent_runtime.process"), ("netem", "netem.proxy")):
+    for name, module in (("agent", "swarmbed.agent_runtime.process"), ("netem", "swarmbed.netem.proxy")):
         p = sub.add_parser(name, help=f"start one {name} process by hand (e.g. on another host)", add_help=False)
         p.set_defaults(func=None, module=module)
 

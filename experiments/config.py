@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from plugins.registry import PluginError, validate_params
+from swarmbed.plugins.registry import PluginError, validate_params
 
 
 class ConfigError(ValueError):

@@ -17,12 +17,12 @@ from typing import Callable
 import zenoh
 from tqdm import tqdm
 
-from coordinator import results
-from coordinator.coordinator import Coordinator, RunError
-from experiments.config import Experiment, to_yaml
-from experiments.launcher import ChildExited, Children
-from wire.keys import Keys
-from wire.session import free_loopback_endpoint, zenoh_config
+from swarmbed.coordinator import results
+from swarmbed.coordinator.coordinator import Coordinator, RunError
+from swarmbed.experiments.config import Experiment, to_yaml
+from swarmbed.experiments.launcher import ChildExited, Children
+from swarmbed.wire.keys import Keys
+from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 RESULT_FILES = (results.SUMMARY, results.TIMESERIES, results.AGENTS, results.TIMINGS, results.TRAJECTORIES,
                 "network_ledger.csv")
@@ -67,9 +67,9 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     try:
         coord.declare()
         common = ["--run-id", keys.run_id, "--connect", endpoint]
-        children.spawn("netem", "netem", [*common, "--out", str(out_dir)])
+        children.spawn("netem", "swarmbed.netem", [*common, "--out", str(out_dir)])
         for i in range(exp.agents.count):
-            children.spawn(f"agent_{i}", "agent_runtime", [*common, "--id", str(i)])
+            children.spawn(f"agent_{i}", "swarmbed.agent_runtime", [*common, "--id", str(i)])
         try:
             coord.wait_for_members(children.check)
         except ChildExited as exc:

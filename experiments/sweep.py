@@ -42,8 +42,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from tqdm import tqdm
 
-from coordinator import results
-from experiments import config as cfg
+from swarmbed.coordinator import results
+from swarmbed.experiments import config as cfg
 
 TABLE = "sweep.csv"
 SPEC = "sweep.json"
@@ -161,7 +161,7 @@ def plan(sweep: Sweep, out: Path) -> list[RunSpec]:
 
 def _execute(spec: RunSpec) -> tuple[str, str]:
     """One run, in a worker process. Returns (status, detail)."""
-    from experiments.runner import run_experiment
+    from swarmbed.experiments.runner import run_experiment
 
     out = Path(spec.out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -1,5 +1,5 @@
 import sys
 
-from netem.proxy import main
+from swarmbed.netem.proxy import main
 
 sys.exit(main())

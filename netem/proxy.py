@@ -16,16 +16,16 @@ from pathlib import Path
 
 import zenoh
 
-from experiments.config import Experiment, from_yaml
-from netem.ledger import Ledger
-from netem.params import NetemParams
-from netem.radio import Radio
-from wire.codec import (AgentOut, NetemStep, World, WireError, decode_agent_out, decode_world, encode_inbox,
+from swarmbed.experiments.config import Experiment, from_yaml
+from swarmbed.netem.ledger import Ledger
+from swarmbed.netem.params import NetemParams
+from swarmbed.netem.radio import Radio
+from swarmbed.wire.codec import (AgentOut, NetemStep, World, WireError, decode_agent_out, decode_world, encode_inbox,
                         encode_netem_step, encode_report, unpack)
-from wire.keys import Keys, agent_id_of
-from wire.lifecycle import NETEM, child_args, component_rng
-from wire.membership import fetch_config_text, hand_over
-from wire.session import open_from_args
+from swarmbed.wire.keys import Keys, agent_id_of
+from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
+from swarmbed.wire.membership import fetch_config_text, hand_over
+from swarmbed.wire.session import open_from_args
 
 log = logging.getLogger("swarmbed.netem")
 

@@ -26,9 +26,9 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from netem.ledger import DELIVERED, Ledger
-from netem.params import NetemParams
-from wire.codec import BROADCAST, RadioMessage
+from swarmbed.netem.ledger import DELIVERED, Ledger
+from swarmbed.netem.params import NetemParams
+from swarmbed.wire.codec import BROADCAST, RadioMessage
 
 _EPS = 1e-9
 

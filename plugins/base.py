@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
-from wire.codec import BROADCAST, RadioMessage, pack
+from swarmbed.wire.codec import BROADCAST, RadioMessage, pack
 
 
 @dataclass(frozen=True, slots=True)

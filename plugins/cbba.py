@@ -26,9 +26,9 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from plugins.base import Allocator, LocalView, TaskInfo
-from plugins.consensus import ConsensusState
-from plugins.taskbook import TaskBook
+from swarmbed.plugins.base import Allocator, LocalView, TaskInfo
+from swarmbed.plugins.consensus import ConsensusState
+from swarmbed.plugins.taskbook import TaskBook
 
 KIND = "cbba"
 

@@ -21,10 +21,10 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from netem import NetemParams, Radio
-from plugins.base import Allocator, LocalView, Message, TaskInfo
-from plugins.registry import make, resolve
-from wire.codec import unpack
+from swarmbed.netem import NetemParams, Radio
+from swarmbed.plugins.base import Allocator, LocalView, Message, TaskInfo
+from swarmbed.plugins.registry import make, resolve
+from swarmbed.wire.codec import unpack
 
 DEFAULT_MAX_BYTES = 64 * 1024
 

@@ -13,7 +13,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict
 
-from plugins.base import Allocator, LocalView, TaskInfo
+from swarmbed.plugins.base import Allocator, LocalView, TaskInfo
 
 CLAIM = "claim"
 

@@ -21,8 +21,8 @@ import math
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from plugins.base import Allocator, LocalView
-from plugins.taskbook import TaskBook
+from swarmbed.plugins.base import Allocator, LocalView
+from swarmbed.plugins.taskbook import TaskBook
 
 KIND = "grape"
 VOID = -1

@@ -17,7 +17,7 @@ from typing import Any, Mapping
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from plugins.base import Allocator
+from swarmbed.plugins.base import Allocator
 
 ANY = "*"
 _REGISTRY: dict[str, dict[str, str]] = {}  # name -> scenario kind (or ANY) -> "module:Class"
@@ -100,14 +100,14 @@ def make(name: str, params: Mapping[str, Any], agent_id: int, rng: np.random.Gen
     return cls(agent_id, validate_params(name, params, scenario), rng, run_seed)
 
 
-register("fcg", "plugins.fcg:FirstClaimedGreedy", "mtsr")
-register("noop", "plugins.noop:NoopAllocator")
-register("cbba", "plugins.cbba:CBBA", "mtsr")
-register("grape", "plugins.grape:GRAPE", "mtsr")
+register("fcg", "swarmbed.plugins.fcg:FirstClaimedGreedy", "mtsr")
+register("noop", "swarmbed.plugins.noop:NoopAllocator")
+register("cbba", "swarmbed.plugins.cbba:CBBA", "mtsr")
+register("grape", "swarmbed.plugins.grape:GRAPE", "mtsr")
 # the six coordination strategies of the CBBA-ETC evaluation (search and rescue)
-register("tree", "plugins.sar.reactive:TreeStrategy", "sar")
-register("comm", "plugins.sar.reactive:CommStrategy", "sar")
-register("cbba", "plugins.sar.consensus:ReactiveCBBA", "sar")
-register("cbba-tree", "plugins.sar.consensus:CBBATree", "sar")
-register("cbba-etc", "plugins.sar.consensus:CBBAETC", "sar")
-register("c-cbba", "plugins.sar.ccbba:ClusteringCBBA", "sar")
+register("tree", "swarmbed.plugins.sar.reactive:TreeStrategy", "sar")
+register("comm", "swarmbed.plugins.sar.reactive:CommStrategy", "sar")
+register("cbba", "swarmbed.plugins.sar.consensus:ReactiveCBBA", "sar")
+register("cbba-tree", "swarmbed.plugins.sar.consensus:CBBATree", "sar")
+register("cbba-etc", "swarmbed.plugins.sar.consensus:CBBAETC", "sar")
+register("c-cbba", "swarmbed.plugins.sar.ccbba:ClusteringCBBA", "sar")

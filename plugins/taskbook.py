@@ -6,7 +6,7 @@ longer among the visible open tasks has been completed.
 
 from __future__ import annotations
 
-from plugins.base import LocalView, TaskInfo
+from swarmbed.plugins.base import LocalView, TaskInfo
 
 
 class TaskBook:

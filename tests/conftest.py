@@ -5,7 +5,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from experiments import config as cfg
+from swarmbed.experiments import config as cfg
 
 ROOT = Path(__file__).resolve().parent.parent
 QUICKSTART = ROOT / "experiments" / "quickstart.yaml"

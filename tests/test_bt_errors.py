@@ -4,10 +4,10 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from agent_runtime.bt import BTError, load_tree
-from agent_runtime.nodes import space_registry
-from agent_runtime.runtime import default_tree_path
-from experiments.cli import main
+from swarmbed.agent_runtime.bt import BTError, load_tree
+from swarmbed.agent_runtime.nodes import space_registry
+from swarmbed.agent_runtime.runtime import default_tree_path
+from swarmbed.experiments.cli import main
 
 
 def load(text):
@@ -62,7 +62,7 @@ def test_check_allocator_command(capsys, tmp_path):
     assert main(["check-allocator", "fcg", "--set", "mode=Random"]) == 0
     assert capsys.readouterr().out.count("PASS") == 4
     bad = tmp_path / "bad.py"
-    bad.write_text("from plugins.base import Allocator\n"
+    bad.write_text("from swarmbed.plugins.base import Allocator\n"
                    "class Liar(Allocator):\n"
                    "    def decide(self, view):\n"
                    "        return 10**6\n")

@@ -2,7 +2,7 @@
 
 import pytest
 
-from experiments import config as cfg
+from swarmbed.experiments import config as cfg
 from tests.conftest import QUICKSTART
 
 

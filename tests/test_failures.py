@@ -10,12 +10,12 @@ import psutil
 import pytest
 import zenoh
 
-from coordinator.coordinator import RunError
-from experiments.runner import run_experiment
+from swarmbed.coordinator.coordinator import RunError
+from swarmbed.experiments.runner import run_experiment
 from tests.conftest import QUICKSTART, ROOT, experiment
-from wire.keys import Keys
-from wire.membership import hand_over
-from wire.session import zenoh_config
+from swarmbed.wire.keys import Keys
+from swarmbed.wire.membership import hand_over
+from swarmbed.wire.session import zenoh_config
 
 LONG_NOOP = ["--set", "allocator={name: noop, peers: 2}", "--set", "scenario.initial_tasks=0",
              "--set", "run.stop_when_done=false", "--set", "run.duration=1000000"]
@@ -27,7 +27,7 @@ def _agents_of(runner: psutil.Process) -> list[psutil.Process]:
 
 @pytest.mark.parametrize("allow", [False, True])
 def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
-    cmd = [sys.executable, "-m", "experiments.cli", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
+    cmd = [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
            *LONG_NOOP, "--set", f"run.allow_agent_failures={str(allow).lower()}"]
     if allow:
         cmd[cmd.index("run.duration=1000000")] = "run.duration=3000"
@@ -60,7 +60,7 @@ def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
 
 
 def _start_long_run(tmp_path):
-    cmd = [sys.executable, "-m", "experiments.cli", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
+    cmd = [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
            *LONG_NOOP]
     runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(runner.pid)
@@ -85,7 +85,7 @@ def test_ctrl_c_stops_every_process_with_a_clear_message(tmp_path):
 
 def test_crashed_proxy_stops_the_run_with_a_clear_message(tmp_path):
     runner, proc, children = _start_long_run(tmp_path)
-    proxy = next(p for p in proc.children() if "-m netem" in " ".join(p.cmdline()))
+    proxy = next(p for p in proc.children() if "-m swarmbed.netem" in " ".join(p.cmdline()))
     proxy.send_signal(signal.SIGKILL)
     _, err = runner.communicate(timeout=60)
     assert runner.returncode == 1
@@ -95,7 +95,7 @@ def test_crashed_proxy_stops_the_run_with_a_clear_message(tmp_path):
 
 
 BOOM = textwrap.dedent('''
-    from plugins.base import Allocator
+    from swarmbed.plugins.base import Allocator
 
     class Boom(Allocator):
         def decide(self, view):

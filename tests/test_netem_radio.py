@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from netem import NetemParams, Radio
-from wire.codec import BROADCAST, RadioMessage
+from swarmbed.netem import NetemParams, Radio
+from swarmbed.wire.codec import BROADCAST, RadioMessage
 
 
 def radio(**kw) -> Radio:

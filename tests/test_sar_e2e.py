@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.runner import run_experiment
-from plugins.sar.ccbba import CLUSTER_STREAM, kmeans_pp
+from swarmbed.experiments.runner import run_experiment
+from swarmbed.plugins.sar.ccbba import CLUSTER_STREAM, kmeans_pp
 from tests.conftest import experiment, ledger_outcomes, read_ledger
 
 SAR = Path(__file__).resolve().parent.parent / "experiments" / "sar" / "_base.yaml"

@@ -6,11 +6,11 @@ import math
 import numpy as np
 import pytest
 
-from plugins import make
-from plugins.base import LocalView, Message, TaskInfo
-from plugins.conformance import random_instance, simulate
-from plugins.sar.ccbba import ClusteringCBBA, kmeans_pp
-from plugins.sar.interval import IntervalParams, next_interval, omega, sigmoid
+from swarmbed.plugins import make
+from swarmbed.plugins.base import LocalView, Message, TaskInfo
+from swarmbed.plugins.conformance import random_instance, simulate
+from swarmbed.plugins.sar.ccbba import ClusteringCBBA, kmeans_pp
+from swarmbed.plugins.sar.interval import IntervalParams, next_interval, omega, sigmoid
 
 P = IntervalParams()  # the paper's values: rho 1, theta 3/1, mu 10, kappa 0.1, lambda 6, gamma 0.001, phi 3..8
 

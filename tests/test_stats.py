@@ -4,9 +4,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.analyze import analyze
-from experiments.stats import cohens_d, compare
-from experiments.sweep import load_sweep, run_sweep
+from swarmbed.experiments.analyze import analyze
+from swarmbed.experiments.stats import cohens_d, compare
+from swarmbed.experiments.sweep import load_sweep, run_sweep
 from tests.conftest import ROOT
 
 

@@ -5,13 +5,13 @@ import textwrap
 import pandas as pd
 import pytest
 
-from experiments import config as cfg
-from experiments.analyze import analyze
-from experiments.sweep import load_sweep, run_sweep, run_seeds
+from swarmbed.experiments import config as cfg
+from swarmbed.experiments.analyze import analyze
+from swarmbed.experiments.sweep import load_sweep, run_sweep, run_seeds
 from tests.conftest import QUICKSTART
 
 BOOM = textwrap.dedent('''
-    from plugins.base import Allocator
+    from swarmbed.plugins.base import Allocator
 
     class Boom(Allocator):
         def decide(self, view):

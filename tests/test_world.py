@@ -4,8 +4,8 @@ import math
 
 import numpy as np
 
-from coordinator.kinematics import Limits, step
-from coordinator.mtsr import MTSRWorld
+from swarmbed.coordinator.kinematics import Limits, step
+from swarmbed.coordinator.mtsr import MTSRWorld
 from tests.conftest import experiment
 
 

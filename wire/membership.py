@@ -6,7 +6,7 @@ import time
 
 import zenoh
 
-from wire.keys import Keys
+from swarmbed.wire.keys import Keys
 
 
 class JoinError(RuntimeError):

@@ -2,13 +2,13 @@
 and follows BT.CPP's semantics for the nodes it supports; ``tests/test_bt_conformance.py`` checks
 it tick by tick against BehaviorTree.CPP itself."""
 
-from agent_runtime.bt.blackboard import Blackboard
-from agent_runtime.bt.node import (BTError, Condition, InputPort, NodeConfig, OutputPort, Port, StatefulAction,
+from swarmbed.agent_runtime.bt.blackboard import Blackboard
+from swarmbed.agent_runtime.bt.node import (BTError, Condition, InputPort, NodeConfig, OutputPort, Port, StatefulAction,
                                    SyncAction, TreeNode)
-from agent_runtime.bt.palette import palette_xml
-from agent_runtime.bt.registry import NodeRegistry
-from agent_runtime.bt.status import Status
-from agent_runtime.bt.tree import Tree, load_tree
+from swarmbed.agent_runtime.bt.palette import palette_xml
+from swarmbed.agent_runtime.bt.registry import NodeRegistry
+from swarmbed.agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.tree import Tree, load_tree
 
 __all__ = [
     "Blackboard", "BTError", "Condition", "InputPort", "NodeConfig", "NodeRegistry", "OutputPort", "Port",

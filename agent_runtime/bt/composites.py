@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from agent_runtime.bt.node import ControlNode, InputPort, Port, BTError
-from agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.node import ControlNode, InputPort, Port, BTError
+from swarmbed.agent_runtime.bt.status import Status
 
 
 class _Ordered(ControlNode):

@@ -8,8 +8,8 @@ with one tick per control step, as here, that means one cycle per tick for synch
 
 from __future__ import annotations
 
-from agent_runtime.bt.node import DecoratorNode, InputPort, Port
-from agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.node import DecoratorNode, InputPort, Port
+from swarmbed.agent_runtime.bt.status import Status
 
 
 class Inverter(DecoratorNode):

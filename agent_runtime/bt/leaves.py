@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from agent_runtime.bt.node import BTError, InputPort, Port, SyncAction
-from agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.node import BTError, InputPort, Port, SyncAction
+from swarmbed.agent_runtime.bt.status import Status
 
 
 class AlwaysSuccess(SyncAction):

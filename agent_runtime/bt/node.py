@@ -10,8 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from agent_runtime.bt.blackboard import Blackboard
-from agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.blackboard import Blackboard
+from swarmbed.agent_runtime.bt.status import Status
 
 
 class BTError(Exception):

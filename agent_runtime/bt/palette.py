@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from xml.sax.saxutils import escape, quoteattr
 
-from agent_runtime.bt.registry import NodeRegistry
+from swarmbed.agent_runtime.bt.registry import NodeRegistry
 
 _PORT_TAG = {"input": "input_port", "output": "output_port", "inout": "inout_port"}
 _TYPE_NAME = {str: "std::string", int: "int", float: "double", bool: "bool"}

@@ -11,10 +11,10 @@ from pathlib import Path
 from typing import Any
 from xml.parsers import expat
 
-from agent_runtime.bt.blackboard import Blackboard
-from agent_runtime.bt.node import BTError, ControlNode, DecoratorNode, NodeConfig, TreeNode, blackboard_key
-from agent_runtime.bt.registry import NodeRegistry
-from agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.blackboard import Blackboard
+from swarmbed.agent_runtime.bt.node import BTError, ControlNode, DecoratorNode, NodeConfig, TreeNode, blackboard_key
+from swarmbed.agent_runtime.bt.registry import NodeRegistry
+from swarmbed.agent_runtime.bt.status import Status
 
 GENERIC_TAGS = ("Action", "Condition", "Control", "Decorator")
 SPECIAL_ATTRS = ("name", "ID")

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from plugins.base import Allocator, LocalView, TaskInfo
+from swarmbed.plugins.base import Allocator, LocalView, TaskInfo
 
 TREES = Path(__file__).resolve().parent / "trees"
 

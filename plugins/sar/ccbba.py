@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from plugins.base import LocalView
-from plugins.sar.base import TREES
-from plugins.sar.consensus import ConsensusParams, SARConsensus
+from swarmbed.plugins.base import LocalView
+from swarmbed.plugins.sar.base import TREES
+from swarmbed.plugins.sar.consensus import ConsensusParams, SARConsensus
 
 BIDS, LEADERS, RESULT = "bids", "leaders", "result"
 CLUSTER_STREAM = 0xCCBBA  # a fixed entropy word: every robot draws the same clustering stream

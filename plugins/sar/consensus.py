@@ -20,12 +20,12 @@ import math
 
 from pydantic import Field
 
-from agent_runtime.nodes import ExplorationNode
-from plugins.base import LocalView
-from plugins.consensus import ConsensusState
-from plugins.sar.base import TREES, SARParams, SARStrategy
-from plugins.sar.interval import IntervalParams, next_interval
-from plugins.sar.nodes import SAR_NODES
+from swarmbed.agent_runtime.nodes import ExplorationNode
+from swarmbed.plugins.base import LocalView
+from swarmbed.plugins.consensus import ConsensusState
+from swarmbed.plugins.sar.base import TREES, SARParams, SARStrategy
+from swarmbed.plugins.sar.interval import IntervalParams, next_interval
+from swarmbed.plugins.sar.nodes import SAR_NODES
 
 BIDS = "bids"
 

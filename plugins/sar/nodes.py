@@ -6,7 +6,7 @@ robot's action for this tick (``config.context.act``). Wandering reuses the SPAC
 
 from __future__ import annotations
 
-from agent_runtime.bt import Condition, StatefulAction, Status, SyncAction
+from swarmbed.agent_runtime.bt import Condition, StatefulAction, Status, SyncAction
 
 
 def _ok(flag: bool) -> Status:

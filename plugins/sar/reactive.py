@@ -13,10 +13,10 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from agent_runtime.nodes import ExplorationNode
-from plugins.base import LocalView
-from plugins.sar.base import TREES, SARParams, SARStrategy
-from plugins.sar.nodes import SAR_NODES
+from swarmbed.agent_runtime.nodes import ExplorationNode
+from swarmbed.plugins.base import LocalView
+from swarmbed.plugins.sar.base import TREES, SARParams, SARStrategy
+from swarmbed.plugins.sar.nodes import SAR_NODES
 
 CLAIM, COLOR = "claim", "color"
 

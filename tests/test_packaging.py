@@ -1,0 +1,54 @@
+"""The install layout: the top-level folders install as one ``swarmbed.*`` namespace, every package
+folder is listed, and the layers import only downward."""
+
+import ast
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _setuptools() -> dict:
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+
+
+def _folder_of(package: str, package_dir: dict[str, str]) -> Path:
+    """Where ``package`` lives in the checkout, through the longest mapped parent."""
+    parts = package.split(".")
+    for cut in range(len(parts), 0, -1):
+        mapped = package_dir.get(".".join(parts[:cut]))
+        if mapped is not None:
+            return ROOT / mapped / Path(*parts[cut:])
+    raise AssertionError(f"{package} has no package-dir mapping")
+
+
+def test_every_package_folder_is_installed():
+    st = _setuptools()
+    listed, mapping = set(st["packages"]), st["package-dir"]
+    for pkg in listed:
+        assert _folder_of(pkg, mapping).is_dir(), f"{pkg} is listed but {_folder_of(pkg, mapping)} is missing"
+    for top, folder in mapping.items():
+        for d in (ROOT / folder).rglob("*"):
+            if d.is_dir() and d.name != "__pycache__" and (any(d.glob("*.py")) or any(d.glob("*.xml"))
+                                                             or any(d.glob("*.yaml"))):
+                pkg = ".".join([top, *d.relative_to(ROOT / folder).parts])
+                assert pkg in listed, f"{d.relative_to(ROOT)} holds files but {pkg} is not in pyproject's packages"
+
+
+def test_no_top_level_names_but_swarmbed():
+    assert {p.split(".")[0] for p in _setuptools()["packages"]} == {"swarmbed"}
+
+
+def _imports(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+        elif isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+    return names
+
+
+def test_benchmarks_import_the_installed_package():
+    for path in (ROOT / "benchmarks").glob("*.py"):
+        assert "sys.path.insert" not in path.read_text(), f"{path.name} patches sys.path"
