@@ -1,5 +1,5 @@
-"""The SPACE behavior-tree nodes. They reach the agent through ``config.context`` (an
-:class:`~agent_runtime.runtime.AgentRuntime`): its view of this tick, its allocator, its action."""
+"""The SPACE behavior-tree nodes. They reach the agent through ``config.context`` (a
+:class:`~swarmbed.agent_runtime.context.NodeContext`): this tick's view, the allocator, the action."""
 
 from __future__ import annotations
 
@@ -79,7 +79,7 @@ class ExplorationNode(StatefulAction):
 
     def on_start(self):
         ctx = self.config.context
-        self.waypoint = ctx.exp.scenario.random_point(ctx.rng)
+        self.waypoint = ctx.scenario.random_point(ctx.rng)
         self.until = ctx.view.time + self.get_input("duration")
         return self.on_running()
 

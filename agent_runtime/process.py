@@ -13,11 +13,11 @@ import traceback
 import zenoh
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
-from swarmbed.experiments.config import from_yaml
 from swarmbed.wire.codec import StopIn, WireError, decode_agent_in, encode_agent_out, encode_report, encode_stop
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.lifecycle import child_args
-from swarmbed.wire.membership import fetch_config_text, hand_over
+from swarmbed.wire.membership import fetch_spec, hand_over, is_alive
+from swarmbed.wire.schema import AgentSpec
 from swarmbed.wire.session import open_from_args
 
 log = logging.getLogger("swarmbed.agent")
@@ -64,7 +64,14 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
                 report(final)
                 return EXIT_OK
             try:
-                action, messages, events = runtime.step(msg.tick, msg.obs, msg.inbox)
+                obs = runtime.decode_observation(msg.obs)
+            except WireError as exc:  # blind for one tick: answer it (the clock must go on), count it
+                malformed += 1
+                log.warning("agent %d: malformed observation of tick %d dropped: %s", agent_id, msg.tick, exc)
+                out.put(encode_agent_out(msg.tick, agent_id, ["stop"], []))
+                continue
+            try:
+                action, messages, events = runtime.step(msg.tick, obs, msg.inbox)
             except Exception as exc:  # a plugin or node raised: stop this agent, loudly
                 tb = traceback.format_exc()
                 log.error("agent %d: failed at tick %d:\n%s", agent_id, msg.tick, tb)
@@ -84,9 +91,13 @@ def main(argv: list[str] | None = None) -> int:
                       argv)
     keys = Keys(args.run_id)
     with open_from_args(args) as session:
-        exp = from_yaml(fetch_config_text(session, keys), f"config of run {args.run_id}")
-        if not 0 <= args.id < exp.agents.count:
-            log.error("agent id %d is outside 0..%d", args.id, exp.agents.count - 1)
+        spec = fetch_spec(session, keys.agent_config, AgentSpec, f"agent config of run {args.run_id}")
+        if not 0 <= args.id < spec.agents.count:
+            log.error("agent id %d is outside 0..%d of run %s", args.id, spec.agents.count - 1, args.run_id)
             return 2
-        runtime = AgentRuntime(exp, args.id)
+        if is_alive(session, keys.alive_agent(args.id)):
+            log.error("agent %d of run %s is already running (its liveliness token is held); "
+                      "refusing to start a second one", args.id, args.run_id)
+            return 2
+        runtime = AgentRuntime(spec, args.id)
         return serve(session, keys, runtime)

@@ -1,66 +1,67 @@
 """One agent's per-tick work, free of any networking: decode the inbox, tick the tree once,
 encode the action and the outgoing messages. The process in ``agent_runtime.process`` wraps it in
-Zenoh; tests and the conformance kit drive it directly."""
+Zenoh; tests and the conformance kit drive it directly.
+
+It is built from an :class:`~swarmbed.wire.schema.AgentSpec` alone: the scenario and allocator
+classes are loaded from the targets the launcher resolved, never looked up by name here.
+"""
 
 from __future__ import annotations
 
 import logging
 from collections import defaultdict
-from importlib import resources
-from pathlib import Path
 
 import numpy as np
 
+from swarmbed.agent_runtime.allocator import Allocator
 from swarmbed.agent_runtime.bt import Blackboard, load_tree
-from swarmbed.agent_runtime.nodes import space_registry
-from swarmbed.experiments.config import Experiment, scenario_sensing
-from swarmbed.plugins import make
-from swarmbed.plugins.base import LocalView, Message, TaskInfo
-from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, decode_task_table, unpack
+from swarmbed.agent_runtime.context import NodeContext
+from swarmbed.agent_runtime.node_sets import node_registry, tree_path
+from swarmbed.agent_runtime.view import LocalView, Message, TaskInfo
+from swarmbed.coordinator.scenario import Scenario
+from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, unpack
 from swarmbed.wire.lifecycle import agent_seeds
+from swarmbed.wire.observation import Observation
+from swarmbed.wire.schema import AgentSpec
+from swarmbed.wire.targets import load_target
 
 log = logging.getLogger("swarmbed.agent")
 
-DEFAULT_TREE = "space_default.xml"
 
-
-def default_tree_path() -> Path:
-    return Path(str(resources.files("swarmbed.agent_runtime") / "trees" / DEFAULT_TREE))
+def build_scenario(spec: AgentSpec) -> Scenario:
+    cls = load_target(spec.targets.scenario, Scenario)
+    return cls(cls.Params.model_validate(spec.scenario.params()), spec.agents, spec.dt)
 
 
 class AgentRuntime:
-    def __init__(self, exp: Experiment, agent_id: int) -> None:
-        self.exp = exp
+    def __init__(self, spec: AgentSpec, agent_id: int) -> None:
+        self.spec = spec
         self.agent_id = agent_id
-        n = exp.agents.count
-        runtime_seed, allocator_seed = agent_seeds(exp.run.seed, agent_id, n, 2)
-        self.rng = np.random.default_rng(runtime_seed)
-        self.allocator = make(exp.allocator.name, exp.allocator.params(), agent_id,
-                              np.random.default_rng(allocator_seed), exp.run.seed, exp.scenario.kind)
-        sc = exp.scenario
-        self.sensing = scenario_sensing(exp)
+        self.n_agents = spec.agents.count
+        runtime_seed, allocator_seed = agent_seeds(spec.seed, agent_id, self.n_agents, 2)
+        self.scenario = build_scenario(spec)
+        allocator_cls = load_target(spec.targets.allocator, Allocator)
+        self.allocator = allocator_cls(agent_id, allocator_cls.Params.model_validate(spec.allocator.params()),
+                                       np.random.default_rng(allocator_seed), spec.seed)
+        self.sensing = self.scenario.sensing()
+        self.context = NodeContext(agent_id, np.random.default_rng(runtime_seed), self.scenario, self.allocator)
         bb = Blackboard()
-        bb.set("exploration_duration", exp.agents.exploration_duration)
-        bb.set("arrival_radius", getattr(sc, "arrival_radius", getattr(sc, "inspect_range", 1.0)))
-        registry = space_registry()
-        for node in type(self.allocator).bt_nodes:
-            registry.register(node)
-        if exp.agents.behavior_tree != "default":
-            tree_path = Path(exp.agents.behavior_tree)
-        elif type(self.allocator).default_tree:
-            tree_path = Path(type(self.allocator).default_tree)
-        else:
-            tree_path = default_tree_path()
-        self.tree = load_tree(tree_path, registry, blackboard=bb, context=self)
-        self.view: LocalView | None = None
-        self._action: list = ["stop"]
+        for key, value in self.scenario.blackboard().items():
+            bb.set(key, value)
+        registry = node_registry([type(self.scenario), allocator_cls])
+        self.tree = load_tree(tree_path(spec.agents.behavior_tree, type(self.scenario), allocator_cls), registry,
+                              blackboard=bb, context=self.context)
         self.sent: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # kind -> [messages, payload bytes]
         self.malformed = 0
         self.ticks = 0
 
-    def act(self, action: list) -> None:
-        """Called by action nodes: the one action this agent sends for this tick (last one wins)."""
-        self._action = action
+    @property
+    def view(self) -> LocalView:
+        return self.context.view
+
+    def decode_observation(self, raw: object) -> Observation:
+        """The scenario's typed observation; a WireError names what is wrong with it."""
+        return self.scenario.Observation.from_wire(raw)
 
     def _inbox(self, data: bytes) -> list[Message]:
         out = []
@@ -78,18 +79,16 @@ class AgentRuntime:
                 log.warning("agent %d: malformed %r message from %d dropped: %s", self.agent_id, d.kind, d.sender, exc)
         return out
 
-    def step(self, tick: int, obs: dict, inbox: bytes) -> tuple[list, list[RadioMessage], dict[str, int]]:
-        me = obs["me"]
-        tasks = {t[0]: TaskInfo(*t) for t in decode_task_table(obs["tasks"]).tolist()}
-        a, sense = self.exp.agents, self.sensing
-        self.view = LocalView(self.agent_id, a.count, tick, float(obs["t"]), me[0], me[1], me[2], me[3],
-                              a.work_rate, tasks, self._inbox(inbox), sense.max_speed, sense.range, sense.angle,
-                              int(obs.get("color", -1)), obs)
-        self._action = ["stop"]
-        self.allocator.observe(self.view)
+    def step(self, tick: int, obs: Observation, inbox: bytes) -> tuple[list, list[RadioMessage], dict[str, int]]:
+        tasks = {t[0]: TaskInfo(*t) for t in obs.tasks.tolist()}
+        a, sense, ctx = self.spec.agents, self.sensing, self.context
+        ctx.view = LocalView(self.agent_id, self.n_agents, tick, obs.time, obs.x, obs.y, obs.heading, obs.speed,
+                             a.work_rate, tasks, self._inbox(inbox), a.max_speed, sense.range, sense.angle, obs)
+        ctx.action = ["stop"]
+        self.allocator.observe(ctx.view)
         self.tree.tick_once()
         messages = []
-        for out in self.view.outbox:
+        for out in ctx.view.outbox:
             msg = out.encode()
             counter = self.sent[out.kind]
             counter[0] += 1
@@ -97,7 +96,7 @@ class AgentRuntime:
             messages.append(msg)
         self.ticks += 1
         events, self.allocator.events = self.allocator.events, {}
-        return self._action, messages, events
+        return ctx.action, messages, events
 
     def report(self) -> dict:
         return {

@@ -17,14 +17,13 @@ from typing import Callable
 import zenoh
 
 from swarmbed.coordinator import results
-from swarmbed.coordinator.scenarios import make_world
-from swarmbed.plugins import resolve
-from swarmbed.experiments.config import Experiment
-from swarmbed.wire.codec import (EMPTY_INBOX, NetemStep, World, WireError, decode_netem_step, decode_report, encode_stop,
-                        encode_tick, encode_world, pack)
+from swarmbed.coordinator.scenario import Scenario
+from swarmbed.wire.codec import (EMPTY_INBOX, NetemStep, World, WireError, decode_netem_step, decode_report,
+                                 encode_stop, encode_tick, encode_world, pack)
 from swarmbed.wire.keys import Keys, agent_id_of
 from swarmbed.wire.lifecycle import WORLD, component_rng
-from swarmbed.wire.membership import accept_handovers, serve_config
+from swarmbed.wire.membership import accept_handovers, serve_text
+from swarmbed.wire.schema import Experiment, Targets, agent_spec, netem_spec
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
@@ -35,15 +34,21 @@ class RunError(RuntimeError):
 
 
 class Coordinator:
-    def __init__(self, exp: Experiment, keys: Keys, session: zenoh.Session, out_dir: Path, config_text: str) -> None:
+    """Drives one run. The launcher hands it the experiment, the scenario built from it, the
+    allocator class (for the traits the world and the results read: ``event_names``,
+    ``bids_with_colors``) and the targets agents load."""
+
+    def __init__(self, exp: Experiment, scenario: Scenario, allocator: type, targets: Targets, keys: Keys,
+                 session: zenoh.Session, out_dir: Path) -> None:
         self.exp = exp
+        self.scenario = scenario
+        self.targets = targets
         self.keys = keys
         self.session = session
         self.out_dir = out_dir
-        self.config_text = config_text
         self.n = exp.agents.count
-        self.world = make_world(exp, component_rng(exp.run.seed, WORLD))
-        self.event_names = list(resolve(exp.allocator.name, exp.scenario.kind).event_names)
+        self.world = scenario.make_world(component_rng(exp.run.seed, WORLD), allocator)
+        self.event_names = list(getattr(allocator, "event_names", ()))
         self.event_totals: dict[str, int] = {}
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.joined: set[str] = set()
@@ -67,7 +72,8 @@ class Coordinator:
     def declare(self) -> None:
         s, k, put = self.session, self.keys, self.events.put
         self._entities += [
-            serve_config(s, k, self.config_text),
+            serve_text(s, k.agent_config, agent_spec(self.exp, self.targets).model_dump_json()),
+            serve_text(s, k.netem_config, netem_spec(self.exp).model_dump_json()),
             s.declare_subscriber(k.netem_step, lambda x: put(("step", x.payload.to_bytes()))),
             accept_handovers(s, k.agent_report_all, lambda _key, data: put(("report", data))),
             accept_handovers(s, k.netem_report, lambda _key, data: put(("netem_report", data))),
@@ -130,7 +136,7 @@ class Coordinator:
             doomed = w.draw_losses()  # lost at tick k+1: the proxy must not deliver to them then
             self.world_pub.put(encode_world(World(k, ids, xs, ys, [i for i in ids if i not in doomed])))
             for i, obs in w.observations().items():
-                self.agent_pubs[i].put(encode_tick(k, obs, inboxes.get(i, EMPTY_INBOX)))
+                self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX)))
             step = self._await_step(k)
             for j in step.lost:
                 self._lose(j, k, "its process exited")

@@ -13,19 +13,99 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from swarmbed.agent_runtime.nodes import SPACE_NODES
 from swarmbed.coordinator.kinematics import Limits, step
-from swarmbed.experiments.config import Experiment
-from swarmbed.wire.codec import TASK_DTYPE, encode_task_table
+from swarmbed.coordinator.scenario import Scenario, Sensing, World
+from swarmbed.wire.codec import TASK_DTYPE
+from swarmbed.wire.observation import Observation
+from swarmbed.wire.schema import Experiment
 
 
-class MTSRWorld:
-    def __init__(self, exp: Experiment, rng: np.random.Generator) -> None:
-        self.exp = exp
-        self.sc = exp.scenario
-        self.dt = exp.run.dt
+class Generations(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    interval: float = Field(1000.0, gt=0, description="simulated seconds between task generations")
+    count: int = Field(3, ge=0, description="how many generations")
+    tasks: int = Field(50, ge=0, description="tasks per generation")
+
+
+class MTSRParams(BaseModel):
+    """The ``scenario:`` section of an MT-SR experiment."""
+
+    model_config = ConfigDict(extra="forbid")
+    width: float = Field(1400.0, gt=0, description="area width")
+    height: float = Field(1000.0, gt=0, description="area height")
+    initial_tasks: int = Field(250, ge=0, description="tasks at time 0")
+    workload: tuple[float, float] = Field((6.0, 60.0), description="task workload range [min, max]")
+    arrival_radius: float = Field(10.0, gt=0, description="distance within which an agent works on a task")
+    generations: Generations = Field(Generations(), description="tasks added during the run")
+    agent_positions: list[tuple[float, float]] | None = Field(None, description="fixed start positions (else uniform)")
+    task_positions: list[tuple[float, float]] | None = Field(None, description="fixed initial task positions")
+
+    @model_validator(mode="after")
+    def _check(self):
+        lo, hi = self.workload
+        if not 0 < lo <= hi:
+            raise ValueError("workload must be [min, max] with 0 < min <= max")
+        if self.task_positions is not None and len(self.task_positions) != self.initial_tasks:
+            raise ValueError("task_positions needs one [x, y] per initial task")
+        return self
+
+
+class MTSR(Scenario):
+    """SPACE's multi-task single-robot workload scenario."""
+
+    Params = MTSRParams
+    Observation = Observation
+    bt_nodes = SPACE_NODES
+    outcome_metrics = ("mission_time", "time_99", "tasks_completed", "all_tasks_completed")
+    summary_keys = ("mission_time", "all_tasks_completed", "time_99", "tasks_total", "tasks_spawned",
+                    "tasks_completed", "distance_total", "distance_per_agent", "work_total", "work_per_agent",
+                    "invalid_actions")
+    params: MTSRParams
+
+    @classmethod
+    def check(cls, exp: Experiment, params: BaseModel) -> list[str]:
+        assert isinstance(params, MTSRParams)
+        if params.agent_positions is not None and len(params.agent_positions) != exp.agents.count:
+            return [f"scenario.agent_positions: needs one [x, y] per agent ({exp.agents.count})"]
+        return []
+
+    def make_world(self, rng: np.random.Generator, allocator: type | None = None) -> MTSRWorld:
+        return MTSRWorld(self, rng)
+
+    def sensing(self) -> Sensing:
+        return Sensing(self.agents.awareness_range)
+
+    def blackboard(self) -> dict:
+        return {**super().blackboard(), "arrival_radius": self.params.arrival_radius}
+
+    def random_point(self, rng: np.random.Generator) -> tuple[float, float]:
+        return float(rng.uniform(0, self.params.width)), float(rng.uniform(0, self.params.height))
+
+    def random_action(self, obs: Observation, rng: np.random.Generator) -> list:
+        if rng.random() < 0.2:
+            return ["goto", *self.random_point(rng)]
+        return super().random_action(obs, rng)
+
+    def summary_rows(self, summary: dict) -> list[tuple[str, object]]:
+        return [
+            ("mission time (sim s)", summary["mission_time"]),
+            ("all tasks completed", summary["all_tasks_completed"]),
+            ("time to 99% of tasks", summary["time_99"]),
+            ("tasks completed / total", f"{summary['tasks_completed']} / {summary['tasks_total']}"),
+            ("distance, all agents", summary["distance_total"]),
+            ("work, all agents", summary["work_total"]),
+        ]
+
+
+class MTSRWorld(World):
+    def __init__(self, scenario: MTSR, rng: np.random.Generator) -> None:
+        self.sc = scenario.params
+        self.dt = scenario.dt
         self.rng = rng
-        a = exp.agents
+        a = scenario.agents
         self.limits = Limits(a.max_speed, a.max_accel, a.max_turn_rate)
         self.n = a.count
         self.work_rate = a.work_rate
@@ -99,10 +179,7 @@ class MTSRWorld:
         self.alive[agent_id] = False
         self.speed[agent_id] = 0.0
 
-    def draw_losses(self) -> list[int]:
-        return []  # MT-SR has no scheduled agent loss
-
-    def observations(self) -> dict[int, dict]:
+    def observations(self) -> dict[int, Observation]:
         """What each live agent senses at this tick: itself and the open tasks within awareness range
         (as a binary task table, see ``wire.codec.TASK_DTYPE``)."""
         open_idx = np.flatnonzero(np.isnan(self.done_at))
@@ -115,8 +192,8 @@ class MTSRWorld:
                         table["y"][None, :] - self.ay[alive, None]) <= self.awareness
         t = self.time
         return {
-            int(i): {"t": t, "me": [float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i])],
-                     "tasks": encode_task_table(table[near[row]])}
+            int(i): Observation(t, float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i]),
+                                table[near[row]])
             for row, i in enumerate(alive)
         }
 
@@ -192,3 +269,14 @@ class MTSRWorld:
     def per_agent(self) -> dict[str, list]:
         return {"distance": [float(d) for d in self.distance], "work": [float(x) for x in self.work],
                 "invalid_actions": [int(v) for v in self.invalid_actions]}
+
+    def invariants(self) -> list[str]:
+        problems = []
+        if np.any(self.remaining < 0) or np.any(self.remaining > self.workload):
+            problems.append("a task's remaining workload left [0, workload]")
+        done = float((self.workload - self.remaining).sum())
+        if not math.isclose(done, float(self.work.sum()), rel_tol=1e-9, abs_tol=1e-6):
+            problems.append(f"work done by agents {float(self.work.sum())} != workload removed from tasks {done}")
+        if self.tasks_completed > len(self.remaining):
+            problems.append("more tasks completed than spawned")
+        return problems

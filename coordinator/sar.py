@@ -18,24 +18,111 @@ observations carry the victims' colours, but a rescue still needs the robot's ow
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.experiments.config import Experiment, SARScenario
-from swarmbed.wire.codec import TASK_DTYPE, encode_task_table
+from swarmbed.agent_runtime.nodes import SPACE_NODES
+from swarmbed.coordinator.scenario import Scenario, Sensing, World
+from swarmbed.wire.codec import TASK_DTYPE
+from swarmbed.wire.observation import Observation
 
 ALIVE, RESCUED, EXPIRED, UNUSED = 0, 1, 2, 3
 
 
-class SARWorld:
-    def __init__(self, exp: Experiment, rng: np.random.Generator, bids_with_colors: bool) -> None:
-        sc: SARScenario = exp.scenario
-        self.exp, self.sc, self.dt = exp, sc, exp.run.dt
+class SARParams(BaseModel):
+    """The ``scenario:`` section of a search-and-rescue experiment (CBBA-ETC paper, Table 1)."""
+
+    model_config = ConfigDict(extra="forbid")
+    arena_radius: float = Field(32.0, gt=0, description="radius of the circular arena (m)")
+    victims: int = Field(100, ge=0, description="victims at any time (steady state) or in all (finite)")
+    lifetime: float = Field(100.0, gt=0, description="seconds a victim lives before it expires")
+    replace: bool = Field(True, description="steady state: a rescued or expired victim is replaced")
+    colors: int = Field(3, ge=1, le=3, description="RED, GREEN, BLUE")
+    vision_range: float = Field(12.0, gt=0, description="conical vision: range (m)")
+    vision_angle: float = Field(math.pi / 2, gt=0, le=2 * math.pi, description="conical vision: full angle (rad)")
+    inspect_range: float = Field(5.0, gt=0, description="distance within which a robot can inspect/rescue (m)")
+    move_fail: float = Field(0.0, ge=0, le=1, description="probability that a move fails")
+    inspect_fail: float = Field(0.0, ge=0, le=1, description="probability that an inspection fails")
+    rescue_fail: float = Field(0.0, ge=0, le=1, description="probability that a rescue fails")
+    move_penalty: float = Field(0.5, ge=0, description="seconds a robot is stuck after a failed move")
+    inspect_time: float = Field(0.0, ge=0, description="extra seconds an inspection keeps the robot busy (0: one tick)")
+    rescue_time: float = Field(0.0, ge=0, description="extra seconds a rescue keeps the robot busy (0: one tick)")
+    agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
+    agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
+    colors_for_bidding: Literal["auto", "always", "never"] = Field(
+        "auto", description="show victims' colours to bidders (auto: when the allocator bids with colours)")
+
+
+@dataclass(frozen=True, slots=True)
+class SARObservation(Observation):
+    """A robot's observation: the core, plus what search and rescue adds."""
+
+    color: int  # this robot's colour
+    reach: float  # the inspection distance
+    robots: list[tuple[int, float, float]]  # other robots in the vision cone: id, x, y
+    inspected: list[tuple[int, int]]  # results of this robot's inspections last tick: victim, colour
+    rescued: list[int]  # victims this robot rescued last tick
+    busy: int  # ticks this robot is still busy (a failed move, an inspection or a rescue)
+    team: list[tuple[int, float, float]] | None = None  # at tick 0 only: every robot's start position
+
+
+class SAR(Scenario):
+    """Search and rescue with heterogeneous robots (CBBA-ETC paper, Section 5.1)."""
+
+    Params = SARParams
+    Observation = SARObservation
+    bt_nodes = SPACE_NODES
+    outcome_metrics = ("rescued", "expired", "failed_rescues")
+    summary_keys = ("rescued", "expired", "failed_rescues", "inspections", "inspect_failures", "rescue_failures",
+                    "move_failures", "abandons", "spawned", "victims_alive", "victims_accounted", "distance_total",
+                    "distance_per_agent", "rescues_per_agent", "invalid_actions", "stale_actions")
+    params: SARParams
+
+    def make_world(self, rng: np.random.Generator, allocator: type | None = None) -> SARWorld:
+        return SARWorld(self, rng, bids_with_colors=bool(getattr(allocator, "bids_with_colors", False)))
+
+    def sensing(self) -> Sensing:
+        return Sensing(self.params.vision_range, self.params.vision_angle)
+
+    def blackboard(self) -> dict:
+        return {**super().blackboard(), "arrival_radius": self.params.inspect_range}
+
+    def random_point(self, rng: np.random.Generator) -> tuple[float, float]:
+        r = self.params.arena_radius * math.sqrt(float(rng.random()))
+        a = float(rng.uniform(-math.pi, math.pi))
+        return r * math.cos(a), r * math.sin(a)
+
+    def random_action(self, obs: Observation, rng: np.random.Generator) -> list:
+        if len(obs.tasks) and rng.random() < 0.5:
+            victim = int(obs.tasks["id"][int(rng.integers(len(obs.tasks)))])
+            return [("inspect", "rescue", "abandon", "goto_task")[int(rng.integers(4))], victim]
+        if rng.random() < 0.2:
+            return ["goto", *self.random_point(rng)]
+        return super().random_action(obs, rng)
+
+    def summary_rows(self, summary: dict) -> list[tuple[str, object]]:
+        return [
+            ("rescued", summary["rescued"]),
+            ("expired", summary["expired"]),
+            ("failed rescues (mismatch found)", summary["failed_rescues"]),
+            ("victims spawned / still alive", f"{summary['spawned']} / {summary['victims_alive']}"),
+            ("negotiations", summary.get("negotiations", "-")),
+            ("agents lost", len(summary["agents_lost"])),
+        ]
+
+
+class SARWorld(World):
+    def __init__(self, scenario: SAR, rng: np.random.Generator, bids_with_colors: bool) -> None:
+        sc = scenario.params
+        self.scenario, self.sc, self.dt = scenario, sc, scenario.dt
         self.spawn_rng, self.fail_rng, self.loss_rng = rng.spawn(3)
-        self.n = exp.agents.count
-        self.speed = exp.agents.max_speed
+        self.n = scenario.agents.count
+        self.speed = scenario.agents.max_speed
         self.show_colors = {"always": True, "never": False}.get(sc.colors_for_bidding, bids_with_colors)
-        start = [sc.random_point(self.spawn_rng) for _ in range(self.n)]
+        start = [scenario.random_point(self.spawn_rng) for _ in range(self.n)]
         self.ax = np.array([p[0] for p in start])
         self.ay = np.array([p[1] for p in start])
         self.heading = self.spawn_rng.uniform(-math.pi, math.pi, self.n)
@@ -72,7 +159,7 @@ class SARWorld:
                 self.vcolor = np.concatenate([self.vcolor, np.zeros(grow, dtype=np.int64)])
                 self.vstatus = np.concatenate([self.vstatus, np.full(grow, UNUSED, dtype=np.int64)])
             v = self.nv
-            self.vx[v], self.vy[v] = self.sc.random_point(self.spawn_rng)
+            self.vx[v], self.vy[v] = self.scenario.random_point(self.spawn_rng)
             self.vcolor[v] = int(self.spawn_rng.integers(self.sc.colors))
             self.vspawn[v] = self.time
             self.vstatus[v] = ALIVE
@@ -113,7 +200,7 @@ class SARWorld:
         off = (np.arctan2(dy, dx) - self.heading[i] + math.pi) % (2 * math.pi) - math.pi
         return near & ((np.abs(off) <= self.sc.vision_angle / 2) | ((dx == 0) & (dy == 0)))
 
-    def observations(self) -> dict[int, dict]:
+    def observations(self) -> dict[int, SARObservation]:
         live = np.flatnonzero(self.vstatus == ALIVE)
         lx, ly = self.vx[live], self.vy[live]
         left = self.vspawn[live] + self.sc.lifetime - self.time
@@ -129,20 +216,17 @@ class SARWorld:
             table["color"] = known
             others = [int(j) for j in robots if j != i]
             visible = self._in_cone(i, self.ax[others], self.ay[others]) if others else []
-            obs = {
-                "t": self.time,
-                "me": [float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), self.speed],
-                "color": int(self.color[i]),
-                "reach": self.sc.inspect_range,
-                "tasks": encode_task_table(table),
-                "robots": [[j, float(self.ax[j]), float(self.ay[j])] for j, v in zip(others, visible) if v],
-                "inspected": self.results.pop(i, []),
-                "rescued": self.rescued_by.pop(i, []),
-                "busy": int(max(0, self.busy_until[i] - self.tick)),
-            }
-            if self.tick == 0:  # where the team starts: known before deployment
-                obs["team"] = [[int(j), float(self.ax[j]), float(self.ay[j])] for j in range(self.n)]
-            out[i] = obs
+            out[i] = SARObservation(
+                self.time, float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed), table,
+                color=int(self.color[i]),
+                reach=self.sc.inspect_range,
+                robots=[(j, float(self.ax[j]), float(self.ay[j])) for j, v in zip(others, visible) if v],
+                inspected=[(v, c) for v, c in self.results.pop(i, [])],
+                rescued=self.rescued_by.pop(i, []),
+                busy=int(max(0, self.busy_until[i] - self.tick)),
+                # where the team starts: known before deployment
+                team=[(int(j), float(self.ax[j]), float(self.ay[j])) for j in range(self.n)] if self.tick == 0 else None,
+            )
         return out
 
     def _victim(self, action: list) -> int | None:
@@ -231,12 +315,19 @@ class SARWorld:
                 "failed_rescues": self.counts["failed_rescues"], "victims_alive": self.victims_alive,
                 "agents_alive": int(self.alive.sum())}
 
+    def invariants(self) -> list[str]:
+        c, spawned, alive = self.counts, self.nv, self.victims_alive
+        if c["rescued"] + c["expired"] + alive != spawned:
+            return [f"victims unaccounted: rescued {c['rescued']} + expired {c['expired']} + alive {alive} "
+                    f"!= spawned {spawned}"]
+        return []
+
     def summary(self) -> dict:
         spawned, alive = self.nv, self.victims_alive
         c = self.counts
-        if c["rescued"] + c["expired"] + alive != spawned:
-            raise AssertionError(f"victims unaccounted: rescued {c['rescued']} + expired {c['expired']} + "
-                                 f"alive {alive} != spawned {spawned}")
+        problems = self.invariants()
+        if problems:
+            raise AssertionError(problems[0])
         return {**c, "spawned": spawned, "victims_alive": alive, "victims_accounted": True,
                 "distance_total": float(self.distance.sum()),
                 "distance_per_agent": [float(d) for d in self.distance],

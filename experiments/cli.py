@@ -5,23 +5,22 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import textwrap
 import time
 from pathlib import Path
 
 from swarmbed.agent_runtime.bt import BTError, load_tree, palette_xml
-from swarmbed.agent_runtime.nodes import space_registry
+from swarmbed.agent_runtime.node_sets import node_registry
 from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments import config as cfg
-from swarmbed.plugins import names as allocator_names
+from swarmbed.plugins import registry
 
 
 def _keys_epilog() -> str:
-    rows = cfg.describe_keys()
-    width = max(len(k) for k, _, _ in rows)
-    lines = ["experiment keys (override any with --set KEY=VALUE):"]
-    lines += [f"  {k:<{width}}  {d:<10}  {desc}" for k, d, desc in rows]
-    lines.append(f"registered allocators: {', '.join(allocator_names())}")
-    return "\n".join(lines)
+    return ("Any key of the experiment can be overridden with --set KEY=VALUE (read as YAML).\n"
+            "`swarmbed params` lists the run, agents and network keys; `swarmbed params NAME` the keys of a\n"
+            f"scenario ({', '.join(registry.scenario_names())}) or an allocator "
+            f"({', '.join(registry.names())}).")
 
 
 def _fmt(v) -> str:
@@ -34,26 +33,10 @@ def _fmt(v) -> str:
     return "-" if v is None else str(v)
 
 
-def print_summary(summary: dict, out_dir: Path, stream=sys.stdout) -> None:
+def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> None:
+    """The run's outcome (as its scenario words it), its network totals, and any agent it lost."""
     net = summary["network"]
-    if summary.get("scenario_kind") == "sar":
-        rows = [
-            ("rescued", summary["rescued"]),
-            ("expired", summary["expired"]),
-            ("failed rescues (mismatch found)", summary["failed_rescues"]),
-            ("victims spawned / still alive", f"{summary['spawned']} / {summary['victims_alive']}"),
-            ("negotiations", summary.get("negotiations", "-")),
-            ("agents lost", len(summary["agents_lost"])),
-        ]
-    else:
-        rows = [
-            ("mission time (sim s)", summary["mission_time"]),
-            ("all tasks completed", summary["all_tasks_completed"]),
-            ("time to 99% of tasks", summary["time_99"]),
-            ("tasks completed / total", f"{summary['tasks_completed']} / {summary['tasks_total']}"),
-            ("distance, all agents", summary["distance_total"]),
-            ("work, all agents", summary["work_total"]),
-        ]
+    rows = scenario.summary_rows(summary)
     rows += [
         ("messages sent", net["messages_sent"]),
         ("payload bytes sent", net["bytes_sent"]),
@@ -64,6 +47,11 @@ def print_summary(summary: dict, out_dir: Path, stream=sys.stdout) -> None:
     print(f"results: {out_dir}", file=stream)
     for label, value in rows:
         print(f"  {label:<{width}}  {_fmt(value)}", file=stream)
+    lost = summary["agents_lost"]
+    if lost:
+        text = ", ".join(f"{agent} at tick {tick}" for agent, tick in lost.items())
+        print(textwrap.fill(f"agents lost: {text} (their logs: logs/agent_<id>.log)", width=100,
+                            initial_indent="  ", subsequent_indent="    "), file=stream)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -72,18 +60,83 @@ def cmd_run(args: argparse.Namespace) -> int:
     exp = cfg.load(args.experiment, args.set, args.seed)
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
     result = run_experiment(exp, out, progress=not args.no_progress)
-    print_summary(result.summary, out)
+    print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
 
 
+def _node_owners(allocator: str | None, scenario: str | None) -> list[type]:
+    """Scenario and allocator classes whose nodes a tree may use: the named ones, or every
+    registered one (so that any shipped tree checks without naming its allocator)."""
+    scenarios = [scenario] if scenario else registry.scenario_names()
+    owners: list[type] = [registry.resolve_scenario(kind) for kind in scenarios]
+    if allocator:
+        owners.append(registry.resolve(allocator, scenario))
+    else:
+        owners += [registry.resolve(name, kind) for name, kind in registry.entries()
+                   if kind == registry.ANY or kind in scenarios]
+    return owners
+
+
 def cmd_bt(args: argparse.Namespace) -> int:
-    registry = space_registry()
+    nodes = node_registry(_node_owners(args.allocator, args.scenario))
     if args.bt_command == "palette":
-        sys.stdout.write(palette_xml(registry))
+        sys.stdout.write(palette_xml(nodes))
         return 0
+    bad = 0
     for path in args.files:
-        load_tree(path, registry)
-        print(f"{path}: ok")
+        try:
+            load_tree(path, nodes)
+            print(f"{path}: ok")
+        except BTError as exc:
+            bad += 1
+            print(f"error: {exc}", file=sys.stderr)
+    return 2 if bad else 0
+
+
+def _first_line(cls: type) -> str:
+    return (cls.__doc__ or cls.__name__).strip().splitlines()[0]
+
+
+def _param_groups(name: str) -> list[tuple[str, list[tuple[str, str, str, str]]]]:
+    """The parameter tables of scenario and/or allocator ``name`` (a registered name or a target)."""
+    groups = []
+    if name in registry.scenario_names() or (":" in name and name not in registry.names()):
+        try:
+            cls = registry.resolve_scenario(name)
+            groups.append((f"scenario.kind: {name} ({_first_line(cls)})", cfg.describe(cls.Params, "scenario.")))
+        except registry.PluginError:
+            if ":" not in name:
+                raise
+    kinds = [k for n, k in registry.entries() if n == name] or ([registry.ANY] if ":" in name and not groups else [])
+    for kind in kinds:
+        cls = registry.resolve(name, None if kind == registry.ANY else kind)
+        where = "any scenario" if kind == registry.ANY else f"scenario {kind}"
+        groups.append((f"allocator.name: {name} for {where} ({_first_line(cls)})",
+                       cfg.describe(cls.Params, "allocator.") or [("(no parameters)", "", "", "")]))
+    return groups
+
+
+def cmd_params(args: argparse.Namespace) -> int:
+    """Every key of the generic sections, or of a scenario or an allocator: type, default, meaning."""
+    if args.name is None:
+        groups = [(f"{name}:", cfg.describe(model, f"{name}.")) for name, model in cfg.SECTIONS.items()]
+        groups.append(("scenarios (swarmbed params NAME):",
+                       [(n, "", "", registry.scenario_target(n)) for n in registry.scenario_names()]))
+        groups.append(("allocators (swarmbed params NAME):",
+                       [(n if k == registry.ANY else f"{n} ({k})", "", "",
+                         registry.allocator_target(n, None if k == registry.ANY else k)) for n, k in registry.entries()]))
+    else:
+        groups = _param_groups(args.name)
+        if not groups:
+            print(f"error: {args.name!r} is neither a scenario ({', '.join(registry.scenario_names())}) nor an "
+                  f"allocator ({', '.join(registry.names())})", file=sys.stderr)
+            return 2
+    for title, rows in groups:
+        print(title)
+        width = [max([len(r[i]) for r in rows] + [1]) for i in range(3)]
+        for key, typ, default, meaning in rows:
+            print(f"  {key:<{width[0]}}  {typ:<{width[1]}}  {default:<{width[2]}}  {meaning}".rstrip())
+        print()
     return 0
 
 
@@ -151,10 +204,18 @@ def main(argv: list[str] | None = None) -> int:
 
     bt = sub.add_parser("bt", help="behavior-tree tools")
     bt_sub = bt.add_subparsers(dest="bt_command", required=True)
-    bt_sub.add_parser("palette", help="print a Groot2 <TreeNodesModel> of every registered node")
-    check = bt_sub.add_parser("check", help="load behavior-tree XML files and report errors")
+    palette = bt_sub.add_parser("palette", help="print a Groot2 <TreeNodesModel> of the custom nodes")
+    check = bt_sub.add_parser("check", help="load behavior-tree XML files and report every error")
     check.add_argument("files", nargs="+")
+    for p in (palette, check):
+        p.add_argument("--allocator", help="only the nodes this allocator's trees may use (default: every one)")
+        p.add_argument("--scenario", help="only the nodes of this scenario (default: every one)")
     bt.set_defaults(func=cmd_bt)
+
+    par = sub.add_parser("params", help="every key of an experiment, a scenario or an allocator: type, default, "
+                                        "meaning")
+    par.add_argument("name", nargs="?", help="a scenario or allocator name (or module:Class); none: the sections")
+    par.set_defaults(func=cmd_params)
 
     sw = sub.add_parser("sweep", help="Monte Carlo runs over scenarios, in parallel and resumable")
     sw.add_argument("sweep", help="sweep YAML (base + scenarios/grid + runs) or a plain experiment")
@@ -175,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
     chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
     chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")
     chk.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="an allocator parameter")
-    chk.add_argument("--scenario", default="mtsr", choices=["mtsr", "sar"], help="the scenario kind it is for")
+    chk.add_argument("--scenario", default="mtsr", help="the scenario it is for (a registered name)")
     chk.set_defaults(func=cmd_check_allocator)
 
     for name, module in (("agent", "swarmbed.agent_runtime.process"), ("netem", "swarmbed.netem.proxy")):
@@ -191,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unrecognized arguments: {' '.join(rest)}")
     try:
         return args.func(args)
-    except (cfg.ConfigError, BTError) as exc:
+    except (cfg.ConfigError, BTError, registry.PluginError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except RunError as exc:

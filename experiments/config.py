@@ -1,159 +1,56 @@
-"""The experiment schema, its loader, and ``--set dotted.key=value`` overrides.
+"""Loading an experiment: YAML, ``--set dotted.key=value`` overrides, and every check before any
+process starts.
 
-Everything is validated before any process starts: an unknown key, a wrong type or an
-out-of-range value is refused with the dotted key and the file it came from.
+The schema itself lives below the processes (``swarmbed.wire.schema``); this is the launcher's side
+of it, and the only place where names are resolved: ``scenario.kind`` and ``allocator.name`` to
+their classes, whose ``Params`` models check their sections. The sections are written back fully
+resolved, so that ``config.yaml`` and every process see complete parameters. The behavior tree is
+loaded here too, with the node set the agents will have. An error names the file (or ``--set``)
+and the dotted key.
 """
 
 from __future__ import annotations
 
-import math
+import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal, get_args, get_origin
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ValidationError
 
-from swarmbed.plugins.registry import PluginError, validate_params
+from swarmbed.agent_runtime.allocator import Allocator
+from swarmbed.agent_runtime.bt import BTError, load_tree
+from swarmbed.agent_runtime.node_sets import node_registry, tree_path
+from swarmbed.coordinator.scenario import Scenario
+from swarmbed.plugins.registry import (PluginError, allocator_target, resolve, resolve_scenario, scenario_target,
+                                       validate_params, validate_scenario_params)
+from swarmbed.wire.schema import (AgentsSection, AllocatorSection, Experiment, NetworkSection, RunSection,
+                                  ScenarioSection, Targets)
+
+__all__ = ["ConfigError", "Experiment", "Resolved", "load", "resolve_experiment", "to_yaml", "from_yaml",
+           "parse_override", "apply_overrides", "validate", "describe", "SECTIONS"]
+
+#: the generic sections, for ``swarmbed params``
+SECTIONS: dict[str, type[BaseModel]] = {"run": RunSection, "agents": AgentsSection, "network": NetworkSection}
 
 
 class ConfigError(ValueError):
     """A bad experiment file or override; the message names the file and the dotted key."""
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class RunSection(_Strict):
-    seed: int = Field(0, ge=0, description="run seed; every random source derives from it")
-    clock: Literal["lockstep"] = Field("lockstep", description="lockstep: ticks advance when everyone has acted")
-    dt: float = Field(1.0, gt=0, description="simulated seconds per tick")
-    duration: float = Field(3000.0, gt=0, description="simulated seconds before the run stops")
-    tick_timeout: float = Field(60.0, gt=0, description="wall seconds a tick may wait for a silent process")
-    join_timeout: float = Field(120.0, gt=0, description="wall seconds to wait for every process to join")
-    allow_agent_failures: bool = Field(False, description="go on without an agent whose process dies")
-    record_every: int = Field(1, ge=1, description="ticks between time-series rows")
-    record_trajectories: bool = Field(False, description="also write trajectories.csv (tick, agent, x, y)")
-    stop_when_done: bool = Field(True, description="end the run once every task there will be is done")
-
-
-class Generations(_Strict):
-    interval: float = Field(1000.0, gt=0, description="simulated seconds between task generations")
-    count: int = Field(3, ge=0, description="how many generations")
-    tasks: int = Field(50, ge=0, description="tasks per generation")
-
-
-class MTSRScenario(_Strict):
-    """The SPACE MT-SR workload scenario (SPACE paper, Table I)."""
-
-    kind: Literal["mtsr"] = "mtsr"
-    width: float = Field(1400.0, gt=0)
-    height: float = Field(1000.0, gt=0)
-    initial_tasks: int = Field(250, ge=0)
-    workload: tuple[float, float] = Field((6.0, 60.0), description="task workload range [min, max]")
-    arrival_radius: float = Field(10.0, gt=0, description="distance within which an agent works on a task")
-    generations: Generations = Generations()
-    agent_positions: list[tuple[float, float]] | None = Field(None, description="fixed start positions (else uniform)")
-    task_positions: list[tuple[float, float]] | None = Field(None, description="fixed initial task positions")
-
-    @model_validator(mode="after")
-    def _check(self):
-        lo, hi = self.workload
-        if not 0 < lo <= hi:
-            raise ValueError("workload must be [min, max] with 0 < min <= max")
-        if self.task_positions is not None and len(self.task_positions) != self.initial_tasks:
-            raise ValueError("task_positions needs one [x, y] per initial task")
-        return self
-
-    def random_point(self, rng) -> tuple[float, float]:
-        return float(rng.uniform(0, self.width)), float(rng.uniform(0, self.height))
-
-
-class SARScenario(_Strict):
-    """Search and rescue (CBBA-ETC paper, Section 5.1 and Table 1)."""
-
-    kind: Literal["sar"]
-    arena_radius: float = Field(32.0, gt=0, description="radius of the circular arena (m)")
-    victims: int = Field(100, ge=0, description="victims at any time (steady state) or in all (finite)")
-    lifetime: float = Field(100.0, gt=0, description="seconds a victim lives before it expires")
-    replace: bool = Field(True, description="steady state: a rescued or expired victim is replaced")
-    colors: int = Field(3, ge=1, le=3, description="RED, GREEN, BLUE")
-    vision_range: float = Field(12.0, gt=0, description="conical vision: range (m)")
-    vision_angle: float = Field(math.pi / 2, gt=0, le=2 * math.pi, description="conical vision: full angle (rad)")
-    inspect_range: float = Field(5.0, gt=0, description="distance within which a robot can inspect/rescue (m)")
-    move_fail: float = Field(0.0, ge=0, le=1, description="probability that a move fails")
-    inspect_fail: float = Field(0.0, ge=0, le=1, description="probability that an inspection fails")
-    rescue_fail: float = Field(0.0, ge=0, le=1, description="probability that a rescue fails")
-    move_penalty: float = Field(0.5, ge=0, description="seconds a robot is stuck after a failed move")
-    inspect_time: float = Field(0.0, ge=0, description="extra seconds an inspection keeps the robot busy (0: one tick)")
-    rescue_time: float = Field(0.0, ge=0, description="extra seconds a rescue keeps the robot busy (0: one tick)")
-    agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
-    agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
-    colors_for_bidding: Literal["auto", "always", "never"] = Field(
-        "auto", description="show victims' colours to bidders (auto: when the allocator bids with colours)")
-
-    def random_point(self, rng) -> tuple[float, float]:
-        r = self.arena_radius * math.sqrt(float(rng.random()))
-        a = float(rng.uniform(-math.pi, math.pi))
-        return r * math.cos(a), r * math.sin(a)
-
-
-class AgentsSection(_Strict):
-    count: int = Field(10, ge=1, le=1000)
-    max_speed: float = Field(0.25, gt=0, description="v_max, units per second")
-    max_accel: float = Field(0.01, gt=0, description="a_max, units per second^2")
-    max_turn_rate: float = Field(0.25, gt=0, description="omega_max, radians per second")
-    work_rate: float = Field(1.0, gt=0, description="workload done per second")
-    awareness_range: float = Field(300.0, gt=0, description="tasks within this distance are observed")
-    exploration_duration: float = Field(1000.0, gt=0, description="seconds spent exploring toward one waypoint")
-    behavior_tree: str = Field("default", description="'default' (the SPACE tree) or a path to BT.CPP v4 XML")
-
-
-class AllocatorSection(BaseModel):
-    """``name`` plus the plugin's own parameters, checked by the plugin's ``Params`` model."""
-
-    model_config = ConfigDict(extra="allow")
-    name: str = "fcg"
-
-    def params(self) -> dict[str, Any]:
-        return dict(self.model_extra or {})
-
-
-class NetworkSection(_Strict):
-    range: float | None = Field(None, ge=0, description="communication range; null = unlimited")
-    loss: float = Field(0.0, ge=0, le=1, description="probability a copy is lost")
-    rate: float | None = Field(None, gt=0, description="per-sender cap in bytes per simulated second")
-    limit: int | None = Field(None, ge=1, description="messages that may wait behind the rate cap")
-    latency: int = Field(0, ge=0, description="extra ticks of delay")
-
-
-class Experiment(_Strict):
-    name: str = "experiment"
-    run: RunSection = RunSection()
-    scenario: Annotated[MTSRScenario | SARScenario, Field(discriminator="kind")] = MTSRScenario()
-    agents: AgentsSection = AgentsSection()
-    allocator: AllocatorSection = AllocatorSection()
-    network: NetworkSection = NetworkSection()
-
-    @property
-    def ticks(self) -> int:
-        return int(round(self.run.duration / self.run.dt))
-
-
 @dataclass(frozen=True)
-class Sensing:
-    range: float
-    angle: float
-    max_speed: float
+class Resolved:
+    """An experiment with the classes its names resolved to: what the launcher runs."""
 
+    exp: Experiment
+    scenario_cls: type[Scenario]
+    allocator_cls: type[Allocator]
+    targets: Targets
 
-def scenario_sensing(exp: Experiment) -> Sensing:
-    """What an agent's sensors cover, by scenario."""
-    sc = exp.scenario
-    if isinstance(sc, SARScenario):
-        return Sensing(sc.vision_range, sc.vision_angle, exp.agents.max_speed)
-    return Sensing(exp.agents.awareness_range, 2 * math.pi, exp.agents.max_speed)
+    def scenario(self) -> Scenario:
+        sc = self.scenario_cls
+        return sc(sc.Params.model_validate(self.exp.scenario.params()), self.exp.agents, self.exp.run.dt)
 
 
 def _set_dotted(data: dict, dotted: str, value: Any, where: str) -> None:
@@ -191,34 +88,102 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key.strip(), value
 
 
-def validate(data: dict, where: str) -> Experiment:
-    if isinstance(data.get("scenario"), dict) and "kind" not in data["scenario"]:
-        data = {**data, "scenario": {"kind": "mtsr", **data["scenario"]}}
+def _origin(line: str, where: str, overridden: dict[str, Any]) -> str:
+    """``line`` (``dotted.key: message``) prefixed by where that key came from: ``--set`` or the file."""
+    key, _, message = line.partition(": ")
+    for set_key, value in overridden.items():
+        if key == set_key:
+            return f"--set {set_key}={value}: {message}"
+        if key.startswith(set_key + ".") or set_key.startswith(key + "."):
+            return f"--set {set_key}={value}: {line}"
+    return f"{where}: {line}"
+
+
+def validate(data: dict, where: str, overridden: dict[str, Any] | None = None) -> Experiment:
+    """Check ``data`` in full (sections, plugin parameters, the behavior tree) and return the
+    experiment with its scenario and allocator sections fully resolved. ``overridden``: the keys
+    that ``--set`` gave, so that an error about one of them names ``--set``, not the file."""
+    overridden = overridden or {}
+
+    def fail(lines: list[str]) -> ConfigError:
+        return ConfigError("\n".join(_origin(line, where, overridden) for line in lines))
+
     try:
         exp = Experiment.model_validate(data)
     except ValidationError as exc:
-        lines = []
-        for e in exc.errors():
-            parts = [str(p) for p in e["loc"]]
-            if parts[:1] == ["scenario"] and parts[1:2] in (["mtsr"], ["sar"]):
-                del parts[1]  # the discriminator's tag is not a key the user wrote
-            loc = ".".join(parts)
-            msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
-            lines.append(f"{where}: {loc}: {msg}")
-        raise ConfigError("\n".join(lines)) from None
+        raise fail([f"{'.'.join(str(p) for p in e['loc'])}: "
+                    f"{'unknown key' if e['type'] == 'extra_forbidden' else e['msg']}" for e in exc.errors()]) from None
     try:
-        validate_params(exp.allocator.name, exp.allocator.params(), exp.scenario.kind)
+        kind = exp.scenario.kind
+        scenario_params = validate_scenario_params(kind, exp.scenario.params())
+        allocator_params = validate_params(exp.allocator.name, exp.allocator.params(), kind)
     except PluginError as exc:
-        raise ConfigError(f"{where}: {exc}") from None
-    positions = getattr(exp.scenario, "agent_positions", None)
-    if positions is not None and len(positions) != exp.agents.count:
-        raise ConfigError(f"{where}: scenario.agent_positions: needs one [x, y] per agent ({exp.agents.count})")
-    if exp.agents.behavior_tree != "default" and not Path(exp.agents.behavior_tree).is_file():
-        raise ConfigError(f"{where}: agents.behavior_tree: file {exp.agents.behavior_tree} does not exist")
+        lines = str(exc).splitlines()
+        if not lines[0].startswith(("scenario.", "allocator.")):  # a name that does not resolve
+            lines = [f"{'scenario.kind' if lines[0].startswith(('scenario', 'unknown scenario')) else 'allocator.name'}"
+                     f": {line}" for line in lines]
+        raise fail(lines) from None
+    exp = exp.model_copy(update={
+        "scenario": ScenarioSection(kind=kind, **scenario_params.model_dump(mode="json")),
+        "allocator": AllocatorSection(name=exp.allocator.name, **allocator_params.model_dump(mode="json")),
+    })
+    problems = resolve_scenario(kind).check(exp, scenario_params)
+    if problems:
+        raise fail(problems)
+    tree_problem = _check_tree(exp)
+    if tree_problem:
+        raise fail([f"agents.behavior_tree: {tree_problem}"])
     return exp
 
 
-def load(path: str | Path, overrides: list[str] = (), seed: int | None = None) -> Experiment:
+def _check_tree(exp: Experiment) -> str | None:
+    """Load the agents' behavior tree with the node set they will have, so that a bad tree stops
+    the run here, before any process starts. The problem, or None."""
+    scenario_cls = resolve_scenario(exp.scenario.kind)
+    allocator_cls = resolve(exp.allocator.name, exp.scenario.kind)
+    path = tree_path(exp.agents.behavior_tree, scenario_cls, allocator_cls)
+    if not path.is_file():
+        return f"file {path} does not exist"
+    try:
+        load_tree(path, node_registry([scenario_cls, allocator_cls]))
+    except BTError as exc:
+        return str(exc)
+    return None
+
+
+def resolve_experiment(exp: Experiment) -> Resolved:
+    """The classes and targets of a validated experiment (what the launcher hands its processes)."""
+    kind, name = exp.scenario.kind, exp.allocator.name
+    targets = Targets(scenario=scenario_target(kind), allocator=allocator_target(name, kind))
+    return Resolved(exp, resolve_scenario(kind), resolve(name, kind), targets)
+
+
+#: keys whose values may be file paths: relative ones resolve from the experiment file's folder
+#: when written in the file, and from the current directory when given with ``--set``
+PATH_KEYS = ("agents.behavior_tree", "allocator.name", "scenario.kind")
+
+
+def _absolute(key: str, value: Any, base: Path) -> Any:
+    """A relative path (a behavior tree, or the file of ``file.py:Class``) made absolute from ``base``."""
+    if not isinstance(value, str) or value == "default":
+        return value
+    ref, sep, cls = value.rpartition(":") if ".py:" in value else (value, "", "")
+    if sep or key == "agents.behavior_tree":
+        path = Path(ref)
+        return str(path if path.is_absolute() else (base / path).resolve()) + (sep + cls)
+    return value
+
+
+def _get_dotted(data: dict, dotted: str) -> Any:
+    node: Any = data
+    for k in dotted.split("."):
+        if not isinstance(node, dict):
+            return None
+        node = node.get(k)
+    return node
+
+
+def load(path: str | Path, overrides: list[str] | tuple[str, ...] = (), seed: int | None = None) -> Experiment:
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
@@ -227,19 +192,23 @@ def load(path: str | Path, overrides: list[str] = (), seed: int | None = None) -
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from None
     if data is None:
-        data = {}
+        raise ConfigError(f"{path}: the file is empty; an experiment names at least its scenario or allocator "
+                          "(see experiments/quickstart.yaml)")
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: the top level must be a mapping of sections")
     if "base" in data and "run" not in data:
         raise ConfigError(f"{path}: this is a sweep file (it names a base experiment): "
                           f"run it with `swarmbed sweep {path}`")
-    apply_overrides(data, [parse_override(text) for text in overrides], str(path))
+    for key in PATH_KEYS:  # paths in the file are relative to the file
+        value = _get_dotted(data, key)
+        if value is not None:
+            _set_dotted(data, key, _absolute(key, value, path.parent), str(path))
+    pairs = [parse_override(text) for text in overrides]
+    pairs = [(k, _absolute(k, v, Path.cwd()) if k in PATH_KEYS else v) for k, v in pairs]  # from the shell: from here
+    apply_overrides(data, pairs, str(path))
     if seed is not None:
         _set_dotted(data, "run.seed", seed, str(path))
-    bt = data.get("agents", {}).get("behavior_tree") if isinstance(data.get("agents"), dict) else None
-    if isinstance(bt, str) and bt != "default" and not Path(bt).is_absolute():
-        data["agents"]["behavior_tree"] = str((path.parent / bt).resolve())
-    return validate(data, str(path))
+    return validate(data, str(path), dict(pairs))
 
 
 def to_yaml(exp: Experiment) -> str:
@@ -250,21 +219,26 @@ def from_yaml(text: str, where: str = "<resolved config>") -> Experiment:
     return validate(yaml.safe_load(text), where)
 
 
-def describe_keys() -> list[tuple[str, str, str]]:
-    """(dotted key, default, description) for every key: what ``swarmbed run --help`` lists."""
-    rows: list[tuple[str, str, str]] = []
+def _type_name(annotation: Any) -> str:
+    if get_origin(annotation) is Literal:
+        return " | ".join(str(a) for a in get_args(annotation))
+    if isinstance(annotation, type):
+        return annotation.__name__
+    return str(annotation).replace("typing.", "").replace("NoneType", "null")
 
-    def walk(model: type[BaseModel], prefix: str) -> None:
-        for name, field in model.model_fields.items():
-            ann = field.annotation
-            if name == "scenario":
-                walk(MTSRScenario, "scenario.")
-                walk(SARScenario, "scenario.")
-            elif isinstance(ann, type) and issubclass(ann, BaseModel) and ann is not AllocatorSection:
-                walk(ann, f"{prefix}{name}.")
-            else:
-                rows.append((f"{prefix}{name}", repr(field.default), field.description or ""))
 
-    walk(Experiment, "")
-    rows.append(("allocator.<param>", "", "the allocator's own parameters (see its Params)"))
+def describe(model: type[BaseModel], prefix: str = "") -> list[tuple[str, str, str, str]]:
+    """(dotted key, type, default, meaning) of every key of ``model``, nested models walked."""
+    rows: list[tuple[str, str, str, str]] = []
+    for name, field in model.model_fields.items():
+        ann = field.annotation
+        if isinstance(ann, type) and issubclass(ann, BaseModel):
+            rows += describe(ann, f"{prefix}{name}.")
+            continue
+        if field.is_required():
+            default = "required"
+        else:
+            value = field.get_default(call_default_factory=True)
+            default = json.dumps(value.model_dump(mode="json") if isinstance(value, BaseModel) else value)
+        rows.append((f"{prefix}{name}", _type_name(ann), default, field.description or ""))
     return rows

@@ -19,7 +19,7 @@ from tqdm import tqdm
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import Coordinator, RunError
-from swarmbed.experiments.config import Experiment, to_yaml
+from swarmbed.experiments.config import Experiment, resolve_experiment, to_yaml
 from swarmbed.experiments.launcher import ChildExited, Children
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
@@ -56,14 +56,14 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         (out_dir / name).unlink(missing_ok=True)
     log_dir = out_dir / "logs"
     log_dir.mkdir(exist_ok=True)
-    config_text = to_yaml(exp)
-    results.write_atomic(out_dir / results.CONFIG, config_text)
+    resolved = resolve_experiment(exp)
+    results.write_atomic(out_dir / results.CONFIG, to_yaml(exp))
 
     t_start = time.perf_counter()
     keys = Keys(secrets.token_hex(6))
     session, endpoint = open_hub()
     children = Children(log_dir)
-    coord = Coordinator(exp, keys, session, out_dir, config_text)
+    coord = Coordinator(exp, resolved.scenario(), resolved.allocator_cls, resolved.targets, keys, session, out_dir)
     try:
         coord.declare()
         common = ["--run-id", keys.run_id, "--connect", endpoint]

@@ -1,7 +1,9 @@
-"""The emulated radio between agents: range, loss, rate cap, queue limit, latency, and a byte ledger."""
+"""The emulated radio between agents: range, loss, rate cap, queue limit, latency, and a byte ledger.
 
-from swarmbed.netem.params import NetemParams
-from swarmbed.netem.radio import Radio
+Its parameters are ``swarmbed.wire.schema.NetworkSection`` (the experiment's ``network:`` section).
+"""
+
 from swarmbed.netem.ledger import Ledger
+from swarmbed.netem.radio import Radio
 
-__all__ = ["NetemParams", "Radio", "Ledger"]
+__all__ = ["Radio", "Ledger"]

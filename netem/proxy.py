@@ -16,15 +16,14 @@ from pathlib import Path
 
 import zenoh
 
-from swarmbed.experiments.config import Experiment, from_yaml
 from swarmbed.netem.ledger import Ledger
-from swarmbed.netem.params import NetemParams
 from swarmbed.netem.radio import Radio
 from swarmbed.wire.codec import (AgentOut, NetemStep, World, WireError, decode_agent_out, decode_world, encode_inbox,
                         encode_netem_step, encode_report, unpack)
 from swarmbed.wire.keys import Keys, agent_id_of
 from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
-from swarmbed.wire.membership import fetch_config_text, hand_over
+from swarmbed.wire.membership import fetch_spec, hand_over
+from swarmbed.wire.schema import NetemSpec
 from swarmbed.wire.session import open_from_args
 
 log = logging.getLogger("swarmbed.netem")
@@ -32,21 +31,16 @@ log = logging.getLogger("swarmbed.netem")
 LEDGER_FILE = "network_ledger.csv"
 
 
-def params_of(exp: Experiment) -> NetemParams:
-    n = exp.network
-    return NetemParams(range=n.range, loss=n.loss, rate=n.rate, limit=n.limit, latency=n.latency)
-
-
 class Proxy:
-    def __init__(self, exp: Experiment, keys: Keys, session: zenoh.Session, out_dir: Path) -> None:
-        self.exp = exp
+    def __init__(self, spec: NetemSpec, keys: Keys, session: zenoh.Session, out_dir: Path) -> None:
+        self.spec = spec
         self.keys = keys
         self.session = session
         self.out_dir = out_dir
         self.part = out_dir / (LEDGER_FILE + ".part")
         self.sink = open(self.part, "w", newline="")
         self.ledger = Ledger(self.sink)
-        self.radio = Radio(params_of(exp), exp.agents.count, exp.run.dt, component_rng(exp.run.seed, NETEM), self.ledger)
+        self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.outs: dict[int, dict[int, AgentOut]] = {}
         self.lost: set[int] = set()
@@ -171,5 +165,5 @@ def main(argv: list[str] | None = None) -> int:
                       lambda ap: ap.add_argument("--out", required=True, help="run directory for the ledger"), argv)
     keys = Keys(args.run_id)
     with open_from_args(args) as session:
-        exp = from_yaml(fetch_config_text(session, keys), f"config of run {args.run_id}")
-        return Proxy(exp, keys, session, Path(args.out)).run()
+        spec = fetch_spec(session, keys.netem_config, NetemSpec, f"netem config of run {args.run_id}")
+        return Proxy(spec, keys, session, Path(args.out)).run()

@@ -27,14 +27,14 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from swarmbed.netem.ledger import DELIVERED, Ledger
-from swarmbed.netem.params import NetemParams
 from swarmbed.wire.codec import BROADCAST, RadioMessage
+from swarmbed.wire.schema import NetworkSection
 
 _EPS = 1e-9
 
 
 class Radio:
-    def __init__(self, params: NetemParams, n_agents: int, dt: float, rng: np.random.Generator,
+    def __init__(self, params: NetworkSection, n_agents: int, dt: float, rng: np.random.Generator,
                  ledger: Ledger | None = None) -> None:
         self.params = params
         self.n_agents = n_agents

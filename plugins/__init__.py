@@ -1,6 +1,6 @@
-"""Allocation-algorithm plugins and their registry."""
+"""Allocation-algorithm plugins. Write one against :mod:`swarmbed.plugins.base`; register it in
+:mod:`swarmbed.plugins.registry` (or through the ``swarmbed.allocators`` entry-point group)."""
 
 from swarmbed.plugins.base import Allocator, LocalView, Message, TaskInfo
-from swarmbed.plugins.registry import PluginError, make, names, register, resolve
 
-__all__ = ["Allocator", "LocalView", "Message", "TaskInfo", "PluginError", "make", "names", "register", "resolve"]
+__all__ = ["Allocator", "LocalView", "Message", "TaskInfo"]

@@ -15,16 +15,19 @@ a task that no longer exists.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 import numpy as np
 
-from swarmbed.netem import NetemParams, Radio
+from swarmbed.netem import Radio
 from swarmbed.plugins.base import Allocator, LocalView, Message, TaskInfo
-from swarmbed.plugins.registry import make, resolve
-from swarmbed.wire.codec import unpack
+from swarmbed.plugins.registry import make, resolve, resolve_scenario
+from swarmbed.wire.codec import TASK_DTYPE, unpack
+from swarmbed.wire.observation import Observation
+from swarmbed.wire.schema import NetworkSection
 
 DEFAULT_MAX_BYTES = 64 * 1024
 
@@ -65,16 +68,33 @@ class Trace:
     radio: Radio | None = None
 
 
+def _observation(cls: type[Observation], k: int, x: float, y: float, visible: dict[int, TaskInfo],
+                 known: dict[str, Any]) -> Observation:
+    """The scenario's observation of a standing agent; extra fields from ``known``, those the
+    scenario leaves optional as None."""
+    table = np.array([(t.id, t.x, t.y, t.remaining, t.color) for t in visible.values()], dtype=TASK_DTYPE)
+    extras, missing = {}, []
+    for field_name, _ in cls.extra_fields():
+        if field_name in known:
+            extras[field_name] = known[field_name]
+        elif field_name not in {f.name for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}:
+            missing.append(field_name)
+    if missing:
+        raise ConformanceError(f"the kit cannot fill the observation fields {missing} of {cls.__name__}")
+    return cls(float(k), x, y, 0.0, 0.0, table, **extras)
+
+
 def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, seed: int = 0,
-             network: NetemParams = NetemParams(), remove_at: Mapping[int, list[int]] | None = None,
+             network: NetworkSection = NetworkSection(), remove_at: Mapping[int, list[int]] | None = None,
              max_bytes: int = DEFAULT_MAX_BYTES, scenario: str | None = None) -> Trace:
     """Run ``rounds`` rounds. ``remove_at[k]``: tasks that disappear (are done) before round k.
     Each round every agent is shown its view (``observe``, then ``decide``), as in a run; the first
-    view lists the team's starting positions (``obs["team"]``), as the SAR scenario does."""
+    view lists the team's starting positions (``obs.team``, where the scenario's observation has
+    that field), as the SAR scenario does."""
     n = len(inst.agents)
     seeds = np.random.SeedSequence(seed).spawn(n + 1)
     trace = Trace([make(name, params, i, np.random.default_rng(seeds[i]), seed, scenario) for i in range(n)])
-    team = [[i, x, y] for i, (x, y) in enumerate(inst.agents)]
+    team = [(i, x, y) for i, (x, y) in enumerate(inst.agents)]
     radio = Radio(network, n, 1.0, np.random.default_rng(seeds[n]))
     trace.radio = radio
     ids = list(range(n))
@@ -82,6 +102,7 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
     tasks = dict(inst.tasks)
     inboxes: dict[int, list[list]] = {}
     kinds = set(type(trace.allocators[0]).message_kinds)
+    obs_cls = resolve_scenario(scenario).Observation if scenario else Observation
     for k in range(rounds):
         for t in (remove_at or {}).get(k, ()):
             tasks.pop(t, None)
@@ -93,9 +114,11 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
                        if math.hypot(tx - x, ty - y) <= inst.awareness_range}
             inbox = [Message(s, kind, unpack(payload)) for s, kind, payload in inboxes.get(i, [])]
             color = inst.agent_colors[i] if inst.agent_colors else -1
+            obs = _observation(obs_cls, k, x, y, visible, {
+                "color": color, "reach": 5.0, "robots": [], "inspected": [], "rescued": [], "busy": 0,
+                "team": team if k == 0 else None})
             view = LocalView(i, n, k, float(k), x, y, 0.0, 0.0, inst.work_rate, visible, inbox,
-                             inst.max_speed, inst.awareness_range, color=color,
-                             obs={"team": team} if k == 0 else {})
+                             inst.max_speed, inst.awareness_range, obs=obs)
             trace.allocators[i].observe(view)
             decision = trace.allocators[i].decide(view)
             if decision is not None and decision not in tasks:
@@ -150,7 +173,7 @@ def check_degraded_network(name: str, params: Mapping[str, Any], scenario: str =
     inst = random_instance(11, 6, 15, scenario=scenario)
     clean = _assigned(simulate(name, params, inst, 60, scenario=scenario))
     out = {"assigned_clean": clean}
-    for label, net in (("loss", NetemParams(loss=0.3)), ("rate", NetemParams(rate=300.0, limit=3))):
+    for label, net in (("loss", NetworkSection(loss=0.3)), ("rate", NetworkSection(rate=300.0, limit=3))):
         degraded = _assigned(simulate(name, params, inst, 60, network=net, scenario=scenario))
         if clean and not degraded:
             raise ConformanceError(f"{name}: assigns {clean} agents on a clean network but none under {label}")

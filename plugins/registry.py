@@ -1,104 +1,159 @@
-"""Allocators by name, like Gymnasium's environment registry.
+"""Allocators and scenarios by name, like Gymnasium's environment registry.
 
-``allocator.name`` in an experiment is either a registered name (``fcg``) or a ``module:Class``
-reference, where ``module`` is an importable module or a path to a ``.py`` file, so that a user's
-own algorithm needs no change to swarmbed. A name may have one implementation per scenario kind
-(``cbba`` is SPACE's CBBA in MT-SR and the CBBA-ETC paper's reactive CBBA in search and rescue).
+``allocator.name`` and ``scenario.kind`` in an experiment are either registered names (``fcg``,
+``sar``) or targets (``module:Class``, where ``module`` is an importable module or a path to a
+``.py`` file), so a user's own code needs no change to swarmbed. An allocator name may have one
+implementation per scenario (``cbba`` is SPACE's CBBA in MT-SR and the CBBA-ETC paper's reactive
+CBBA in search and rescue).
+
+Other installed packages add theirs through entry points, read on first use:
+
+- group ``swarmbed.scenarios``: ``name = "package.module:Class"``;
+- group ``swarmbed.allocators``: ``name = "package.module:Class"`` for every scenario, or
+  ``name@scenario = ...`` for one.
+
+Only the launcher resolves names (``swarmbed.experiments.config``); the processes it starts load
+the targets it hands them.
 """
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import sys
-from pathlib import Path
+from importlib.metadata import entry_points
 from typing import Any, Mapping
 
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from swarmbed.plugins.base import Allocator
+from swarmbed.agent_runtime.allocator import Allocator
+from swarmbed.coordinator.scenario import Scenario
+from swarmbed.wire.targets import TargetError, is_target, load_target
 
 ANY = "*"
-_REGISTRY: dict[str, dict[str, str]] = {}  # name -> scenario kind (or ANY) -> "module:Class"
+ALLOCATOR_GROUP = "swarmbed.allocators"
+SCENARIO_GROUP = "swarmbed.scenarios"
+
+_ALLOCATORS: dict[str, dict[str, str]] = {}  # name -> scenario (or ANY) -> target
+_SCENARIOS: dict[str, str] = {}  # name -> target
+_entry_points_read = False
 
 
 class PluginError(ValueError):
-    """An allocator that cannot be found, loaded or configured."""
+    """An allocator or scenario that cannot be found, loaded or configured."""
 
 
 def register(name: str, target: str, scenario: str = ANY) -> None:
-    """Register ``target`` (``"package.module:Class"``) under ``name`` for one scenario kind (or
-    all); imported only when used."""
-    known = _REGISTRY.setdefault(name, {})
+    """Register allocator ``target`` under ``name`` for one scenario (or all); imported only when used."""
+    known = _ALLOCATORS.setdefault(name, {})
     if known.get(scenario, target) != target:
-        raise PluginError(f"allocator {name!r} is already registered as {known[scenario]}")
+        raise PluginError(f"allocator {name!r} for scenario {scenario!r} is already registered as {known[scenario]}")
     known[scenario] = target
 
 
+def register_scenario(name: str, target: str) -> None:
+    """Register scenario ``target`` under ``name``; imported only when used."""
+    if _SCENARIOS.get(name, target) != target:
+        raise PluginError(f"scenario {name!r} is already registered as {_SCENARIOS[name]}")
+    _SCENARIOS[name] = target
+
+
+def _read_entry_points() -> None:
+    global _entry_points_read
+    if _entry_points_read:
+        return
+    _entry_points_read = True
+    for ep in entry_points(group=SCENARIO_GROUP):
+        register_scenario(ep.name, ep.value)
+    for ep in entry_points(group=ALLOCATOR_GROUP):
+        name, _, scenario = ep.name.partition("@")
+        register(name, ep.value, scenario or ANY)
+
+
 def names() -> list[str]:
-    return sorted(_REGISTRY)
+    _read_entry_points()
+    return sorted(_ALLOCATORS)
 
 
 def entries() -> list[tuple[str, str]]:
-    """(name, scenario kind) of every registration."""
-    return sorted((n, k) for n, kinds in _REGISTRY.items() for k in kinds)
+    """(name, scenario) of every allocator registration."""
+    _read_entry_points()
+    return sorted((n, k) for n, kinds in _ALLOCATORS.items() for k in kinds)
 
 
-def _import_module(ref: str):
-    if ref.endswith(".py"):
-        path = Path(ref).resolve()
-        if not path.is_file():
-            raise PluginError(f"plugin file {ref} does not exist")
-        mod_name = f"swarmbed_user_plugin_{path.stem}"
-        if mod_name in sys.modules:
-            return sys.modules[mod_name]
-        spec = importlib.util.spec_from_file_location(mod_name, path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[mod_name] = module
-        spec.loader.exec_module(module)
-        return module
-    return importlib.import_module(ref)
+def scenario_names() -> list[str]:
+    _read_entry_points()
+    return sorted(_SCENARIOS)
+
+
+def scenario_target(kind: str) -> str:
+    """The target of scenario ``kind`` (a registered name or already a target)."""
+    _read_entry_points()
+    if kind in _SCENARIOS:
+        return _SCENARIOS[kind]
+    if is_target(kind):
+        return kind
+    raise PluginError(f"unknown scenario {kind!r}; registered: {', '.join(scenario_names())}; "
+                      "or give 'module:Class' / 'path/to/file.py:Class'")
+
+
+def allocator_target(name: str, scenario: str | None = None) -> str:
+    """The target of allocator ``name`` for ``scenario`` (a registered name or already a target)."""
+    _read_entry_points()
+    kinds = _ALLOCATORS.get(name)
+    if not kinds:
+        if is_target(name):
+            return name
+        raise PluginError(f"unknown allocator {name!r}; registered: {', '.join(names())}; "
+                          "or give 'module:Class' / 'path/to/file.py:Class'")
+    if scenario is None:
+        return kinds.get(ANY) or kinds[sorted(kinds)[0]]
+    target = kinds.get(scenario, kinds.get(ANY))
+    if target is None:
+        raise PluginError(f"allocator {name!r} has no implementation for scenario {scenario!r} "
+                          f"(it has: {', '.join(sorted(kinds))})")
+    return target
 
 
 def resolve(name: str, scenario: str | None = None) -> type[Allocator]:
-    kinds = _REGISTRY.get(name, {})
-    if kinds and scenario is not None and scenario not in kinds and ANY not in kinds:
-        raise PluginError(f"allocator {name!r} has no implementation for scenario {scenario!r} "
-                          f"(it has: {', '.join(sorted(kinds))})")
-    target = kinds.get(scenario, kinds.get(ANY)) if kinds else name
-    if target is None:  # no scenario given: the only (or first) implementation
-        target = kinds[sorted(kinds)[0]]
-    if ":" not in target:
-        raise PluginError(f"unknown allocator {name!r}; registered: {', '.join(names())}; "
-                          "or give 'module:Class' / 'path/to/file.py:Class'")
-    module_ref, _, cls_name = target.rpartition(":")
     try:
-        module = _import_module(module_ref)
-    except ImportError as exc:
-        raise PluginError(f"cannot import allocator module {module_ref!r}: {exc}") from exc
-    cls = getattr(module, cls_name, None)
-    if not (isinstance(cls, type) and issubclass(cls, Allocator)):
-        raise PluginError(f"{target} is not an Allocator subclass")
-    return cls
+        return load_target(allocator_target(name, scenario), Allocator)
+    except TargetError as exc:
+        raise PluginError(f"allocator {name!r}: {exc}") from None
+
+
+def resolve_scenario(kind: str) -> type[Scenario]:
+    try:
+        return load_target(scenario_target(kind), Scenario)
+    except TargetError as exc:
+        raise PluginError(f"scenario {kind!r}: {exc}") from None
+
+
+def _validate(model: type[BaseModel], params: Mapping[str, Any], section: str) -> BaseModel:
+    try:
+        return model.model_validate(dict(params))
+    except ValidationError as exc:
+        raise PluginError("\n".join(
+            f"{'.'.join([section, *(str(p) for p in e['loc'])])}: "
+            f"{'unknown key' if e['type'] == 'extra_forbidden' else e['msg']}"
+            for e in exc.errors())) from None
 
 
 def validate_params(name: str, params: Mapping[str, Any], scenario: str | None = None) -> BaseModel:
-    cls = resolve(name, scenario)
-    try:
-        return cls.Params.model_validate(dict(params))
-    except ValidationError as exc:
-        problems = "; ".join(
-            f"allocator.{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()
-        )
-        raise PluginError(problems) from None
+    return _validate(resolve(name, scenario).Params, params, "allocator")
+
+
+def validate_scenario_params(kind: str, params: Mapping[str, Any]) -> BaseModel:
+    return _validate(resolve_scenario(kind).Params, params, "scenario")
 
 
 def make(name: str, params: Mapping[str, Any], agent_id: int, rng: np.random.Generator,
          run_seed: int = 0, scenario: str | None = None) -> Allocator:
+    """An allocator instance outside a run (tests, the conformance kit)."""
     cls = resolve(name, scenario)
     return cls(agent_id, validate_params(name, params, scenario), rng, run_seed)
 
+
+register_scenario("mtsr", "swarmbed.coordinator.mtsr:MTSR")
+register_scenario("sar", "swarmbed.coordinator.sar:SAR")
 
 register("fcg", "swarmbed.plugins.fcg:FirstClaimedGreedy", "mtsr")
 register("noop", "swarmbed.plugins.noop:NoopAllocator")

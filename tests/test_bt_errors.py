@@ -6,7 +6,7 @@ import pytest
 
 from swarmbed.agent_runtime.bt import BTError, load_tree
 from swarmbed.agent_runtime.nodes import space_registry
-from swarmbed.agent_runtime.runtime import default_tree_path
+from swarmbed.coordinator.scenario import SPACE_TREE
 from swarmbed.experiments.cli import main
 
 
@@ -35,13 +35,13 @@ def test_load_errors_name_file_line_and_node(body, needle):
 
 
 def test_default_tree_loads_and_uses_the_space_nodes():
-    tree = load_tree(default_tree_path(), space_registry())
+    tree = load_tree(SPACE_TREE, space_registry())
     ids = {type(n).ID for n in tree.nodes}
     assert {"LocalSensingNode", "DecisionMakingNode", "TaskExecutingNode", "ExplorationNode"} <= ids
 
 
 def test_palette_lists_custom_nodes_with_ports(capsys):
-    assert main(["bt", "palette"]) == 0
+    assert main(["bt", "palette", "--scenario", "mtsr", "--allocator", "fcg"]) == 0
     root = ET.fromstring(capsys.readouterr().out.split("\n", 1)[1])
     model = root.find("TreeNodesModel")
     nodes = {el.get("ID"): el for el in model}
@@ -51,11 +51,24 @@ def test_palette_lists_custom_nodes_with_ports(capsys):
     assert "Sequence" not in nodes  # Groot2 knows the built-ins
 
 
-def test_bt_check_command_reports_errors(tmp_path, capsys):
+def test_bt_check_command_reports_every_bad_file(tmp_path, capsys):
     bad = tmp_path / "bad.xml"
     bad.write_text('<root BTCPP_format="4"><BehaviorTree ID="M"><Nope/></BehaviorTree></root>')
-    assert main(["bt", "check", str(bad)]) == 2
-    assert f"{bad}:1 <Nope>: unknown node type" in capsys.readouterr().err
+    worse = tmp_path / "worse.xml"
+    worse.write_text('<root BTCPP_format="4"><BehaviorTree ID="M"><Sequence>')
+    assert main(["bt", "check", str(bad), str(SPACE_TREE), str(worse)]) == 2
+    out, err = capsys.readouterr()
+    assert f"{bad}:1 <Nope>: unknown node type" in err and f"{worse}:1: malformed XML" in err
+    assert f"{SPACE_TREE}: ok" in out
+
+
+def test_palette_of_an_allocator_has_the_nodes_its_trees_use(capsys):
+    assert main(["bt", "palette", "--scenario", "sar", "--allocator", "cbba-etc"]) == 0
+    ids = {el.get("ID") for el in ET.fromstring(capsys.readouterr().out.split("\n", 1)[1]).find("TreeNodesModel")}
+    assert {"IsTargetValid", "ExplorationNode"} <= ids and "DecisionMakingNode" in ids
+    assert main(["bt", "palette"]) == 0  # every registered scenario and allocator
+    every = {el.get("ID") for el in ET.fromstring(capsys.readouterr().out.split("\n", 1)[1]).find("TreeNodesModel")}
+    assert ids <= every
 
 
 def test_check_allocator_command(capsys, tmp_path):

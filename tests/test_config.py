@@ -3,6 +3,7 @@
 import pytest
 
 from swarmbed.experiments import config as cfg
+from swarmbed.experiments.config import resolve_experiment
 from tests.conftest import QUICKSTART
 
 
@@ -39,8 +40,13 @@ def test_overrides_apply_to_any_dotted_key():
 
 
 def test_bad_overrides_are_refused():
-    with pytest.raises(cfg.ConfigError, match="agents.speed: unknown key"):
+    with pytest.raises(cfg.ConfigError, match="^--set agents.speed=3: unknown key$"):
         cfg.load(QUICKSTART, ["agents.speed=3"])
+    with pytest.raises(cfg.ConfigError, match=r"^--set scenario.generations=\{'interval': -1\}: "
+                                              r"scenario.generations.interval: Input should be greater than 0$"):
+        cfg.load(QUICKSTART, ["scenario.generations={interval: -1}"])
+    with pytest.raises(cfg.ConfigError, match="^--set allocator.mode=Fastest: Input should be"):
+        cfg.load(QUICKSTART, ["allocator.mode=Fastest"])
     with pytest.raises(cfg.ConfigError, match="expected dotted.key=value"):
         cfg.load(QUICKSTART, ["agents.count"])
 
@@ -51,16 +57,20 @@ def test_resolved_config_round_trips():
 
 
 def test_every_key_is_described():
-    keys = [k for k, _, _ in cfg.describe_keys()]
-    for key in ("run.seed", "run.duration", "agents.count", "network.loss", "network.rate", "scenario.width"):
-        assert key in keys
+    rows = [row for model in cfg.SECTIONS.values() for row in cfg.describe(model)]
+    rows += cfg.describe(resolve_experiment(cfg.load(QUICKSTART)).scenario_cls.Params)
+    for key, typ, default, meaning in rows:
+        assert typ and default and meaning and "Undefined" not in default, (key, typ, default, meaning)
+    keys = {r[0] for r in rows}
+    assert {"seed", "duration", "count", "loss", "rate", "width", "generations.interval"} <= keys
 
 
 def test_naming_another_allocator_drops_the_old_ones_parameters():
     exp = cfg.load(QUICKSTART, ["allocator.name=cbba"])  # quickstart sets fcg's mode
-    assert exp.allocator.name == "cbba" and exp.allocator.params() == {}
+    assert exp.allocator.name == "cbba" and "mode" not in exp.allocator.params()
+    assert exp.allocator.params()["max_tasks"] == 5  # resolved: every parameter, defaults included
     exp = cfg.load(QUICKSTART, ["allocator.name=cbba", "allocator.max_tasks=3"])
-    assert exp.allocator.params() == {"max_tasks": 3}
+    assert exp.allocator.params()["max_tasks"] == 3
 
 
 def test_a_sweep_file_given_to_run_says_so():

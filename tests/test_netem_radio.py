@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.netem import NetemParams, Radio
+from swarmbed.netem import Radio
+from swarmbed.wire.schema import NetworkSection as NetemParams
 from swarmbed.wire.codec import BROADCAST, RadioMessage
 
 

@@ -6,7 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.plugins import make
+from swarmbed.coordinator.sar import SARObservation
+from swarmbed.plugins.registry import make
+from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.plugins.base import LocalView, Message, TaskInfo
 from swarmbed.plugins.conformance import random_instance, simulate
 from swarmbed.plugins.sar.ccbba import ClusteringCBBA, kmeans_pp
@@ -47,8 +49,10 @@ def test_interval_is_clipped_to_both_bounds():
 
 def view(t, x, y, victims, inbox=(), agent=0, color=0):
     tasks = {v: TaskInfo(v, vx, vy, 100.0, c) for v, (vx, vy, c) in victims.items()}
+    obs = SARObservation(float(t), x, y, 0.0, 0.0, np.empty(0, TASK_DTYPE), color=color, reach=5.0, robots=[],
+                         inspected=[], rescued=[], busy=0)
     return LocalView(agent, 4, int(t), float(t), x, y, 0.0, 0.0, 1.0, tasks, list(inbox), 11.1, math.inf,
-                     2 * math.pi, color, {})
+                     2 * math.pi, obs)
 
 
 def etc(**params):

@@ -5,8 +5,12 @@ import math
 import numpy as np
 
 from swarmbed.coordinator.kinematics import Limits, step
-from swarmbed.coordinator.mtsr import MTSRWorld
+from swarmbed.experiments.config import resolve_experiment
 from tests.conftest import experiment
+
+
+def MTSRWorld(exp, rng):
+    return resolve_experiment(exp).scenario().make_world(rng)
 
 
 def test_kinematics_honour_speed_acceleration_and_turn_rate():

@@ -15,10 +15,14 @@ class Keys:
     def root(self) -> str:
         return f"{PREFIX}/{self.run_id}"
 
-    # queryable on the coordinator: the run's resolved experiment (YAML)
+    # queryables on the coordinator: what each process needs of the run (JSON of wire.schema specs)
     @property
-    def config(self) -> str:
-        return f"{self.root}/config"
+    def agent_config(self) -> str:
+        return f"{self.root}/config/agent"
+
+    @property
+    def netem_config(self) -> str:
+        return f"{self.root}/config/netem"
 
     # coordinator -> netem proxy: the run is over after the given tick
     @property

@@ -3,30 +3,42 @@
 from __future__ import annotations
 
 import time
+from typing import TypeVar
 
 import zenoh
 
-from swarmbed.wire.keys import Keys
+from pydantic import BaseModel, ValidationError
+
+M = TypeVar("M", bound=BaseModel)
 
 
 class JoinError(RuntimeError):
     pass
 
 
-def fetch_config_text(session: zenoh.Session, keys: Keys, timeout: float = 60.0) -> str:
-    """The resolved experiment YAML, asked of the coordinator's queryable (retried until ``timeout``)."""
+def fetch_spec(session: zenoh.Session, key: str, model: type[M], what: str, timeout: float = 60.0) -> M:
+    """A process's spec (JSON of ``model``), asked of the coordinator's queryable on ``key``
+    (retried until ``timeout``) and validated; a malformed one is a JoinError naming ``what``."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        for reply in session.get(keys.config, timeout=2.0):
+        for reply in session.get(key, timeout=2.0):
             if reply.ok is not None:
-                return reply.ok.payload.to_string()
+                try:
+                    return model.model_validate_json(reply.ok.payload.to_bytes())
+                except ValidationError as exc:
+                    raise JoinError(f"{what} on {key} is malformed: {exc}") from None
         time.sleep(0.05)
-    raise JoinError(f"no coordinator answered on {keys.config} within {timeout:.0f} s")
+    raise JoinError(f"no coordinator answered on {key} within {timeout:.0f} s")
 
 
-def serve_config(session: zenoh.Session, keys: Keys, text: str):
-    """Answer every query on the config key with ``text``; keep the returned queryable alive."""
-    return session.declare_queryable(keys.config, lambda query: query.reply(keys.config, text))
+def serve_text(session: zenoh.Session, key: str, text: str):
+    """Answer every query on ``key`` with ``text``; keep the returned queryable alive."""
+    return session.declare_queryable(key, lambda query: query.reply(key, text))
+
+
+def is_alive(session: zenoh.Session, token_key: str, timeout: float = 2.0) -> bool:
+    """Whether some process holds the liveliness token ``token_key`` now."""
+    return any(reply.ok is not None for reply in session.liveliness().get(token_key, timeout=timeout))
 
 
 def hand_over(session: zenoh.Session, key: str, payload: bytes, timeout: float = 30.0) -> bool:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from swarmbed.coordinator.sar import SARObservation
 from swarmbed.plugins.base import Allocator, LocalView, TaskInfo
 
 TREES = Path(__file__).resolve().parent / "trees"
@@ -42,18 +43,19 @@ class SARStrategy(Allocator):
         self.now = 0.0
 
     # -- memory -------------------------------------------------------------------------------------
-    def observe(self, view: LocalView) -> None:
-        self.now, self.my_color = view.time, view.color
-        self.reach = float(view.obs.get("reach", self.reach))
+    def observe(self, view: LocalView[SARObservation]) -> None:
+        obs = view.obs
+        self.now, self.my_color = view.time, obs.color
+        self.reach = obs.reach
         for v, info in view.tasks.items():
             self.victims[v] = info
             self.expires[v] = view.time + info.remaining
             if info.color >= 0:
                 self.colors[v] = info.color
-        for v, color in view.obs.get("inspected", ()):
+        for v, color in obs.inspected:
             self.inspected.add(v)
             self.colors[v] = color
-        rescued = set(view.obs.get("rescued", ()))
+        rescued = set(obs.rescued)
         gone = [v for v, info in self.victims.items()
                 if v in rescued or (v not in view.tasks and (view.sees(info.x, info.y) or self.expires[v] <= view.time))]
         for v in gone:

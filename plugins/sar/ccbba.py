@@ -78,8 +78,8 @@ class ClusteringCBBA(SARConsensus):
         self.members = [a for a in sorted(groups[mine]) if a != self.leader]
 
     def observe(self, view: LocalView) -> None:
-        if self.leader is None and "team" in view.obs:
-            self.setup(view.obs["team"])
+        if self.leader is None and view.obs.team is not None:
+            self.setup(view.obs.team)
         super().observe(view)
         if self.is_leader:
             self.relay(view)

@@ -151,7 +151,7 @@ class StateMachine(_SARNode, SyncAction):
         action = self.strategy.fsm_step(self.view)
         if action is None:  # nothing to do: wander toward a random point until there
             if getattr(self, "waypoint", None) is None or self._reached():
-                self.waypoint = ctx.exp.scenario.random_point(ctx.rng)
+                self.waypoint = ctx.scenario.random_point(ctx.rng)
             action = ["goto", *self.waypoint]
         else:
             self.waypoint = None

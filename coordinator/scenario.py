@@ -1,0 +1,142 @@
+"""What a scenario is: one class that holds everything scenario-specific, registered by name.
+
+A :class:`Scenario` declares its parameters (the ``scenario:`` section of an experiment), its typed
+observation (part of the wire contract), the behavior-tree nodes and default tree its agents run,
+the metrics that measure its outcome, and it builds the :class:`World` that the coordinator drives.
+The coordinator, the agent runtime and the CLI know nothing else about scenarios, so a new one is
+one module plus one registry line (``swarmbed.plugins.registry``) or a ``swarmbed.scenarios``
+entry point in another package; ``swarmbed.coordinator.checker.check_scenario`` checks it.
+
+Agents build a scenario too (from the same resolved parameters) for its sensing range and its
+helpers (``random_point``); they never build its world.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel
+
+from swarmbed.wire.observation import Observation as BaseObservation
+from swarmbed.wire.schema import AgentsSection, Experiment
+
+SPACE_TREE = Path(str(resources.files("swarmbed.agent_runtime") / "trees" / "space_default.xml"))
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """What an agent's sensors cover: tasks within ``range`` and inside a cone of ``angle``."""
+
+    range: float
+    angle: float = 2 * math.pi
+
+
+class World(abc.ABC):
+    """The ground truth of one run, advanced one tick at a time by the coordinator."""
+
+    tick: int
+    alive: np.ndarray  # bool per agent
+
+    @property
+    @abc.abstractmethod
+    def time(self) -> float: ...
+
+    @property
+    @abc.abstractmethod
+    def finished(self) -> bool:
+        """Nothing is left to do (the run may stop early)."""
+
+    @abc.abstractmethod
+    def positions(self) -> tuple[list[int], list[float], list[float]]:
+        """Ids and positions of the live agents, in id order."""
+
+    @abc.abstractmethod
+    def observations(self) -> dict[int, BaseObservation]:
+        """What each live agent senses at this tick."""
+
+    @abc.abstractmethod
+    def apply(self, actions: dict[int, list]) -> None:
+        """Advance one tick with every live agent's action (all act on the state of this tick)."""
+
+    def draw_losses(self) -> list[int]:
+        """Agents the scenario loses at the next tick (default: none)."""
+        return []
+
+    @abc.abstractmethod
+    def kill(self, agent_id: int) -> None: ...
+
+    @abc.abstractmethod
+    def row(self) -> dict[str, Any]:
+        """This tick's time-series row; the same keys every tick."""
+
+    @abc.abstractmethod
+    def summary(self) -> dict[str, Any]:
+        """Outcome figures for ``summary.json`` (JSON values)."""
+
+    @abc.abstractmethod
+    def per_agent(self) -> dict[str, list]:
+        """Columns of ``agents.csv``: one list per column, one entry per agent."""
+
+    def invariants(self) -> list[str]:
+        """Broken conservation laws (tasks or victims unaccounted), as sentences; empty when sound."""
+        return []
+
+
+class Scenario(abc.ABC):
+    """A scenario, built from its resolved parameters and the run's agents section and tick length."""
+
+    #: the ``scenario:`` section's own keys (pydantic; unknown keys are refused)
+    Params: ClassVar[type[BaseModel]]
+    #: the typed observation its world sends each agent every tick
+    Observation: ClassVar[type[BaseObservation]] = BaseObservation
+    #: behavior-tree nodes its agents' trees may use, and the tree used when the allocator has none
+    bt_nodes: ClassVar[tuple[type, ...]] = ()
+    default_tree: ClassVar[Path] = SPACE_TREE
+    #: summary keys that measure the outcome, first the headline (sweep tables, printed summaries)
+    outcome_metrics: ClassVar[tuple[str, ...]] = ()
+    #: every key ``World.summary()`` returns (checked by the scenario checker)
+    summary_keys: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, params: BaseModel, agents: AgentsSection, dt: float) -> None:
+        self.params = params
+        self.agents = agents
+        self.dt = dt
+
+    @classmethod
+    def check(cls, exp: Experiment, params: BaseModel) -> list[str]:
+        """Problems between this scenario's parameters and the rest of the experiment, as
+        ``dotted.key: message`` (default: none)."""
+        return []
+
+    @abc.abstractmethod
+    def make_world(self, rng: np.random.Generator, allocator: type | None = None) -> World:
+        """The world of one run. ``allocator`` is the allocator class, for traits the scenario
+        reads from it (e.g. whether it bids with victims' colours)."""
+
+    @abc.abstractmethod
+    def sensing(self) -> Sensing: ...
+
+    @abc.abstractmethod
+    def random_point(self, rng: np.random.Generator) -> tuple[float, float]:
+        """A uniformly random point of the arena (exploration waypoints)."""
+
+    def blackboard(self) -> dict[str, Any]:
+        """Entries the agents' trees find on their blackboard at start (ports default to them)."""
+        return {"exploration_duration": self.agents.exploration_duration}
+
+    def random_action(self, obs: BaseObservation, rng: np.random.Generator) -> list:
+        """An action for the checker to drive the world with (default: go to a visible task or
+        stop). Scenarios with more actions override it so that the checker exercises them."""
+        if len(obs.tasks) and rng.random() < 0.8:
+            return ["goto_task", int(obs.tasks["id"][int(rng.integers(len(obs.tasks)))])]
+        return ["stop"]
+
+    def summary_rows(self, summary: dict[str, Any]) -> list[tuple[str, Any]]:
+        """(label, value) lines of the printed summary (default: the outcome metrics)."""
+        return [(key.replace("_", " "), summary.get(key)) for key in self.outcome_metrics]

@@ -1,0 +1,129 @@
+"""The experiment schema: pure pydantic models, shared by every process and importing no plugin.
+
+An experiment has five sections. ``run``, ``agents`` and ``network`` are checked here in full.
+``scenario`` and ``allocator`` are a name (``kind`` / ``name``) plus the parameters of the code
+that name resolves to; only the launcher (``swarmbed.experiments.config``) resolves names and
+checks those parameters against the plugin's own ``Params`` model, and it writes them back fully
+resolved, so that every process reads complete sections.
+
+Each process is handed only what it needs: the netem proxy a :class:`NetemSpec` (its radio
+parameters), an agent an :class:`AgentSpec` (its sections and the code to load). Both travel as
+JSON from the coordinator's queryables and are validated again on arrival.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class Strict(BaseModel):
+    """A section whose unknown keys are refused."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class RunSection(Strict):
+    seed: int = Field(0, ge=0, description="run seed; every random source derives from it")
+    clock: Literal["lockstep"] = Field("lockstep", description="lockstep: ticks advance when everyone has acted")
+    dt: float = Field(1.0, gt=0, description="simulated seconds per tick")
+    duration: float = Field(3000.0, gt=0, description="simulated seconds before the run stops")
+    tick_timeout: float = Field(60.0, gt=0, description="wall seconds a tick may wait for a silent process")
+    join_timeout: float = Field(120.0, gt=0, description="wall seconds to wait for every process to join")
+    allow_agent_failures: bool = Field(False, description="go on without an agent whose process dies")
+    record_every: int = Field(1, ge=1, description="ticks between time-series rows")
+    record_trajectories: bool = Field(False, description="also write trajectories.csv (tick, agent, x, y)")
+    stop_when_done: bool = Field(True, description="end the run once every task there will be is done")
+
+
+class AgentsSection(Strict):
+    count: int = Field(10, ge=1, le=1000, description="number of agents, one OS process each")
+    max_speed: float = Field(0.25, gt=0, description="v_max, units per second")
+    max_accel: float = Field(0.01, gt=0, description="a_max, units per second^2 (MT-SR kinematics)")
+    max_turn_rate: float = Field(0.25, gt=0, description="omega_max, radians per second (MT-SR kinematics)")
+    work_rate: float = Field(1.0, gt=0, description="workload done per second (MT-SR)")
+    awareness_range: float = Field(300.0, gt=0, description="tasks within this distance are observed (MT-SR)")
+    exploration_duration: float = Field(1000.0, gt=0, description="seconds spent exploring toward one waypoint")
+    behavior_tree: str = Field("default", description="'default' (the allocator's or scenario's tree) or a path to "
+                                                      "BT.CPP v4 XML")
+
+
+class ScenarioSection(BaseModel):
+    """``kind`` (a registered scenario or ``module:Class``) plus that scenario's own parameters."""
+
+    model_config = ConfigDict(extra="allow")
+    kind: str = Field("mtsr", description="registered scenario name or module:Class")
+
+    def params(self) -> dict[str, Any]:
+        return dict(self.model_extra or {})
+
+
+class AllocatorSection(BaseModel):
+    """``name`` (a registered allocator or ``module:Class``) plus the plugin's own parameters."""
+
+    model_config = ConfigDict(extra="allow")
+    name: str = Field("fcg", description="registered allocator name or module:Class")
+
+    def params(self) -> dict[str, Any]:
+        return dict(self.model_extra or {})
+
+
+class NetworkSection(Strict):
+    """The radio's parameters, named as tc-netem names them; the one definition of their bounds."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    range: float | None = Field(None, ge=0, description="communication range; null = unlimited")
+    loss: float = Field(0.0, ge=0, le=1, description="probability a copy is lost")
+    rate: float | None = Field(None, gt=0, description="per-sender cap in bytes per simulated second; null = none")
+    limit: int | None = Field(None, ge=1, description="messages that may wait behind the rate cap (tail drop)")
+    latency: int = Field(0, ge=0, description="extra ticks of delay on top of the one-tick minimum")
+
+
+class Experiment(Strict):
+    name: str = Field("experiment", description="names the run directory and the progress bar")
+    run: RunSection = RunSection()
+    scenario: ScenarioSection = ScenarioSection()
+    agents: AgentsSection = AgentsSection()
+    allocator: AllocatorSection = AllocatorSection()
+    network: NetworkSection = NetworkSection()
+
+    @property
+    def ticks(self) -> int:
+        return int(round(self.run.duration / self.run.dt))
+
+
+class Targets(Strict):
+    """The code a run's names resolved to, as ``module:Class`` (or ``path/file.py:Class``)."""
+
+    scenario: str
+    allocator: str
+
+
+class AgentSpec(Strict):
+    """Everything an agent process needs, and nothing else."""
+
+    seed: int
+    dt: float
+    agents: AgentsSection
+    scenario: ScenarioSection
+    allocator: AllocatorSection
+    targets: Targets
+
+
+class NetemSpec(Strict):
+    """Everything the netem proxy needs: its radio parameters and the run's size and seed."""
+
+    seed: int
+    dt: float
+    agents: int
+    network: NetworkSection
+
+
+def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
+    return AgentSpec(seed=exp.run.seed, dt=exp.run.dt, agents=exp.agents, scenario=exp.scenario,
+                     allocator=exp.allocator, targets=targets)
+
+
+def netem_spec(exp: Experiment) -> NetemSpec:
+    return NetemSpec(seed=exp.run.seed, dt=exp.run.dt, agents=exp.agents.count, network=exp.network)

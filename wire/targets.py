@@ -1,0 +1,58 @@
+"""Loading code named by a target: ``package.module:Class`` or ``path/to/file.py:Class``.
+
+The launcher resolves the names in an experiment (``allocator.name``, ``scenario.kind``) to
+targets; processes load exactly the targets they are handed, and never look a name up.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+
+class TargetError(ValueError):
+    """A target that cannot be imported or is not what it should be."""
+
+
+def is_target(text: str) -> bool:
+    return ":" in text
+
+
+def _import_module(ref: str) -> ModuleType:
+    if ref.endswith(".py"):
+        path = Path(ref).resolve()
+        if not path.is_file():
+            raise TargetError(f"file {ref} does not exist")
+        mod_name = f"swarmbed_user_plugin_{path.stem}"
+        if mod_name in sys.modules:
+            return sys.modules[mod_name]
+        spec = importlib.util.spec_from_file_location(mod_name, path)
+        if spec is None or spec.loader is None:
+            raise TargetError(f"cannot load {ref} as a Python module")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[mod_name] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[mod_name]
+            raise
+        return module
+    return importlib.import_module(ref)
+
+
+def load_target(target: str, base: type) -> type:
+    """The class ``target`` names; it must be a subclass of ``base``."""
+    if not is_target(target):
+        raise TargetError(f"{target!r} is not a target: expected 'module:Class' or 'path/to/file.py:Class'")
+    module_ref, _, cls_name = target.rpartition(":")
+    try:
+        module = _import_module(module_ref)
+    except ImportError as exc:
+        raise TargetError(f"cannot import {module_ref!r}: {exc}") from exc
+    cls = getattr(module, cls_name, None)
+    if not (isinstance(cls, type) and issubclass(cls, base)):
+        raise TargetError(f"{target} is not a {base.__name__} subclass")
+    return cls
