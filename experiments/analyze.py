@@ -50,6 +50,9 @@ SAR_METRICS = {
 }
 
 
+DEFAULT_CONTROL = "cbba-etc"
+
+
 class AnalyzeError(ValueError):
     pass
 
@@ -214,11 +217,20 @@ def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
     return written
 
 
-def analyze(sweep_dirs: list[Path] | Path, control: str = "cbba-etc") -> list[Path]:
+def analyze(sweep_dirs: list[Path] | Path, control: str | None = None) -> list[Path]:
+    """Tables and figures from sweep directories, written to the first. ``control``: the strategy
+    the others are compared with (default: cbba-etc where the sweeps have it); one the sweeps do
+    not have is refused before anything is written."""
     dirs = [sweep_dirs] if isinstance(sweep_dirs, Path) else list(sweep_dirs)
     out = dirs[0]
     df = load(dirs)
     sar = "rescued" in df
+    if control is not None and control not in set(df[ALLOCATOR]):
+        raise AnalyzeError(f"--control {control}: no such strategy in these sweeps "
+                           f"(they have: {', '.join(sorted(set(df[ALLOCATOR])))})")
+    control = control or DEFAULT_CONTROL
+    for stale in ("statistics.csv", "statistics.md"):  # never leave an earlier analysis's statistics
+        (out / stale).unlink(missing_ok=True)
     written = []
     summary = scenario_summary(df, SAR_METRICS if sar else METRICS)
     summary.to_csv(out / "scenario_summary.csv", index=False)

@@ -49,7 +49,7 @@ def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> 
         print(f"  {label:<{width}}  {_fmt(value)}", file=stream)
     lost = summary["agents_lost"]
     if lost:
-        text = ", ".join(f"{agent} at tick {tick}" for agent, tick in lost.items())
+        text = ", ".join(f"{a} at tick {t}" for a, t in sorted(lost.items(), key=lambda kv: int(kv[0])))
         print(textwrap.fill(f"agents lost: {text} (their logs: logs/agent_<id>.log)", width=100,
                             initial_indent="  ", subsequent_indent="    "), file=stream)
 
@@ -91,6 +91,16 @@ def cmd_bt(args: argparse.Namespace) -> int:
             bad += 1
             print(f"error: {exc}", file=sys.stderr)
     return 2 if bad else 0
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not at least 1")
+    return value
 
 
 def _first_line(cls: type) -> str:
@@ -149,9 +159,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     ok = table[table["status"] == "ok"]
     print(f"sweep: {out}/sweep.csv  ({len(ok)} of {len(table)} runs complete, "
           f"{len(sweep.scenarios)} scenarios x {sweep.runs} runs)")
-    shown = [c for c in ("mission_time", "time_99", "tasks_completed", "network.messages_sent") if c in ok]
+    metrics: list[str] = []
+    for kind in ok["scenario_kind"].dropna().unique() if "scenario_kind" in ok else ():
+        metrics += [m for m in registry.resolve_scenario(kind).outcome_metrics if m not in metrics]
+    shown = [c for c in (*metrics, "network.messages_sent") if c in ok]
     if shown:
-        print(ok.groupby("scenario")[shown].mean().round(1).to_string())
+        print(ok.groupby("scenario")[shown].mean(numeric_only=True).round(1).to_string())
     return 0 if len(ok) == len(table) else 1
 
 
@@ -189,6 +202,21 @@ def cmd_check_allocator(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def cmd_check_scenario(args: argparse.Namespace) -> int:
+    from swarmbed.coordinator.checker import ScenarioCheckError, check_scenario
+
+    cls = registry.resolve_scenario(args.scenario)
+    try:
+        params = dict(cfg.parse_override(text) for text in args.set)
+        agents = dict(cfg.parse_override(text) for text in args.agents)
+        result = check_scenario(cls, params, agents, ticks=args.ticks)
+    except ScenarioCheckError as exc:
+        print(f"FAIL {args.scenario}: {exc}")
+        return 1
+    print(f"PASS {args.scenario}: {result}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -220,8 +248,8 @@ def main(argv: list[str] | None = None) -> int:
     sw = sub.add_parser("sweep", help="Monte Carlo runs over scenarios, in parallel and resumable")
     sw.add_argument("sweep", help="sweep YAML (base + scenarios/grid + runs) or a plain experiment")
     sw.add_argument("--out", help="sweep directory (default: runs/<name>)")
-    sw.add_argument("--jobs", "-j", type=int, help="runs at once (default: one per core)")
-    sw.add_argument("--runs", "-n", type=int, help="runs per scenario (overrides the file)")
+    sw.add_argument("--jobs", "-j", type=_positive, help="runs at once (default: one per core)")
+    sw.add_argument("--runs", "-n", type=_positive, help="runs per scenario (overrides the file)")
     sw.add_argument("--seed", type=int, help="sweep seed (overrides the file)")
     sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")
     sw.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every run")
@@ -230,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
 
     an = sub.add_parser("analyze", help="tables and figures from a sweep directory")
     an.add_argument("sweep_dir", nargs="+", help="sweep directories (outputs go to the first)")
-    an.add_argument("--control", default="cbba-etc", help="control strategy for Dunnett and Cohen's d")
+    an.add_argument("--control", help="control strategy for Dunnett and Cohen's d (default: cbba-etc where present)")
     an.set_defaults(func=cmd_analyze)
 
     chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
@@ -238,6 +266,15 @@ def main(argv: list[str] | None = None) -> int:
     chk.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="an allocator parameter")
     chk.add_argument("--scenario", default="mtsr", help="the scenario it is for (a registered name)")
     chk.set_defaults(func=cmd_check_allocator)
+
+    chs = sub.add_parser("check-scenario", help="run the scenario checker (determinism, observations, results, "
+                                              "conservation, robustness)")
+    chs.add_argument("scenario", help="registered name, module:Class or path/to/file.py:Class")
+    chs.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="a scenario parameter")
+    chs.add_argument("--agents", action="append", default=[], metavar="KEY=VALUE",
+                     help="an agents-section key for the check (e.g. max_speed=5)")
+    chs.add_argument("--ticks", type=int, default=60, help="ticks per checked run (default 60)")
+    chs.set_defaults(func=cmd_check_scenario)
 
     for name, module in (("agent", "swarmbed.agent_runtime.process"), ("netem", "swarmbed.netem.proxy")):
         p = sub.add_parser(name, help=f"start one {name} process by hand (e.g. on another host)", add_help=False)
@@ -258,8 +295,8 @@ def main(argv: list[str] | None = None) -> int:
     except RunError as exc:
         print(f"run failed: {exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print("interrupted: every process was stopped; no summary.json was written", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        print(str(exc) or "interrupted: every process was stopped; no summary.json was written", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader of our output went away (e.g. `| head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -121,3 +121,5 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         children.kill_all()
         coord.close()
         session.close()
+        for partial in out_dir.glob("*.part"):  # a run that did not complete leaves no half-written file
+            partial.unlink(missing_ok=True)

@@ -31,6 +31,7 @@ import itertools
 import json
 import multiprocessing
 import os
+import signal
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import psutil
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from tqdm import tqdm
@@ -140,8 +142,10 @@ def load_sweep(path: str | Path, runs: int | None = None, grid: list[str] = (), 
     varying = {k for s in scenarios for k, _ in s.overrides if k not in spec.set or
                any(dict(s2.overrides).get(k) != spec.set[k] for s2 in scenarios)}
     factors = sorted(varying)
+    if runs is not None and runs < 1:
+        raise cfg.ConfigError(f"--runs {runs}: a sweep needs at least one run per scenario")
     return Sweep(spec.name, (path.parent / spec.base).resolve(), spec.seed if seed is None else seed,
-                 runs or spec.runs, scenarios, factors, list(extra))
+                 spec.runs if runs is None else runs, scenarios, factors, list(extra))
 
 
 def run_seeds(sweep_seed: int, runs: int) -> list[int]:
@@ -169,7 +173,7 @@ def _execute(spec: RunSpec) -> tuple[str, str]:
     try:
         run_experiment(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra), out, progress=False)
         return "ok", ""
-    except BaseException as exc:  # a failed run is recorded, the sweep goes on
+    except Exception as exc:  # a failed run is recorded, the sweep goes on (an interrupt is not a failure)
         detail = f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}"
         results.write_atomic(out / ERROR, detail)
         return "failed", f"{type(exc).__name__}: {exc}"
@@ -211,7 +215,57 @@ def collect(sweep: Sweep, out: Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a sweep; the message says what completed and how to resume."""
+
+
+def _exit(signum: int, _frame: object) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _leave_interrupts_to_the_main_process() -> None:
+    """Pool workers: Ctrl-C is the sweep's to handle, so that a run never records it as a failure
+    (a Python-level handler, not SIG_IGN: the runs' own children get the default action back), and
+    SIGTERM from the sweep ends the run through its cleanup (children stopped, partial files gone)."""
+    signal.signal(signal.SIGINT, lambda *_: None)
+    signal.signal(signal.SIGTERM, _exit)
+
+
+def _stop_descendants(grace: float = 10.0) -> None:
+    """Stop every process this one started. The pool workers are asked first (SIGTERM: each ends
+    its run through the runner's cleanup, which stops that run's processes); whatever is left
+    after ``grace`` seconds is killed."""
+    family = [p for p in psutil.Process().children(recursive=True)
+              if "multiprocessing.resource_tracker" not in " ".join(_cmdline(p))]
+    workers = [p for p in psutil.Process().children() if p in family]
+    for p in workers:
+        try:
+            p.terminate()
+        except psutil.NoSuchProcess:
+            pass
+    psutil.wait_procs(workers, timeout=grace)
+    for p in family:
+        try:
+            p.kill()
+        except psutil.NoSuchProcess:
+            pass
+    psutil.wait_procs(family, timeout=grace)
+
+
+def _cmdline(p: psutil.Process) -> list[str]:
+    try:
+        return p.cmdline()
+    except psutil.Error:
+        return []
+
+
+def _complete(specs: list[RunSpec]) -> int:
+    return sum(1 for s in specs if (Path(s.out_dir) / results.SUMMARY).exists())
+
+
 def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool = True) -> pd.DataFrame:
+    if jobs is not None and jobs < 1:
+        raise cfg.ConfigError(f"--jobs {jobs}: at least one run must be able to go at once")
     out.mkdir(parents=True, exist_ok=True)
     specs = plan(sweep, out)
     for spec in specs[: len(sweep.scenarios)]:  # every scenario is valid before anything starts
@@ -220,24 +274,34 @@ def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool =
                                     "runs": sweep.runs, "factors": sweep.factors, "extra": sweep.extra,
                                     "scenarios": {s.name: dict(s.overrides) for s in sweep.scenarios}})
     todo = [s for s in specs if not (Path(s.out_dir) / results.SUMMARY).exists()]
+    done_before = len(specs) - len(todo)
     jobs = jobs or os.cpu_count() or 1
-    bar = tqdm(total=len(specs), initial=len(specs) - len(todo), unit="run", desc=sweep.name, disable=not progress)
-    failed = 0
-    with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+    bar = tqdm(total=len(specs), initial=done_before, unit="run", desc=sweep.name, disable=not progress)
+    pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=_leave_interrupts_to_the_main_process)
+    try:
         futures = {pool.submit(_execute, s): s for s in todo}
-        try:
-            for fut in cf.as_completed(futures):
-                status, detail = fut.result()
-                if status != "ok":
-                    failed += 1
-                    bar.write(f"failed: {futures[fut].out_dir}: {detail}")
-                bar.update(1)
-        except KeyboardInterrupt:
-            for f in futures:
-                f.cancel()
-            raise
-        finally:
-            bar.close()
+        for fut in cf.as_completed(futures):
+            status, detail = fut.result()
+            if status != "ok":
+                bar.write(f"failed: {futures[fut].out_dir}: {detail}")
+            bar.update(1)
+    except KeyboardInterrupt:
+        pool.shutdown(wait=False, cancel_futures=True)  # nothing new starts
+        _stop_descendants()  # and what runs stops now
+        bar.close()
+        for spec in specs:  # an incomplete run leaves no half-written file behind
+            if not (Path(spec.out_dir) / results.SUMMARY).exists():
+                for partial in Path(spec.out_dir).glob("*.part"):
+                    partial.unlink(missing_ok=True)
+        done = _complete(specs)
+        raise SweepInterrupted(
+            f"interrupted: {done} of {len(specs)} runs are complete ({done - done_before} finished in this session); "
+            f"the runs under way were stopped and nothing else was started. Run the same command again to do "
+            f"the other {len(specs) - done}.") from None
+    finally:
+        bar.close()
+    pool.shutdown(wait=True)
     table = collect(sweep, out)
     tmp = out / (TABLE + ".part")
     table.to_csv(tmp, index=False)

@@ -2,6 +2,8 @@
 folder is listed, and the layers import only downward."""
 
 import ast
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -52,3 +54,29 @@ def _imports(path: Path) -> set[str]:
 def test_benchmarks_import_the_installed_package():
     for path in (ROOT / "benchmarks").glob("*.py"):
         assert "sys.path.insert" not in path.read_text(), f"{path.name} patches sys.path"
+
+
+PROCESS_LAYERS = ("wire", "netem", "coordinator", "agent_runtime")
+
+
+def test_processes_never_import_the_launcher_or_the_registry():
+    """Data flows down and across: no process module imports ``experiments`` (the launcher) or the
+    plugin registry (only the launcher resolves names); ``wire`` imports nothing above it and
+    ``netem`` nothing but ``wire``."""
+    allowed_below = {"wire": ("swarmbed.wire",), "netem": ("swarmbed.wire", "swarmbed.netem")}
+    for layer in PROCESS_LAYERS:
+        for path in (ROOT / layer).rglob("*.py"):
+            for name in _imports(path):
+                where = f"{path.relative_to(ROOT)} imports {name}"
+                assert not name.startswith(("swarmbed.experiments", "swarmbed.plugins")), where
+                if layer in allowed_below and name.startswith("swarmbed."):
+                    assert name.startswith(allowed_below[layer]), where
+
+
+def test_the_proxy_process_loads_no_plugin_and_no_tree_engine():
+    code = ("import sys, swarmbed.netem.proxy; "
+            "print('\\n'.join(m for m in sys.modules if m.startswith('swarmbed.')))")
+    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert "swarmbed.netem.proxy" in loaded
+    assert not [m for m in loaded if m.startswith(("swarmbed.plugins", "swarmbed.experiments", "swarmbed.agent_runtime",
+                                                   "swarmbed.coordinator"))], loaded

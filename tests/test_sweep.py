@@ -85,3 +85,55 @@ def test_space_fig3_has_27_scenarios():
     assert len(sweep.scenarios) == 27 and sweep.runs == 1
     with pytest.raises(cfg.ConfigError):
         load_sweep(QUICKSTART, grid=["agents.count"])
+
+
+def _runs(out):
+    return [d for d in out.glob("*/run_*") if d.is_dir()]
+
+
+def test_ctrl_c_stops_a_sweep_at_once_and_the_same_command_resumes(tmp_path):
+    """SIGINT to the sweep's process group, as a terminal sends it: the runs under way stop, nothing
+    new starts, no interrupt is recorded as a failure, the message says what completed, and the
+    same command then does only the rest."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import psutil
+
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "swarmbed", "sweep", str(QUICKSTART), "--runs", "6", "--jobs", "2", "--out", str(out),
+           "--no-progress", "--set", "run.duration=1500", "--set", "run.stop_when_done=false"]
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list(out.glob("*/run_*/summary.json")):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.1)
+    time.sleep(0.5)  # let the next runs get under way
+    family = psutil.Process(proc.pid).children(recursive=True)
+    os.killpg(proc.pid, signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "interrupted:" in stderr and "of 6 runs are complete" in stderr
+    _, alive = psutil.wait_procs(family, timeout=10)
+    assert not alive, [p.pid for p in alive]
+    done = list(out.glob("*/run_*/summary.json"))
+    assert not list(out.rglob("error.txt")) and not list(out.rglob("*.part"))
+    assert len(_runs(out)) <= len(done) + 2  # only the two runs under way were cut short
+    assert f"{len(done)} of 6 runs are complete" in stderr
+    first = {p: p.stat().st_mtime_ns for p in done}
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert "6 of 6 runs complete" in again.stdout
+    assert all(p.stat().st_mtime_ns == t for p, t in first.items())  # completed runs were kept, not redone
+
+
+@pytest.mark.parametrize("flag, value", [("--runs", "-2"), ("--runs", "0"), ("--jobs", "0"), ("--runs", "two")])
+def test_sweep_refuses_counts_below_one(flag, value, capsys):
+    from swarmbed.experiments.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["sweep", str(QUICKSTART), flag, value])
+    assert info.value.code == 2 and flag in capsys.readouterr().err

@@ -65,7 +65,10 @@ class Observation:
             raise WireError("observation field t: must be a number")
         if not (isinstance(me, list) and len(me) == 4 and all(_is_number(v) for v in me)):
             raise WireError("observation field me: must be [x, y, heading, speed]")
-        tasks = decode_task_table(table)
+        try:
+            tasks = decode_task_table(table)
+        except WireError as exc:
+            raise WireError(f"observation field tasks: {exc}") from None
         extras = {}
         for name, annotation in cls.extra_fields():
             if name in obj:
