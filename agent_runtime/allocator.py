@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import abc
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict
@@ -44,7 +44,7 @@ class Allocator(abc.ABC):
     def count(self, event: str, n: int = 1) -> None:
         self.events[event] = self.events.get(event, 0) + n
 
-    def observe(self, view: LocalView) -> None:
+    def observe(self, view: LocalView) -> None:  # noqa: B027 - optional hook, deliberately empty
         """Called every tick before the tree is ticked (default: nothing)."""
 
     @abc.abstractmethod

@@ -6,8 +6,8 @@ tree that loads in ``bt check`` loads in a run and the palette Groot2 gets is th
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from swarmbed.agent_runtime.bt import NodeRegistry
 

@@ -86,7 +86,8 @@ class ExplorationNode(StatefulAction):
     def on_running(self):
         ctx = self.config.context
         view = ctx.view
-        if view.time >= self.until or math.hypot(self.waypoint[0] - view.x, self.waypoint[1] - view.y) <= self.get_input("reach"):
+        near = math.hypot(self.waypoint[0] - view.x, self.waypoint[1] - view.y) <= self.get_input("reach")
+        if view.time >= self.until or near:
             return Status.SUCCESS
         ctx.act(["goto", *self.waypoint])
         return Status.RUNNING

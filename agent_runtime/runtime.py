@@ -64,7 +64,7 @@ class AgentRuntime:
         return self.scenario.Observation.from_wire(raw)
 
     def _inbox(self, data: bytes) -> list[Message]:
-        out = []
+        out: list[Message] = []
         try:
             delivered = decode_inbox(data)
         except WireError as exc:

@@ -11,14 +11,13 @@ Printed next to the public SPACE simulator's own figures, measured on this machi
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-
 from swarmbed.experiments import config as cfg
 from swarmbed.experiments.runner import run_experiment
+
+ROOT = Path(__file__).resolve().parent.parent
 
 SPACE_REFERENCE = {(50, "cbba"): 130, (50, "grape"): 230, (50, "fcg"): 640,
                    (100, "cbba"): 19, (100, "grape"): 84, (100, "fcg"): 264}

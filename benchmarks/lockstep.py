@@ -21,10 +21,10 @@ from pathlib import Path
 
 import zenoh
 
-ROOT = Path(__file__).resolve().parent.parent
-
 from swarmbed.experiments import config as cfg
 from swarmbed.experiments.runner import open_hub, run_experiment
+
+ROOT = Path(__file__).resolve().parent.parent
 
 BLOCK = zenoh.CongestionControl.BLOCK
 

@@ -19,7 +19,8 @@ checks what the rest of swarmbed relies on:
 from __future__ import annotations
 
 import json
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import msgpack
 import numpy as np

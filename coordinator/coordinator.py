@@ -11,15 +11,26 @@ from __future__ import annotations
 import logging
 import queue
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
+from typing import Any
 
 import zenoh
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.scenario import Scenario
-from swarmbed.wire.codec import (EMPTY_INBOX, NetemStep, World, WireError, decode_netem_step, decode_report,
-                                 encode_stop, encode_tick, encode_world, pack)
+from swarmbed.wire.codec import (
+    EMPTY_INBOX,
+    NetemStep,
+    WireError,
+    World,
+    decode_netem_step,
+    decode_report,
+    encode_stop,
+    encode_tick,
+    encode_world,
+    pack,
+)
 from swarmbed.wire.keys import Keys, agent_id_of
 from swarmbed.wire.lifecycle import WORLD, component_rng
 from swarmbed.wire.membership import accept_handovers, serve_text
@@ -50,7 +61,7 @@ class Coordinator:
         self.world = scenario.make_world(component_rng(exp.run.seed, WORLD), allocator)
         self.event_names = list(getattr(allocator, "event_names", ()))
         self.event_totals: dict[str, int] = {}
-        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.events: queue.SimpleQueue[tuple[str, Any]] = queue.SimpleQueue()  # (what, data) from Zenoh callbacks
         self.joined: set[str] = set()
         self.lost: dict[int, int] = {}  # agent -> tick at which it was lost
         self.retired: set[int] = set()  # lost by the scenario (agent loss), not by a crash
@@ -66,7 +77,7 @@ class Coordinator:
         self.last_tick = -1
         self.wall: dict[str, float] = {}
         self._entities: list = []
-        self._pushback: list[tuple[str, object]] = []
+        self._pushback: list[tuple[str, Any]] = []
 
     # -- setup -----------------------------------------------------------------------------------
     def declare(self) -> None:
@@ -150,7 +161,8 @@ class Coordinator:
             self.last_tick = k
             if w.tick % self.exp.run.record_every == 0 or w.finished:
                 row = w.row()
-                self.rows.append(list(row.values()) + self.net_cum + [self.event_totals.get(e, 0) for e in self.event_names])
+                events = [self.event_totals.get(e, 0) for e in self.event_names]
+                self.rows.append(list(row.values()) + self.net_cum + events)
             if on_tick:
                 on_tick(w.tick, w.time)
         self.wall["run_s"] = time.perf_counter() - t0
@@ -183,7 +195,7 @@ class Coordinator:
             elif what == "report":
                 self._on_report(data, k)
 
-    def _next_event(self, timeout: float) -> tuple[str, object]:
+    def _next_event(self, timeout: float) -> tuple[str, Any]:
         if self._pushback:
             return self._pushback.pop(0)
         return self.events.get(timeout=max(0.0, timeout))
@@ -270,6 +282,7 @@ class Coordinator:
 
     def summary(self) -> dict:
         w, exp = self.world, self.exp
+        assert self.netem_report is not None, "summary() before the proxy's final report"
         net = self.netem_report["totals"]
         agent_bytes = sum(b for r in self.reports.values() for _, b in r["sent"].values())
         all_reported = len(self.reports) == self.n
@@ -300,6 +313,7 @@ class Coordinator:
     def write_results(self, timings: dict) -> dict:
         out, w = self.out_dir, self.world
         summary = self.summary()
+        assert self.netem_report is not None
         per_sender = self.netem_report["per_sender"]
         results.write_csv(out / results.TIMESERIES, self._row_columns, self.rows)
         if self.exp.run.record_trajectories:

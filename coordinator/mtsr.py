@@ -20,6 +20,7 @@ from swarmbed.coordinator.kinematics import Limits, step
 from swarmbed.coordinator.scenario import Scenario, Sensing, World
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
+from swarmbed.wire.observation import Observation as AnyObservation
 from swarmbed.wire.schema import Experiment
 
 
@@ -84,7 +85,7 @@ class MTSR(Scenario):
     def random_point(self, rng: np.random.Generator) -> tuple[float, float]:
         return float(rng.uniform(0, self.params.width)), float(rng.uniform(0, self.params.height))
 
-    def random_action(self, obs: Observation, rng: np.random.Generator) -> list:
+    def random_action(self, obs: AnyObservation, rng: np.random.Generator) -> list:
         if rng.random() < 0.2:
             return ["goto", *self.random_point(rng)]
         return super().random_action(obs, rng)
@@ -217,7 +218,8 @@ class MTSRWorld(World):
         working: dict[int, list[int]] = {}
         for i in map(int, np.flatnonzero(self.alive)):
             target, task = self._target(i, actions.get(i, ["stop"]))
-            if task is not None and math.hypot(self.tx[task] - self.ax[i], self.ty[task] - self.ay[i]) <= self.sc.arrival_radius:
+            if (task is not None and
+                    math.hypot(self.tx[task] - self.ax[i], self.ty[task] - self.ay[i]) <= self.sc.arrival_radius):
                 working.setdefault(task, []).append(i)
                 target = None  # brake while working
             x, y, h, v = step(float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i]),

@@ -6,8 +6,9 @@ from __future__ import annotations
 import csv
 import json
 import os
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 SUMMARY = "summary.json"
 TIMESERIES = "timeseries.csv"

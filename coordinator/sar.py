@@ -28,6 +28,7 @@ from swarmbed.agent_runtime.nodes import SPACE_NODES
 from swarmbed.coordinator.scenario import Scenario, Sensing, World
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
+from swarmbed.wire.observation import Observation as AnyObservation
 
 ALIVE, RESCUED, EXPIRED, UNUSED = 0, 1, 2, 3
 
@@ -95,7 +96,7 @@ class SAR(Scenario):
         a = float(rng.uniform(-math.pi, math.pi))
         return r * math.cos(a), r * math.sin(a)
 
-    def random_action(self, obs: Observation, rng: np.random.Generator) -> list:
+    def random_action(self, obs: AnyObservation, rng: np.random.Generator) -> list:
         if len(obs.tasks) and rng.random() < 0.5:
             victim = int(obs.tasks["id"][int(rng.integers(len(obs.tasks)))])
             return [("inspect", "rescue", "abandon", "goto_task")[int(rng.integers(4))], victim]
@@ -155,7 +156,8 @@ class SARWorld(World):
         for _ in range(count):
             if self.nv == len(self.vstatus):
                 grow = max(64, len(self.vstatus))
-                self.vx, self.vy, self.vspawn = (np.concatenate([a, np.zeros(grow)]) for a in (self.vx, self.vy, self.vspawn))
+                self.vx, self.vy, self.vspawn = (np.concatenate([a, np.zeros(grow)])
+                                                 for a in (self.vx, self.vy, self.vspawn))
                 self.vcolor = np.concatenate([self.vcolor, np.zeros(grow, dtype=np.int64)])
                 self.vstatus = np.concatenate([self.vstatus, np.full(grow, UNUSED, dtype=np.int64)])
             v = self.nv
@@ -215,7 +217,7 @@ class SARWorld(World):
                      for v in ids]
             table["color"] = known
             others = [int(j) for j in robots if j != i]
-            visible = self._in_cone(i, self.ax[others], self.ay[others]) if others else []
+            visible = self._in_cone(i, self.ax[others], self.ay[others]) if others else np.zeros(0, dtype=bool)
             out[i] = SARObservation(
                 self.time, float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed), table,
                 color=int(self.color[i]),
@@ -224,10 +226,12 @@ class SARWorld(World):
                 inspected=[(v, c) for v, c in self.results.pop(i, [])],
                 rescued=self.rescued_by.pop(i, []),
                 busy=int(max(0, self.busy_until[i] - self.tick)),
-                # where the team starts: known before deployment
-                team=[(int(j), float(self.ax[j]), float(self.ay[j])) for j in range(self.n)] if self.tick == 0 else None,
+                team=self._team() if self.tick == 0 else None,  # where the team starts: known before deployment
             )
         return out
+
+    def _team(self) -> list[tuple[int, float, float]]:
+        return [(int(j), float(self.ax[j]), float(self.ay[j])) for j in range(self.n)]
 
     def _victim(self, action: list) -> int | None:
         if len(action) == 2 and isinstance(action[1], int) and 0 <= action[1] < self.nv:
@@ -305,7 +309,8 @@ class SARWorld(World):
             elif name != "stop":
                 self.invalid_actions[i] += 1
         self.tick += 1
-        for v in map(int, np.flatnonzero((self.vstatus == ALIVE) & (self.vspawn + self.sc.lifetime <= self.time + 1e-9))):
+        expired = (self.vstatus == ALIVE) & (self.vspawn + self.sc.lifetime <= self.time + 1e-9)
+        for v in map(int, np.flatnonzero(expired)):
             self._end(v, EXPIRED)
 
     # -- metrics -----------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import abc
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -57,7 +58,7 @@ class World(abc.ABC):
         """Ids and positions of the live agents, in id order."""
 
     @abc.abstractmethod
-    def observations(self) -> dict[int, BaseObservation]:
+    def observations(self) -> Mapping[int, BaseObservation]:
         """What each live agent senses at this tick."""
 
     @abc.abstractmethod

@@ -58,7 +58,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from swarmbed.experiments.runner import run_experiment
 
     exp = cfg.load(args.experiment, args.set, args.seed)
-    out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
     result = run_experiment(exp, out, progress=not args.no_progress)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
@@ -119,10 +120,10 @@ def _param_groups(name: str) -> list[tuple[str, list[tuple[str, str, str, str]]]
                 raise
     kinds = [k for n, k in registry.entries() if n == name] or ([registry.ANY] if ":" in name and not groups else [])
     for kind in kinds:
-        cls = registry.resolve(name, None if kind == registry.ANY else kind)
+        allocator = registry.resolve(name, None if kind == registry.ANY else kind)
         where = "any scenario" if kind == registry.ANY else f"scenario {kind}"
-        groups.append((f"allocator.name: {name} for {where} ({_first_line(cls)})",
-                       cfg.describe(cls.Params, "allocator.") or [("(no parameters)", "", "", "")]))
+        groups.append((f"allocator.name: {name} for {where} ({_first_line(allocator)})",
+                       cfg.describe(allocator.Params, "allocator.") or [("(no parameters)", "", "", "")]))
     return groups
 
 
@@ -132,9 +133,9 @@ def cmd_params(args: argparse.Namespace) -> int:
         groups = [(f"{name}:", cfg.describe(model, f"{name}.")) for name, model in cfg.SECTIONS.items()]
         groups.append(("scenarios (swarmbed params NAME):",
                        [(n, "", "", registry.scenario_target(n)) for n in registry.scenario_names()]))
-        groups.append(("allocators (swarmbed params NAME):",
-                       [(n if k == registry.ANY else f"{n} ({k})", "", "",
-                         registry.allocator_target(n, None if k == registry.ANY else k)) for n, k in registry.entries()]))
+        allocators = [(n if k == registry.ANY else f"{n} ({k})", "", "",
+                       registry.allocator_target(n, None if k == registry.ANY else k)) for n, k in registry.entries()]
+        groups.append(("allocators (swarmbed params NAME):", allocators))
     else:
         groups = _param_groups(args.name)
         if not groups:

@@ -23,10 +23,24 @@ from swarmbed.agent_runtime.allocator import Allocator
 from swarmbed.agent_runtime.bt import BTError, load_tree
 from swarmbed.agent_runtime.node_sets import node_registry, tree_path
 from swarmbed.coordinator.scenario import Scenario
-from swarmbed.plugins.registry import (PluginError, allocator_target, resolve, resolve_scenario, scenario_target,
-                                       validate_params, validate_scenario_params)
-from swarmbed.wire.schema import (AgentsSection, AllocatorSection, Experiment, NetworkSection, RunSection,
-                                  ScenarioSection, Targets)
+from swarmbed.plugins.registry import (
+    PluginError,
+    allocator_target,
+    resolve,
+    resolve_scenario,
+    scenario_target,
+    validate_params,
+    validate_scenario_params,
+)
+from swarmbed.wire.schema import (
+    AgentsSection,
+    AllocatorSection,
+    Experiment,
+    NetworkSection,
+    RunSection,
+    ScenarioSection,
+    Targets,
+)
 
 __all__ = ["ConfigError", "Experiment", "Resolved", "load", "resolve_experiment", "to_yaml", "from_yaml",
            "parse_override", "apply_overrides", "validate", "describe", "SECTIONS"]

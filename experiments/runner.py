@@ -10,9 +10,9 @@ from __future__ import annotations
 import resource
 import secrets
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import zenoh
 from tqdm import tqdm

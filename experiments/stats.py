@@ -36,7 +36,8 @@ def compare(df: pd.DataFrame, group: str, metrics: list[str], control: str) -> p
         samples = {g: df.loc[df[group] == g, metric].dropna().to_numpy(dtype=float) for g in names}
         if any(len(v) < 2 for v in samples.values()):
             continue
-        constant = all(np.all(v == v[0]) for v in samples.values()) and len({float(v[0]) for v in samples.values()}) == 1
+        constant = (all(np.all(v == v[0]) for v in samples.values())
+                    and len({float(v[0]) for v in samples.values()}) == 1)
         if constant:
             f, p_anova, dunnett_p = float("nan"), 1.0, [1.0] * len(others)
         else:

@@ -33,6 +33,7 @@ import multiprocessing
 import os
 import signal
 import traceback
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -109,7 +110,7 @@ def _parse_grid(text: str) -> tuple[str, list[Any]]:
     return key.strip(), [yaml.safe_load(v) for v in raw.split(",")]
 
 
-def load_sweep(path: str | Path, runs: int | None = None, grid: list[str] = (), extra: list[str] = (),
+def load_sweep(path: str | Path, runs: int | None = None, grid: Sequence[str] = (), extra: Sequence[str] = (),
                seed: int | None = None) -> Sweep:
     path = Path(path)
     try:
@@ -152,7 +153,8 @@ def run_seeds(sweep_seed: int, runs: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(sweep_seed).spawn(runs)]
 
 
-def experiment_for(base: str | Path, scenario: Scenario, seed: int, extra: list[str] | tuple[str, ...]) -> cfg.Experiment:
+def experiment_for(base: str | Path, scenario: Scenario, seed: int,
+                   extra: list[str] | tuple[str, ...]) -> cfg.Experiment:
     pairs = list(scenario.overrides) + [cfg.parse_override(t) for t in extra] + [("run.seed", seed)]
     return cfg.load(base, [f"{k}={json.dumps(v)}" for k, v in pairs])
 

@@ -18,8 +18,18 @@ import zenoh
 
 from swarmbed.netem.ledger import Ledger
 from swarmbed.netem.radio import Radio
-from swarmbed.wire.codec import (AgentOut, NetemStep, World, WireError, decode_agent_out, decode_world, encode_inbox,
-                        encode_netem_step, encode_report, unpack)
+from swarmbed.wire.codec import (
+    AgentOut,
+    NetemStep,
+    WireError,
+    World,
+    decode_agent_out,
+    decode_world,
+    encode_inbox,
+    encode_netem_step,
+    encode_report,
+    unpack,
+)
 from swarmbed.wire.keys import Keys, agent_id_of
 from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
 from swarmbed.wire.membership import fetch_spec, hand_over
@@ -101,7 +111,8 @@ class Proxy:
                     self._malformed(self.keys.world, exc)
                     continue
                 if self.world is not None:
-                    self._malformed(self.keys.world, WireError(f"tick {world.tick} before tick {self.world.tick} was done"))
+                    early = WireError(f"tick {world.tick} before tick {self.world.tick} was done")
+                    self._malformed(self.keys.world, early)
                     continue
                 self.radio.confirm()  # tick `world.tick` happens: the inboxes made for it arrived
                 self.world = world

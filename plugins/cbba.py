@@ -43,6 +43,7 @@ class CBBAParams(BaseModel):
 
 class CBBA(Allocator):
     Params = CBBAParams
+    params: CBBAParams
     message_kinds = (KIND,)
 
     def __init__(self, agent_id, params, rng, run_seed=0):

@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -30,6 +31,7 @@ from swarmbed.wire.observation import Observation
 from swarmbed.wire.schema import NetworkSection
 
 DEFAULT_MAX_BYTES = 64 * 1024
+CLEAN_NETWORK = NetworkSection()
 
 
 class ConformanceError(AssertionError):
@@ -85,7 +87,7 @@ def _observation(cls: type[Observation], k: int, x: float, y: float, visible: di
 
 
 def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, seed: int = 0,
-             network: NetworkSection = NetworkSection(), remove_at: Mapping[int, list[int]] | None = None,
+             network: NetworkSection = CLEAN_NETWORK, remove_at: Mapping[int, list[int]] | None = None,
              max_bytes: int = DEFAULT_MAX_BYTES, scenario: str | None = None) -> Trace:
     """Run ``rounds`` rounds. ``remove_at[k]``: tasks that disappear (are done) before round k.
     Each round every agent is shown its view (``observe``, then ``decide``), as in a run; the first

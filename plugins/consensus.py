@@ -5,7 +5,7 @@ Table 1, all 17 cases), and the bundle release of Eqs. 6-7."""
 from __future__ import annotations
 
 import math
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 NONE = -1
 _NEVER = -math.inf

@@ -26,6 +26,7 @@ class FCGParams(BaseModel):
 
 class FirstClaimedGreedy(Allocator):
     Params = FCGParams
+    params: FCGParams
     message_kinds = (CLAIM,)
 
     def __init__(self, agent_id, params, rng, run_seed=0):

@@ -37,6 +37,7 @@ class GRAPEParams(BaseModel):
 
 class GRAPE(Allocator):
     Params = GRAPEParams
+    params: GRAPEParams
     message_kinds = (KIND,)
 
     def __init__(self, agent_id, params, rng, run_seed=0):

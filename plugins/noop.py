@@ -19,6 +19,7 @@ class NoopParams(BaseModel):
 
 class NoopAllocator(Allocator):
     Params = NoopParams
+    params: NoopParams
     message_kinds = ("noop",)
 
     def decide(self, view: LocalView) -> int | None:

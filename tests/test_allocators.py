@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.plugins.registry import entries
 from swarmbed.plugins.cbba import CBBA
-from swarmbed.plugins.consensus import table
 from swarmbed.plugins.conformance import random_instance, run_all, simulate
+from swarmbed.plugins.consensus import table
 from swarmbed.plugins.grape import VOID
+from swarmbed.plugins.registry import entries
 
 
 @pytest.mark.parametrize("name, scenario", [(n, "mtsr" if k == "*" else k) for n, k in entries()])

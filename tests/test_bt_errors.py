@@ -19,7 +19,8 @@ def load(text):
      "trees/t.xml:1: malformed XML"),
     ('<root BTCPP_format="4">\n<BehaviorTree ID="M">\n  <Teleport/>\n</BehaviorTree></root>',
      "trees/t.xml:3 <Teleport>: unknown node type 'Teleport'"),
-    ('<root BTCPP_format="4">\n<BehaviorTree ID="M">\n<Repeat name="r"><AlwaysSuccess/></Repeat>\n</BehaviorTree></root>',
+    ('<root BTCPP_format="4">\n<BehaviorTree ID="M">\n<Repeat name="r"><AlwaysSuccess/></Repeat>\n'
+     '</BehaviorTree></root>',
      "trees/t.xml:3 <Repeat name='r'>: required port 'num_cycles' is missing"),
     ('<root BTCPP_format="4"><BehaviorTree ID="M"><ExplorationNode duraton="5"/></BehaviorTree></root>',
      "unknown port 'duraton'"),

@@ -12,10 +12,10 @@ import zenoh
 
 from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments.runner import run_experiment
-from tests.conftest import QUICKSTART, ROOT, experiment
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
 from swarmbed.wire.session import zenoh_config
+from tests.conftest import QUICKSTART, ROOT, experiment
 
 LONG_NOOP = ["--set", "allocator={name: noop, peers: 2}", "--set", "scenario.initial_tasks=0",
              "--set", "run.stop_when_done=false", "--set", "run.duration=1000000"]

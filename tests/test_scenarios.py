@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from swarmbed.coordinator.checker import ScenarioCheckError, check_scenario
+from swarmbed.coordinator.scenario import Scenario
 from swarmbed.experiments import config as cfg
 from swarmbed.experiments.runner import run_experiment
 from swarmbed.plugins.registry import resolve_scenario, scenario_names
 from swarmbed.wire.codec import WireError
 from swarmbed.wire.targets import load_target
-from swarmbed.coordinator.scenario import Scenario
 from tests.conftest import ledger_outcomes, read_ledger
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -124,8 +124,9 @@ def test_an_installed_package_adds_a_scenario_and_an_allocator_through_entry_poi
     dist = tmp_path / "pickup_plugin-0.1.dist-info"
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: pickup-plugin\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text("[swarmbed.scenarios]\npickup = tests.example_scenario:PickupDelivery\n\n"
-                                           "[swarmbed.allocators]\nnearest@pickup = tests.example_scenario:NearestItem\n")
+    (dist / "entry_points.txt").write_text(
+        "[swarmbed.scenarios]\npickup = tests.example_scenario:PickupDelivery\n\n"
+        "[swarmbed.allocators]\nnearest@pickup = tests.example_scenario:NearestItem\n")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
     listing = subprocess.run([sys.executable, "-m", "swarmbed", "params"], env=env, capture_output=True, text=True,
                              check=True).stdout

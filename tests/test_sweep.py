@@ -7,7 +7,7 @@ import pytest
 
 from swarmbed.experiments import config as cfg
 from swarmbed.experiments.analyze import analyze
-from swarmbed.experiments.sweep import load_sweep, run_sweep, run_seeds
+from swarmbed.experiments.sweep import load_sweep, run_seeds, run_sweep
 from tests.conftest import QUICKSTART
 
 BOOM = textwrap.dedent('''

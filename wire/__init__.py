@@ -4,7 +4,7 @@ Every process imports its keys and its encoders/decoders from here and nowhere e
 coordinator, netem proxy and agents (possibly on other hosts) always agree on the protocol.
 """
 
-from swarmbed.wire.keys import Keys
 from swarmbed.wire.codec import WireError
+from swarmbed.wire.keys import Keys
 
 __all__ = ["Keys", "WireError"]

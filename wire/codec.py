@@ -113,7 +113,7 @@ def encode_task_table(table: np.ndarray) -> bytes:
     return np.ascontiguousarray(table, dtype=TASK_DTYPE).tobytes()
 
 
-def decode_task_table(data: bytes) -> np.ndarray:
+def decode_task_table(data: object) -> np.ndarray:
     if not isinstance(data, bytes) or len(data) % TASK_DTYPE.itemsize:
         raise WireError(f"task table must be bytes, a multiple of {TASK_DTYPE.itemsize}")
     return np.frombuffer(data, dtype=TASK_DTYPE)
@@ -141,7 +141,7 @@ class StopIn:
 
 def decode_agent_in(data: bytes) -> TickIn | StopIn:
     msg = unpack(data)
-    _expect(isinstance(msg, list) and msg and _is_int(msg[0]), "agent input must be [tag, ...]")
+    _expect(isinstance(msg, list) and bool(msg) and _is_int(msg[0]), "agent input must be [tag, ...]")
     if msg[0] == TAG_TICK:
         _expect(len(msg) == 4, "tick must be [0, tick, obs, inbox]")
         _, tick, obs, inbox = msg
@@ -177,7 +177,7 @@ def decode_agent_out(data: bytes) -> AgentOut:
     tick, agent_id, action, messages, events = msg
     _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
     _expect(_is_int(agent_id) and agent_id >= 0, "agent id must be a non-negative int")
-    _expect(isinstance(action, list) and action and isinstance(action[0], str), "action must be [name, ...]")
+    _expect(isinstance(action, list) and bool(action) and isinstance(action[0], str), "action must be [name, ...]")
     _expect(isinstance(messages, list), "messages must be a list")
     _expect(isinstance(events, dict) and all(isinstance(k, str) and _is_int(v) for k, v in events.items()),
             "events must map names to counts")

@@ -8,7 +8,7 @@ import logging
 import os
 import signal
 import sys
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -41,7 +41,7 @@ def die_with_parent(parent_pid: int | None) -> None:
         os._exit(3)
 
 
-def child_args(prog: str, description: str, add_args: Callable[[argparse.ArgumentParser], None],
+def child_args(prog: str, description: str, add_args: Callable[[argparse.ArgumentParser], object],
                argv: list[str] | None) -> argparse.Namespace:
     """Parse a child process's command line (its own flags, ``--run-id``, ``--parent-pid`` and the
     zenoh flags), tie it to its parent and set up logging to stderr."""

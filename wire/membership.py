@@ -6,7 +6,6 @@ import time
 from typing import TypeVar
 
 import zenoh
-
 from pydantic import BaseModel, ValidationError
 
 M = TypeVar("M", bound=BaseModel)

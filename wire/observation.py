@@ -22,7 +22,7 @@ import numpy as np
 
 from swarmbed.wire.codec import TASK_DTYPE, WireError, decode_task_table, encode_task_table
 
-O = TypeVar("O", bound="Observation")
+ObsT = TypeVar("ObsT", bound="Observation")
 _CORE = ("time", "x", "y", "heading", "speed", "tasks")
 
 
@@ -57,7 +57,7 @@ class Observation:
         return out
 
     @classmethod
-    def from_wire(cls: type[O], obj: Any) -> O:
+    def from_wire(cls: type[ObsT], obj: Any) -> ObsT:
         if not isinstance(obj, dict):
             raise WireError("observation must be a map")
         t, me, table = obj.get("t"), obj.get("me"), obj.get("tasks")

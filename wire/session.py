@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import socket
-from typing import Sequence
+from collections.abc import Sequence
 
 import zenoh
 

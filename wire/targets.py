@@ -11,6 +11,9 @@ import importlib.util
 import sys
 from pathlib import Path
 from types import ModuleType
+from typing import TypeVar
+
+T = TypeVar("T")
 
 
 class TargetError(ValueError):
@@ -43,7 +46,7 @@ def _import_module(ref: str) -> ModuleType:
     return importlib.import_module(ref)
 
 
-def load_target(target: str, base: type) -> type:
+def load_target(target: str, base: type[T]) -> type[T]:
     """The class ``target`` names; it must be a subclass of ``base``."""
     if not is_target(target):
         raise TargetError(f"{target!r} is not a target: expected 'module:Class' or 'path/to/file.py:Class'")

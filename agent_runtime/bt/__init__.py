@@ -3,8 +3,17 @@ and follows BT.CPP's semantics for the nodes it supports; ``tests/test_bt_confor
 it tick by tick against BehaviorTree.CPP itself."""
 
 from swarmbed.agent_runtime.bt.blackboard import Blackboard
-from swarmbed.agent_runtime.bt.node import (BTError, Condition, InputPort, NodeConfig, OutputPort, Port, StatefulAction,
-                                   SyncAction, TreeNode)
+from swarmbed.agent_runtime.bt.node import (
+                                   BTError,
+                                   Condition,
+                                   InputPort,
+                                   NodeConfig,
+                                   OutputPort,
+                                   Port,
+                                   StatefulAction,
+                                   SyncAction,
+                                   TreeNode,
+)
 from swarmbed.agent_runtime.bt.palette import palette_xml
 from swarmbed.agent_runtime.bt.registry import NodeRegistry
 from swarmbed.agent_runtime.bt.status import Status

@@ -15,31 +15,32 @@ _MISSING = object()
 
 
 class Blackboard:
-    def __init__(self, parent: "Blackboard | None" = None, remap: dict[str, str] | None = None,
+    def __init__(self, parent: Blackboard | None = None, remap: dict[str, str] | None = None,
                  autoremap: bool = False) -> None:
         self._store: dict[str, Any] = {}
         self.parent = parent
         self.remap = dict(remap or {})
         self.autoremap = autoremap
 
-    def root(self) -> "Blackboard":
+    def root(self) -> Blackboard:
         bb = self
         while bb.parent is not None:
             bb = bb.parent
         return bb
 
-    def _owner(self, key: str) -> tuple["Blackboard", str]:
+    def _owner(self, key: str) -> tuple[Blackboard, str]:
         """Where ``key`` lives (or would be created)."""
         if key.startswith("@"):
             return self.root(), key[1:]
         bb = self
         while True:
-            if key in bb._store or bb.parent is None:
+            parent = bb.parent
+            if key in bb._store or parent is None:
                 return bb, key
             if key in bb.remap:
-                bb, key = bb.parent, bb.remap[key]
+                bb, key = parent, bb.remap[key]
             elif bb.autoremap and not key.startswith("_"):
-                bb = bb.parent
+                bb = parent
             else:
                 return bb, key
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from swarmbed.agent_runtime.bt.node import ControlNode, InputPort, Port, BTError
+from swarmbed.agent_runtime.bt.node import BTError, ControlNode, InputPort, Port
 from swarmbed.agent_runtime.bt.status import Status
 
 

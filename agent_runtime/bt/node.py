@@ -132,7 +132,7 @@ class TreeNode:
     def reset_status(self) -> None:
         self.status = Status.IDLE
 
-    def children(self) -> list["TreeNode"]:
+    def children(self) -> list[TreeNode]:
         return []
 
 
@@ -211,16 +211,13 @@ class ControlNode(TreeNode):
 
 class DecoratorNode(TreeNode):
     KIND = "Decorator"
-
-    def __init__(self, name: str, config: NodeConfig) -> None:
-        super().__init__(name, config)
-        self.child: TreeNode | None = None
+    child: TreeNode  # set by add_child; the loader refuses a decorator without exactly one child
 
     def add_child(self, child: TreeNode) -> None:
         self.child = child
 
     def children(self) -> list[TreeNode]:
-        return [self.child] if self.child is not None else []
+        return [self.child] if hasattr(self, "child") else []
 
     def reset_child(self) -> None:
         if self.child.status == Status.RUNNING:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 from swarmbed.agent_runtime.bt.composites import CONTROLS
 from swarmbed.agent_runtime.bt.decorators import DECORATORS

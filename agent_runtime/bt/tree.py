@@ -57,7 +57,7 @@ class _Element:
     tag: str
     attrs: dict[str, str]
     line: int
-    children: list["_Element"] = field(default_factory=list)
+    children: list[_Element] = field(default_factory=list)
 
 
 def _parse(text: str, where: str) -> _Element:

@@ -28,6 +28,7 @@ class SARParams(BaseModel):
 
 class SARStrategy(Allocator):
     Params = SARParams
+    params: SARParams
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)
@@ -57,7 +58,8 @@ class SARStrategy(Allocator):
             self.colors[v] = color
         rescued = set(obs.rescued)
         gone = [v for v, info in self.victims.items()
-                if v in rescued or (v not in view.tasks and (view.sees(info.x, info.y) or self.expires[v] <= view.time))]
+                if v in rescued
+                or (v not in view.tasks and (view.sees(info.x, info.y) or self.expires[v] <= view.time))]
         for v in gone:
             del self.victims[v]
             del self.expires[v]
@@ -97,14 +99,16 @@ class SARStrategy(Allocator):
         return self.target not in self.inspected
 
     def color_match(self) -> bool:
-        return self.colors.get(self.target) == self.my_color
+        return self.target is not None and self.colors.get(self.target) == self.my_color
 
     def in_reach(self, view: LocalView) -> bool:
-        return self.target in self.victims and self.distance(view, self.target) <= self.reach
+        t = self.target
+        return t is not None and t in self.victims and self.distance(view, t) <= self.reach
 
     def abandon(self, view: LocalView) -> None:
         """The colours do not match: remember the victim as incompatible for a while, let it go."""
         v = self.target
+        assert v is not None, "abandon() without a target"
         self.incompatible[v] = self.now + self.params.incompatible_for
         self.target = None
         self.released(v, view)

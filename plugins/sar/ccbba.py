@@ -25,13 +25,13 @@ def kmeans_pp(points: np.ndarray, k: int, rng: np.random.Generator, iterations: 
     """Cluster labels by k-means with k-means++ seeding (Arthur and Vassilvitskii 2007)."""
     n = len(points)
     k = max(1, min(k, n))
-    centers = [points[int(rng.integers(n))]]
+    chosen = [points[int(rng.integers(n))]]
     for _ in range(1, k):
-        d2 = np.min([np.sum((points - c) ** 2, axis=1) for c in centers], axis=0)
+        d2 = np.min([np.sum((points - c) ** 2, axis=1) for c in chosen], axis=0)
         total = d2.sum()
         pick = int(rng.choice(n, p=d2 / total)) if total > 0 else int(rng.integers(n))
-        centers.append(points[pick])
-    centers = np.array(centers, dtype=float)
+        chosen.append(points[pick])
+    centers = np.array(chosen, dtype=float)
     labels = np.zeros(n, dtype=int)
     for _ in range(iterations):
         labels = np.argmin(((points[:, None, :] - centers[None, :, :]) ** 2).sum(axis=2), axis=1)
@@ -48,6 +48,7 @@ class CCBBAParams(ConsensusParams):
 
 class ClusteringCBBA(SARConsensus):
     Params = CCBBAParams
+    params: CCBBAParams
     message_kinds = (BIDS, LEADERS, RESULT)
     default_tree = str(TREES / "c_cbba.xml")
 

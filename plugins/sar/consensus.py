@@ -17,6 +17,7 @@ mattering. ``negotiations`` counts the rounds a robot starts.
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 from pydantic import Field
 
@@ -40,8 +41,9 @@ class ConsensusParams(SARParams):
 
 class SARConsensus(SARStrategy):
     Params = ConsensusParams
-    message_kinds = (BIDS,)
-    event_names = ("negotiations",)
+    params: ConsensusParams
+    message_kinds: ClassVar[tuple[str, ...]] = (BIDS,)
+    event_names: ClassVar[tuple[str, ...]] = ("negotiations",)
     bids_with_colors = True
     bt_nodes = SAR_NODES + (ExplorationNode,)
 
@@ -178,6 +180,7 @@ class CBBAETC(SARConsensus):
     ``theta_outbid_margin``; Tr_fallback: the adaptive interval has elapsed."""
 
     Params = ETCParams
+    params: ETCParams
     event_names = ("negotiations", "tr_init", "tr_delta_bid", "tr_conflict", "tr_fallback")
     default_tree = str(TREES / "cbba_etc.xml")
 

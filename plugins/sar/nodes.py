@@ -6,7 +6,7 @@ robot's action for this tick (``config.context.act``). Wandering reuses the SPAC
 
 from __future__ import annotations
 
-from swarmbed.agent_runtime.bt import Condition, StatefulAction, Status, SyncAction
+from swarmbed.agent_runtime.bt import Condition, NodeConfig, StatefulAction, Status, SyncAction
 
 
 def _ok(flag: bool) -> Status:
@@ -14,6 +14,8 @@ def _ok(flag: bool) -> Status:
 
 
 class _SARNode:
+    config: NodeConfig  # provided by the node class it is mixed into
+
     @property
     def strategy(self):
         return self.config.context.allocator

@@ -47,6 +47,7 @@ class CommParams(SARParams):
 
 class CommStrategy(TreeStrategy):
     Params = CommParams
+    params: CommParams
     message_kinds = (CLAIM, COLOR)
     default_tree = str(TREES / "comm.xml")
 
@@ -63,7 +64,8 @@ class CommStrategy(TreeStrategy):
             elif msg.kind == COLOR:
                 victim, color = msg.data
                 self.colors[int(victim)] = int(color)
-        if self.target is not None and self.now - self.claimed_at >= self.params.claim_refresh and self.target_valid(view):
+        due = self.now - self.claimed_at >= self.params.claim_refresh
+        if self.target is not None and due and self.target_valid(view):
             self._claim(view)
 
     def choosable(self, v: int) -> bool:
