@@ -4,7 +4,7 @@ import pytest
 
 from swarmbed.experiments import config as cfg
 from swarmbed.experiments.config import resolve_experiment
-from tests.conftest import QUICKSTART
+from tests.conftest import QUICKSTART, ROOT
 
 
 def load_text(tmp_path, text, *overrides):
@@ -76,3 +76,48 @@ def test_naming_another_allocator_drops_the_old_ones_parameters():
 def test_a_sweep_file_given_to_run_says_so():
     with pytest.raises(cfg.ConfigError, match="swarmbed sweep"):
         cfg.load(QUICKSTART.parent / "space_fig3.yaml")
+
+
+def test_an_empty_file_is_refused(tmp_path):
+    (tmp_path / "empty.yaml").write_text("# nothing yet\n")
+    with pytest.raises(cfg.ConfigError, match="empty.yaml: the file is empty"):
+        cfg.load(tmp_path / "empty.yaml")
+
+
+def test_a_bad_tree_given_with_set_is_refused_before_any_process_starts(tmp_path, monkeypatch):
+    with pytest.raises(cfg.ConfigError, match=r"^--set agents.behavior_tree=.*missing.xml: file .* does not exist"):
+        cfg.load(QUICKSTART, ["agents.behavior_tree=missing.xml"])
+    (tmp_path / "bad.xml").write_text('<root BTCPP_format="4">\n<BehaviorTree ID="M">\n<Nope/>\n</BehaviorTree></root>')
+    monkeypatch.chdir(tmp_path)  # a relative path on the command line is read from the current directory
+    refused = r"^--set agents.behavior_tree=.*bad.xml: .*bad.xml:3 <Nope>: unknown node"
+    with pytest.raises(cfg.ConfigError, match=refused):
+        cfg.load(QUICKSTART, ["agents.behavior_tree=bad.xml"])
+    (tmp_path / "good.xml").write_text((ROOT / "agent_runtime" / "trees" / "space_default.xml").read_text())
+    exp = cfg.load(QUICKSTART, ["agents.behavior_tree=good.xml"])
+    assert exp.agents.behavior_tree == str(tmp_path / "good.xml")
+
+
+def test_a_tree_named_in_the_file_is_read_from_the_files_folder(tmp_path, monkeypatch):
+    (tmp_path / "trees").mkdir()
+    (tmp_path / "trees" / "mine.xml").write_text((ROOT / "agent_runtime" / "trees" / "space_default.xml").read_text())
+    text = QUICKSTART.read_text().replace("  exploration_duration: 60", "  exploration_duration: 60\n"
+                                                                      "  behavior_tree: trees/mine.xml")
+    (tmp_path / "exp.yaml").write_text(text)
+    monkeypatch.chdir(ROOT)  # not where the file is
+    assert cfg.load(tmp_path / "exp.yaml").agents.behavior_tree == str(tmp_path / "trees" / "mine.xml")
+
+
+def test_run_help_shows_no_python_internals(capsys):
+    from swarmbed.experiments.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    out = capsys.readouterr().out
+    assert "PydanticUndefined" not in out and "swarmbed params" in out
+    assert main(["params"]) == 0
+    out = capsys.readouterr().out
+    assert "PydanticUndefined" not in out and "run.seed" in out and "network.loss" in out
+    assert main(["params", "cbba-etc"]) == 0
+    out = capsys.readouterr().out
+    assert "allocator.theta_bid_change" in out and "float" in out
+    assert main(["params", "nosuch"]) == 2

@@ -12,6 +12,7 @@ import zenoh
 
 from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments.runner import run_experiment
+from swarmbed.wire.codec import EMPTY_INBOX, encode_tick
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
 from swarmbed.wire.session import zenoh_config
@@ -78,6 +79,7 @@ def test_ctrl_c_stops_every_process_with_a_clear_message(tmp_path):
     _, err = runner.communicate(timeout=60)
     assert runner.returncode == 130
     assert "interrupted" in err and "no summary.json" in err
+    assert not list(tmp_path.glob("*.part"))  # no half-written file left looking like a result
     assert not (tmp_path / "summary.json").exists()
     _, alive = psutil.wait_procs(children, timeout=5)
     assert not alive
@@ -135,11 +137,35 @@ def test_malformed_samples_are_dropped_counted_and_survived(tmp_path):
                     s.put(key, junk, congestion_control=zenoh.CongestionControl.BLOCK)
             for junk in (b"\xc1", b"\x93\x01\x02", b"not msgpack at all"):  # reports are handed over as queries
                 assert hand_over(s, keys.agent_report(1), junk, timeout=5)
+            far = 10**6  # observations for ticks that never come: the answers the agent gives are never used
+            for k, obs in enumerate(({"t": "noon", "me": [0, 0, 0, 0], "tasks": b""},
+                                     {"t": 0, "me": [0, 0], "tasks": b""},
+                                     {"t": 0, "me": [0, 0, 0, 0], "tasks": b"\x01\x02"},
+                                     {"t": 0, "me": [0, 0, 0, 0], "tasks": b"", "weather": "rain"})):
+                s.put(keys.agent_in(0), encode_tick(far + k, obs, EMPTY_INBOX),
+                      congestion_control=zenoh.CongestionControl.BLOCK)
             time.sleep(0.3)
 
     exp = experiment("allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
                      "run.duration=400")
     result = run_experiment(exp, tmp_path, progress=False, on_ready=inject)
     bad = result.summary["network"]["malformed"]
-    assert bad["coordinator"] >= 6 and bad["netem"] >= 6 and bad["agents"] >= 3
+    assert bad["coordinator"] >= 6 and bad["netem"] >= 6 and bad["agents"] >= 3 + 4
     assert result.summary["ticks"] == 400
+    log = (tmp_path / "logs" / "agent_0.log").read_text()
+    for field in ("field t", "field me", "field tasks", "unknown fields: weather"):
+        assert "malformed observation of tick" in log and field in log, field
+
+
+def test_a_second_agent_with_a_taken_id_is_refused(tmp_path):
+    refused = {}
+
+    def second(keys: Keys, endpoint: str) -> None:
+        proc = subprocess.run([sys.executable, "-m", "swarmbed", "agent", "--connect", endpoint, "--run-id",
+                               keys.run_id, "--id", "1"], capture_output=True, text=True, timeout=60)
+        refused["rc"], refused["err"] = proc.returncode, proc.stderr
+
+    exp = experiment("run.duration=50")
+    result = run_experiment(exp, tmp_path, progress=False, on_ready=second)
+    assert refused["rc"] == 2 and "agent 1 of run" in refused["err"] and "already running" in refused["err"]
+    assert result.summary["ticks"] > 0 and not result.summary["agents_lost"]

@@ -137,3 +137,15 @@ def test_sweep_refuses_counts_below_one(flag, value, capsys):
     with pytest.raises(SystemExit) as info:
         main(["sweep", str(QUICKSTART), flag, value])
     assert info.value.code == 2 and flag in capsys.readouterr().err
+
+
+def test_analyze_refuses_a_control_the_sweeps_do_not_have(sweep_dir, capsys):
+    from swarmbed.experiments.cli import main
+
+    out = sweep_dir / "out"
+    (out / "statistics.md").write_text("stale")
+    assert main(["analyze", str(out), "--control", "nosuch"]) == 2
+    assert "--control nosuch: no such strategy" in capsys.readouterr().err
+    assert (out / "statistics.md").read_text() == "stale"  # refused before anything was written
+    assert main(["analyze", str(out)]) == 0
+    assert not (out / "statistics.md").exists()  # MT-SR sweep: no statistics, and no stale ones left
