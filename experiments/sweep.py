@@ -71,7 +71,9 @@ class SweepFile(BaseModel):
 
 
 @dataclass(frozen=True)
-class Scenario:
+class SweepScenario:
+    """One condition of a sweep (the papers call them scenarios): a name and its overrides."""
+
     name: str
     overrides: tuple[tuple[str, Any], ...]
 
@@ -79,7 +81,7 @@ class Scenario:
 @dataclass(frozen=True)
 class RunSpec:
     base: str
-    scenario: Scenario
+    scenario: SweepScenario
     index: int
     seed: int
     out_dir: str
@@ -92,7 +94,7 @@ class Sweep:
     base: Path
     seed: int
     runs: int
-    scenarios: list[Scenario]
+    scenarios: list[SweepScenario]
     factors: list[str]
     extra: list[str]
 
@@ -129,14 +131,15 @@ def load_sweep(path: str | Path, runs: int | None = None, grid: Sequence[str] = 
     common = tuple(spec.set.items())
     grid_spec = dict(spec.grid)
     grid_spec.update(_parse_grid(g) for g in grid)
-    entries = [Scenario(e.name, tuple(e.set.items())) for e in spec.scenarios] or [Scenario("", ())]
+    entries = [SweepScenario(e.name, tuple(e.set.items())) for e in spec.scenarios] or [SweepScenario("", ())]
     keys = list(grid_spec)
     scenarios = []
     for entry in entries:
         for combo in itertools.product(*(grid_spec[k] for k in keys)):
             parts = [entry.name] if entry.name else []
             parts += [f"{k.split('.')[-1]}-{_label(v)}" for k, v in zip(keys, combo)]
-            scenarios.append(Scenario("_".join(parts) or "base", common + entry.overrides + tuple(zip(keys, combo))))
+            overrides = common + entry.overrides + tuple(zip(keys, combo))
+            scenarios.append(SweepScenario("_".join(parts) or "base", overrides))
     names = [s.name for s in scenarios]
     if len(set(names)) != len(names):
         raise cfg.ConfigError(f"{path}: two scenarios share a name")
@@ -153,7 +156,7 @@ def run_seeds(sweep_seed: int, runs: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(sweep_seed).spawn(runs)]
 
 
-def experiment_for(base: str | Path, scenario: Scenario, seed: int,
+def experiment_for(base: str | Path, scenario: SweepScenario, seed: int,
                    extra: list[str] | tuple[str, ...]) -> cfg.Experiment:
     pairs = list(scenario.overrides) + [cfg.parse_override(t) for t in extra] + [("run.seed", seed)]
     return cfg.load(base, [f"{k}={json.dumps(v)}" for k, v in pairs])
@@ -240,18 +243,13 @@ def _stop_descendants(grace: float = 10.0) -> None:
     family = [p for p in psutil.Process().children(recursive=True)
               if "multiprocessing.resource_tracker" not in " ".join(_cmdline(p))]
     workers = [p for p in psutil.Process().children() if p in family]
-    for p in workers:
-        try:
-            p.terminate()
-        except psutil.NoSuchProcess:
-            pass
-    psutil.wait_procs(workers, timeout=grace)
-    for p in family:
-        try:
-            p.kill()
-        except psutil.NoSuchProcess:
-            pass
-    psutil.wait_procs(family, timeout=grace)
+    for procs, stop in ((workers, psutil.Process.terminate), (family, psutil.Process.kill)):
+        for p in procs:
+            try:
+                stop(p)
+            except psutil.NoSuchProcess:
+                pass
+        psutil.wait_procs(procs, timeout=grace)
 
 
 def _cmdline(p: psutil.Process) -> list[str]:
