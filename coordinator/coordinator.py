@@ -50,7 +50,7 @@ class Coordinator:
     ``bids_with_colors``) and the targets agents load."""
 
     def __init__(self, exp: Experiment, scenario: Scenario, allocator: type, targets: Targets, keys: Keys,
-                 session: zenoh.Session, out_dir: Path) -> None:
+                 session: zenoh.Session, out_dir: Path, hosts: dict[int, str] | None = None) -> None:
         self.exp = exp
         self.scenario = scenario
         self.targets = targets
@@ -58,6 +58,7 @@ class Coordinator:
         self.session = session
         self.out_dir = out_dir
         self.n = exp.agents.count
+        self.hosts = hosts or {}  # agent -> host it runs on, where not on this machine
         self.world = scenario.make_world(component_rng(exp.run.seed, WORLD), allocator)
         self.event_names = list(getattr(allocator, "event_names", ()))
         self.event_totals: dict[str, int] = {}
@@ -237,10 +238,16 @@ class Coordinator:
         fatal = self.fatal.get(agent)
         detail = f"\n{fatal['error']}\n{fatal.get('traceback', '')}" if fatal else ""
         if not self.exp.run.allow_agent_failures:
-            raise RunError(f"agent {agent} stopped at tick {tick} because {why}; see logs/agent_{agent}.log"
+            raise RunError(f"agent {agent} stopped at tick {tick} because {why}; see {self._log_of(agent)}"
                            f" (set run.allow_agent_failures to go on without it){detail}")
         self.lost[agent] = tick
         self.world.kill(agent)
+
+    def _log_of(self, agent: int) -> str:
+        host = self.hosts.get(agent, "local")
+        if host == "local":
+            return f"logs/agent_{agent}.log"
+        return f"agent_{agent}.log in the logs of host {host} (run {self.keys.run_id})"
 
     def _retire(self, agent: int, tick: int) -> None:
         """Scheduled agent loss: the robot is gone from ``tick`` on and its process is stopped."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 import textwrap
@@ -14,6 +15,7 @@ from swarmbed.agent_runtime.node_sets import node_registry
 from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments import config as cfg
 from swarmbed.plugins import registry
+from swarmbed.wire.session import add_zenoh_args
 
 
 def _keys_epilog() -> str:
@@ -60,7 +62,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     exp = cfg.load(args.experiment, args.set, args.seed)
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
-    result = run_experiment(exp, out, progress=not args.no_progress)
+    result = run_experiment(exp, out, progress=not args.no_progress, listen=args.listen)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
 
@@ -218,6 +220,39 @@ def cmd_check_scenario(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_host(args: argparse.Namespace) -> int:
+    from swarmbed.experiments.host import serve
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    logs = Path(args.logs) if args.logs else Path("runs") / "hosts" / args.name
+    return serve(args.name, args.connect, args.listen, logs, args.zenoh_config, args.mode)
+
+
+def cmd_hosts(args: argparse.Namespace) -> int:
+    import zenoh
+
+    from swarmbed.experiments.host import host_info, visible_hosts
+    from swarmbed.wire.session import zenoh_config
+
+    try:
+        session = zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config))
+    except zenoh.ZError as exc:
+        print(f"error: cannot reach {', '.join(args.connect) or 'any endpoint (give --connect)'}: {exc}",
+              file=sys.stderr)
+        return 2
+    with session:
+        names = visible_hosts(session, timeout=args.timeout)
+        if not names:
+            print(f"no host visible from {', '.join(args.connect)}")
+            return 1
+        for name in names:
+            info = host_info(session, name) or {}
+            agents = ", ".join(f"{run}: {len(ids)}" for run, ids in info.get("agents", {}).items()) or "none"
+            print(f"{name}  cores {info.get('cores', '?')}  free {info.get('mem_free_mb', '?')} MB  "
+                  f"router {info.get('endpoint', '?')}  agents {agents}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -229,6 +264,8 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--out", help="run directory (default: runs/<name>/seed<seed>-<time>)")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument("--listen", "-l", action="append", default=[], metavar="ENDPOINT",
+                     help="also listen here, for the routers of hosts in the placement (e.g. tcp/0.0.0.0:7447)")
     run.set_defaults(func=cmd_run)
 
     bt = sub.add_parser("bt", help="behavior-tree tools")
@@ -276,6 +313,17 @@ def main(argv: list[str] | None = None) -> int:
                      help="an agents-section key for the check (e.g. max_speed=5)")
     chs.add_argument("--ticks", type=int, default=60, help="ticks per checked run (default 60)")
     chs.set_defaults(func=cmd_check_scenario)
+
+    host = sub.add_parser("host", help="run this machine's host daemon: a Zenoh router that starts agents for runs")
+    host.add_argument("--name", required=True, help="this host's name in placements (letters, digits, _ . -)")
+    host.add_argument("--logs", help="where its agents log (default: runs/hosts/<name>)")
+    add_zenoh_args(host, default_mode="router")
+    host.set_defaults(func=cmd_host)
+
+    hosts = sub.add_parser("hosts", help="list the hosts visible from an endpoint")
+    hosts.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
+    add_zenoh_args(hosts)
+    hosts.set_defaults(func=cmd_hosts)
 
     for name, module in (("agent", "swarmbed.agent_runtime.process"), ("netem", "swarmbed.netem.proxy")):
         p = sub.add_parser(name, help=f"start one {name} process by hand (e.g. on another host)", add_help=False)

@@ -40,6 +40,7 @@ from swarmbed.wire.schema import (
     RunSection,
     ScenarioSection,
     Targets,
+    hosts_of,
 )
 
 __all__ = ["ConfigError", "Experiment", "Resolved", "load", "resolve_experiment", "to_yaml", "from_yaml",
@@ -142,6 +143,12 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None) -
         "allocator": AllocatorSection(name=exp.allocator.name, **allocator_params.model_dump(mode="json")),
     })
     problems = resolve_scenario(kind).check(exp, scenario_params)
+    try:
+        hosts_of(exp.placement, exp.agents.count)
+    except ValueError as exc:
+        problems.append(str(exc))
+    problems += [f"swaps[{k}].agent: {s.agent} is outside 0..{exp.agents.count - 1}"
+                 for k, s in enumerate(exp.swaps) if s.agent >= exp.agents.count]
     if problems:
         raise fail(problems)
     tree_problem = _check_tree(exp)

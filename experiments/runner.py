@@ -10,7 +10,7 @@ from __future__ import annotations
 import resource
 import secrets
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,12 +20,15 @@ from tqdm import tqdm
 from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import Coordinator, RunError
 from swarmbed.experiments.config import Experiment, resolve_experiment, to_yaml
+from swarmbed.experiments.host import HostError, host_info, start_agents, stop_agents, wait_for_hosts
 from swarmbed.experiments.launcher import ChildExited, Children
 from swarmbed.wire.keys import Keys
+from swarmbed.wire.schema import LOCAL, hosts_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
+DEPLOYMENT = "deployment.json"  # where each agent ran; not a result (the same everywhere)
 RESULT_FILES = (results.SUMMARY, results.TIMESERIES, results.AGENTS, results.TIMINGS, results.TRAJECTORIES,
-                "network_ledger.csv")
+                "network_ledger.csv", DEPLOYMENT)
 
 
 @dataclass
@@ -35,22 +38,24 @@ class RunResult:
     timings: dict
 
 
-def open_hub(attempts: int = 5) -> tuple[zenoh.Session, str]:
-    """A router session listening on a free loopback TCP port."""
+def open_hub(listen: Sequence[str] = (), attempts: int = 5) -> tuple[zenoh.Session, str]:
+    """A router session listening on a free loopback TCP port (the run's own processes connect
+    there) and on ``listen`` (where other hosts' routers connect)."""
     last: Exception | None = None
     for _ in range(attempts):
         endpoint = free_loopback_endpoint()
         try:
-            return zenoh.open(zenoh_config("router", listen=[endpoint])), endpoint
+            return zenoh.open(zenoh_config("router", listen=[endpoint, *listen])), endpoint
         except zenoh.ZError as exc:  # the port was taken between probe and bind
             last = exc
     raise RunError(f"could not listen on a loopback port: {last}")
 
 
 def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
-                   on_ready: Callable[[Keys, str], None] | None = None) -> RunResult:
+                   on_ready: Callable[[Keys, str], None] | None = None, listen: Sequence[str] = ()) -> RunResult:
     """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
-    (tests use it to reach the run's keys from outside)."""
+    (tests use it to reach the run's keys from outside). ``listen``: endpoints where the hub also
+    listens, for the routers of the hosts in ``exp.placement``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     for name in RESULT_FILES:  # a stale summary must never vouch for a new, unfinished run
         (out_dir / name).unlink(missing_ok=True)
@@ -61,15 +66,32 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
 
     t_start = time.perf_counter()
     keys = Keys(secrets.token_hex(6))
-    session, endpoint = open_hub()
+    where = hosts_of(exp.placement, exp.agents.count)
+    remote = sorted({h for h in where.values() if h != LOCAL})
+    session, endpoint = open_hub(listen)
     children = Children(log_dir)
-    coord = Coordinator(exp, resolved.scenario(), resolved.allocator_cls, resolved.targets, keys, session, out_dir)
+    coord = Coordinator(exp, resolved.scenario(), resolved.allocator_cls, resolved.targets, keys, session, out_dir,
+                        where)
+    started: list[str] = []
     try:
         coord.declare()
         common = ["--run-id", keys.run_id, "--connect", endpoint]
         children.spawn("netem", "swarmbed.netem", [*common, "--out", str(out_dir)])
         for i in range(exp.agents.count):
-            children.spawn(f"agent_{i}", "swarmbed.agent_runtime", [*common, "--id", str(i)])
+            if where[i] == LOCAL:
+                children.spawn(f"agent_{i}", "swarmbed.agent_runtime", [*common, "--id", str(i)])
+        hosts = {}
+        if remote:
+            try:
+                wait_for_hosts(session, remote, exp.run.join_timeout, listen[0] if listen else endpoint)
+                for host in remote:
+                    hosts[host] = host_info(session, host)
+                    start_agents(session, host, keys.run_id, [i for i, h in where.items() if h == host])
+                    started.append(host)
+            except HostError as exc:
+                raise RunError(str(exc)) from None
+        results.write_json(out_dir / DEPLOYMENT, {"run_id": keys.run_id, "hub": [endpoint, *listen],
+                                                  "placement": {str(i): h for i, h in where.items()}, "hosts": hosts})
         try:
             coord.wait_for_members(children.check)
         except ChildExited as exc:
@@ -118,6 +140,8 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         summary = coord.write_results(timings)
         return RunResult(out_dir, summary, timings)
     finally:
+        for host in started:  # agents still running there after a failure
+            stop_agents(session, host, keys.run_id)
         children.kill_all()
         coord.close()
         session.close()

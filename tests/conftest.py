@@ -7,6 +7,8 @@ import pytest
 
 from swarmbed.experiments import config as cfg
 
+pytest_plugins = ("tests.netns",)  # the `lab` fixture: stand-in hosts in network namespaces
+
 ROOT = Path(__file__).resolve().parent.parent
 QUICKSTART = ROOT / "experiments" / "quickstart.yaml"
 

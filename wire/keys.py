@@ -92,3 +92,39 @@ def agent_id_of(key: str) -> int:
         return int(parts[parts.index("agent") + 1])
     except (ValueError, IndexError) as exc:
         raise ValueError(f"no agent id in key {key!r}") from exc
+
+
+HOSTS = f"{PREFIX}/hosts"
+
+
+@dataclass(frozen=True)
+class HostKeys:
+    """Keys of one host daemon; outside any run, since a host serves one run after another."""
+
+    name: str
+
+    # liveliness token: the host is up
+    @property
+    def alive(self) -> str:
+        return f"{HOSTS}/{self.name}"
+
+    # queryables: what the host is (JSON), and start/stop agents of a run (JSON request and answer)
+    @property
+    def info(self) -> str:
+        return f"{HOSTS}/{self.name}/info"
+
+    @property
+    def start(self) -> str:
+        return f"{HOSTS}/{self.name}/start"
+
+    @property
+    def stop(self) -> str:
+        return f"{HOSTS}/{self.name}/stop"
+
+
+def host_name_of(key: str) -> str:
+    """The host name in ``swarmbed/hosts/<name>[/...]``."""
+    parts = str(key).split("/")
+    if parts[:2] != HOSTS.split("/") or len(parts) < 3:
+        raise ValueError(f"no host name in key {key!r}")
+    return parts[2]

@@ -13,6 +13,7 @@ JSON from the coordinator's queryables and are validated again on arrival.
 
 from __future__ import annotations
 
+import re
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -80,8 +81,58 @@ class NetworkSection(Strict):
     latency: int = Field(0, ge=0, description="extra ticks of delay on top of the one-tick minimum")
 
 
+HOST_NAME = r"^[A-Za-z0-9_.-]+$"
+LOCAL = "local"  # the launching machine's name in a placement
+
+
+class SwapEntry(Strict):
+    """One scripted swap: agent ``agent`` moves to host ``to`` before tick ``tick``."""
+
+    agent: int = Field(ge=0)
+    tick: int = Field(ge=1)
+    to: str = Field(pattern=HOST_NAME)
+
+
+def hosts_of(placement: dict[str, str | int | list[int]], n_agents: int) -> dict[int, str]:
+    """Host of every agent id (``local`` unless placed); raises ValueError on a bad placement."""
+    where = {i: LOCAL for i in range(n_agents)}
+    placed: dict[int, str] = {}
+    for host, ids in placement.items():
+        if not re.match(HOST_NAME, host):
+            raise ValueError(f"placement: {host!r} is not a host name (letters, digits, _ . -)")
+        for i in parse_ids(ids):
+            if not 0 <= i < n_agents:
+                raise ValueError(f"placement.{host}: agent {i} is outside 0..{n_agents - 1}")
+            if i in placed:
+                raise ValueError(f"placement: agent {i} is placed on both {placed[i]} and {host}")
+            placed[i] = where[i] = host
+    return where
+
+
+def parse_ids(ids: str | int | list[int]) -> list[int]:
+    """``"0-9,12"``, ``7`` or ``[1, 2]`` as a list of ids."""
+    if isinstance(ids, int):
+        return [ids]
+    if isinstance(ids, list):
+        return list(ids)
+    out: list[int] = []
+    for part in str(ids).replace(" ", "").split(","):
+        lo, dash, hi = part.partition("-")
+        if not lo.isdigit() or (dash and not hi.isdigit()):
+            raise ValueError(f"placement: {ids!r} is not a list of ids like '0-9,12'")
+        out += list(range(int(lo), int(hi) + 1)) if dash else [int(lo)]
+    return out
+
+
 class Experiment(Strict):
     name: str = Field("experiment", description="names the run directory and the progress bar")
+    # Where agents run: not part of the results (config.yaml leaves these out, deployment.json
+    # records them), so the same experiment gives the same files wherever its agents run.
+    placement: dict[str, str | int | list[int]] = Field(
+        default_factory=dict, exclude=True,
+        description="host name -> agent ids ('0-9,12', 7 or [1, 2]); the others run on the launching machine")
+    swaps: list[SwapEntry] = Field(default_factory=list, exclude=True,
+                                   description="scripted moves of agents between hosts before given ticks")
     run: RunSection = RunSection()
     scenario: ScenarioSection = ScenarioSection()
     agents: AgentsSection = AgentsSection()

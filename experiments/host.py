@@ -1,0 +1,209 @@
+"""``swarmbed host``: the daemon of one machine that takes part in runs.
+
+It runs the machine's Zenoh router (the rmw_zenoh convention: one router per host, the host's own
+processes connect to it, routers connect to each other), announces itself with a liveliness token
+(``swarmbed/hosts/<name>``; its queryable ``.../info`` answers with its cores, free memory and
+agents), and starts or stops agent processes when a run's launcher asks (``.../start``,
+``.../stop``: JSON in, JSON out, the answer says what started or why not).
+
+Agents it starts are its children: they connect to its router, log to ``<logs>/<run-id>/``, and die
+with it (the kernel's parent-death signal), so a host that dies takes its agents with it and the
+run sees agent loss. Ctrl-C or SIGTERM stops its agents and leaves no orphan.
+
+    swarmbed host --name labpc2 --connect tcp/192.0.2.10:7447
+    swarmbed hosts --connect tcp/192.0.2.10:7447
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import psutil
+import zenoh
+
+from swarmbed.experiments.launcher import Children
+from swarmbed.wire.keys import HOSTS, HostKeys, host_name_of
+from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
+
+log = logging.getLogger("swarmbed.host")
+
+AGENT_MODULE = "swarmbed.agent_runtime"
+
+
+class HostError(RuntimeError):
+    """A host that cannot be reached or refuses a request; the message says which and why."""
+
+
+class Host:
+    def __init__(self, name: str, session: zenoh.Session, endpoint: str, logs: Path) -> None:
+        self.name = name
+        self.keys = HostKeys(name)
+        self.session = session
+        self.endpoint = endpoint  # where this host's agents connect: its own router
+        self.logs = logs
+        self.runs: dict[str, Children] = {}
+        self.lock = threading.Lock()
+        self._entities: list[Any] = []
+
+    def info(self) -> dict[str, Any]:
+        with self.lock:
+            agents = {run: sorted(int(n.split("_")[1]) for n, p in ch.procs.items() if p.poll() is None)
+                      for run, ch in self.runs.items()}
+        return {"name": self.name, "cores": os.cpu_count(), "mem_free_mb": psutil.virtual_memory().available // 2**20,
+                "pid": os.getpid(), "endpoint": self.endpoint, "agents": {r: a for r, a in agents.items() if a}}
+
+    def start_agents(self, request: dict[str, Any]) -> dict[str, Any]:
+        run_id, ids = request.get("run_id"), request.get("agents")
+        if not isinstance(run_id, str) or not run_id.isalnum():
+            return {"error": f"start: run_id must be alphanumeric, got {run_id!r}"}
+        if not isinstance(ids, list) or not all(isinstance(i, int) and i >= 0 for i in ids):
+            return {"error": f"start: agents must be a list of ids, got {ids!r}"}
+        extra = [str(a) for a in request.get("args", [])]
+        with self.lock:
+            children = self.runs.get(run_id)
+            if children is None:
+                log_dir = self.logs / run_id
+                try:
+                    log_dir.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    return {"error": f"cannot write logs to {log_dir}: {exc.strerror}"}
+                children = self.runs[run_id] = Children(log_dir)
+            busy = [i for i in ids if (p := children.procs.get(f"agent_{i}")) is not None and p.poll() is None]
+            if busy:
+                return {"error": f"agents {busy} of run {run_id} already run on host {self.name}"}
+            for i in ids:
+                children.spawn(f"agent_{i}", AGENT_MODULE,
+                               ["--run-id", run_id, "--connect", self.endpoint, "--id", str(i), *extra])
+        log.info("host %s: started agents %s of run %s", self.name, ids, run_id)
+        return {"started": ids, "logs": str(self.logs / run_id)}
+
+    def stop_agents(self, request: dict[str, Any]) -> dict[str, Any]:
+        run_id, ids = request.get("run_id"), request.get("agents")
+        with self.lock:
+            children = self.runs.get(run_id) if isinstance(run_id, str) else None
+            if children is None:
+                return {"stopped": []}
+            names = [f"agent_{i}" for i in ids] if isinstance(ids, list) else list(children.procs)
+            procs = [children.procs[n] for n in names if n in children.procs]
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=5)
+            except Exception:
+                p.kill()
+        return {"stopped": [int(n.split("_")[1]) for n in names]}
+
+    def _serve(self, handler):
+        def on_query(query: zenoh.Query) -> None:
+            try:
+                request = json.loads(query.payload.to_bytes()) if query.payload is not None else {}
+                answer = handler(request) if isinstance(request, dict) else {"error": "request must be a JSON object"}
+            except (ValueError, UnicodeDecodeError) as exc:
+                answer = {"error": f"request is not JSON: {exc}"}
+            query.reply(query.key_expr, json.dumps(answer))
+        return on_query
+
+    def declare(self) -> None:
+        s, k = self.session, self.keys
+        self._entities += [
+            s.declare_queryable(k.info, self._serve(lambda _req: self.info())),
+            s.declare_queryable(k.start, self._serve(self.start_agents)),
+            s.declare_queryable(k.stop, self._serve(self.stop_agents)),
+            s.liveliness().declare_token(k.alive),
+        ]
+
+    def reap(self) -> None:
+        """Forget runs whose agents have all exited."""
+        with self.lock:
+            for run_id in [r for r, ch in self.runs.items() if all(p.poll() is not None for p in ch.procs.values())]:
+                del self.runs[run_id]
+
+    def close(self) -> None:
+        for entity in reversed(self._entities):
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+        with self.lock:
+            runs = list(self.runs.values())
+        for children in runs:
+            children.kill_all()
+
+
+def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_config_file: str | None = None,
+          mode: str = "router") -> int:
+    """Run the host daemon until SIGINT or SIGTERM: a router (or peer) for this machine."""
+    listen = listen or [free_loopback_endpoint()]
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    with zenoh.open(zenoh_config(mode, connect, listen, zenoh_config_file)) as session:
+        host = Host(name, session, listen[0], logs)
+        host.declare()
+        log.info("host %s: router on %s, connecting to %s; agents log to %s", name, ", ".join(listen),
+                 ", ".join(connect) or "nothing", logs)
+        print(f"host {name} up: router on {', '.join(listen)}", flush=True)
+        try:
+            while not stop.wait(1.0):
+                host.reap()
+        finally:
+            host.close()
+    log.info("host %s: stopped", name)
+    return 0
+
+
+def _get_json(session: zenoh.Session, key: str, payload: dict | None, timeout: float) -> dict | None:
+    body = json.dumps(payload) if payload is not None else None
+    for reply in session.get(key, payload=body, timeout=timeout):
+        if reply.ok is not None:
+            answer = json.loads(reply.ok.payload.to_bytes())
+            return answer if isinstance(answer, dict) else None
+    return None
+
+
+def visible_hosts(session: zenoh.Session, timeout: float = 2.0) -> list[str]:
+    """Names of the hosts whose liveliness token this session can see."""
+    names = set()
+    for reply in session.liveliness().get(f"{HOSTS}/*", timeout=timeout):
+        if reply.ok is not None:
+            names.add(host_name_of(str(reply.ok.key_expr)))
+    return sorted(names)
+
+
+def host_info(session: zenoh.Session, name: str, timeout: float = 5.0) -> dict | None:
+    return _get_json(session, HostKeys(name).info, None, timeout)
+
+
+def wait_for_hosts(session: zenoh.Session, names: list[str], timeout: float, endpoint_hint: str) -> None:
+    """Until every named host holds its token; else a HostError naming the missing ones and the
+    command that starts each."""
+    deadline = time.monotonic() + timeout
+    missing = sorted(set(names))
+    while missing:
+        missing = sorted(set(names) - set(visible_hosts(session, timeout=1.0)))
+        if missing and time.monotonic() > deadline:
+            commands = "\n".join(f"    swarmbed host --name {h} --connect {endpoint_hint}" for h in missing)
+            raise HostError(f"hosts not reachable after {timeout:.0f} s: {', '.join(missing)}; start each on its "
+                            f"machine with:\n{commands}")
+
+
+def start_agents(session: zenoh.Session, host: str, run_id: str, agents: list[int], timeout: float = 30.0) -> None:
+    """Ask ``host`` to start ``agents`` of ``run_id``; a HostError says why it did not."""
+    answer = _get_json(session, HostKeys(host).start, {"run_id": run_id, "agents": agents}, timeout)
+    if answer is None:
+        raise HostError(f"host {host} did not answer the request to start agents {agents}")
+    if "error" in answer:
+        raise HostError(f"host {host} refused to start agents {agents}: {answer['error']}")
+
+
+def stop_agents(session: zenoh.Session, host: str, run_id: str, timeout: float = 10.0) -> None:
+    _get_json(session, HostKeys(host).stop, {"run_id": run_id}, timeout)

@@ -1,0 +1,90 @@
+"""Runs spread over stand-in hosts (network namespaces, one ``swarmbed host`` each): placement never
+changes results, a host that dies is agent loss, a missing host is named with the command to start it."""
+
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from swarmbed.coordinator.coordinator import RunError
+from swarmbed.experiments.runner import run_experiment
+from tests.conftest import QUICKSTART, experiment
+
+RESULTS = ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv", "config.yaml")
+SAR = QUICKSTART.parent / "sar" / "_base.yaml"
+
+
+def _same_files(a, b):
+    for name in RESULTS:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), f"{name} differs"
+
+
+def test_agents_split_over_three_hosts_give_the_all_local_results(lab, tmp_path):
+    for name in ("h1", "h2", "h3"):
+        lab.add_host(name)
+    sets = ["agents.count=20", "allocator={name: cbba}", "run.duration=150", "run.stop_when_done=false"]
+    local = run_experiment(experiment(*sets), tmp_path / "local", progress=False)
+    placed = experiment(*sets, "placement={h1: '0-5', h2: '6-12,19', h3: [13, 14, 15, 16, 17, 18]}")
+    seen = {}
+
+    def look(keys, endpoint):
+        seen["hosts"] = subprocess.run([sys.executable, "-m", "swarmbed", "hosts", "--connect", endpoint],
+                                       capture_output=True, text=True, timeout=30).stdout
+
+    spread = run_experiment(placed, tmp_path / "spread", progress=False, listen=[lab.hub], on_ready=look)
+    _same_files(tmp_path / "local", tmp_path / "spread")
+    assert spread.summary["network"]["messages_sent"] == local.summary["network"]["messages_sent"] > 0
+    deployment = (tmp_path / "spread" / "deployment.json").read_text()
+    assert '"19": "h2"' in deployment and '"13": "h3"' in deployment
+    for name in ("h1", "h2", "h3"):
+        assert name in seen["hosts"]
+    assert list((lab.logs / "h2").glob("*/agent_19.log")), "agent 19 did not run on host h2"
+
+
+def test_search_and_rescue_over_two_hosts_gives_the_all_local_results(lab, tmp_path):
+    lab.add_host("a")
+    lab.add_host("b")
+    sets = ["allocator.name=cbba-etc", "run.duration=40"]
+    run_experiment(experiment(*sets, base=SAR), tmp_path / "local", progress=False)
+    run_experiment(experiment(*sets, "placement={a: '0-9', b: '10-19'}", base=SAR), tmp_path / "spread",
+                   progress=False, listen=[lab.hub])
+    _same_files(tmp_path / "local", tmp_path / "spread")
+
+
+def _kill_when_running(lab, name, delay):
+    def later(keys, endpoint):
+        threading.Timer(delay, lab.kill_host, [name]).start()
+    return later
+
+
+def test_a_host_that_dies_takes_its_agents_and_the_run_accounts_for_them(lab, tmp_path):
+    lab.add_host("doomed")
+    lab.add_host("fine")
+    long = ["allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
+            "agents.count=6", "placement={doomed: '0-1', fine: '2-3'}"]
+    result = run_experiment(experiment(*long, "run.duration=3000", "run.allow_agent_failures=true"),
+                            tmp_path / "allowed", progress=False, listen=[lab.hub],
+                            on_ready=_kill_when_running(lab, "doomed", 1.0))
+    assert set(result.summary["agents_lost"]) == {"0", "1"}
+    net = result.summary["network"]
+    assert net["copies"] == net["delivered"] + net["dropped_total"] and net["dropped"]["receiver_dead"] > 0
+    assert lab.pids("doomed") == []  # nothing of that host is left running
+
+    lab.start_daemon("doomed", lab.namespaces[0])  # the machine comes back for the next run
+    with pytest.raises(RunError, match=r"agent [01] stopped at tick \d+ .* logs of host doomed"):
+        run_experiment(experiment(*long, "run.duration=1000000"), tmp_path / "strict", progress=False,
+                       listen=[lab.hub], on_ready=_kill_when_running(lab, "doomed", 1.0))
+
+
+def test_a_missing_host_is_named_with_the_command_that_starts_it(lab, tmp_path):
+    lab.add_host("here")
+    t0 = time.monotonic()
+    with pytest.raises(RunError) as info:
+        run_experiment(experiment("placement={here: 0, gone: '1-2'}", "run.join_timeout=3"), tmp_path,
+                       progress=False, listen=[lab.hub])
+    msg = str(info.value)
+    assert "hosts not reachable after 3 s: gone" in msg and f"swarmbed host --name gone --connect {lab.hub}" in msg
+    assert time.monotonic() - t0 < 20
+    assert not (tmp_path / "summary.json").exists()
