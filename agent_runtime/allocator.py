@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import abc
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict
@@ -33,6 +33,9 @@ class Allocator(abc.ABC):
     default_tree: ClassVar[str | None] = None
     #: SAR: whether the scenario should show victims' colours to this algorithm when bidding
     bids_with_colors: ClassVar[bool] = False
+    #: whether a running instance can move to another process (snapshot / restore); a plugin that
+    #: holds what cannot move (open files, threads, sockets) sets False, and swaps are refused
+    snapshottable: ClassVar[bool] = True
 
     def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator, run_seed: int = 0) -> None:
         self.agent_id = agent_id
@@ -43,6 +46,20 @@ class Allocator(abc.ABC):
 
     def count(self, event: str, n: int = 1) -> None:
         self.events[event] = self.events.get(event, 0) + n
+
+    #: attributes that ``snapshot`` leaves out: the constructor sets them again
+    CONSTRUCTED: ClassVar[tuple[str, ...]] = ("agent_id", "params", "run_seed")
+
+    def snapshot(self) -> dict[str, Any]:
+        """This instance's state, to continue in another process: by default every attribute but
+        those the constructor sets from the run (``CONSTRUCTED``). Override both this and
+        :meth:`restore` for state that is not plain data (see ``swarmbed.wire.state``)."""
+        return {k: v for k, v in vars(self).items() if k not in self.CONSTRUCTED}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from ``state`` (what :meth:`snapshot` returned, restored in a fresh instance
+        built with the same arguments)."""
+        self.__dict__.update(state)
 
     def observe(self, view: LocalView) -> None:  # noqa: B027 - optional hook, deliberately empty
         """Called every tick before the tree is ticked (default: nothing)."""

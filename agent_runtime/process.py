@@ -13,12 +13,21 @@ import traceback
 import zenoh
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
-from swarmbed.wire.codec import StopIn, WireError, decode_agent_in, encode_agent_out, encode_report, encode_stop
+from swarmbed.wire.codec import (
+    ControlIn,
+    StopIn,
+    WireError,
+    decode_agent_in,
+    encode_agent_out,
+    encode_report,
+    encode_stop,
+)
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.lifecycle import child_args
-from swarmbed.wire.membership import fetch_spec, hand_over, is_alive
+from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_over, is_alive
 from swarmbed.wire.schema import AgentSpec
 from swarmbed.wire.session import open_from_args
+from swarmbed.wire.state import StateError
 
 log = logging.getLogger("swarmbed.agent")
 
@@ -26,7 +35,11 @@ EXIT_OK, EXIT_PLUGIN_ERROR, EXIT_COORDINATOR_GONE = 0, 1, 3
 COORDINATOR_GONE = "coordinator gone"
 
 
-def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
+def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation: int = 0,
+          restored: bool = False, malformed: int = 0) -> int:
+    """Answer tick samples until the run stops this agent. Swap orders name an incarnation: on
+    ``snapshot`` this process hands its state to the coordinator and freezes (answers no tick),
+    then either ``retire``s (its successor goes on) or ``resume``s (the swap failed)."""
     agent_id = runtime.agent_id
     in_key = keys.agent_in(agent_id)
     # A channel subscriber wakes this thread directly (no Python callback thread in between): the
@@ -44,8 +57,10 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
         if not hand_over(session, keys.agent_report(agent_id), encode_report(data)):
             log.error("agent %d: the coordinator did not take the %s report", agent_id, data["kind"])
 
-    token = session.liveliness().declare_token(keys.alive_agent(agent_id))
-    malformed = 0
+    token = session.liveliness().declare_token(keys.alive_agent(agent_id, incarnation))
+    if restored:  # subscribed and announced: the coordinator may retire the old process and go on
+        report({"kind": "restored", "agent": agent_id, "incarnation": incarnation})
+    frozen = False
     try:
         while True:
             data = sub.recv().payload.to_bytes()
@@ -55,6 +70,18 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
                 malformed += 1
                 log.warning("agent %d: malformed sample on %s dropped: %s", agent_id, in_key, exc)
                 continue
+            if isinstance(msg, ControlIn):
+                if msg.incarnation != incarnation:
+                    continue  # an order for the other process of a swap
+                if msg.order == "snapshot":
+                    frozen = _hand_over_state(session, keys, runtime, incarnation, malformed, report)
+                elif msg.order == "resume":
+                    frozen = False
+                    log.info("agent %d: swap cancelled; going on here", agent_id)
+                elif msg.order == "retire":
+                    log.info("agent %d: moved to incarnation %d elsewhere; exiting", agent_id, incarnation + 1)
+                    return EXIT_OK
+                continue
             if isinstance(msg, StopIn):
                 if msg.reason == COORDINATOR_GONE:
                     log.error("agent %d: the coordinator went away; exiting", agent_id)
@@ -63,6 +90,8 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
                 final["malformed"] += malformed
                 report(final)
                 return EXIT_OK
+            if frozen:
+                continue  # its successor answers this tick
             try:
                 obs = runtime.decode_observation(msg.obs)
             except WireError as exc:  # blind for one tick: answer it (the clock must go on), count it
@@ -85,19 +114,51 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime) -> int:
             entity.undeclare()
 
 
+def _hand_over_state(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation: int, malformed: int,
+                     report) -> bool:
+    """Give the coordinator this agent's snapshot; whether it took it (and this process is frozen)."""
+    agent_id = runtime.agent_id
+    try:
+        state = runtime.snapshot({"malformed": malformed})
+    except StateError as exc:
+        log.error("agent %d: cannot snapshot its state: %s", agent_id, exc)
+        report({"kind": "snapshot_failed", "agent": agent_id, "incarnation": incarnation, "error": str(exc)})
+        return False
+    if not hand_over(session, keys.agent_snapshot(agent_id), state):
+        log.error("agent %d: the coordinator did not take the snapshot", agent_id)
+        return False
+    log.info("agent %d: state handed over (%d bytes); waiting to retire or resume", agent_id, len(state))
+    return True
+
+
+def _add_args(ap) -> None:
+    ap.add_argument("--id", type=int, required=True, help="0 <= id < agents.count")
+    ap.add_argument("--incarnation", type=int, default=0, help="which process of this agent (a swap starts the next)")
+    ap.add_argument("--restore", action="store_true", help="continue from the snapshot the coordinator holds")
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = child_args("swarmbed agent", "run one swarmbed agent process",
-                      lambda ap: ap.add_argument("--id", type=int, required=True, help="0 <= id < agents.count"),
-                      argv)
+    args = child_args("swarmbed agent", "run one swarmbed agent process", _add_args, argv)
     keys = Keys(args.run_id)
     with open_from_args(args) as session:
         spec = fetch_spec(session, keys.agent_config, AgentSpec, f"agent config of run {args.run_id}")
         if not 0 <= args.id < spec.agents.count:
             log.error("agent id %d is outside 0..%d of run %s", args.id, spec.agents.count - 1, args.run_id)
             return 2
-        if is_alive(session, keys.alive_agent(args.id)):
+        if not args.restore and is_alive(session, keys.alive_agent_any(args.id)):
             log.error("agent %d of run %s is already running (its liveliness token is held); "
                       "refusing to start a second one", args.id, args.run_id)
             return 2
         runtime = AgentRuntime(spec, args.id)
-        return serve(session, keys, runtime)
+        malformed = 0
+        if args.restore:
+            try:
+                malformed = int(runtime.restore(fetch_bytes(session, keys.agent_snapshot(args.id)))["malformed"])
+            except (StateError, JoinError, KeyError, ValueError) as exc:
+                log.error("agent %d: cannot restore: %s", args.id, exc)
+                if not hand_over(session, keys.agent_report(args.id), encode_report(
+                        {"kind": "restore_failed", "agent": args.id, "incarnation": args.incarnation,
+                         "error": str(exc)})):
+                    log.error("agent %d: the coordinator did not take the restore_failed report", args.id)
+                return EXIT_PLUGIN_ERROR
+        return serve(session, keys, runtime, args.incarnation, restored=args.restore, malformed=malformed)

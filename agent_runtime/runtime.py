@@ -23,9 +23,12 @@ from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, unpack
 from swarmbed.wire.lifecycle import agent_seeds
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.schema import AgentSpec
+from swarmbed.wire.state import StateError, pack_state, unpack_state
 from swarmbed.wire.targets import load_target
 
 log = logging.getLogger("swarmbed.agent")
+
+SNAPSHOT_VERSION = 1
 
 
 def build_scenario(spec: AgentSpec) -> Scenario:
@@ -97,6 +100,53 @@ class AgentRuntime:
         self.ticks += 1
         events, self.allocator.events = self.allocator.events, {}
         return ctx.action, messages, events
+
+    # -- moving to another process ----------------------------------------------------------------
+    #: node attributes the tree loader sets: not state
+    STRUCTURE = frozenset({"name", "config", "_literals", "_children", "child"})
+
+    def _modules(self) -> tuple[str, ...]:
+        """Modules whose classes a snapshot may hold: the allocator's and the tree nodes'."""
+        return tuple({type(self.allocator).__module__, *(type(n).__module__ for n in self.tree.nodes)})
+
+    def _blackboards(self) -> list[Blackboard]:
+        seen: dict[int, Blackboard] = {}
+        for node in self.tree.nodes:
+            seen.setdefault(id(node.config.blackboard), node.config.blackboard)
+        return list(seen.values())
+
+    def snapshot(self, extra: dict | None = None) -> bytes:
+        """Everything that makes this agent continue as it would have: the allocator's state, every
+        tree node's state, the blackboards, the agent's random generator and its counters. Taken
+        between ticks; raises StateError (naming what) when something cannot move."""
+        if not self.allocator.snapshottable:
+            raise StateError(f"allocator {type(self.allocator).__name__} says its state cannot move "
+                             "(snapshottable = False)")
+        state = {
+            "version": SNAPSHOT_VERSION, "agent": self.agent_id, "ticks": self.ticks, "sent": dict(self.sent),
+            "malformed": self.malformed, "rng": self.context.rng, "allocator": self.allocator.snapshot(),
+            "nodes": [{k: v for k, v in vars(n).items() if k not in self.STRUCTURE} for n in self.tree.nodes],
+            "blackboards": [bb._store for bb in self._blackboards()], "extra": extra or {},
+        }
+        return pack_state(state, self._modules())
+
+    def restore(self, data: bytes) -> dict:
+        """Continue from a snapshot taken by the same agent of the same run; returns its ``extra``."""
+        state = unpack_state(data, self._modules())
+        if state.get("version") != SNAPSHOT_VERSION or state.get("agent") != self.agent_id:
+            raise StateError(f"snapshot of agent {state.get('agent')} (version {state.get('version')}) "
+                             f"given to agent {self.agent_id}")
+        if len(state["nodes"]) != len(self.tree.nodes) or len(state["blackboards"]) != len(self._blackboards()):
+            raise StateError("the snapshot's behavior tree has another shape than this agent's")
+        self.ticks, self.malformed, self.context.rng = state["ticks"], state["malformed"], state["rng"]
+        self.sent.clear()
+        self.sent.update(state["sent"])
+        self.allocator.restore(state["allocator"])
+        for node, attrs in zip(self.tree.nodes, state["nodes"]):
+            node.__dict__.update(attrs)
+        for bb, store in zip(self._blackboards(), state["blackboards"]):
+            bb._store = store
+        return state["extra"]
 
     def report(self) -> dict:
         return {

@@ -8,6 +8,7 @@ run's Zenoh hub: it listens, everyone else connects to it as a client.
 
 from __future__ import annotations
 
+import json
 import logging
 import queue
 import time
@@ -21,23 +22,28 @@ from swarmbed.coordinator import results
 from swarmbed.coordinator.scenario import Scenario
 from swarmbed.wire.codec import (
     EMPTY_INBOX,
+    TAG_RESUME,
+    TAG_RETIRE,
+    TAG_SNAPSHOT,
     NetemStep,
     WireError,
     World,
     decode_netem_step,
     decode_report,
+    encode_control,
     encode_stop,
     encode_tick,
     encode_world,
     pack,
 )
-from swarmbed.wire.keys import Keys, agent_id_of
+from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
 from swarmbed.wire.lifecycle import WORLD, component_rng
 from swarmbed.wire.membership import accept_handovers, serve_text
 from swarmbed.wire.schema import Experiment, Targets, agent_spec, netem_spec
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
+SWAPS = "swaps.csv"
 
 
 class RunError(RuntimeError):
@@ -79,6 +85,18 @@ class Coordinator:
         self.wall: dict[str, float] = {}
         self._entities: list = []
         self._pushback: list[tuple[str, Any]] = []
+        # moving agents between processes (swaps)
+        self.incarnation: dict[int, int] = {}  # agent -> its current process, where not the first (0)
+        self.snapshots: dict[int, bytes] = {}  # agent -> the snapshot its old process handed over
+        self.swaps_due: dict[int, list[tuple[int, str]]] = {}  # tick -> (agent, host), scripted
+        for entry in exp.swaps:
+            self.swaps_due.setdefault(entry.tick, []).append((entry.agent, entry.to))
+        self.swap_requests: queue.SimpleQueue[tuple[int, str, int]] = queue.SimpleQueue()  # (agent, host, number)
+        self.swap_log: list[dict[str, Any]] = []
+        self.requested_swaps: dict[int, dict[str, Any] | None] = {}  # number -> its record once done
+        # place(agent, host, incarnation) starts a restoring process; unplace(...) stops one (the runner's)
+        self.place: Callable[[int, str, int], None] | None = None
+        self.unplace: Callable[[int, str, int], None] | None = None
 
     # -- setup -----------------------------------------------------------------------------------
     def declare(self) -> None:
@@ -90,6 +108,8 @@ class Coordinator:
             accept_handovers(s, k.agent_report_all, lambda _key, data: put(("report", data))),
             accept_handovers(s, k.netem_report, lambda _key, data: put(("netem_report", data))),
             s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True),
+            s.declare_queryable(k.agent_snapshot_all, self._on_snapshot_query),
+            s.declare_queryable(k.swap, self._on_swap_query),
         ]
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
         self.world_pub = s.declare_publisher(k.world, congestion_control=BLOCK)
@@ -100,6 +120,42 @@ class Coordinator:
     def _on_alive(self, sample: zenoh.Sample) -> None:
         what = "join" if sample.kind == zenoh.SampleKind.PUT else "leave"
         self.events.put((what, str(sample.key_expr)))
+
+    def _on_snapshot_query(self, query: zenoh.Query) -> None:
+        """An old process hands its snapshot over (payload), or the new one fetches it (none)."""
+        try:
+            agent = agent_id_of(str(query.key_expr))
+        except ValueError:
+            query.reply_err("no agent in the key")
+            return
+        if query.payload is not None:
+            self.snapshots[agent] = query.payload.to_bytes()
+            query.reply(query.key_expr, b"ok")
+            self.events.put(("snapshot", agent))
+        elif agent in self.snapshots:
+            query.reply(query.key_expr, self.snapshots[agent])
+        else:
+            query.reply_err(f"no snapshot of agent {agent} is held")
+
+    def _on_swap_query(self, query: zenoh.Query) -> None:
+        """``{"agent": I, "to": HOST}`` queues a swap before the next tick and answers its number;
+        ``{"swap": N}`` answers swap N's record once it is done (``{"pending": true}`` before)."""
+        try:
+            req = json.loads(query.payload.to_bytes()) if query.payload is not None else None
+            if isinstance(req, dict) and isinstance(req.get("swap"), int):
+                record = self.requested_swaps.get(req["swap"])
+                answer: dict[str, Any] = record if record is not None else {"pending": True}
+            elif (isinstance(req, dict) and isinstance(req.get("agent"), int) and 0 <= req["agent"] < self.n
+                  and isinstance(req.get("to"), str) and req["to"]):
+                number = len(self.requested_swaps)
+                self.requested_swaps[number] = None
+                self.swap_requests.put((req["agent"], req["to"], number))
+                answer = {"queued": number}
+            else:
+                answer = {"error": f"a swap request is {{\"agent\": 0..{self.n - 1}, \"to\": HOST}}"}
+        except ValueError as exc:
+            answer = {"error": f"not JSON: {exc}"}
+        query.reply(query.key_expr, json.dumps(answer))
 
     def close(self) -> None:
         for e in reversed(self._entities):
@@ -145,8 +201,11 @@ class Coordinator:
             ids, xs, ys = w.positions()
             if self.exp.run.record_trajectories:
                 self.trajectories += [(k, i, x, y) for i, x, y in zip(ids, xs, ys)]
+            if k > 0:
+                self._swap_due(k)
             doomed = w.draw_losses()  # lost at tick k+1: the proxy must not deliver to them then
-            self.world_pub.put(encode_world(World(k, ids, xs, ys, [i for i in ids if i not in doomed])))
+            incarnations = {a: i for a, i in self.incarnation.items() if i}
+            self.world_pub.put(encode_world(World(k, ids, xs, ys, [i for i in ids if i not in doomed], incarnations)))
             for i, obs in w.observations().items():
                 self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX)))
             step = self._await_step(k)
@@ -191,6 +250,8 @@ class Coordinator:
                     raise RunError(f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log")
                 if not data.endswith("/coordinator"):
                     agent = agent_id_of(data)
+                    if incarnation_of(data) != self.incarnation.get(agent, 0):
+                        continue  # a process swapped out: its agent goes on elsewhere
                     self._await_fatal_report(agent)
                     self._lose(agent, k, "its process exited")
             elif what == "report":
@@ -242,6 +303,92 @@ class Coordinator:
                            f" (set run.allow_agent_failures to go on without it){detail}")
         self.lost[agent] = tick
         self.world.kill(agent)
+
+    # -- moving agents (swaps) ---------------------------------------------------------------------
+    def _swap_due(self, k: int) -> None:
+        """Every swap scripted for tick ``k`` and every one requested since the last tick, in order."""
+        due: list[tuple[int, str, int | None]] = [(a, h, None) for a, h in self.swaps_due.pop(k, [])]
+        while True:
+            try:
+                due.append(self.swap_requests.get_nowait())
+            except queue.Empty:
+                break
+        for agent, host, number in due:
+            record = self._swap(agent, host, k)
+            self.swap_log.append(record)
+            if number is not None:
+                self.requested_swaps[number] = record
+
+    def _swap(self, agent: int, to: str, k: int) -> dict[str, Any]:
+        """Move ``agent`` to host ``to`` before tick ``k``: the old process hands its state over and
+        freezes, a new process on ``to`` restores it and announces itself, the old one retires.
+        Any failure resumes the old process; the record says what happened."""
+        t0 = time.perf_counter()
+        old = self.incarnation.get(agent, 0)
+        new = old + 1
+        record: dict[str, Any] = {"tick": k, "agent": agent, "from": self.hosts.get(agent, "local"), "to": to,
+                                  "outcome": "failed", "reason": "", "snapshot_bytes": 0, "pause_ms": 0.0}
+
+        def finish(reason: str = "") -> dict[str, Any]:
+            record["pause_ms"] = round((time.perf_counter() - t0) * 1000, 3)
+            if reason:
+                record["reason"] = reason
+                log.warning("coordinator: swap of agent %d to %s before tick %d failed: %s", agent, to, k, reason)
+            return record
+
+        if agent in self.lost or self.place is None:
+            return finish("the agent is not running" if agent in self.lost else "this run cannot start processes")
+        self.snapshots.pop(agent, None)
+        self.agent_pubs[agent].put(encode_control(TAG_SNAPSHOT, old))
+        got = self._await_swap_event(agent, old, new, ("snapshot", "snapshot_failed"))
+        if got != "snapshot":
+            return finish(got)
+        record["snapshot_bytes"] = len(self.snapshots[agent])
+        try:
+            self.place(agent, to, new)
+        except Exception as exc:  # the host refused or is gone: the old process goes on
+            self.agent_pubs[agent].put(encode_control(TAG_RESUME, old))
+            return finish(f"cannot start it on {to}: {exc}")
+        got = self._await_swap_event(agent, old, new, ("restored", "restore_failed"))
+        if got != "restored":
+            self.agent_pubs[agent].put(encode_control(TAG_RESUME, old))
+            if self.unplace is not None:
+                self.unplace(agent, to, new)
+            return finish(got)
+        self.incarnation[agent] = new
+        self.agent_pubs[agent].put(encode_control(TAG_RETIRE, old))
+        self.hosts[agent] = to
+        self.snapshots.pop(agent, None)
+        record["outcome"] = "ok"
+        return finish()
+
+    def _await_swap_event(self, agent: int, old: int, new: int, wanted: tuple[str, str]) -> str:
+        """``wanted[0]`` when it comes; otherwise why not (the failure's reason). Other events wait."""
+        deadline = time.monotonic() + self.exp.run.tick_timeout
+        held: list[tuple[str, Any]] = []
+        try:
+            while True:
+                try:
+                    what, data = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
+                except queue.Empty:
+                    return f"no {wanted[0]} within {self.exp.run.tick_timeout:.0f} s"
+                if what == "snapshot" and data == agent and wanted[0] == "snapshot":
+                    return "snapshot"
+                if what == "report":
+                    try:
+                        rep = decode_report(data)
+                    except WireError as exc:
+                        self._malformed(self.keys.agent_report_all, exc)
+                        continue
+                    if rep.get("agent") == agent and rep.get("kind") in wanted:
+                        return "restored" if rep["kind"] == "restored" else f"{rep['kind']}: {rep.get('error')}"
+                if what == "leave" and not data.endswith(("/coordinator", "/netem")) and agent_id_of(data) == agent:
+                    gone = incarnation_of(data)
+                    if gone in (old, new):
+                        return f"the {'old' if gone == old else 'new'} process of agent {agent} exited"
+                held.append((what, data))
+        finally:
+            self._pushback.extend(held)
 
     def _log_of(self, agent: int) -> str:
         host = self.hosts.get(agent, "local")
@@ -335,5 +482,8 @@ class Coordinator:
         results.write_csv(out / results.AGENTS, ["agent", "alive", "lost_at_tick", *columns,
                                                  "messages_sent", "bytes_sent", "copies", "delivered"], rows)
         results.write_json(out / results.TIMINGS, timings)
+        if self.swap_log:  # wall-clock pauses: not among the files that repeat byte for byte
+            cols = ["tick", "agent", "from", "to", "outcome", "reason", "snapshot_bytes", "pause_ms"]
+            results.write_csv(out / SWAPS, cols, [[r[c] for c in cols] for r in self.swap_log])
         results.write_json(out / results.SUMMARY, summary)
         return summary

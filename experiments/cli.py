@@ -253,6 +253,47 @@ def cmd_hosts(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_swap(args: argparse.Namespace) -> int:
+    """Ask a running run to move one agent to another host before its next tick; wait for the outcome."""
+    import json
+
+    import zenoh
+
+    from swarmbed.wire.keys import Keys
+    from swarmbed.wire.session import zenoh_config
+
+    key = Keys(args.run).swap
+
+    def ask(request: dict) -> dict | None:
+        for reply in session.get(key, payload=json.dumps(request), timeout=5.0):
+            if reply.ok is not None:
+                return json.loads(reply.ok.payload.to_bytes())
+        return None
+
+    try:
+        session = zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config))
+    except zenoh.ZError as exc:
+        print(f"error: cannot reach {', '.join(args.connect)}: {exc}", file=sys.stderr)
+        return 2
+    with session:
+        answer = ask({"agent": args.agent, "to": args.to})
+        if answer is None or "error" in answer:
+            print(f"error: run {args.run}: {answer['error'] if answer else 'no coordinator answered'}", file=sys.stderr)
+            return 2
+        deadline = time.monotonic() + args.wait
+        while time.monotonic() < deadline:
+            record = ask({"swap": answer["queued"]})
+            if record is not None and not record.get("pending"):
+                print(f"swap of agent {record['agent']} from {record['from']} to {record['to']} before tick "
+                      f"{record['tick']}: {record['outcome']}"
+                      + (f" ({record['reason']})" if record["reason"] else
+                         f", {record['snapshot_bytes']} bytes, paused {record['pause_ms']:.0f} ms"))
+                return 0 if record["outcome"] == "ok" else 1
+            time.sleep(0.1)
+    print(f"error: the swap was queued but not done within {args.wait:.0f} s", file=sys.stderr)
+    return 1
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -324,6 +365,14 @@ def main(argv: list[str] | None = None) -> int:
     hosts.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
     add_zenoh_args(hosts)
     hosts.set_defaults(func=cmd_hosts)
+
+    swap = sub.add_parser("swap", help="move a running agent to another host, with its state")
+    swap.add_argument("--run", required=True, help="the run id (timings.json and deployment.json name it)")
+    swap.add_argument("--agent", type=int, required=True, help="the agent to move")
+    swap.add_argument("--to", required=True, help="the host to move it to ('local': the launching machine)")
+    swap.add_argument("--wait", type=float, default=60.0, help="seconds to wait for the outcome")
+    add_zenoh_args(swap)
+    swap.set_defaults(func=cmd_swap)
 
     for name, module in (("agent", "swarmbed.agent_runtime.process"), ("netem", "swarmbed.netem.proxy")):
         p = sub.add_parser(name, help=f"start one {name} process by hand (e.g. on another host)", add_help=False)

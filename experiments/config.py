@@ -149,6 +149,10 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None) -
         problems.append(str(exc))
     problems += [f"swaps[{k}].agent: {s.agent} is outside 0..{exp.agents.count - 1}"
                  for k, s in enumerate(exp.swaps) if s.agent >= exp.agents.count]
+    allocator = resolve(exp.allocator.name, kind)
+    if exp.swaps and not allocator.snapshottable:
+        problems.append(f"swaps: allocator {exp.allocator.name} cannot move between processes "
+                        f"({allocator.__name__}.snapshottable is False)")
     if problems:
         raise fail(problems)
     tree_problem = _check_tree(exp)

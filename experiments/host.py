@@ -37,6 +37,15 @@ log = logging.getLogger("swarmbed.host")
 AGENT_MODULE = "swarmbed.agent_runtime"
 
 
+def process_name(agent: int, incarnation: int = 0) -> str:
+    """An agent process's name (and log file): ``agent_3``, or ``agent_3.1`` for its second process."""
+    return f"agent_{agent}" if incarnation == 0 else f"agent_{agent}.{incarnation}"
+
+
+def _agent_of(name: str) -> int:
+    return int(name.split("_")[1].split(".")[0])
+
+
 class HostError(RuntimeError):
     """A host that cannot be reached or refuses a request; the message says which and why."""
 
@@ -54,7 +63,7 @@ class Host:
 
     def info(self) -> dict[str, Any]:
         with self.lock:
-            agents = {run: sorted(int(n.split("_")[1]) for n, p in ch.procs.items() if p.poll() is None)
+            agents = {run: sorted(_agent_of(n) for n, p in ch.procs.items() if p.poll() is None)
                       for run, ch in self.runs.items()}
         return {"name": self.name, "cores": os.cpu_count(), "mem_free_mb": psutil.virtual_memory().available // 2**20,
                 "pid": os.getpid(), "endpoint": self.endpoint, "agents": {r: a for r, a in agents.items() if a}}
@@ -65,7 +74,11 @@ class Host:
             return {"error": f"start: run_id must be alphanumeric, got {run_id!r}"}
         if not isinstance(ids, list) or not all(isinstance(i, int) and i >= 0 for i in ids):
             return {"error": f"start: agents must be a list of ids, got {ids!r}"}
-        extra = [str(a) for a in request.get("args", [])]
+        extra = request.get("args", [])
+        allowed = ("--restore", "--incarnation")
+        if not (isinstance(extra, list) and all(a in allowed or str(a).isdigit() for a in extra)):
+            return {"error": f"start: args may be --incarnation N and --restore, got {extra!r}"}
+        incarnation = int(extra[extra.index("--incarnation") + 1]) if "--incarnation" in extra else 0
         with self.lock:
             children = self.runs.get(run_id)
             if children is None:
@@ -75,12 +88,13 @@ class Host:
                 except OSError as exc:
                     return {"error": f"cannot write logs to {log_dir}: {exc.strerror}"}
                 children = self.runs[run_id] = Children(log_dir)
-            busy = [i for i in ids if (p := children.procs.get(f"agent_{i}")) is not None and p.poll() is None]
+            busy = [i for i in ids if (p := children.procs.get(process_name(i, incarnation))) is not None
+                    and p.poll() is None]
             if busy:
                 return {"error": f"agents {busy} of run {run_id} already run on host {self.name}"}
             for i in ids:
-                children.spawn(f"agent_{i}", AGENT_MODULE,
-                               ["--run-id", run_id, "--connect", self.endpoint, "--id", str(i), *extra])
+                children.spawn(process_name(i, incarnation), AGENT_MODULE,
+                               ["--run-id", run_id, "--connect", self.endpoint, "--id", str(i), *map(str, extra)])
         log.info("host %s: started agents %s of run %s", self.name, ids, run_id)
         return {"started": ids, "logs": str(self.logs / run_id)}
 
@@ -90,7 +104,11 @@ class Host:
             children = self.runs.get(run_id) if isinstance(run_id, str) else None
             if children is None:
                 return {"stopped": []}
-            names = [f"agent_{i}" for i in ids] if isinstance(ids, list) else list(children.procs)
+            incarnation = request.get("incarnation", 0)
+            if isinstance(ids, list) and isinstance(incarnation, int):
+                names = [process_name(i, incarnation) for i in ids]
+            else:
+                names = list(children.procs)
             procs = [children.procs[n] for n in names if n in children.procs]
         for p in procs:
             if p.poll() is None:
@@ -100,7 +118,7 @@ class Host:
                 p.wait(timeout=5)
             except Exception:
                 p.kill()
-        return {"stopped": [int(n.split("_")[1]) for n in names]}
+        return {"stopped": [_agent_of(n) for n in names]}
 
     def _serve(self, handler):
         def on_query(query: zenoh.Query) -> None:
@@ -196,14 +214,22 @@ def wait_for_hosts(session: zenoh.Session, names: list[str], timeout: float, end
                             f"machine with:\n{commands}")
 
 
-def start_agents(session: zenoh.Session, host: str, run_id: str, agents: list[int], timeout: float = 30.0) -> None:
-    """Ask ``host`` to start ``agents`` of ``run_id``; a HostError says why it did not."""
-    answer = _get_json(session, HostKeys(host).start, {"run_id": run_id, "agents": agents}, timeout)
+def start_agents(session: zenoh.Session, host: str, run_id: str, agents: list[int], args: list[str] | None = None,
+                 timeout: float = 30.0) -> None:
+    """Ask ``host`` to start ``agents`` of ``run_id`` (with ``args``: ``--incarnation N --restore``
+    for a swap); a HostError says why it did not."""
+    answer = _get_json(session, HostKeys(host).start, {"run_id": run_id, "agents": agents, "args": args or []},
+                       timeout)
     if answer is None:
         raise HostError(f"host {host} did not answer the request to start agents {agents}")
     if "error" in answer:
         raise HostError(f"host {host} refused to start agents {agents}: {answer['error']}")
 
 
-def stop_agents(session: zenoh.Session, host: str, run_id: str, timeout: float = 10.0) -> None:
-    _get_json(session, HostKeys(host).stop, {"run_id": run_id}, timeout)
+def stop_agents(session: zenoh.Session, host: str, run_id: str, agents: list[int] | None = None,
+                incarnation: int = 0, timeout: float = 10.0) -> None:
+    """Ask ``host`` to stop ``agents`` (every agent of the run where None) of ``run_id``."""
+    request: dict[str, Any] = {"run_id": run_id, "incarnation": incarnation}
+    if agents is not None:
+        request["agents"] = agents
+    _get_json(session, HostKeys(host).stop, request, timeout)

@@ -20,7 +20,14 @@ from tqdm import tqdm
 from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import Coordinator, RunError
 from swarmbed.experiments.config import Experiment, resolve_experiment, to_yaml
-from swarmbed.experiments.host import HostError, host_info, start_agents, stop_agents, wait_for_hosts
+from swarmbed.experiments.host import (
+    HostError,
+    host_info,
+    process_name,
+    start_agents,
+    stop_agents,
+    wait_for_hosts,
+)
 from swarmbed.experiments.launcher import ChildExited, Children
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.schema import LOCAL, hosts_of
@@ -90,6 +97,25 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                     started.append(host)
             except HostError as exc:
                 raise RunError(str(exc)) from None
+        def place(agent: int, host: str, incarnation: int) -> None:
+            args = ["--id", str(agent), "--incarnation", str(incarnation), "--restore"]
+            if host == LOCAL:
+                children.spawn(process_name(agent, incarnation), "swarmbed.agent_runtime", [*common, *args])
+                return
+            wait_for_hosts(session, [host], min(5.0, exp.run.join_timeout), listen[0] if listen else endpoint)
+            start_agents(session, host, keys.run_id, [agent], args=args[2:])
+            if host not in started:
+                started.append(host)
+
+        def unplace(agent: int, host: str, incarnation: int) -> None:
+            if host == LOCAL:
+                proc = children.procs.get(process_name(agent, incarnation))
+                if proc is not None and proc.poll() is None:
+                    proc.kill()
+            else:
+                stop_agents(session, host, keys.run_id, [agent], incarnation)
+
+        coord.place, coord.unplace = place, unplace
         results.write_json(out_dir / DEPLOYMENT, {"run_id": keys.run_id, "hub": [endpoint, *listen],
                                                   "placement": {str(i): h for i, h in where.items()}, "hosts": hosts})
         try:

@@ -30,7 +30,7 @@ from swarmbed.wire.codec import (
     encode_report,
     unpack,
 )
-from swarmbed.wire.keys import Keys, agent_id_of
+from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
 from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
 from swarmbed.wire.membership import fetch_spec, hand_over
 from swarmbed.wire.schema import NetemSpec
@@ -53,7 +53,8 @@ class Proxy:
         self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.outs: dict[int, dict[int, AgentOut]] = {}
-        self.lost: set[int] = set()
+        self.gone: set[tuple[int, int]] = set()  # (agent, incarnation) whose process left
+        self.lost: set[int] = set()  # agents whose current process left
         self.lost_unreported: list[int] = []
         self.world: World | None = None
         self.malformed = 0
@@ -62,7 +63,8 @@ class Proxy:
     # -- events ----------------------------------------------------------------------------------
     def _on_agent_alive(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.DELETE:
-            self.events.put(("lost", agent_id_of(str(sample.key_expr))))
+            key = str(sample.key_expr)
+            self.events.put(("left", (agent_id_of(key), incarnation_of(key))))
 
     def _on_coordinator(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.DELETE:
@@ -100,10 +102,9 @@ class Proxy:
                 self._finish(last)
                 log.info("netem: ledger balanced and written; report sent")
                 return 0
-            if what == "lost":
-                if data not in self.lost:
-                    self.lost.add(data)
-                    self.lost_unreported.append(data)
+            if what == "left":  # lost only if that process is the agent's current one (not one swapped out)
+                self.gone.add(data)
+                self._note_losses(self.world)
             elif what == "world":
                 try:
                     world = decode_world(data)
@@ -116,6 +117,7 @@ class Proxy:
                     continue
                 self.radio.confirm()  # tick `world.tick` happens: the inboxes made for it arrived
                 self.world = world
+                self._note_losses(world)
             elif what == "out":
                 try:
                     out = decode_agent_out(data)
@@ -131,6 +133,15 @@ class Proxy:
         self.malformed += 1
         if self.malformed <= 20:
             log.warning("netem: malformed sample on %s dropped: %s", key, exc)
+
+    def _note_losses(self, w: World | None) -> None:
+        """Agents whose current process (as tick ``w`` names it) has left are lost."""
+        if w is None:
+            return
+        for agent, incarnation in self.gone:
+            if agent not in self.lost and incarnation == w.incarnation(agent):
+                self.lost.add(agent)
+                self.lost_unreported.append(agent)
 
     def _complete(self, w: World) -> bool:
         got = self.outs.get(w.tick, {})

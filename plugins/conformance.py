@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +29,7 @@ from swarmbed.plugins.registry import make, resolve, resolve_scenario
 from swarmbed.wire.codec import TASK_DTYPE, unpack
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.schema import NetworkSection
+from swarmbed.wire.state import pack_state, unpack_state
 
 DEFAULT_MAX_BYTES = 64 * 1024
 CLEAN_NETWORK = NetworkSection()
@@ -88,7 +89,8 @@ def _observation(cls: type[Observation], k: int, x: float, y: float, visible: di
 
 def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, seed: int = 0,
              network: NetworkSection = CLEAN_NETWORK, remove_at: Mapping[int, list[int]] | None = None,
-             max_bytes: int = DEFAULT_MAX_BYTES, scenario: str | None = None) -> Trace:
+             max_bytes: int = DEFAULT_MAX_BYTES, scenario: str | None = None,
+             move_at: Sequence[int] = ()) -> Trace:
     """Run ``rounds`` rounds. ``remove_at[k]``: tasks that disappear (are done) before round k.
     Each round every agent is shown its view (``observe``, then ``decide``), as in a run; the first
     view lists the team's starting positions (``obs.team``, where the scenario's observation has
@@ -106,6 +108,8 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
     kinds = set(type(trace.allocators[0]).message_kinds)
     obs_cls = resolve_scenario(scenario).Observation if scenario else Observation
     for k in range(rounds):
+        if k in move_at:  # every agent moves to a fresh instance through a snapshot, as a swap does
+            trace.allocators = [_moved(a, name, params, i, seed, scenario) for i, a in enumerate(trace.allocators)]
         for t in (remove_at or {}).get(k, ()):
             tasks.pop(t, None)
         radio.confirm()
@@ -143,6 +147,16 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
     radio.finish(rounds - 1)
     radio.ledger.check()
     return trace
+
+
+def _moved(allocator: Allocator, name: str, params: Mapping[str, Any], agent_id: int, seed: int,
+           scenario: str | None) -> Allocator:
+    """A fresh instance restored from ``allocator``'s snapshot through its bytes."""
+    modules = (type(allocator).__module__,)
+    state = unpack_state(pack_state(allocator.snapshot(), modules), modules)
+    fresh = make(name, params, agent_id, np.random.default_rng(12345), seed, scenario)  # rng from the snapshot
+    fresh.restore(state)
+    return fresh
 
 
 # -- generic checks ---------------------------------------------------------------------------------
@@ -196,7 +210,23 @@ def check_vanishing_tasks(name: str, params: Mapping[str, Any], scenario: str = 
     return {"vanished": len(chosen)}
 
 
-GENERIC_CHECKS = (check_determinism, check_messages, check_degraded_network, check_vanishing_tasks)
+def check_snapshot(name: str, params: Mapping[str, Any], scenario: str = "mtsr", rounds: int = 40) -> dict:
+    """Snapshot, restore in a fresh instance and continue equals continuing: the same decisions
+    and message bytes, with every agent moved at three points of the run."""
+    if not resolve(name, scenario).snapshottable:
+        return {"snapshottable": False}
+    inst = random_instance(13, 6, 15, scenario=scenario)
+    plain = simulate(name, params, inst, rounds, seed=4, scenario=scenario)
+    moved = simulate(name, params, inst, rounds, seed=4, scenario=scenario, move_at=(1, 7, 23))
+    for k, (a, b) in enumerate(zip(plain.decisions, moved.decisions)):
+        if a != b or plain.messages[k] != moved.messages[k]:
+            raise ConformanceError(f"{name}: after moving through a snapshot, round {k} differs "
+                                   f"(decisions {a} vs {b})")
+    size = max(len(pack_state(a.snapshot(), (type(a).__module__,))) for a in moved.allocators)
+    return {"moves": 3, "snapshot_bytes_max": size}
+
+
+GENERIC_CHECKS = (check_determinism, check_messages, check_degraded_network, check_vanishing_tasks, check_snapshot)
 
 
 def run_all(name: str, params: Mapping[str, Any] | None = None, scenario: str = "mtsr") -> dict[str, dict]:

@@ -1,11 +1,13 @@
 """Runs spread over stand-in hosts (network namespaces, one ``swarmbed host`` each): placement never
 changes results, a host that dies is agent loss, a missing host is named with the command to start it."""
 
+import csv
 import subprocess
 import sys
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from swarmbed.coordinator.coordinator import RunError
@@ -88,3 +90,35 @@ def test_a_missing_host_is_named_with_the_command_that_starts_it(lab, tmp_path):
     assert "hosts not reachable after 3 s: gone" in msg and f"swarmbed host --name gone --connect {lab.hub}" in msg
     assert time.monotonic() - t0 < 20
     assert not (tmp_path / "summary.json").exists()
+
+
+def test_ten_swaps_between_hosts_give_the_all_local_results(lab, tmp_path):
+    lab.add_host("h1")
+    lab.add_host("h2")
+    sets = ["agents.count=8", "allocator={name: cbba}", "run.duration=120", "run.stop_when_done=false"]
+    run_experiment(experiment(*sets), tmp_path / "local", progress=False)
+    rng = np.random.default_rng(3)
+    ticks = sorted(int(t) for t in rng.choice(np.arange(1, 110), 10, replace=False))
+    swaps = ", ".join(f"{{agent: {int(rng.integers(8))}, tick: {t}, to: {['h1', 'h2', 'local'][int(rng.integers(3))]}}}"
+                      for t in ticks)
+    run_experiment(experiment(*sets, "placement={h1: '0-2', h2: '3-5'}", f"swaps=[{swaps}]"), tmp_path / "moved",
+                   progress=False, listen=[lab.hub])
+    _same_files(tmp_path / "local", tmp_path / "moved")
+    with open(tmp_path / "moved" / "swaps.csv") as f:
+        records = list(csv.DictReader(f))
+    assert len(records) == 10 and all(r["outcome"] == "ok" for r in records), records
+    assert {r["to"] for r in records} >= {"h1", "h2"}
+
+
+def test_a_swap_to_a_dead_host_fails_and_the_agent_goes_on_where_it_was(lab, tmp_path):
+    lab.add_host("alive")
+    lab.add_host("dead")
+    lab.kill_host("dead")
+    sets = ["allocator={name: cbba}", "run.duration=60", "run.stop_when_done=false"]
+    run_experiment(experiment(*sets), tmp_path / "local", progress=False)
+    run_experiment(experiment(*sets, "placement={alive: '0-1'}", "swaps=[{agent: 1, tick: 10, to: dead}]"),
+                   tmp_path / "tried", progress=False, listen=[lab.hub])
+    _same_files(tmp_path / "local", tmp_path / "tried")
+    with open(tmp_path / "tried" / "swaps.csv") as f:
+        (record,) = list(csv.DictReader(f))
+    assert record["outcome"] == "failed" and "cannot start it on dead" in record["reason"]

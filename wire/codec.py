@@ -20,6 +20,9 @@ BROADCAST = -1
 
 TAG_TICK = 0
 TAG_STOP = 1
+# swap orders, each for one incarnation of the agent (the other process of a swap ignores it)
+TAG_SNAPSHOT, TAG_RESUME, TAG_RETIRE = 2, 3, 4
+CONTROLS = {TAG_SNAPSHOT: "snapshot", TAG_RESUME: "resume", TAG_RETIRE: "retire"}
 
 
 class WireError(ValueError):
@@ -127,6 +130,10 @@ def encode_stop(reason: str) -> bytes:
     return pack([TAG_STOP, reason])
 
 
+def encode_control(tag: int, incarnation: int) -> bytes:
+    return pack([tag, incarnation])
+
+
 @dataclass(frozen=True, slots=True)
 class TickIn:
     tick: int
@@ -139,7 +146,15 @@ class StopIn:
     reason: str
 
 
-def decode_agent_in(data: bytes) -> TickIn | StopIn:
+@dataclass(frozen=True, slots=True)
+class ControlIn:
+    """A swap order: ``order`` is snapshot, resume or retire, for one ``incarnation``."""
+
+    order: str
+    incarnation: int
+
+
+def decode_agent_in(data: bytes) -> TickIn | StopIn | ControlIn:
     msg = unpack(data)
     _expect(isinstance(msg, list) and bool(msg) and _is_int(msg[0]), "agent input must be [tag, ...]")
     if msg[0] == TAG_TICK:
@@ -152,6 +167,9 @@ def decode_agent_in(data: bytes) -> TickIn | StopIn:
     if msg[0] == TAG_STOP:
         _expect(len(msg) == 2 and isinstance(msg[1], str), "stop must be [1, reason]")
         return StopIn(msg[1])
+    if msg[0] in CONTROLS:
+        _expect(len(msg) == 2 and _is_int(msg[1]) and msg[1] >= 0, "a swap order must be [tag, incarnation]")
+        return ControlIn(CONTROLS[msg[0]], msg[1])
     raise WireError(f"unknown agent input tag {msg[0]}")
 
 
@@ -195,20 +213,26 @@ class World:
     xs: list[float]
     ys: list[float]
     alive_next: list[int]
+    incarnations: dict[int, int]  # the current process of each agent that was swapped (others: 0)
+
+    def incarnation(self, agent: int) -> int:
+        return self.incarnations.get(agent, 0)
 
 
 def encode_world(w: World) -> bytes:
-    return pack([w.tick, w.ids, w.xs, w.ys, w.alive_next])
+    return pack([w.tick, w.ids, w.xs, w.ys, w.alive_next, w.incarnations])
 
 
 def decode_world(data: bytes) -> World:
     msg = unpack(data)
-    _expect(isinstance(msg, list) and len(msg) == 5, "world must be [tick, ids, xs, ys, alive_next]")
-    tick, ids, xs, ys, alive_next = msg
+    _expect(isinstance(msg, list) and len(msg) == 6, "world must be [tick, ids, xs, ys, alive_next, incarnations]")
+    tick, ids, xs, ys, alive_next, incarnations = msg
+    _expect(isinstance(incarnations, dict) and all(_is_int(k) and _is_int(v) for k, v in incarnations.items()),
+            "incarnations must map agent ids to numbers")
     _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
     _expect(all(isinstance(v, list) for v in (ids, xs, ys, alive_next)), "world fields must be lists")
     _expect(len(ids) == len(xs) == len(ys), "ids, xs and ys must have one entry per agent")
-    return World(tick, ids, [float(x) for x in xs], [float(y) for y in ys], alive_next)
+    return World(tick, ids, [float(x) for x in xs], [float(y) for y in ys], alive_next, incarnations)
 
 
 # --- netem proxy -> coordinator -------------------------------------------------------------

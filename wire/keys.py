@@ -65,12 +65,31 @@ class Keys:
         return f"{self.root}/netem/report"
 
     # liveliness tokens
-    def alive_agent(self, agent_id: int) -> str:
-        return f"{self.root}/alive/agent/{agent_id}"
+    def alive_agent(self, agent_id: int, incarnation: int = 0) -> str:
+        """An agent's token. A swap starts a new process (the next incarnation) before the old one
+        leaves, so each process of an agent holds its own token."""
+        return f"{self.root}/alive/agent/{agent_id}/{incarnation}"
+
+    def alive_agent_any(self, agent_id: int) -> str:
+        return f"{self.root}/alive/agent/{agent_id}/*"
 
     @property
     def alive_agents(self) -> str:
-        return f"{self.root}/alive/agent/*"
+        return f"{self.root}/alive/agent/*/*"
+
+    # coordinator queryable: an agent's snapshot, handed over by the old process during a swap
+    # (query with payload) and fetched by the new one (query without)
+    def agent_snapshot(self, agent_id: int) -> str:
+        return f"{self.root}/agent/{agent_id}/snapshot"
+
+    @property
+    def agent_snapshot_all(self) -> str:
+        return f"{self.root}/agent/*/snapshot"
+
+    # coordinator queryable: swap requests (JSON {agent, to}) and their outcome (JSON {swap})
+    @property
+    def swap(self) -> str:
+        return f"{self.root}/swap"
 
     @property
     def alive_netem(self) -> str:
@@ -83,6 +102,14 @@ class Keys:
     @property
     def alive_all(self) -> str:
         return f"{self.root}/alive/**"
+
+
+def incarnation_of(key: str) -> int:
+    """The incarnation in ``.../alive/agent/<id>/<incarnation>``."""
+    try:
+        return int(str(key).rsplit("/", 1)[1])
+    except (ValueError, IndexError) as exc:
+        raise ValueError(f"no incarnation in key {key!r}") from exc
 
 
 def agent_id_of(key: str) -> int:

@@ -30,6 +30,19 @@ def fetch_spec(session: zenoh.Session, key: str, model: type[M], what: str, time
     raise JoinError(f"no coordinator answered on {key} within {timeout:.0f} s")
 
 
+def fetch_bytes(session: zenoh.Session, key: str, timeout: float = 30.0) -> bytes:
+    """The payload the queryable on ``key`` answers with (an error reply is a JoinError)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for reply in session.get(key, timeout=min(5.0, timeout)):
+            if reply.ok is not None:
+                return reply.ok.payload.to_bytes()
+            if reply.err is not None:
+                raise JoinError(f"{key}: {reply.err.payload.to_string()}")
+        time.sleep(0.05)
+    raise JoinError(f"nothing answered on {key} within {timeout:.0f} s")
+
+
 def serve_text(session: zenoh.Session, key: str, text: str):
     """Answer every query on ``key`` with ``text``; keep the returned queryable alive."""
     return session.declare_queryable(key, lambda query: query.reply(key, text))

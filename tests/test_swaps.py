@@ -1,0 +1,135 @@
+"""Live swaps on one machine: an agent moves to a new process with its whole state, scripted or on
+request, and the run's files stay byte-identical to a run where nothing moved; failures leave the
+old process running."""
+
+import csv
+import subprocess
+import sys
+import textwrap
+import threading
+
+import numpy as np
+import pytest
+
+from swarmbed.experiments import config as cfg
+from swarmbed.experiments.runner import run_experiment
+from swarmbed.plugins.conformance import ConformanceError, check_snapshot
+from swarmbed.plugins.registry import register
+from tests.conftest import QUICKSTART, experiment
+
+RESULTS = ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv", "config.yaml")
+SAR = QUICKSTART.parent / "sar" / "_base.yaml"
+
+
+def _same_files(a, b):
+    for name in RESULTS:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), f"{name} differs"
+
+
+def _swaps(run_dir):
+    with open(run_dir / "swaps.csv") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.parametrize("base, sets", [
+    (QUICKSTART, ["allocator.name=cbba", "run.duration=120", "run.stop_when_done=false"]),
+    (SAR, ["allocator.name=cbba-etc", "run.duration=30"]),
+], ids=["mtsr-cbba", "sar-cbba-etc"])
+def test_swapped_agents_give_the_files_of_a_run_where_nothing_moved(tmp_path, base, sets):
+    run_experiment(experiment(*sets, base=base), tmp_path / "still", progress=False)
+    rng = np.random.default_rng(7)
+    n = cfg.load(base).agents.count
+    ticks = sorted(int(t) for t in rng.choice(np.arange(1, 100), 6, replace=False))
+    swaps = ", ".join(f"{{agent: {int(rng.integers(n))}, tick: {t}, to: local}}" for t in ticks)
+    run_experiment(experiment(*sets, f"swaps=[{swaps}]", base=base), tmp_path / "moved", progress=False)
+    _same_files(tmp_path / "still", tmp_path / "moved")
+    records = _swaps(tmp_path / "moved")
+    assert [r["outcome"] for r in records] == ["ok"] * 6 and all(int(r["snapshot_bytes"]) > 0 for r in records)
+
+
+def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path):
+    sets = ["allocator.name=cbba", "run.duration=400", "run.stop_when_done=false"]
+    asked = {}
+    threads = []
+
+    def ask(keys, endpoint):
+        proc = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
+                               "--agent", "2", "--to", "local"], capture_output=True, text=True, timeout=120)
+        asked["rc"], asked["out"], asked["err"] = proc.returncode, proc.stdout, proc.stderr
+        bad = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
+                              "--agent", "99", "--to", "local"], capture_output=True, text=True, timeout=60)
+        asked["bad"] = (bad.returncode, bad.stderr)
+
+    def from_another_terminal(keys, endpoint):
+        threads.append(threading.Thread(target=ask, args=(keys, endpoint)))
+        threads[-1].start()
+
+    run_experiment(experiment(*sets), tmp_path / "moved", progress=False, on_ready=from_another_terminal)
+    threads[0].join(timeout=60)
+    assert asked["rc"] == 0, asked["err"]
+    assert "swap of agent 2 from local to local before tick" in asked["out"] and ": ok," in asked["out"]
+    assert asked["bad"][0] == 2 and "a swap request is" in asked["bad"][1]
+    assert [r["agent"] for r in _swaps(tmp_path / "moved")] == ["2"]
+    run_experiment(experiment(*sets), tmp_path / "still", progress=False)
+    _same_files(tmp_path / "still", tmp_path / "moved")
+
+
+STUCK = textwrap.dedent('''
+    import threading
+
+    from swarmbed.plugins.fcg import FirstClaimedGreedy
+
+
+    class Pinned(FirstClaimedGreedy):
+        """Holds what cannot move (a lock), and says so."""
+
+        snapshottable = False
+
+        def __init__(self, *args):
+            super().__init__(*args)
+            self.lock = threading.Lock()
+
+
+    class Silent(FirstClaimedGreedy):
+        """Holds a lock and does not say so: its snapshot fails when taken."""
+
+        def __init__(self, *args):
+            super().__init__(*args)
+            self.lock = threading.Lock()
+''')
+
+
+def test_state_that_cannot_move_is_refused_and_the_old_process_goes_on(tmp_path):
+    plugin = tmp_path / "stuck.py"
+    plugin.write_text(STUCK)
+    with pytest.raises(cfg.ConfigError, match="cannot move between processes"):
+        experiment(f"allocator={{name: '{plugin}:Pinned'}}", "swaps=[{agent: 0, tick: 5, to: local}]")
+    sets = [f"allocator={{name: '{plugin}:Silent'}}", "run.duration=60", "run.stop_when_done=false"]
+    run_experiment(experiment(*sets, "swaps=[{agent: 0, tick: 5, to: local}]"), tmp_path / "tried", progress=False)
+    (record,) = _swaps(tmp_path / "tried")
+    assert record["outcome"] == "failed" and "snapshot_failed" in record["reason"]
+    assert "state.allocator.lock: cannot snapshot a _thread.lock" in record["reason"]  # names what and where
+    run_experiment(experiment(*sets), tmp_path / "still", progress=False)
+    _same_files(tmp_path / "still", tmp_path / "tried")
+
+
+def test_a_swap_to_a_host_that_is_not_there_fails_and_the_old_process_goes_on(tmp_path):
+    sets = ["allocator.name=cbba", "run.duration=60", "run.stop_when_done=false"]
+    run_experiment(experiment(*sets, "swaps=[{agent: 1, tick: 5, to: nowhere}]"), tmp_path / "tried", progress=False)
+    (record,) = _swaps(tmp_path / "tried")
+    assert record["outcome"] == "failed" and "cannot start it on nowhere" in record["reason"]
+    run_experiment(experiment(*sets), tmp_path / "still", progress=False)
+    _same_files(tmp_path / "still", tmp_path / "tried")
+
+
+def test_the_snapshot_check_fails_for_an_allocator_that_forgets_its_state():
+    from swarmbed.plugins.fcg import FirstClaimedGreedy
+
+    class Forgetful(FirstClaimedGreedy):
+        def snapshot(self):
+            return {}  # its rng and claims stay behind
+
+    register("forgetful-test", f"{__name__}:Forgetful", "mtsr")
+    globals()["Forgetful"] = Forgetful
+    with pytest.raises(ConformanceError, match="after moving through a snapshot"):
+        check_snapshot("forgetful-test", {"mode": "Random"}, "mtsr")
