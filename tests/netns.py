@@ -1,147 +1,18 @@
-"""Stand-in hosts for tests: Linux network namespaces on a bridge, one ``swarmbed host`` in each.
-
-The bridge lives in the default namespace with address 198.18.<net>.1 (198.18.0.0/15 is set aside
-for network benchmarks: nothing real lives there); host i gets its own namespace, a veth pair into
-the bridge, the address 198.18.<net>.(10 + i), and its daemon's router connects to the run's hub on
-the bridge. Everything is removed again when the fixture ends, processes included.
-"""
-
-from __future__ import annotations
-
-import os
-import secrets
-import shutil
-import signal
-import socket
-import subprocess
-import sys
-import time
-from dataclasses import dataclass, field
-from pathlib import Path
+"""The ``lab`` fixture: stand-in hosts (network namespaces, one ``swarmbed host`` each) for a test."""
 
 import pytest
 
-
-def _ip(*args: str, ns: str | None = None, check: bool = True) -> subprocess.CompletedProcess:
-    cmd = ["ip", *(["netns", "exec", ns, "ip"] if ns else []), *args]
-    return subprocess.run(cmd, capture_output=True, text=True, check=check)
-
-
-def why_not() -> str | None:
-    """Why namespaces cannot be made here, or None."""
-    if sys.platform != "linux":
-        return "network namespaces need Linux"
-    if os.geteuid() != 0:
-        return "creating network namespaces needs root"
-    if shutil.which("ip") is None:
-        return "the ip command (iproute2) is not installed"
-    return None
-
-
-@dataclass
-class Lab:
-    tag: str
-    net: int
-    logs: Path
-    namespaces: list[str] = field(default_factory=list)
-    links: list[str] = field(default_factory=list)
-    daemons: dict[str, subprocess.Popen] = field(default_factory=dict)
-    hub_port: int = 0
-
-    @property
-    def bridge_ip(self) -> str:
-        return f"198.18.{self.net}.1"
-
-    @property
-    def hub(self) -> str:
-        """Where the run's hub listens for the hosts' routers."""
-        return f"tcp/{self.bridge_ip}:{self.hub_port}"
-
-    def add_host(self, name: str) -> str:
-        """A namespace for host ``name`` with its daemon running; returns the namespace."""
-        i = len(self.namespaces)
-        ns, veth = f"{self.tag}n{i}", f"{self.tag}v{i}"
-        _ip("netns", "add", ns)
-        self.namespaces.append(ns)
-        _ip("link", "add", veth, "type", "veth", "peer", "name", f"{veth}p")
-        self.links.append(veth)
-        _ip("link", "set", f"{veth}p", "netns", ns)
-        _ip("link", "set", veth, "master", f"{self.tag}br")
-        _ip("link", "set", veth, "up")
-        _ip("addr", "add", f"198.18.{self.net}.{10 + i}/24", "dev", f"{veth}p", ns=ns)
-        _ip("link", "set", f"{veth}p", "up", ns=ns)
-        _ip("link", "set", "lo", "up", ns=ns)
-        self.start_daemon(name, ns)
-        return ns
-
-    def start_daemon(self, name: str, ns: str) -> None:
-        log = open(self.logs / f"host_{name}.log", "wb")
-        cmd = ["ip", "netns", "exec", ns, sys.executable, "-m", "swarmbed", "host", "--name", name,
-               "--connect", self.hub, "--listen", "tcp/127.0.0.1:7447", "--logs", str(self.logs / name)]
-        self.daemons[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
-        log.close()
-
-    def kill_host(self, name: str) -> None:
-        """The machine dies: every process in its namespace is killed at once."""
-        ns = self.namespaces[list(self.daemons).index(name)]
-        pids = _ip("netns", "pids", ns, check=False).stdout.split()
-        for pid in pids:
-            try:
-                os.kill(int(pid), signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        self.daemons[name].wait(timeout=10)
-
-    def pids(self, name: str) -> list[str]:
-        ns = self.namespaces[list(self.daemons).index(name)]
-        return _ip("netns", "pids", ns, check=False).stdout.split()
-
-    def close(self) -> None:
-        for proc in self.daemons.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)
-        for proc in self.daemons.values():
-            try:
-                proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        for ns in self.namespaces:
-            for pid in _ip("netns", "pids", ns, check=False).stdout.split():
-                try:
-                    os.kill(int(pid), signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-            _ip("netns", "del", ns, check=False)
-        for link in self.links:
-            _ip("link", "del", link, check=False)
-        _ip("link", "del", f"{self.tag}br", check=False)
-
-
-def _free_port(ip: str) -> int:
-    with socket.socket() as s:
-        s.bind((ip, 0))
-        return s.getsockname()[1]
+from swarmbed.experiments.netns import LabError, make_lab
 
 
 @pytest.fixture
 def lab(tmp_path):
-    """A bridge for stand-in hosts; ``lab.add_host(name)`` adds one. Skips where namespaces cannot be made."""
-    reason = why_not()
-    if reason:
-        pytest.skip(reason)
-    tag = "sb" + secrets.token_hex(2)
-    the_lab = Lab(tag, net=int(secrets.randbelow(200)) + 20, logs=tmp_path / "hosts")
-    the_lab.logs.mkdir()
+    """A bridge for stand-in hosts; ``lab.add_host(name)`` adds one. Skips, with the reason, where
+    namespaces cannot be made (no root, no iproute2)."""
     try:
-        _ip("link", "add", f"{tag}br", "type", "bridge")
-        _ip("addr", "add", f"{the_lab.bridge_ip}/24", "dev", f"{tag}br")
-        _ip("link", "set", f"{tag}br", "up")
-    except subprocess.CalledProcessError as exc:
-        the_lab.close()
-        pytest.skip(f"cannot create a bridge for stand-in hosts: {exc.stderr.strip()}")
-    time.sleep(0.2)  # the bridge address must be usable before anything binds to it
-    the_lab.hub_port = _free_port(the_lab.bridge_ip)
+        the_lab = make_lab(tmp_path / "hosts")
+    except LabError as exc:
+        pytest.skip(str(exc))
     try:
         yield the_lab
     finally:

@@ -2,6 +2,7 @@
 changes results, a host that dies is agent loss, a missing host is named with the command to start it."""
 
 import csv
+import signal
 import subprocess
 import sys
 import threading
@@ -122,3 +123,17 @@ def test_a_swap_to_a_dead_host_fails_and_the_agent_goes_on_where_it_was(lab, tmp
     with open(tmp_path / "tried" / "swaps.csv") as f:
         (record,) = list(csv.DictReader(f))
     assert record["outcome"] == "failed" and "cannot start it on dead" in record["reason"]
+
+
+def test_sigterm_on_a_host_daemon_stops_its_agents_and_leaves_nothing(lab, tmp_path):
+    lab.add_host("h")
+
+    def stop_the_daemon_soon(keys, endpoint):
+        threading.Timer(1.0, lab.daemons["h"].send_signal, [signal.SIGTERM]).start()
+
+    exp = experiment("allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
+                     "run.duration=3000", "run.allow_agent_failures=true", "placement={h: '0-1'}")
+    result = run_experiment(exp, tmp_path, progress=False, listen=[lab.hub], on_ready=stop_the_daemon_soon)
+    assert set(result.summary["agents_lost"]) == {"0", "1"}
+    assert lab.daemons["h"].wait(timeout=20) == 0
+    assert lab.pids("h") == []
