@@ -91,13 +91,25 @@ class Lab:
     def kill_host(self, name: str) -> None:
         """The machine dies: every process in its namespace is killed at once."""
         ns = self.namespaces[list(self.daemons).index(name)]
-        pids = _ip("netns", "pids", ns, check=False).stdout.split()
-        for pid in pids:
-            try:
-                os.kill(int(pid), signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        self.daemons[name].wait(timeout=10)
+        daemon = self.daemons[name]
+        # The daemon itself is killed by its pid too: just after start it may still be ``ip netns
+        # exec`` on its way into the namespace, where ``ip netns pids`` does not list it yet.
+        deadline = time.monotonic() + 10
+        while True:
+            pids = {int(p) for p in _ip("netns", "pids", ns, check=False).stdout.split()}
+            if daemon.poll() is None:
+                pids.add(daemon.pid)
+            if not pids:
+                break
+            if time.monotonic() > deadline:
+                raise LabError(f"processes {sorted(pids)} of stand-in host {name!r} survive SIGKILL")
+            for pid in pids:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            time.sleep(0.05)
+        daemon.wait(timeout=10)
 
     def pids(self, name: str) -> list[str]:
         ns = self.namespaces[list(self.daemons).index(name)]
