@@ -28,6 +28,7 @@ from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_ov
 from swarmbed.wire.schema import AgentSpec
 from swarmbed.wire.session import open_from_args
 from swarmbed.wire.state import StateError
+from swarmbed.wire.transport import tcp_counters
 
 log = logging.getLogger("swarmbed.agent")
 
@@ -61,9 +62,11 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation
     if restored:  # subscribed and announced: the coordinator may retire the old process and go on
         report({"kind": "restored", "agent": agent_id, "incarnation": incarnation})
     frozen = False
+    sample_bytes = {"in": 0, "out": 0}  # this process's per-tick samples, for the wire-bytes accounting
     try:
         while True:
             data = sub.recv().payload.to_bytes()
+            sample_bytes["in"] += len(data)
             try:
                 msg = decode_agent_in(data)
             except WireError as exc:
@@ -88,6 +91,7 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation
                     return EXIT_COORDINATOR_GONE
                 final = runtime.report()
                 final["malformed"] += malformed
+                final["transport"] = {"tcp": tcp_counters(), "samples": sample_bytes}
                 report(final)
                 return EXIT_OK
             if frozen:
@@ -107,7 +111,9 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation
                 report({"kind": "fatal", "agent": agent_id, "tick": msg.tick,
                         "error": f"{type(exc).__name__}: {exc}", "traceback": tb})
                 return EXIT_PLUGIN_ERROR
-            out.put(encode_agent_out(msg.tick, agent_id, action, messages, events))
+            answer = encode_agent_out(msg.tick, agent_id, action, messages, events)
+            sample_bytes["out"] += len(answer)
+            out.put(answer)
     finally:
         token.undeclare()
         for entity in (sub, watch, out):

@@ -85,7 +85,8 @@ def _trace(scenario: Scenario, seed: int, ticks: int) -> tuple[list[bytes], dict
 
 def _check_results(cls: type[Scenario], results: dict[str, Any], agents: int) -> None:
     summary = results["summary"]
-    missing = [k for k in (*cls.summary_keys, *cls.outcome_metrics) if k not in summary]
+    declared = (*cls.summary_keys, *cls.outcome_metrics, *([cls.benefit_metric] if cls.benefit_metric else []))
+    missing = [k for k in declared if k not in summary]
     if missing:
         raise ScenarioCheckError(f"summary() lacks the declared keys {missing}")
     try:

@@ -464,6 +464,40 @@ class Coordinator:
             },
         }
 
+    def transport(self, summary: dict) -> dict:
+        """TCP bytes each process of the run measured on its own sockets, beside the radio payload
+        bytes of the ledger (see :mod:`swarmbed.wire.transport` for what they count).
+
+        Every link of a run has the hub (this process's router) at one end, so measuring each
+        client's end counts every byte once: what the clients sent is what the hub received, and
+        the other way round; the hub's own sockets are not read (they would count it all twice)."""
+        assert self.netem_report is not None
+        processes: dict[str, dict] = {"netem": self.netem_report.get("transport", {})}
+        for i in sorted(self.reports):
+            processes[f"agent_{i}"] = self.reports[i].get("transport", {})
+        agents = [p for name, p in processes.items() if name.startswith("agent_")]
+        payload = summary["network"]["bytes_sent"]
+
+        def total(of: list[dict], layer: str, field: str) -> int | None:
+            values = [(p.get(layer) or {}).get(field) for p in of]
+            known = [int(v) for v in values if v is not None]
+            return sum(known) if values and len(known) == len(values) else None
+
+        agents_sent = total(agents, "tcp", "sent")
+        everyone = list(processes.values())
+        totals = {
+            "radio_payload_bytes": payload,
+            "agent_sample_bytes_out": total(agents, "samples", "out"),
+            "agent_sample_bytes_in": total(agents, "samples", "in"),
+            "agent_tcp_bytes_sent": agents_sent,
+            "agent_tcp_bytes_received": total(agents, "tcp", "received"),
+            "tcp_bytes_sent": total(everyone, "tcp", "sent"),
+            "tcp_bytes_received": total(everyone, "tcp", "received"),
+            "overhead_ratio": agents_sent / payload if agents_sent is not None and payload else None,
+            "agents_reporting": len(agents),
+        }
+        return {"totals": totals, "processes": processes}
+
     def write_results(self, timings: dict) -> dict:
         out, w = self.out_dir, self.world
         summary = self.summary()
@@ -482,6 +516,7 @@ class Coordinator:
         results.write_csv(out / results.AGENTS, ["agent", "alive", "lost_at_tick", *columns,
                                                  "messages_sent", "bytes_sent", "copies", "delivered"], rows)
         results.write_json(out / results.TIMINGS, timings)
+        results.write_json(out / results.TRANSPORT, self.transport(summary))
         if self.swap_log:  # wall-clock pauses: not among the files that repeat byte for byte
             cols = ["tick", "agent", "from", "to", "outcome", "reason", "snapshot_bytes", "pause_ms"]
             results.write_csv(out / SWAPS, cols, [[r[c] for c in cols] for r in self.swap_log])

@@ -61,6 +61,7 @@ class MTSR(Scenario):
     Observation = Observation
     bt_nodes = SPACE_NODES
     outcome_metrics = ("mission_time", "time_99", "tasks_completed", "all_tasks_completed")
+    benefit_metric = "tasks_completed"
     summary_keys = ("mission_time", "all_tasks_completed", "time_99", "tasks_total", "tasks_spawned",
                     "tasks_completed", "distance_total", "distance_per_agent", "work_total", "work_per_agent",
                     "invalid_actions")

@@ -14,6 +14,7 @@ SUMMARY = "summary.json"
 TIMESERIES = "timeseries.csv"
 AGENTS = "agents.csv"
 TIMINGS = "timings.json"
+TRANSPORT = "transport.json"  # measured bytes on the wire: of this machine and moment, not reproducible
 CONFIG = "config.yaml"
 TRAJECTORIES = "trajectories.csv"
 

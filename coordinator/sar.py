@@ -77,6 +77,7 @@ class SAR(Scenario):
     Observation = SARObservation
     bt_nodes = SPACE_NODES
     outcome_metrics = ("rescued", "expired", "failed_rescues")
+    benefit_metric = "rescued"
     summary_keys = ("rescued", "expired", "failed_rescues", "inspections", "inspect_failures", "rescue_failures",
                     "move_failures", "abandons", "spawned", "victims_alive", "victims_accounted", "distance_total",
                     "distance_per_agent", "rescues_per_agent", "invalid_actions", "stale_actions")

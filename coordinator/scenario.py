@@ -101,6 +101,9 @@ class Scenario(abc.ABC):
     default_tree: ClassVar[Path] = SPACE_TREE
     #: summary keys that measure the outcome, first the headline (sweep tables, printed summaries)
     outcome_metrics: ClassVar[tuple[str, ...]] = ()
+    #: the summary key that counts work done (tasks completed, victims rescued): what reports set
+    #: against the bytes it cost; None where a scenario has no such count
+    benefit_metric: ClassVar[str | None] = None
     #: every key ``World.summary()`` returns (checked by the scenario checker)
     summary_keys: ClassVar[tuple[str, ...]] = ()
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
 import sys
@@ -45,6 +46,11 @@ def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> 
         ("copies delivered / total", f"{net['delivered']:,} / {net['copies']:,}"),
         ("copies dropped", ", ".join(f"{k} {v:,}" for k, v in net["dropped"].items() if v) or "0"),
     ]
+    transport = out_dir / "transport.json"
+    wire = json.loads(transport.read_text())["totals"] if transport.exists() else {}
+    if wire.get("agent_tcp_bytes_sent") is not None:
+        ratio = f" ({wire['overhead_ratio']:,.1f} x payload)" if wire.get("overhead_ratio") else ""
+        rows.append(("TCP bytes agents sent", f"{wire['agent_tcp_bytes_sent']:,}{ratio}"))
     width = max(len(r[0]) for r in rows)
     print(f"results: {out_dir}", file=stream)
     for label, value in rows:
@@ -205,6 +211,23 @@ def cmd_check_allocator(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def cmd_report(args: argparse.Namespace) -> int:
+    from swarmbed.experiments.report import ReportError, report
+
+    if args.output and len(args.folders) > 1:
+        print("error: -o names one file: give one folder with it", file=sys.stderr)
+        return 2
+    for folder in args.folders:
+        try:
+            t0 = time.perf_counter()
+            path = report(Path(folder), Path(args.output) if args.output else None)
+        except ReportError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        print(f"{path}  ({path.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
 def cmd_check_scenario(args: argparse.Namespace) -> int:
     from swarmbed.coordinator.checker import ScenarioCheckError, check_scenario
 
@@ -339,6 +362,11 @@ def main(argv: list[str] | None = None) -> int:
     an.add_argument("sweep_dir", nargs="+", help="sweep directories (outputs go to the first)")
     an.add_argument("--control", help="control strategy for Dunnett and Cohen's d (default: cbba-etc where present)")
     an.set_defaults(func=cmd_analyze)
+
+    rep = sub.add_parser("report", help="a run's or a sweep's bandwidth accounting as one self-contained HTML page")
+    rep.add_argument("folders", nargs="+", metavar="RUN_DIR|SWEEP_DIR")
+    rep.add_argument("-o", "--output", help="the HTML file (default: report.html in the folder)")
+    rep.set_defaults(func=cmd_report)
 
     chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
     chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")

@@ -34,8 +34,9 @@ from swarmbed.wire.schema import LOCAL, hosts_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 DEPLOYMENT = "deployment.json"  # where each agent ran; not a result (the same everywhere)
-RESULT_FILES = (results.SUMMARY, results.TIMESERIES, results.AGENTS, results.TIMINGS, results.TRAJECTORIES,
-                "network_ledger.csv", DEPLOYMENT)
+RESULT_FILES = (results.SUMMARY, results.TIMESERIES, results.AGENTS, results.TIMINGS, results.TRANSPORT,
+                results.TRAJECTORIES,
+                "network_ledger.csv", "network_ledger_receivers.parquet", DEPLOYMENT)
 
 
 @dataclass

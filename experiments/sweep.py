@@ -211,6 +211,9 @@ def collect(sweep: Sweep, out: Path) -> pd.DataFrame:
         if summary.exists():
             row["status"] = "ok"
             row.update(flatten(json.loads(summary.read_text())))
+            transport = run_dir / results.TRANSPORT  # measured, not reproducible: in its own columns
+            if transport.exists():
+                row.update(flatten(json.loads(transport.read_text())["totals"], "wire."))
         else:
             row["status"] = "failed" if (run_dir / ERROR).exists() else "missing"
             if (run_dir / ERROR).exists():

@@ -6,6 +6,10 @@ multicast). Rows are booked at the tick the outcome was decided: ``sent`` rows c
 (and their payload bytes), every other outcome counts copies (and copies x payload bytes).
 
 Conservation, checked by :meth:`Ledger.check`: copies == delivered + sum(dropped).
+
+With a :class:`ReceiverLog` (``network.ledger: per_receiver``) every copy also gets its own row
+(tick, sender, receiver, kind, outcome, bytes) in a Parquet file: it grows as agents squared, so
+it is written in row groups as ticks close and only on request.
 """
 
 from __future__ import annotations
@@ -13,18 +17,66 @@ from __future__ import annotations
 import csv
 import io
 from collections import defaultdict
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
 
 SENT = "sent"
 DELIVERED = "delivered"
 DROP_REASONS = ("out_of_range", "loss", "queue_full", "receiver_dead", "no_such_receiver", "run_ended")
 OUTCOMES = (SENT, DELIVERED) + DROP_REASONS
 LEDGER_COLUMNS = ("tick", "sender", "kind", "outcome", "messages", "bytes")
+RECEIVER_COLUMNS = ("tick", "sender", "receiver", "kind", "outcome", "bytes")
+
+
+class ReceiverLog:
+    """One row per copy, streamed to a Parquet file in row groups of about ``group`` rows."""
+
+    def __init__(self, path: Path, group: int = 1 << 16) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        self._pa = pa
+        # strings stay strings here: Parquet dictionary-encodes the few kinds and outcomes itself
+        types = (pa.int64(), pa.int32(), pa.int32(), pa.string(), pa.string(), pa.int32())
+        self.schema = pa.schema(list(zip(RECEIVER_COLUMNS, types)))
+        self._writer: Any = pq.ParquetWriter(path, self.schema)
+        self.group = group
+        self.rows = 0
+        self._cols: tuple[list, ...] = ([], [], [], [], [], [])
+
+    def add(self, tick: int, sender: int, receivers: Iterable[int], kind: str, outcome: str, size: int) -> int:
+        ticks, senders, recv, kinds, outcomes, sizes = self._cols
+        before = len(recv)
+        recv.extend(int(r) for r in receivers)
+        n = len(recv) - before
+        ticks.extend([tick] * n)
+        senders.extend([sender] * n)
+        kinds.extend([kind] * n)
+        outcomes.extend([outcome] * n)
+        sizes.extend([size] * n)
+        return n
+
+    def flush(self, force: bool = False) -> None:
+        if not self._cols[0] or (len(self._cols[0]) < self.group and not force):
+            return
+        pa = self._pa
+        arrays = [pa.array(col, type=f.type) for col, f in zip(self._cols, self.schema)]
+        self._writer.write_table(pa.Table.from_arrays(arrays, schema=self.schema))
+        self.rows += len(self._cols[0])
+        for col in self._cols:
+            col.clear()
+
+    def close(self) -> None:
+        self.flush(force=True)
+        self._writer.close()
 
 
 class Ledger:
     """Accumulates rows tick by tick and streams finished ticks to a CSV text sink."""
 
-    def __init__(self, sink: io.TextIOBase | None = None) -> None:
+    def __init__(self, sink: io.TextIOBase | None = None, receivers: ReceiverLog | None = None) -> None:
+        self.receivers = receivers
         self._open: dict[tuple[int, int, str, str], list[int]] = defaultdict(lambda: [0, 0])
         self._writer = csv.writer(sink, lineterminator="\n") if sink is not None else None
         if self._writer:
@@ -50,10 +102,23 @@ class Ledger:
             agg["bytes"] += size
             agg["copies"] += copies
 
-    def book(self, tick: int, sender: int, kind: str, size: int, outcome: str, copies: int = 1) -> None:
-        """Book ``copies`` copies of one message (``size`` payload bytes each) with ``outcome``."""
+    @property
+    def per_receiver(self) -> bool:
+        return self.receivers is not None
+
+    def book(self, tick: int, sender: int, kind: str, size: int, outcome: str, copies: int = 1,
+             to: Iterable[int] | None = None) -> None:
+        """Book ``copies`` copies of one message (``size`` payload bytes each) with ``outcome``.
+
+        ``to``: the receivers of those copies, needed when the ledger is kept per receiver."""
         if copies <= 0:
             return
+        if self.receivers is not None:
+            if to is None:
+                raise ValueError(f"ledger kept per receiver, but {outcome!r} was booked without its receivers")
+            n = self.receivers.add(tick, sender, to, kind, outcome, size)
+            if n != copies:
+                raise ValueError(f"{copies} {outcome!r} copies booked with {n} receivers")
         row = self._open[(tick, sender, kind, outcome)]
         row[0] += copies
         row[1] += copies * size
@@ -72,6 +137,8 @@ class Ledger:
             messages, nbytes = self._open.pop(key)
             if self._writer:
                 self._writer.writerow((*key, messages, nbytes))
+        if self.receivers is not None:
+            self.receivers.flush()
 
     @property
     def dropped_total(self) -> int:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import zenoh
 
-from swarmbed.netem.ledger import Ledger
+from swarmbed.netem.ledger import Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio
 from swarmbed.wire.codec import (
     AgentOut,
@@ -35,10 +35,12 @@ from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
 from swarmbed.wire.membership import fetch_spec, hand_over
 from swarmbed.wire.schema import NetemSpec
 from swarmbed.wire.session import open_from_args
+from swarmbed.wire.transport import tcp_counters
 
 log = logging.getLogger("swarmbed.netem")
 
 LEDGER_FILE = "network_ledger.csv"
+RECEIVER_LEDGER_FILE = "network_ledger_receivers.parquet"  # network.ledger: per_receiver
 
 
 class Proxy:
@@ -49,7 +51,10 @@ class Proxy:
         self.out_dir = out_dir
         self.part = out_dir / (LEDGER_FILE + ".part")
         self.sink = open(self.part, "w", newline="")
-        self.ledger = Ledger(self.sink)
+        self.receivers: ReceiverLog | None = None
+        if spec.network.ledger == "per_receiver":
+            self.receivers = ReceiverLog(out_dir / (RECEIVER_LEDGER_FILE + ".part"))
+        self.ledger = Ledger(self.sink, self.receivers)
         self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.outs: dict[int, dict[int, AgentOut]] = {}
@@ -175,9 +180,15 @@ class Proxy:
         os.fsync(self.sink.fileno())
         self.sink.close()
         os.replace(self.part, self.out_dir / LEDGER_FILE)
+        files = [LEDGER_FILE]
+        if self.receivers is not None:
+            self.receivers.close()
+            os.replace(self.out_dir / (RECEIVER_LEDGER_FILE + ".part"), self.out_dir / RECEIVER_LEDGER_FILE)
+            files.append(RECEIVER_LEDGER_FILE)
         report = {"kind": "netem", "totals": self.ledger.totals(),
                   "per_sender": {str(k): v for k, v in self.ledger.per_sender().items()},
-                  "per_kind": self.ledger.per_kind(), "malformed": self.malformed, "ledger": LEDGER_FILE}
+                  "per_kind": self.ledger.per_kind(), "malformed": self.malformed, "ledger": files,
+                  "transport": {"tcp": tcp_counters()}}
         if not hand_over(self.session, self.keys.netem_report, encode_report(report)):
             log.error("netem: the coordinator did not take the final report")
 

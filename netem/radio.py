@@ -45,13 +45,14 @@ class Radio:
         self._in_queue: dict[int, deque[float]] = defaultdict(deque)  # transmission end times
         # delivery tick -> [(receivers, sender, kind, payload, send_tick)]
         self._pending: dict[int, list[tuple[list[int], int, str, bytes, int]]] = defaultdict(list)
-        self._unconfirmed: list[tuple[int, int, str, int, int, int]] = []
+        # (tick, sender, kind, size, receivers delivered to, receivers found dead)
+        self._unconfirmed: list[tuple[int, int, str, int, list[int], list[int]]] = []
 
     @property
     def pending_copies(self) -> int:
         """Copies scheduled or handed out but not yet booked."""
         scheduled = sum(len(r) for entries in self._pending.values() for r, *_ in entries)
-        return scheduled + sum(d + x for *_, d, x in self._unconfirmed)
+        return scheduled + sum(len(d) + len(x) for *_, d, x in self._unconfirmed)
 
     def route(self, tick: int, ids: Sequence[int], xs: Sequence[float], ys: Sequence[float],
               outs: Mapping[int, Iterable[RadioMessage]]) -> None:
@@ -80,9 +81,9 @@ class Radio:
             ok = []
             for r in wanted:
                 if r == sender or not 0 <= r < self.n_agents:
-                    ledger.book(tick, sender, kind, size, "no_such_receiver")
+                    ledger.book(tick, sender, kind, size, "no_such_receiver", to=(r,))
                 elif r not in row_of:
-                    ledger.book(tick, sender, kind, size, "receiver_dead")
+                    ledger.book(tick, sender, kind, size, "receiver_dead", to=(r,))
                 else:
                     ok.append(r)
             receivers = np.asarray(ok, dtype=np.int64)
@@ -94,7 +95,7 @@ class Radio:
             while queue and queue[0] <= t_now + _EPS:
                 queue.popleft()
             if p.limit is not None and len(queue) >= p.limit:
-                ledger.book(tick, sender, kind, size, "queue_full", len(receivers))
+                ledger.book(tick, sender, kind, size, "queue_full", len(receivers), receivers)
                 return
             end = max(t_now, self._busy_until[sender]) + size / p.rate
             self._busy_until[sender] = end
@@ -106,13 +107,14 @@ class Radio:
             in_range = near[row_of[sender], [row_of[int(r)] for r in receivers]]
             n_far = int(len(receivers) - in_range.sum())
             if n_far:
-                ledger.book(tick, sender, kind, size, "out_of_range", n_far)
+                ledger.book(tick, sender, kind, size, "out_of_range", n_far,
+                            receivers[~in_range] if ledger.per_receiver else None)
                 receivers = receivers[in_range]
         if p.loss > 0.0 and len(receivers):
             kept = self.rng.random(len(receivers)) >= p.loss
             n_lost = int(len(receivers) - kept.sum())
             if n_lost:
-                ledger.book(tick, sender, kind, size, "loss", n_lost)
+                ledger.book(tick, sender, kind, size, "loss", n_lost, receivers[~kept] if ledger.per_receiver else None)
                 receivers = receivers[kept]
         if not len(receivers):
             return
@@ -127,29 +129,29 @@ class Radio:
         alive_set = set(alive)
         inboxes: dict[int, list[list]] = {}
         for receivers, sender, kind, payload, _sent in self._pending.pop(tick, ()):
-            size = len(payload)
-            dead = 0
+            reached, dead = [], []
             for r in receivers:
                 if r in alive_set:
                     inboxes.setdefault(r, []).append([sender, kind, payload])
+                    reached.append(r)
                 else:
-                    dead += 1
-            self._unconfirmed.append((tick, sender, kind, size, len(receivers) - dead, dead))
+                    dead.append(r)
+            self._unconfirmed.append((tick, sender, kind, len(payload), reached, dead))
         return inboxes
 
     def confirm(self) -> None:
         """The inboxes handed out by :meth:`deliver` reached their tick: book them."""
         for tick, sender, kind, size, delivered, dead in self._unconfirmed:
-            self.ledger.book(tick, sender, kind, size, DELIVERED, delivered)
-            self.ledger.book(tick, sender, kind, size, "receiver_dead", dead)
+            self.ledger.book(tick, sender, kind, size, DELIVERED, len(delivered), delivered)
+            self.ledger.book(tick, sender, kind, size, "receiver_dead", len(dead), dead)
         self._unconfirmed.clear()
 
     def finish(self, last_tick: int) -> None:
         """The run is over after ``last_tick``: every copy not yet delivered is booked ``run_ended``."""
         for _tick, sender, kind, size, delivered, dead in self._unconfirmed:
-            self.ledger.book(last_tick, sender, kind, size, "run_ended", delivered + dead)
+            self.ledger.book(last_tick, sender, kind, size, "run_ended", len(delivered) + len(dead), delivered + dead)
         self._unconfirmed.clear()
         for due in sorted(self._pending):
             for receivers, sender, kind, payload, _sent in self._pending[due]:
-                self.ledger.book(last_tick, sender, kind, len(payload), "run_ended", len(receivers))
+                self.ledger.book(last_tick, sender, kind, len(payload), "run_ended", len(receivers), receivers)
         self._pending.clear()

@@ -49,6 +49,7 @@ class PickupDelivery(Scenario):
     Observation = PickupObservation
     bt_nodes = SPACE_NODES
     outcome_metrics = ("delivered", "items")
+    benefit_metric = "delivered"
     summary_keys = ("delivered", "items", "carried", "distance_total", "invalid_actions")
     params: PickupParams
 

@@ -106,3 +106,58 @@ def test_params_reject_out_of_range_values():
     for bad in ({"loss": 1.5}, {"rate": 0}, {"limit": 0}, {"latency": -1}, {"range": -2}):
         with pytest.raises(ValueError):
             NetemParams(**bad)
+
+
+def test_receiver_ledger_books_each_copy_once_and_sums_to_the_sender_ledger(tmp_path):
+    """Random traffic through every drop path (addressing, queue, range, loss, death, run end):
+    the per-copy Parquet rows add up, per (tick, sender, kind, outcome), to the sender ledger."""
+    import io
+
+    import pandas as pd
+
+    from swarmbed.netem.ledger import Ledger, ReceiverLog
+
+    rng = np.random.default_rng(7)
+    sink = io.StringIO()
+    path = tmp_path / "receivers.parquet"
+    ledger = Ledger(sink, ReceiverLog(path, group=50))  # small row groups: several flushes
+    n = 6
+    r = Radio(NetemParams(range=3.0, loss=0.3, rate=40.0, limit=3), n_agents=n, dt=1.0,
+              rng=np.random.default_rng(1), ledger=ledger)
+    for k in range(40):
+        alive = [a for a in range(n) if not (a == 5 and k >= 20)]  # agent 5 dies at tick 20
+        xs, ys = rng.uniform(0, 6, n), rng.uniform(0, 2, n)
+        outs = {}
+        for a in alive:
+            dests = [BROADCAST, int(rng.integers(0, n + 1)), (0, 5, 9)]
+            outs[a] = [msg(int(rng.integers(1, 30)), dest=dests[int(rng.integers(0, 3))], kind=f"k{a % 2}")
+                       for _ in range(int(rng.integers(0, 3)))]
+        r.confirm()
+        r.route(k, alive, [xs[a] for a in alive], [ys[a] for a in alive], outs)
+        r.deliver(k + 1, [a for a in alive if not (a == 5 and k + 1 >= 20)])
+        ledger.close_tick(k)
+    r.finish(39)
+    ledger.close_tick(1 << 62)
+    ledger.check()
+    ledger.receivers.close()
+    per_copy = pd.read_parquet(path).astype({"sender": "int64", "bytes": "int64"})
+    assert len(per_copy) == ledger.copies
+    assert set(per_copy["outcome"]) >= {"delivered", "loss", "out_of_range", "receiver_dead", "no_such_receiver"}
+    to_self = per_copy[per_copy["sender"] == per_copy["receiver"]]
+    assert set(to_self["outcome"]) <= {"no_such_receiver"}  # addressed to itself: refused, never delivered
+    sink.seek(0)
+    rows = pd.read_csv(sink)
+    copies = rows[rows["outcome"] != "sent"].set_index(["tick", "sender", "kind", "outcome"]).sort_index()
+    summed = per_copy.groupby(["tick", "sender", "kind", "outcome"]).agg(messages=("bytes", "size"),
+                                                                         bytes=("bytes", "sum"))
+    pd.testing.assert_frame_equal(copies[["messages", "bytes"]], summed, check_dtype=False)
+
+
+def test_a_receiver_ledger_refuses_a_booking_without_its_receivers(tmp_path):
+    from swarmbed.netem.ledger import Ledger, ReceiverLog
+
+    ledger = Ledger(receivers=ReceiverLog(tmp_path / "r.parquet"))
+    with pytest.raises(ValueError, match="without its receivers"):
+        ledger.book(0, 1, "k", 10, "loss", 2)
+    with pytest.raises(ValueError, match="2 'loss' copies booked with 1 receivers"):
+        ledger.book(0, 1, "k", 10, "loss", 2, to=[3])

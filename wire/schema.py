@@ -79,6 +79,8 @@ class NetworkSection(Strict):
     rate: float | None = Field(None, gt=0, description="per-sender cap in bytes per simulated second; null = none")
     limit: int | None = Field(None, ge=1, description="messages that may wait behind the rate cap (tail drop)")
     latency: int = Field(0, ge=0, description="extra ticks of delay on top of the one-tick minimum")
+    ledger: Literal["per_sender", "per_receiver"] = Field(
+        "per_sender", description="per_receiver adds network_ledger_receivers.parquet: one row per copy")
 
 
 HOST_NAME = r"^[A-Za-z0-9_.-]+$"

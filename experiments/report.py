@@ -1,0 +1,304 @@
+"""``swarmbed report``: the bandwidth accounting of a run or a sweep as one HTML page.
+
+The page is self-contained (plotly's script inlined, no network needed to open it), its plots are
+interactive (hover, zoom), and every number on it names the file of the run directory it comes
+from. For a run: totals with the ledger's conservation re-checked from ``network_ledger.csv``,
+bytes and messages per agent and per message kind, bytes per second over simulated time per kind
+and per sending agent, drops by reason over time, copies by sender and outcome, message sizes per
+kind, and the run's outcome beside its traffic (outcome per kilobyte). For a sweep: the same per
+scenario with 95 % confidence intervals, and the cost-benefit plots (outcome against messages and
+against bytes, one point per run, one colour per scenario).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import plotly.graph_objects as go
+import plotly.io as pio
+import yaml
+from scipy import stats
+
+import swarmbed
+from swarmbed.plugins.registry import PluginError, resolve_scenario
+
+MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
+DROP_COLORS = {"out_of_range": "#9467bd", "loss": "#d62728", "queue_full": "#ff7f0e", "receiver_dead": "#7f7f7f",
+               "no_such_receiver": "#8c564b", "run_ended": "#bcbd22"}
+
+
+class ReportError(ValueError):
+    """A folder that is neither a complete run nor a sweep."""
+
+
+def _benefit(kind: str) -> str | None:
+    try:
+        return resolve_scenario(kind).benefit_metric
+    except PluginError:
+        return None
+
+
+class Page:
+    """Sections of figures and tables; plotly's script goes in once, with the first figure."""
+
+    def __init__(self, title: str) -> None:
+        self.title = title
+        self.parts: list[str] = []
+        self.figures = 0
+
+    def heading(self, text: str, note: str = "") -> None:
+        self.parts.append(f"<h2>{html.escape(text)}</h2>")
+        if note:
+            self.parts.append(f"<p class='note'>{html.escape(note)}</p>")
+
+    def table(self, rows: list[tuple[str, Any, str]],
+              header: tuple[str, str, str] = ("figure", "value", "from")) -> None:
+        cells = "".join(f"<tr><td>{html.escape(str(a))}</td><td class='num'>{html.escape(_fmt(b))}</td>"
+                        f"<td class='src'>{html.escape(c)}</td></tr>" for a, b, c in rows)
+        head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+        self.parts.append(f"<table><tr>{head}</tr>{cells}</table>")
+
+    def figure(self, fig: go.Figure, source: str) -> None:
+        fig.update_layout(template="plotly_white", height=420, margin={"l": 60, "r": 20, "t": 50, "b": 50})
+        self.parts.append(pio.to_html(fig, full_html=False, include_plotlyjs=self.figures == 0,
+                                      div_id=f"fig{self.figures}", config={"displaylogo": False}))
+        self.parts.append(f"<p class='src'>from {html.escape(source)}</p>")
+        self.figures += 1
+
+    def render(self, subtitle: str) -> str:
+        return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(self.title)}</title>"
+                f"<style>{CSS}</style></head><body><h1>{html.escape(self.title)}</h1>"
+                f"<p class='note'>{html.escape(subtitle)}</p>{''.join(self.parts)}</body></html>")
+
+
+CSS = ("body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;color:#222}"
+       "table{border-collapse:collapse;margin:1em 0}td,th{border-bottom:1px solid #ddd;padding:4px 10px;"
+       "text-align:left}.num{text-align:right;font-variant-numeric:tabular-nums}.src,.note{color:#777;"
+       "font-size:0.85em}h2{margin-top:2em;border-bottom:2px solid #eee}")
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, bool) or v is None:
+        return "-" if v is None else ("yes" if v else "NO")
+    if isinstance(v, (int, np.integer)):
+        return f"{int(v):,}"
+    if isinstance(v, (float, np.floating)):
+        return f"{float(v):,.3g}" if abs(float(v)) < 1000 else f"{float(v):,.0f}"
+    return str(v)
+
+
+def _binned(frame: pd.DataFrame, ticks: int, dt: float, by: str, value: str) -> pd.DataFrame:
+    """``value`` summed per time bin and per ``by``, as a rate per simulated second."""
+    width = max(1, int(np.ceil(ticks / MAX_BINS)))
+    frame = frame.assign(bin=(frame["tick"] // width) * width)
+    table = frame.pivot_table(index="bin", columns=by, values=value, aggfunc="sum", fill_value=0)
+    table = table.reindex(range(0, max(ticks, 1), width), fill_value=0)
+    table.index = table.index * dt
+    return table / (width * dt)
+
+
+def run_report(run: Path) -> tuple[str, int]:
+    """The HTML of one run's report and how many figures it has."""
+    summary = json.loads((run / "summary.json").read_text())
+    config = yaml.safe_load((run / "config.yaml").read_text())
+    ledger = pd.read_csv(run / "network_ledger.csv")
+    agents = pd.read_csv(run / "agents.csv")
+    net, dt, ticks = summary["network"], float(config["run"]["dt"]), int(summary["ticks"])
+    page = Page(f"{summary['name']}: bandwidth accounting")
+    sent = ledger[ledger["outcome"] == "sent"]
+    copies = ledger[ledger["outcome"] != "sent"]
+    delivered = int(copies.loc[copies["outcome"] == "delivered", "messages"].sum())
+    dropped = copies[copies["outcome"] != "delivered"].groupby("outcome")["messages"].sum()
+    balanced = int(copies["messages"].sum()) == delivered + int(dropped.sum()) == net["copies"]
+    page.heading("Totals", "Messages count transmissions; copies count one per intended receiver. Payload bytes "
+                           "are the encoded messages as agents hand them to the radio.")
+    benefit = _benefit(summary.get("scenario_kind", ""))
+    rows = [("scenario / allocator", f"{summary.get('scenario_kind')} / {summary['allocator']}", "summary.json"),
+            ("agents, ticks, dt", f"{summary['agents']}, {ticks}, {dt} s", "summary.json, config.yaml"),
+            ("messages sent", int(sent["messages"].sum()), "network_ledger.csv (sent rows)"),
+            ("payload bytes sent", int(sent["bytes"].sum()), "network_ledger.csv (sent rows)"),
+            ("copies", int(copies["messages"].sum()), "network_ledger.csv (other rows)"),
+            ("copies delivered", delivered, "network_ledger.csv"),
+            *[(f"copies dropped: {reason}", int(n), "network_ledger.csv") for reason, n in dropped.items()],
+            ("copies = delivered + dropped, and as summary.json says", balanced, "network_ledger.csv, summary.json"),
+            ("agents' and proxy's byte counts agree", net.get("bytes_agree"), "summary.json")]
+    if benefit and benefit in summary:
+        kb = max(net["bytes_sent"], 1) / 1000
+        rows += [(benefit.replace("_", " "), summary[benefit], "summary.json"),
+                 (f"{benefit.replace('_', ' ')} per kB sent", summary[benefit] / kb, "summary.json")]
+    page.table(rows)
+
+    transport_file = run / "transport.json"
+    if transport_file.exists():
+        wire = json.loads(transport_file.read_text())
+        t = wire["totals"]
+        page.heading("On the wire", "Payload: the radio messages as agents encode them (reproducible). Samples: "
+                     "the per-tick Zenoh samples agents publish (actions, radio messages, framing of ours) and "
+                     "receive (observation, inbox). TCP: what each process's sockets sent and received, as the "
+                     "kernel counts it (Zenoh framing, control traffic, keep-alives; not IP/TCP headers). "
+                     "Measured, so not reproducible byte for byte.")
+        page.table([("radio payload bytes sent", t["radio_payload_bytes"], "transport.json, summary.json"),
+                    ("per-tick sample bytes agents published", t["agent_sample_bytes_out"], "transport.json"),
+                    ("per-tick sample bytes agents received", t["agent_sample_bytes_in"], "transport.json"),
+                    ("TCP bytes agents sent", t["agent_tcp_bytes_sent"], "transport.json"),
+                    ("TCP bytes agents received", t["agent_tcp_bytes_received"], "transport.json"),
+                    ("overhead: TCP bytes agents sent / radio payload bytes", t["overhead_ratio"], "transport.json"),
+                    ("TCP bytes all processes sent / received",
+                     f"{_fmt(t['tcp_bytes_sent'])} / {_fmt(t['tcp_bytes_received'])}", "transport.json")])
+        procs = {n: p for n, p in wire["processes"].items() if n.startswith("agent_")}
+        names = [n.removeprefix("agent_") for n in procs]
+        sent_by = agents.set_index("agent")["bytes_sent"]
+        fig = go.Figure([
+            go.Bar(x=names, y=[sent_by.get(int(n), 0) for n in names], name="radio payload"),
+            go.Bar(x=names, y=[(p.get("samples") or {}).get("out") for p in procs.values()],
+                   name="per-tick samples published"),
+            go.Bar(x=names, y=[(p.get("tcp") or {}).get("sent") for p in procs.values()], name="TCP bytes sent")])
+        fig.update_layout(title="What each agent sent, layer by layer", xaxis_title="agent", yaxis_title="bytes",
+                          barmode="group")
+        page.figure(fig, "transport.json, agents.csv")
+
+    page.heading("Per agent")
+    fig = go.Figure([go.Bar(x=agents["agent"], y=agents["bytes_sent"], name="payload bytes sent"),
+                     go.Bar(x=agents["agent"], y=agents["messages_sent"], name="messages sent", yaxis="y2",
+                            opacity=0.6)])
+    fig.update_layout(title="Bytes and messages each agent sent", xaxis_title="agent", yaxis_title="bytes",
+                      yaxis2={"title": "messages", "overlaying": "y", "side": "right"}, barmode="group")
+    page.figure(fig, "agents.csv")
+
+    page.heading("Per message kind")
+    kinds = pd.DataFrame(net["per_kind"]).T.reset_index(names="kind") if net["per_kind"] else pd.DataFrame()
+    if len(kinds):
+        fig = go.Figure([go.Bar(x=kinds["kind"], y=kinds["bytes"], name="payload bytes"),
+                         go.Bar(x=kinds["kind"], y=kinds["messages"], name="messages", yaxis="y2", opacity=0.6)])
+        fig.update_layout(title="Bytes and messages per kind", yaxis_title="bytes", barmode="group",
+                          yaxis2={"title": "messages", "overlaying": "y", "side": "right"})
+        page.figure(fig, "summary.json (network.per_kind)")
+        sizes = sent.assign(size=sent["bytes"] / sent["messages"])
+        fig = go.Figure([go.Histogram(x=g["size"], name=k, opacity=0.7) for k, g in sizes.groupby("kind")])
+        fig.update_layout(title="Message sizes per kind (mean per sender and tick)", xaxis_title="bytes",
+                          yaxis_title="count", barmode="overlay")
+        page.figure(fig, "network_ledger.csv (sent rows)")
+
+    page.heading("Over simulated time")
+    for by, what in (("kind", "message kind"), ("sender", "sending agent")):
+        rate = _binned(sent, ticks, dt, by, "bytes")
+        fig = go.Figure([go.Scatter(x=rate.index, y=rate[c], name=str(c), stackgroup="one", mode="lines")
+                         for c in rate.columns])
+        fig.update_layout(title=f"Payload bytes per second by {what} (stacked)", xaxis_title="simulated time (s)",
+                          yaxis_title="bytes/s")
+        page.figure(fig, "network_ledger.csv (sent rows)")
+    drops = copies[copies["outcome"] != "delivered"]
+    if len(drops):
+        rate = _binned(drops, ticks, dt, "outcome", "messages")
+        fig = go.Figure([go.Scatter(x=rate.index, y=rate[c], name=str(c), mode="lines",
+                                    line={"color": DROP_COLORS.get(str(c))}) for c in rate.columns])
+        fig.update_layout(title="Dropped copies per second by reason", xaxis_title="simulated time (s)",
+                          yaxis_title="copies/s")
+        page.figure(fig, "network_ledger.csv (drop rows)")
+
+    receivers_file = run / "network_ledger_receivers.parquet"
+    if receivers_file.exists():
+        page.heading("Who sent what to whom, and what became of it",
+                     "One cell per sender and receiver: copies delivered, and copies dropped (any reason).")
+        per_copy = pd.read_parquet(receivers_file, columns=["sender", "receiver", "outcome"])
+        ids = [str(i) for i in range(int(summary["agents"]))]
+        for title, rows in (("delivered", per_copy["outcome"] == "delivered"),
+                            ("dropped", per_copy["outcome"] != "delivered")):
+            cells = per_copy[rows].groupby(["sender", "receiver"]).size().unstack(fill_value=0)
+            cells = cells.reindex(index=range(len(ids)), columns=range(len(ids)), fill_value=0)
+            fig = go.Figure(go.Heatmap(z=cells.values, x=ids, y=ids, colorscale="Blues" if title == "delivered"
+                                       else "Reds", hovertemplate="sender %{y} to receiver %{x}<br>%{z} copies "
+                                       f"{title}<extra></extra>"))
+            fig.update_layout(title=f"Copies {title}, sender by receiver", xaxis_title="receiver",
+                              yaxis_title="sender", yaxis_autorange="reversed")
+            page.figure(fig, receivers_file.name)
+    else:
+        page.heading("Who sent what, and what became of it",
+                     "Copies by sending agent and outcome (network.ledger: per_receiver adds the sender by "
+                     "receiver matrices).")
+        matrix = copies.pivot_table(index="outcome", columns="sender", values="messages", aggfunc="sum",
+                                    fill_value=0)
+        fig = go.Figure(go.Heatmap(z=matrix.values, x=[str(c) for c in matrix.columns], y=list(matrix.index),
+                                   colorscale="Blues",
+                                   hovertemplate="sender %{x}<br>%{y}: %{z} copies<extra></extra>"))
+        fig.update_layout(title="Copies by sender and outcome", xaxis_title="sender")
+        page.figure(fig, "network_ledger.csv")
+
+    if benefit and (run / "timeseries.csv").exists():
+        series = pd.read_csv(run / "timeseries.csv")
+        if benefit in series:
+            fig = go.Figure([go.Scatter(x=series["time"], y=series[benefit], name=benefit.replace("_", " ")),
+                             go.Scatter(x=series["time"], y=series["bytes_sent"] / 1000, name="kB sent (cumulative)",
+                                        yaxis="y2")])
+            fig.update_layout(title="Outcome beside traffic", xaxis_title="simulated time (s)",
+                              yaxis_title=benefit.replace("_", " "),
+                              yaxis2={"title": "kB sent", "overlaying": "y", "side": "right"})
+            page.figure(fig, "timeseries.csv")
+    subtitle = (f"run {run} · seed {summary['seed']} · swarmbed {swarmbed.__version__} · "
+                f"report made {time.strftime('%Y-%m-%d %H:%M')}")
+    return page.render(subtitle), page.figures
+
+
+def _ci(values: pd.Series) -> float:
+    n = values.count()
+    return float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
+
+
+def sweep_report(sweep: Path) -> tuple[str, int]:
+    """The HTML of one sweep's report and how many figures it has."""
+    table = pd.read_csv(sweep / "sweep.csv")
+    ok = table[table["status"] == "ok"]
+    if ok.empty:
+        raise ReportError(f"{sweep}: no completed run in sweep.csv")
+    kinds = ok["scenario_kind"].dropna().unique() if "scenario_kind" in ok else []
+    benefit = next((b for b in map(_benefit, kinds) if b and b in ok), None)
+    page = Page(f"{sweep.name}: bandwidth accounting of a sweep")
+    page.heading("Per scenario", "Means over the completed runs with 95 % confidence intervals (t).")
+    metrics = [m for m in ("network.messages_sent", "network.bytes_sent", "wire.agent_tcp_bytes_sent",
+                           "wire.overhead_ratio", benefit) if m and m in ok]
+    rows = []
+    for scenario, group in ok.groupby("scenario"):
+        for m in metrics:
+            rows.append((f"{scenario}: {m}", f"{group[m].mean():,.1f} ± {_ci(group[m]):,.1f} (n={group[m].count()})",
+                         "sweep.csv"))
+    page.table(rows, ("scenario: figure", "mean ± 95 % CI", "from"))
+    for m in metrics:
+        g = ok.groupby("scenario")[m]
+        fig = go.Figure(go.Bar(x=list(g.mean().index), y=g.mean().values,
+                               error_y={"type": "data", "array": [_ci(v) for _, v in g]}))
+        fig.update_layout(title=f"{m} per scenario (95 % CI)", yaxis_title=m)
+        page.figure(fig, "sweep.csv")
+    if benefit:
+        page.heading("Cost and benefit", f"One point per run: {benefit} against what it cost on the radio.")
+        for cost in [c for c in ("network.messages_sent", "network.bytes_sent", "wire.agent_tcp_bytes_sent")
+                     if c in ok]:
+            fig = go.Figure([go.Scatter(x=g[cost], y=g[benefit], mode="markers", name=str(s),
+                                        hovertemplate=f"{s}<br>run %{{text}}<extra></extra>", text=g["run"])
+                             for s, g in ok.groupby("scenario")])
+            fig.update_layout(title=f"{benefit} against {cost}", xaxis_title=cost, yaxis_title=benefit,
+                              xaxis_type="log" if (ok[cost] > 0).all() else "linear")
+            page.figure(fig, "sweep.csv")
+    subtitle = (f"sweep {sweep} · {len(ok)} of {len(table)} runs complete · swarmbed {swarmbed.__version__} · "
+                f"report made {time.strftime('%Y-%m-%d %H:%M')}")
+    return page.render(subtitle), page.figures
+
+
+def report(folder: Path, out: Path | None = None) -> Path:
+    """Write the report of a run or a sweep folder; returns the file."""
+    if (folder / "summary.json").exists():
+        text, _ = run_report(folder)
+    elif (folder / "sweep.csv").exists():
+        text, _ = sweep_report(folder)
+    else:
+        raise ReportError(f"{folder}: neither a completed run (no summary.json) nor a sweep (no sweep.csv)")
+    out = out or folder / "report.html"
+    tmp = out.with_name(out.name + ".part")
+    tmp.write_text(text)
+    tmp.replace(out)
+    return out

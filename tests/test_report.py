@@ -1,0 +1,131 @@
+"""Bandwidth accounting as a researcher reads it: wire bytes, the receiver-level ledger, and the
+HTML report of a run and of a sweep, opened in a real headless Chromium."""
+
+import json
+import re
+import shutil
+import subprocess
+import textwrap
+
+import pandas as pd
+import pytest
+
+from swarmbed.experiments.cli import main as cli
+from swarmbed.experiments.report import report, run_report, sweep_report
+from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.sweep import load_sweep, run_sweep
+from tests.conftest import QUICKSTART, experiment
+
+LOSSY = ("network.loss=0.2", "network.ledger=per_receiver")
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("report")
+    return {name: run_experiment(experiment(*LOSSY, "run.seed=4"), base / name, progress=False).out_dir
+            for name in ("a", "b")}
+
+
+@pytest.fixture(scope="module")
+def sweep_dir(tmp_path_factory):
+    base = tmp_path_factory.mktemp("report_sweep")
+    (base / "sweep.yaml").write_text(textwrap.dedent(f"""
+        name: costs
+        base: {QUICKSTART}
+        seed: 5
+        runs: 2
+        scenarios:
+          - {{name: fcg, set: {{agents.count: 3}}}}
+          - {{name: cbba, set: {{agents.count: 3, allocator: {{name: cbba}}}}}}
+    """))
+    run_sweep(load_sweep(base / "sweep.yaml", extra=["run.duration=150"]), base / "out", jobs=2, progress=False)
+    return base / "out"
+
+
+def test_wire_bytes_are_measured_per_process_and_cover_the_payload(runs):
+    wire = json.loads((runs["a"] / "transport.json").read_text())
+    t = wire["totals"]
+    assert t["agents_reporting"] == 5 and set(wire["processes"]) == {"netem", *(f"agent_{i}" for i in range(5))}
+    # each layer carries the one above it: radio payload < the samples that carry it < TCP bytes
+    assert 0 < t["radio_payload_bytes"] < t["agent_sample_bytes_out"] < t["agent_tcp_bytes_sent"]
+    assert t["agent_sample_bytes_in"] < t["agent_tcp_bytes_received"]
+    assert t["overhead_ratio"] == pytest.approx(t["agent_tcp_bytes_sent"] / t["radio_payload_bytes"])
+    for name, proc in wire["processes"].items():
+        assert proc["tcp"]["sockets"] >= 1 and proc["tcp"]["segments_out"] > 0, name
+    # what every agent sent reached the hub and was relayed: the proxy received at least the samples
+    assert wire["processes"]["netem"]["tcp"]["received"] >= t["agent_sample_bytes_out"]
+
+
+def test_receiver_ledger_has_a_row_per_copy_and_repeats_under_the_seed(runs):
+    a, b = runs["a"], runs["b"]
+    per_copy = pd.read_parquet(a / "network_ledger_receivers.parquet")
+    summary = json.loads((a / "summary.json").read_text())
+    net = summary["network"]
+    assert len(per_copy) == net["copies"]
+    outcomes = per_copy["outcome"].value_counts().to_dict()
+    assert outcomes["delivered"] == net["delivered"]
+    assert {k: v for k, v in outcomes.items() if k != "delivered"} == {k: v for k, v in net["dropped"].items() if v}
+    assert (per_copy["receiver"] != per_copy["sender"]).all()
+    for name in ("network_ledger_receivers.parquet", "network_ledger.csv", "summary.json"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+
+
+def test_run_report_is_one_offline_page_whose_numbers_come_from_the_run(runs, tmp_path):
+    run = runs["a"]
+    out = report(run, tmp_path / "r.html")
+    page = out.read_text()
+    assert not re.search(r"<script[^>]+src=", page), "the page must not load scripts from anywhere"
+    assert "cdn" not in re.sub(r"<script.*?</script>", "", page, flags=re.S).lower()
+    summary = json.loads((run / "summary.json").read_text())
+    wire = json.loads((run / "transport.json").read_text())["totals"]
+    assert f"seed {summary['seed']}" in page and summary["name"] in page
+    for value in (summary["network"]["messages_sent"], summary["network"]["bytes_sent"],
+                  wire["agent_tcp_bytes_sent"], summary["network"]["dropped"]["loss"]):
+        assert f">{value:,}<" in page
+    assert "Copies delivered, sender by receiver" in page  # the receiver-level ledger's matrices
+    _, figures = run_report(run)
+    assert figures == page.count('class="plotly-graph-div"') >= 10
+
+
+def test_sweep_report_has_intervals_and_the_cost_benefit_plots(sweep_dir):
+    text, figures = sweep_report(sweep_dir)
+    assert "fcg" in text and "cbba" in text and "± " in text
+    assert "tasks_completed against network.bytes_sent" in text
+    assert "tasks_completed against wire.agent_tcp_bytes_sent" in text
+    assert figures >= 6
+    table = pd.read_csv(sweep_dir / "sweep.csv")
+    assert (table["wire.agent_tcp_bytes_sent"] > table["network.bytes_sent"]).all()
+
+
+def test_report_command_names_a_folder_that_is_neither_run_nor_sweep(tmp_path, capsys):
+    assert cli(["report", str(tmp_path)]) == 2
+    assert f"{tmp_path}: neither a completed run" in capsys.readouterr().err
+
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+# Installed before the page's own scripts: records every uncaught error and console.error, then
+# writes them into the page once it has loaded, where --dump-dom shows them.
+ERROR_PROBE = ("<script>window.__errors=[];addEventListener('error',e=>__errors.push(String(e.message)));"
+               "const __ce=console.error;console.error=(...a)=>{__errors.push(a.join(' '));__ce(...a)};"
+               "addEventListener('load',()=>setTimeout(()=>{const p=document.createElement('pre');"
+               "p.id='errors';p.textContent=JSON.stringify(__errors);document.body.appendChild(p)},0));</script>")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no Chromium here (Debian: apt-get install chromium; .ci/run does)")
+@pytest.mark.parametrize("which", ["run", "sweep"])
+def test_reports_render_every_plot_in_a_real_browser(which, runs, sweep_dir, tmp_path):
+    folder = runs["a"] if which == "run" else sweep_dir
+    page = report(folder, tmp_path / "page.html").read_text()
+    probed = tmp_path / "probed.html"
+    probed.write_text(page.replace("<head>", "<head>" + ERROR_PROBE, 1))
+    dom = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--user-data-dir=" +
+                          str(tmp_path / "profile"), "--virtual-time-budget=20000", "--dump-dom", probed.as_uri()],
+                         capture_output=True, text=True, timeout=120).stdout
+    errors = re.search(r'<pre id="errors">(.*?)</pre>', dom, re.S)
+    assert errors, "the page never finished loading"
+    assert json.loads(errors.group(1).replace("&quot;", '"')) == []
+    plots = re.split(r'id="(fig\d+)"', dom)[1:]
+    names, bodies = plots[0::2], plots[1::2]
+    assert len(names) == page.count('class="plotly-graph-div"') > 0
+    for name, body in zip(names, bodies):
+        assert 'class="main-svg"' in body, f"{name} did not render"  # the text up to the next plot's div
