@@ -77,7 +77,9 @@ class Coordinator:
         self.netem_report: dict | None = None
         self.malformed = 0
         self.rows: list[list] = []
-        self.trajectories: list[tuple[int, int, float, float]] = []
+        self.trajectories: list[tuple[int, int, float, float, str]] = []
+        self.marker_rows: list[tuple] = []  # (tick, marker, x, y, label, appear|vanish)
+        self._markers: dict[int, tuple[float, float, str]] = {}
         self._row_columns = (list(self.world.row()) + ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
                              + self.event_names)
         self.net_cum = [0, 0, 0, 0, 0]
@@ -190,6 +192,16 @@ class Coordinator:
             elif what == "report":
                 self._on_report(data, tick=-1)
 
+    def _record_markers(self, k: int) -> None:
+        """Rows for the markers that appeared, changed or vanished since the last recorded tick."""
+        now = self.world.markers()
+        for m in sorted(self._markers.keys() - now.keys()):
+            self.marker_rows.append((k, m, "", "", "", "vanish"))
+        for m in sorted(now):
+            if self._markers.get(m) != now[m]:
+                self.marker_rows.append((k, m, *now[m], "appear"))
+        self._markers = now
+
     # -- the lock-step loop ------------------------------------------------------------------------
     def run(self, on_tick: Callable[[int, float], None] | None = None) -> None:
         w = self.world
@@ -200,7 +212,9 @@ class Coordinator:
                 break
             ids, xs, ys = w.positions()
             if self.exp.run.record_trajectories:
-                self.trajectories += [(k, i, x, y) for i, x, y in zip(ids, xs, ys)]
+                labels = w.agent_labels()
+                self.trajectories += [(k, i, x, y, labels.get(i, "")) for i, x, y in zip(ids, xs, ys)]
+                self._record_markers(k)
             if k > 0:
                 self._swap_due(k)
             doomed = w.draw_losses()  # lost at tick k+1: the proxy must not deliver to them then
@@ -505,7 +519,8 @@ class Coordinator:
         per_sender = self.netem_report["per_sender"]
         results.write_csv(out / results.TIMESERIES, self._row_columns, self.rows)
         if self.exp.run.record_trajectories:
-            results.write_csv(out / results.TRAJECTORIES, ["tick", "agent", "x", "y"], self.trajectories)
+            results.write_csv(out / results.TRAJECTORIES, ["tick", "agent", "x", "y", "label"], self.trajectories)
+            results.write_csv(out / results.MARKERS, ["tick", "marker", "x", "y", "label", "event"], self.marker_rows)
         columns = w.per_agent()
         net_cols = ["messages", "bytes", "copies", "delivered"]
         rows = []

@@ -172,6 +172,10 @@ class MTSRWorld(World):
         """Every task there will ever be is done."""
         return self._generations_done == self.sc.generations.count and self.tasks_completed == len(self.remaining)
 
+    def markers(self) -> dict[int, tuple[float, float, str]]:
+        """Tasks spawned and not yet done."""
+        return {int(j): (float(self.tx[j]), float(self.ty[j]), "task") for j in np.flatnonzero(np.isnan(self.done_at))}
+
     # -- agents --------------------------------------------------------------------------------
     def positions(self) -> tuple[list[int], list[float], list[float]]:
         ids = [int(i) for i in np.flatnonzero(self.alive)]

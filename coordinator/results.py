@@ -17,6 +17,7 @@ TIMINGS = "timings.json"
 TRANSPORT = "transport.json"  # measured bytes on the wire: of this machine and moment, not reproducible
 CONFIG = "config.yaml"
 TRAJECTORIES = "trajectories.csv"
+MARKERS = "markers.csv"  # tasks or victims as they appear and vanish (with trajectories)
 
 
 def write_atomic(path: Path, text: str) -> None:

@@ -31,6 +31,7 @@ from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
 
 ALIVE, RESCUED, EXPIRED, UNUSED = 0, 1, 2, 3
+COLOR_NAMES = ("red", "green", "blue")
 
 
 class SARParams(BaseModel):
@@ -181,6 +182,14 @@ class SARWorld(World):
     @property
     def finished(self) -> bool:
         return not self.sc.replace and self.victims_alive == 0
+
+    def markers(self) -> dict[int, tuple[float, float, str]]:
+        """Victims alive, labelled with their (hidden) wall colour."""
+        return {int(v): (float(self.vx[v]), float(self.vy[v]), COLOR_NAMES[int(self.vcolor[v])])
+                for v in np.flatnonzero(self.vstatus == ALIVE)}
+
+    def agent_labels(self) -> dict[int, str]:
+        return {int(i): COLOR_NAMES[int(self.color[i])] for i in np.flatnonzero(self.alive)}
 
     # -- agents ----------------------------------------------------------------------------------
     def positions(self) -> tuple[list[int], list[float], list[float]]:

@@ -84,6 +84,15 @@ class World(abc.ABC):
     def per_agent(self) -> dict[str, list]:
         """Columns of ``agents.csv``: one list per column, one entry per agent."""
 
+    def markers(self) -> dict[int, tuple[float, float, str]]:
+        """What stands on the map at this tick (tasks, victims): id -> (x, y, label), for replays.
+        Recorded with ``run.record_trajectories`` only; the default draws nothing."""
+        return {}
+
+    def agent_labels(self) -> Mapping[int, str]:
+        """A label per live agent for replays (its colour, its state); the default labels none."""
+        return {}
+
     def invariants(self) -> list[str]:
         """Broken conservation laws (tasks or victims unaccounted), as sentences; empty when sound."""
         return []

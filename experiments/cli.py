@@ -228,6 +228,20 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_replay(args: argparse.Namespace) -> int:
+    from swarmbed.experiments.replay import ReplayError, replay
+
+    try:
+        t0 = time.perf_counter()
+        path, frames = replay(Path(args.run_dir), Path(args.output) if args.output else None,
+                              getattr(args, "from"), args.to, args.fps, args.every)
+    except ReplayError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{path}  ({frames} frames, {path.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
 def cmd_check_scenario(args: argparse.Namespace) -> int:
     from swarmbed.coordinator.checker import ScenarioCheckError, check_scenario
 
@@ -367,6 +381,15 @@ def main(argv: list[str] | None = None) -> int:
     rep.add_argument("folders", nargs="+", metavar="RUN_DIR|SWEEP_DIR")
     rep.add_argument("-o", "--output", help="the HTML file (default: report.html in the folder)")
     rep.set_defaults(func=cmd_report)
+
+    rp = sub.add_parser("replay", help="a movie of a run recorded with run.record_trajectories")
+    rp.add_argument("run_dir", metavar="RUN_DIR")
+    rp.add_argument("-o", "--output", help="run.gif or run.mp4 (mp4 needs ffmpeg; default: replay.gif in RUN_DIR)")
+    rp.add_argument("--from", type=float, help="simulated second to start at")
+    rp.add_argument("--to", type=float, help="simulated second to end at")
+    rp.add_argument("--fps", type=int, default=10, help="frames per second of the movie (default 10)")
+    rp.add_argument("--every", type=int, help="ticks per frame (default: at most 600 frames)")
+    rp.set_defaults(func=cmd_replay)
 
     chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
     chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")

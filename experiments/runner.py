@@ -35,7 +35,7 @@ from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 DEPLOYMENT = "deployment.json"  # where each agent ran; not a result (the same everywhere)
 RESULT_FILES = (results.SUMMARY, results.TIMESERIES, results.AGENTS, results.TIMINGS, results.TRANSPORT,
-                results.TRAJECTORIES,
+                results.TRAJECTORIES, results.MARKERS,
                 "network_ledger.csv", "network_ledger_receivers.parquet", DEPLOYMENT)
 
 

@@ -129,3 +129,43 @@ def test_reports_render_every_plot_in_a_real_browser(which, runs, sweep_dir, tmp
     assert len(names) == page.count('class="plotly-graph-div"') > 0
     for name, body in zip(names, bodies):
         assert 'class="main-svg"' in body, f"{name} did not render"  # the text up to the next plot's div
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    base = tmp_path_factory.mktemp("replay")
+    return {rec: run_experiment(experiment(*LOSSY, "run.seed=4", f"run.record_trajectories={rec}"),
+                                base / str(rec), progress=False).out_dir for rec in (True, False)}
+
+
+def test_recording_for_a_replay_changes_no_result(recorded, runs):
+    with_rec, without = recorded[True], recorded[False]
+    assert (with_rec / "markers.csv").exists() and not (without / "markers.csv").exists()
+    for name in ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv",
+                 "network_ledger_receivers.parquet"):
+        assert (with_rec / name).read_bytes() == (without / name).read_bytes() == (runs["a"] / name).read_bytes()
+
+
+def test_replay_is_a_movie_with_one_frame_per_chosen_tick(recorded, tmp_path):
+    from PIL import Image
+
+    from swarmbed.experiments.replay import replay
+
+    run = recorded[True]
+    markers = pd.read_csv(run / "markers.csv")
+    assert set(markers["event"]) == {"appear", "vanish"} and (markers["label"].dropna() == "task").all()
+    out, frames = replay(run, tmp_path / "m.gif", start=10, end=59, fps=5, every=2)
+    assert frames == 25  # ticks 10, 12, ..., 58
+    with Image.open(out) as movie:
+        assert movie.n_frames == 25 and movie.size == (512, 512)
+        first = movie.convert("RGB").tobytes()
+        movie.seek(24)
+        assert movie.convert("RGB").tobytes() != first  # the agents moved
+    before = sorted(p.name for p in run.iterdir())
+    assert cli(["replay", str(run), "-o", str(tmp_path / "all.gif")]) == 0
+    assert sorted(p.name for p in run.iterdir()) == before  # nothing written into the run
+
+
+def test_replay_says_what_is_missing(runs, capsys):
+    assert cli(["replay", str(runs["a"])]) == 2
+    assert "run.record_trajectories=true" in capsys.readouterr().err

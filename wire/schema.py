@@ -34,7 +34,7 @@ class RunSection(Strict):
     join_timeout: float = Field(120.0, gt=0, description="wall seconds to wait for every process to join")
     allow_agent_failures: bool = Field(False, description="go on without an agent whose process dies")
     record_every: int = Field(1, ge=1, description="ticks between time-series rows")
-    record_trajectories: bool = Field(False, description="also write trajectories.csv (tick, agent, x, y)")
+    record_trajectories: bool = Field(False, description="write trajectories.csv and markers.csv (for swarmbed replay)")
     stop_when_done: bool = Field(True, description="end the run once every task there will be is done")
 
 

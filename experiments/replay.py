@@ -1,0 +1,143 @@
+"""``swarmbed replay``: a movie of a finished run, drawn from its recorded files only.
+
+Needs ``run.record_trajectories: true`` (``trajectories.csv``: agents' positions per tick;
+``markers.csv``: the tasks or victims on the map as they appear and vanish). With
+``network.ledger: per_receiver`` it also draws, each tick, a line for every copy delivered that
+tick (sender to receiver) and a dashed line, in the reason's colour, for every copy dropped that
+tick. Rendering reads files and nothing else: it never runs or changes a run.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from swarmbed.experiments.report import DROP_COLORS
+
+MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
+MARKER_COLORS = {"red": "#d62728", "green": "#2ca02c", "blue": "#1f77b4"}
+
+
+class ReplayError(ValueError):
+    """A run that cannot be replayed (files missing, an empty window, no movie writer)."""
+
+
+def _segments(rows: pd.DataFrame, pos: dict[int, tuple[float, float]]) -> list[list[tuple[float, float]]]:
+    return [[pos[s], pos[r]] for s, r in zip(rows["sender"], rows["receiver"]) if s in pos and r in pos]
+
+
+def replay(run: Path, out: Path | None = None, start: float | None = None, end: float | None = None,
+           fps: int = 10, every: int | None = None) -> tuple[Path, int]:
+    """Write the movie (``.gif``, or ``.mp4`` where ffmpeg is installed); returns it and its frame count."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib import animation
+    from matplotlib.collections import LineCollection
+
+    traj_file, marker_file = run / "trajectories.csv", run / "markers.csv"
+    if not (run / "summary.json").exists():
+        raise ReplayError(f"{run}: not a completed run (no summary.json)")
+    if not traj_file.exists() or not marker_file.exists():
+        raise ReplayError(f"{run}: no trajectories.csv/markers.csv; run it again with "
+                          "--set run.record_trajectories=true")
+    out = out or run / "replay.gif"
+    if out.suffix not in (".gif", ".mp4"):
+        raise ReplayError(f"{out}: a replay is a .gif or an .mp4")
+    if out.suffix == ".mp4" and shutil.which("ffmpeg") is None:
+        raise ReplayError("an .mp4 needs ffmpeg (not installed here); ask for a .gif instead")
+    dt = float(yaml.safe_load((run / "config.yaml").read_text())["run"]["dt"])
+    traj = pd.read_csv(traj_file, keep_default_na=False)
+    if "label" not in traj:  # recorded before agents had labels
+        traj["label"] = ""
+    markers = pd.read_csv(marker_file, keep_default_na=False)
+    copies_file = run / "network_ledger_receivers.parquet"
+    copies = pd.read_parquet(copies_file) if copies_file.exists() else None
+
+    first, last = int(traj["tick"].min()), int(traj["tick"].max())
+    lo = first if start is None else max(first, int(np.ceil(start / dt)))
+    hi = last if end is None else min(last, int(end / dt))
+    if hi < lo:
+        raise ReplayError(f"no tick between {start} s and {end} s (the run has {first * dt}-{last * dt} s)")
+    every = every or max(1, int(np.ceil((hi - lo + 1) / MAX_FRAMES)))
+    frames = list(range(lo, hi + 1, every))
+
+    xs = np.concatenate([traj["x"].to_numpy(), pd.to_numeric(markers["x"], errors="coerce").dropna().to_numpy()])
+    ys = np.concatenate([traj["y"].to_numpy(), pd.to_numeric(markers["y"], errors="coerce").dropna().to_numpy()])
+    pad = 0.05 * max(float(np.ptp(xs)), float(np.ptp(ys)), 1.0)
+    by_tick = dict(tuple(traj.groupby("tick")))
+    marker_events = markers.groupby("tick")
+    marker_ticks = sorted(marker_events.groups)
+
+    fig, ax = plt.subplots(figsize=(6.4, 6.4), dpi=80)
+    ax.set_xlim(xs.min() - pad, xs.max() + pad)
+    ax.set_ylim(ys.min() - pad, ys.max() + pad)
+    ax.set_aspect("equal")
+    links = LineCollection([], colors="#1f77b4", linewidths=0.6, alpha=0.5)
+    drops = LineCollection([], linewidths=0.8, linestyles="dashed", alpha=0.8)
+    ax.add_collection(links)
+    ax.add_collection(drops)
+    marks = ax.scatter([], [], s=24, marker="s")
+    agents = ax.scatter([], [], s=40, c="#222222", edgecolors="black", linewidths=1.2, zorder=3)
+    label = ax.text(0.01, 0.99, "", transform=ax.transAxes, va="top", family="monospace")
+    if copies is not None:
+        from matplotlib.lines import Line2D
+
+        reasons = [r for r in DROP_COLORS if r != "run_ended" and r in set(copies["outcome"])]
+        handles = [Line2D([], [], color="#1f77b4", lw=1, label="delivered")]
+        handles += [Line2D([], [], color=DROP_COLORS[r], lw=1, ls="--", label=r.replace("_", " ")) for r in reasons]
+        ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
+    else:
+        ax.text(0.01, 0.01, "links: run with network.ledger: per_receiver", transform=ax.transAxes, fontsize=8,
+                color="#777777")
+    present: dict[int, tuple[float, float, str]] = {}
+    applied = [-1]  # last tick whose marker events are in `present`
+
+    def draw(k: int):
+        for t in marker_ticks:
+            if applied[0] < t <= k:
+                for m, x, y, lab, event in marker_events.get_group(t)[["marker", "x", "y", "label", "event"]].values:
+                    if event == "vanish":
+                        present.pop(int(m), None)
+                    else:
+                        present[int(m)] = (float(x), float(y), str(lab))
+        applied[0] = k
+        now = by_tick.get(k)
+        pos = {} if now is None else {int(a): (x, y) for a, x, y in now[["agent", "x", "y"]].values}
+        agents.set_offsets(np.array(list(pos.values())) if pos else np.empty((0, 2)))
+        if now is not None:
+            agents.set_facecolor([MARKER_COLORS.get(lab, "#222222") for lab in now["label"]])
+        if present:
+            marks.set_offsets(np.array([(x, y) for x, y, _ in present.values()]))
+            marks.set_color([MARKER_COLORS.get(lab, "#999999") for *_, lab in present.values()])
+        else:
+            marks.set_offsets(np.empty((0, 2)))
+        if copies is not None:
+            now_copies = copies[copies["tick"] == k]
+            delivered = now_copies[now_copies["outcome"] == "delivered"]
+            dropped = now_copies[~now_copies["outcome"].isin(["delivered", "run_ended"])]
+            links.set_segments(_segments(delivered, pos))
+            drop_rows = dropped[dropped["sender"].isin(pos) & dropped["receiver"].isin(pos)]
+            drops.set_segments(_segments(drop_rows, pos))
+            drops.set_color([DROP_COLORS.get(o, "#7f7f7f") for o in drop_rows["outcome"]])
+        label.set_text(f"tick {k}  t = {k * dt:,.1f} s")
+        return agents, marks, links, drops, label
+
+    fig.tight_layout()
+    movie = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
+    tmp = out.with_name(out.stem + ".part" + out.suffix)
+    writer = animation.PillowWriter(fps=fps) if out.suffix == ".gif" else animation.FFMpegWriter(fps=fps)
+    try:
+        movie.save(tmp, writer=writer)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(fig)
+    tmp.replace(out)
+    return out, len(frames)
