@@ -16,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import zenoh
 
 from swarmbed.coordinator import results
@@ -31,6 +32,7 @@ from swarmbed.wire.codec import (
     decode_netem_step,
     decode_report,
     encode_control,
+    encode_status,
     encode_stop,
     encode_tick,
     encode_world,
@@ -43,6 +45,7 @@ from swarmbed.wire.schema import Experiment, Targets, agent_spec, netem_spec
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
+STATUS_EVERY = 0.25  # wall seconds between progress samples for watchers
 SWAPS = "swaps.csv"
 
 
@@ -83,6 +86,7 @@ class Coordinator:
         self._row_columns = (list(self.world.row()) + ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
                              + self.event_names)
         self.net_cum = [0, 0, 0, 0, 0]
+        self.drops_cum: dict[str, int] = {}
         self.last_tick = -1
         self.wall: dict[str, float] = {}
         self._entities: list = []
@@ -116,7 +120,9 @@ class Coordinator:
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
         self.world_pub = s.declare_publisher(k.world, congestion_control=BLOCK)
         self.stop_pub = s.declare_publisher(k.netem_stop, congestion_control=BLOCK)
-        self._entities += self.agent_pubs + [self.world_pub, self.stop_pub]
+        # progress for watchers: dropped rather than waited for when a watcher is slow (never blocks a tick)
+        self.status_pub = s.declare_publisher(k.status, congestion_control=zenoh.CongestionControl.DROP)
+        self._entities += self.agent_pubs + [self.world_pub, self.stop_pub, self.status_pub]
         self._entities.append(s.liveliness().declare_token(k.alive_coordinator))
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
@@ -206,7 +212,7 @@ class Coordinator:
     def run(self, on_tick: Callable[[int, float], None] | None = None) -> None:
         w = self.world
         inboxes: dict[int, bytes] = {}
-        t0 = time.perf_counter()
+        t0 = status_at = time.perf_counter()
         for k in range(self.exp.ticks):
             if w.finished and self.exp.run.stop_when_done:
                 break
@@ -232,6 +238,8 @@ class Coordinator:
                 self._retire(j, k + 1)
             inboxes = step.inboxes
             self.net_cum = [c + d for c, d in zip(self.net_cum, step.counters)]
+            for reason, n in step.drops.items():
+                self.drops_cum[reason] = self.drops_cum.get(reason, 0) + n
             self.last_tick = k
             if w.tick % self.exp.run.record_every == 0 or w.finished:
                 row = w.row()
@@ -239,7 +247,20 @@ class Coordinator:
                 self.rows.append(list(row.values()) + self.net_cum + events)
             if on_tick:
                 on_tick(w.tick, w.time)
+            if time.perf_counter() - status_at >= STATUS_EVERY:
+                status_at = time.perf_counter()
+                self._publish_status(status_at - t0)
+        self._publish_status(time.perf_counter() - t0)
         self.wall["run_s"] = time.perf_counter() - t0
+
+    def _publish_status(self, wall_s: float) -> None:
+        """Where the run is, for ``swarmbed watch`` (wall-clock paced: never part of the results)."""
+        w = self.world
+        self.status_pub.put(encode_status({
+            "name": self.exp.name, "scenario": self.exp.scenario.kind, "allocator": self.exp.allocator.name,
+            "tick": self.last_tick, "time": w.time, "ticks": self.exp.ticks, "wall_s": wall_s, "row": w.row(),
+            "network": dict(zip(("messages_sent", "bytes_sent", "copies", "delivered", "dropped"), self.net_cum)),
+            "drops": self.drops_cum, "alive": [int(a) for a in np.flatnonzero(w.alive)], "late_ticks": 0}))
 
     def _await_step(self, k: int) -> NetemStep:
         timeout = self.exp.run.tick_timeout

@@ -290,6 +290,26 @@ def cmd_hosts(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_watch(args: argparse.Namespace) -> int:
+    import zenoh
+
+    from swarmbed.experiments.watch import WatchError, watch
+    from swarmbed.wire.session import zenoh_config
+
+    try:
+        session = zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config))
+    except zenoh.ZError as exc:
+        print(f"error: cannot reach {', '.join(args.connect) or 'any endpoint (give --connect)'}: {exc}",
+              file=sys.stderr)
+        return 2
+    with session:
+        try:
+            return watch(session, args.run, wait=args.wait)
+        except WatchError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+
+
 def cmd_swap(args: argparse.Namespace) -> int:
     """Ask a running run to move one agent to another host before its next tick; wait for the outcome."""
     import json
@@ -416,6 +436,12 @@ def main(argv: list[str] | None = None) -> int:
     hosts.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
     add_zenoh_args(hosts)
     hosts.set_defaults(func=cmd_hosts)
+
+    wat = sub.add_parser("watch", help="a live view of a running experiment (read-only)")
+    wat.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
+    wat.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the run to answer")
+    add_zenoh_args(wat)
+    wat.set_defaults(func=cmd_watch)
 
     swap = sub.add_parser("swap", help="move a running agent to another host, with its state")
     swap.add_argument("--run", required=True, help="the run id (timings.json and deployment.json name it)")

@@ -64,6 +64,7 @@ class Proxy:
         self.world: World | None = None
         self.malformed = 0
         self._last = [0, 0, 0, 0, 0]
+        self._last_drops: dict[str, int] = dict(self.ledger.dropped)
 
     # -- events ----------------------------------------------------------------------------------
     def _on_agent_alive(self, sample: zenoh.Sample) -> None:
@@ -167,8 +168,11 @@ class Proxy:
         for a in sorted(outs):
             for name, n in outs[a].events.items():
                 events[name] = events.get(name, 0) + n
+        drops = {r: n - self._last_drops[r] for r, n in led.dropped.items() if n != self._last_drops[r]}
+        self._last_drops = dict(led.dropped)
         step = NetemStep(w.tick, {a: o.action for a, o in outs.items() if a in members},
-                         {a: encode_inbox(v) for a, v in inboxes.items()}, counters, self.lost_unreported, events)
+                         {a: encode_inbox(v) for a, v in inboxes.items()}, counters, self.lost_unreported, events,
+                         drops)
         self.lost_unreported = []
         self.step_pub.put(encode_netem_step(step))
 

@@ -247,21 +247,38 @@ class NetemStep:
     counters: list[int]  # messages_sent, bytes_sent, copies, delivered, dropped (this tick)
     lost: list[int]  # agents whose process vanished while the proxy waited for them
     events: dict[str, int]  # the agents' event counts of this tick, summed
+    drops: dict[str, int]  # copies dropped at this tick, by reason (those that had any)
 
 
 def encode_netem_step(s: NetemStep) -> bytes:
-    return pack([s.tick, s.actions, s.inboxes, s.counters, s.lost, s.events])
+    return pack([s.tick, s.actions, s.inboxes, s.counters, s.lost, s.events, s.drops])
 
 
 def decode_netem_step(data: bytes) -> NetemStep:
     msg = unpack(data)
-    _expect(isinstance(msg, list) and len(msg) == 6,
-            "netem step must be [tick, actions, inboxes, counters, lost, events]")
-    tick, actions, inboxes, counters, lost, events = msg
+    _expect(isinstance(msg, list) and len(msg) == 7,
+            "netem step must be [tick, actions, inboxes, counters, lost, events, drops]")
+    tick, actions, inboxes, counters, lost, events, drops = msg
     _expect(_is_int(tick) and isinstance(actions, dict) and isinstance(inboxes, dict), "bad netem step")
     _expect(isinstance(counters, list) and len(counters) == 5 and isinstance(lost, list), "bad netem step")
-    _expect(isinstance(events, dict), "bad netem step")
-    return NetemStep(tick, actions, inboxes, counters, lost, events)
+    _expect(isinstance(events, dict) and isinstance(drops, dict), "bad netem step")
+    return NetemStep(tick, actions, inboxes, counters, lost, events, drops)
+
+
+STATUS_KEYS = ("name", "tick", "time", "ticks", "wall_s", "row", "network", "drops", "alive")
+
+
+def encode_status(status: dict) -> bytes:
+    return pack(status)
+
+
+def decode_status(data: bytes) -> dict:
+    """The coordinator's progress sample (for ``swarmbed watch``): a map with ``STATUS_KEYS``."""
+    msg = unpack(data)
+    _expect(isinstance(msg, dict) and all(k in msg for k in STATUS_KEYS),
+            f"status must be a map with {', '.join(STATUS_KEYS)}")
+    _expect(isinstance(msg["row"], dict) and isinstance(msg["drops"], dict), "bad status")
+    return msg
 
 
 # --- reports (maps: rare, and read by people too) ---------------------------------------------

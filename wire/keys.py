@@ -59,6 +59,11 @@ class Keys:
     def netem_step(self) -> str:
         return f"{self.root}/netem/step"
 
+    # coordinator -> anyone watching: progress a few times a second (swarmbed watch)
+    @property
+    def status(self) -> str:
+        return f"{self.root}/status"
+
     # netem proxy -> coordinator: final totals once the ledger is on disk
     @property
     def netem_report(self) -> str:

@@ -1,0 +1,72 @@
+"""``swarmbed watch`` as a person uses it: in a terminal (a pseudo-terminal here), against a real run."""
+
+import fcntl
+import os
+import pty
+import re
+import select
+import struct
+import subprocess
+import sys
+import termios
+import threading
+import time
+
+from swarmbed.experiments.runner import run_experiment
+from swarmbed.wire.session import free_loopback_endpoint
+from tests.conftest import experiment
+
+ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
+
+
+def _run_in_background(tmp_path, endpoint, results):
+    exp = experiment("agents.count=6", "run.stop_when_done=false", "run.duration=2500", "run.seed=9")
+    results["run"] = run_experiment(exp, tmp_path / "run", progress=False, listen=[endpoint])
+
+
+def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(tmp_path):
+    endpoint = free_loopback_endpoint()
+    results: dict = {}
+    runner = threading.Thread(target=_run_in_background, args=(tmp_path, endpoint, results))
+    runner.start()
+    main_fd, child_fd = pty.openpty()
+    fcntl.ioctl(child_fd, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 140, 0, 0))
+    watcher = subprocess.Popen([sys.executable, "-m", "swarmbed", "watch", "--connect", endpoint, "--wait", "30"],
+                               stdin=child_fd, stdout=child_fd, stderr=child_fd, close_fds=True,
+                               env={**os.environ, "TERM": "xterm-256color", "COLUMNS": "140", "LINES": "40"})
+    os.close(child_fd)
+    screen = b""
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([main_fd], [], [], 0.5)
+            if ready:
+                try:
+                    chunk = os.read(main_fd, 65536)
+                except OSError:  # the watcher closed its end
+                    break
+                if not chunk:
+                    break
+                screen += chunk
+            elif watcher.poll() is not None:
+                break
+        code = watcher.wait(timeout=30)
+    finally:
+        if watcher.poll() is None:
+            watcher.kill()
+            watcher.wait()
+        os.close(main_fd)
+        runner.join(timeout=120)
+    text = ANSI.sub("", screen.decode("utf-8", "replace"))
+    assert code == 0, text[-2000:]
+    summary = results["run"].summary
+    assert "quickstart" in text and "ticks/s" in text and "tasks_completed" in text
+    assert "coordinator up" in text and "netem up" in text and "agents 6 up of 6 in the world" in text
+    seen = [int(t.replace(",", "")) for t in re.findall(r"tick ([\d,]+) of 2,500", text)]
+    assert len(seen) >= 3 and seen == sorted(seen)  # it followed the run as it went
+    # the last view shows the final tick and the run's totals
+    assert seen[-1] == summary["ticks"] == 2500
+    assert f"{summary['network']['messages_sent']:,} messages" in text
+    assert text.rstrip().endswith("is over (its coordinator left)")
+    for agent in range(6):  # one table row per agent
+        assert re.search(rf"│\s+{agent} │\s+(up|-) │", text), agent
