@@ -1,9 +1,11 @@
-"""The coordinator: owns simulated time and the world, drives the lock-step clock.
+"""The coordinator: owns simulated time and the world, drives the clock (lock-step or real-time).
 
 Tick k: publish the world (positions, membership) to the proxy and one input sample to every live
 agent (its observation and its inbox of tick k); wait for the proxy's step (every live agent's
-action and message of tick k taken); apply the actions; record. The coordinator's session is the
-run's Zenoh hub: it listens, everyone else connects to it as a client.
+action and message of tick k taken, or on the real-time clock those that came before the
+deadline); apply the actions; record. On the real-time clock tick k starts at its wall time.
+The coordinator's session is the run's Zenoh hub: it listens, everyone else connects to it as a
+client.
 """
 
 from __future__ import annotations
@@ -83,10 +85,16 @@ class Coordinator:
         self.trajectories: list[tuple[int, int, float, float, str]] = []
         self.marker_rows: list[tuple] = []  # (tick, marker, x, y, label, appear|vanish)
         self._markers: dict[int, tuple[float, float, str]] = {}
+        self.realtime = exp.run.clock == "realtime"
         self._row_columns = (list(self.world.row()) + ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
-                             + self.event_names)
+                             + self.event_names + (["late_agents", "start_lag_ms"] if self.realtime else []))
         self.net_cum = [0, 0, 0, 0, 0]
         self.drops_cum: dict[str, int] = {}
+        # the real-time clock's own accounting (wall-clock facts: never part of a lock-step run's files)
+        self.late_ticks: dict[int, int] = {}  # agent -> ticks it missed
+        self.late_per_tick: list[int] = []
+        self.start_lags: list[float] = []  # wall seconds each tick started after its time
+        self.last_action: dict[int, list] = {}
         self.last_tick = -1
         self.wall: dict[str, float] = {}
         self._entities: list = []
@@ -208,14 +216,21 @@ class Coordinator:
                 self.marker_rows.append((k, m, *now[m], "appear"))
         self._markers = now
 
-    # -- the lock-step loop ------------------------------------------------------------------------
+    # -- the tick loop (lock-step, or paced by the wall on the real-time clock) -----------------------
     def run(self, on_tick: Callable[[int, float], None] | None = None) -> None:
-        w = self.world
+        w, r = self.world, self.exp.run
         inboxes: dict[int, bytes] = {}
         t0 = status_at = time.perf_counter()
+        period = r.dt / r.speed  # wall seconds per tick on the real-time clock
         for k in range(self.exp.ticks):
             if w.finished and self.exp.run.stop_when_done:
                 break
+            if self.realtime:
+                lag = time.perf_counter() - (t0 + k * period)
+                if lag < 0:
+                    time.sleep(-lag)
+                    lag = time.perf_counter() - (t0 + k * period)
+                self.start_lags.append(max(lag, 0.0))
             ids, xs, ys = w.positions()
             if self.exp.run.record_trajectories:
                 labels = w.agent_labels()
@@ -231,7 +246,16 @@ class Coordinator:
             step = self._await_step(k)
             for j in step.lost:
                 self._lose(j, k, "its process exited")
-            w.apply({a: act for a, act in step.actions.items() if w.alive[a]})
+            actions = step.actions
+            if step.late:
+                for a in step.late:
+                    self.late_ticks[a] = self.late_ticks.get(a, 0) + 1
+                if r.on_late == "hold":  # the robot keeps its last command; "stop": the world's default
+                    actions = {**{a: self.last_action[a] for a in step.late if a in self.last_action}, **actions}
+            if self.realtime:
+                self.last_action.update(actions)
+                self.late_per_tick.append(len(step.late))
+            w.apply({a: act for a, act in actions.items() if w.alive[a]})
             for name, n in step.events.items():
                 self.event_totals[name] = self.event_totals.get(name, 0) + n
             for j in doomed:
@@ -244,7 +268,8 @@ class Coordinator:
             if w.tick % self.exp.run.record_every == 0 or w.finished:
                 row = w.row()
                 events = [self.event_totals.get(e, 0) for e in self.event_names]
-                self.rows.append(list(row.values()) + self.net_cum + events)
+                clock = [len(step.late), round(1000 * self.start_lags[-1], 3)] if self.realtime else []
+                self.rows.append(list(row.values()) + self.net_cum + events + clock)
             if on_tick:
                 on_tick(w.tick, w.time)
             if time.perf_counter() - status_at >= STATUS_EVERY:
@@ -260,7 +285,10 @@ class Coordinator:
             "name": self.exp.name, "scenario": self.exp.scenario.kind, "allocator": self.exp.allocator.name,
             "tick": self.last_tick, "time": w.time, "ticks": self.exp.ticks, "wall_s": wall_s, "row": w.row(),
             "network": dict(zip(("messages_sent", "bytes_sent", "copies", "delivered", "dropped"), self.net_cum)),
-            "drops": self.drops_cum, "alive": [int(a) for a in np.flatnonzero(w.alive)], "late_ticks": 0}))
+            "drops": self.drops_cum, "alive": [int(a) for a in np.flatnonzero(w.alive)],
+            "late_ticks": sum(self.late_ticks.values()),
+            "positions": [list(p) for p in zip(*w.positions())], "labels": w.agent_labels(),
+            "markers": [[x, y, label] for x, y, label in w.markers().values()]}))
 
     def _await_step(self, k: int) -> NetemStep:
         timeout = self.exp.run.tick_timeout
@@ -486,6 +514,7 @@ class Coordinator:
             **{name: self.event_totals.get(name, 0) for name in self.event_names},
             "events": dict(sorted(self.event_totals.items())),
             "agents_lost": {str(a): t for a, t in sorted(self.lost.items())},
+            **({"realtime": self.clock_summary()} if self.realtime else {}),
             "network": {
                 **net,
                 "per_kind": self.netem_report["per_kind"],
@@ -497,6 +526,22 @@ class Coordinator:
                     "agents": sum(r["malformed"] for r in self.reports.values()),
                 },
             },
+        }
+
+    def clock_summary(self) -> dict:
+        """How well the real-time clock was kept: ticks agents missed, and ticks that started late
+        (more than a tenth of a tick's wall period after their time) with the start lag's spread."""
+        r = self.exp.run
+        lags = np.asarray(self.start_lags) * 1000
+        tolerance_ms = 100 * r.dt / r.speed
+        return {
+            "speed": r.speed, "deadline": r.deadline, "on_late": r.on_late,
+            "late_ticks_total": sum(self.late_ticks.values()),
+            "late_ticks": {str(a): n for a, n in sorted(self.late_ticks.items())},
+            "ticks_started_late": int((lags > tolerance_ms).sum()),
+            "start_lag_ms": {"p50": float(np.percentile(lags, 50)) if len(lags) else None,
+                             "p99": float(np.percentile(lags, 99)) if len(lags) else None,
+                             "max": float(lags.max()) if len(lags) else None},
         }
 
     def transport(self, summary: dict) -> dict:

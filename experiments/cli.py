@@ -304,7 +304,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
         return 2
     with session:
         try:
-            return watch(session, args.run, wait=args.wait)
+            return watch(session, args.run, wait=args.wait, map_file=Path(args.map) if args.map else None)
         except WatchError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -440,6 +440,7 @@ def main(argv: list[str] | None = None) -> int:
     wat = sub.add_parser("watch", help="a live view of a running experiment (read-only)")
     wat.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
     wat.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the run to answer")
+    wat.add_argument("--map", metavar="FILE.html", help="also keep a map of the run in FILE.html (reloads itself)")
     add_zenoh_args(wat)
     wat.set_defaults(func=cmd_watch)
 

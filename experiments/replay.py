@@ -16,10 +16,9 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from swarmbed.experiments.report import DROP_COLORS
+from swarmbed.experiments.palette import DROP_COLORS, LABEL_COLORS
 
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
-MARKER_COLORS = {"red": "#d62728", "green": "#2ca02c", "blue": "#1f77b4"}
 
 
 class ReplayError(ValueError):
@@ -111,10 +110,10 @@ def replay(run: Path, out: Path | None = None, start: float | None = None, end: 
         pos = {} if now is None else {int(a): (x, y) for a, x, y in now[["agent", "x", "y"]].values}
         agents.set_offsets(np.array(list(pos.values())) if pos else np.empty((0, 2)))
         if now is not None:
-            agents.set_facecolor([MARKER_COLORS.get(lab, "#222222") for lab in now["label"]])
+            agents.set_facecolor([LABEL_COLORS.get(lab, "#222222") for lab in now["label"]])
         if present:
             marks.set_offsets(np.array([(x, y) for x, y, _ in present.values()]))
-            marks.set_color([MARKER_COLORS.get(lab, "#999999") for *_, lab in present.values()])
+            marks.set_color([LABEL_COLORS.get(lab, "#999999") for *_, lab in present.values()])
         else:
             marks.set_offsets(np.empty((0, 2)))
         if copies is not None:

@@ -26,11 +26,10 @@ import yaml
 from scipy import stats
 
 import swarmbed
+from swarmbed.experiments.palette import DROP_COLORS
 from swarmbed.plugins.registry import PluginError, resolve_scenario
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
-DROP_COLORS = {"out_of_range": "#9467bd", "loss": "#d62728", "queue_full": "#ff7f0e", "receiver_dead": "#7f7f7f",
-               "no_such_receiver": "#8c564b", "run_ended": "#bcbd22"}
 
 
 class ReportError(ValueError):

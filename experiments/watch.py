@@ -1,5 +1,8 @@
 """``swarmbed watch``: a live terminal view of a running experiment, from any machine that reaches it.
 
+With ``--map FILE.html`` it also keeps an HTML page of the run's map (agents, tasks or victims)
+that reloads itself every second.
+
 Read-only by construction: the watcher's session only subscribes (the coordinator's progress
 samples, the agents' per-tick outputs for their traffic, the run's liveliness tokens) and never
 puts, queries a run's queryables or declares a token. The coordinator publishes its progress at
@@ -10,9 +13,11 @@ rather than slowing the run.
 from __future__ import annotations
 
 import collections
+import html
 import threading
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import zenoh
 from rich.console import Console, Group
@@ -20,6 +25,7 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from swarmbed.experiments.palette import LABEL_COLORS
 from swarmbed.wire.codec import WireError, decode_agent_out, decode_status
 from swarmbed.wire.keys import PREFIX, Keys, agent_id_of
 
@@ -154,8 +160,39 @@ class RunView:
                 + f" messages={s['network']['messages_sent']} dropped={s['network']['dropped']}")
 
 
+def write_map(status: dict, path: Path, bounds: list[float]) -> None:
+    """An HTML page with the run's map as SVG that reloads itself every second (written atomically)."""
+    points = [(x, y) for _, x, y in status.get("positions", [])] + [(x, y) for x, y, _ in status.get("markers", [])]
+    for x, y in points:  # the view only grows, so that the map does not jump about
+        bounds[:] = [min(bounds[0], x), min(bounds[1], y), max(bounds[2], x), max(bounds[3], y)]
+    x0, y0, x1, y1 = bounds if bounds[0] <= bounds[2] else (0.0, 0.0, 1.0, 1.0)
+    pad = 0.05 * max(x1 - x0, y1 - y0, 1.0)
+    w, h = x1 - x0 + 2 * pad, y1 - y0 + 2 * pad
+    r = max(w, h) / 120
+
+    def sy(y: float) -> float:  # SVG's y grows downwards
+        return y0 + y1 - y
+
+    shapes = [f"<rect x='{x - r:.2f}' y='{sy(y) - r:.2f}' width='{2 * r:.2f}' height='{2 * r:.2f}' "
+              f"fill='{LABEL_COLORS.get(lab, '#999')}'/>" for x, y, lab in status.get("markers", [])]
+    labels = {int(k): v for k, v in status.get("labels", {}).items()}
+    shapes += [f"<circle cx='{x:.2f}' cy='{sy(y):.2f}' r='{1.4 * r:.2f}' "
+               f"fill='{LABEL_COLORS.get(labels.get(a, ''), '#222')}' "
+               f"stroke='black' stroke-width='{r / 3:.2f}'><title>agent {a}</title></circle>"
+               for a, x, y in status.get("positions", [])]
+    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><meta http-equiv='refresh' content='1'>"
+            f"<title>{html.escape(status['name'])}: tick {status['tick'] + 1}</title></head>"
+            f"<body style='font-family:sans-serif'><p>{html.escape(status['name'])}: tick {status['tick'] + 1:,} of "
+            f"{status['ticks']:,}, t = {status['time']:,.1f} s</p>"
+            f"<svg viewBox='{x0 - pad:.2f} {y0 - pad:.2f} {w:.2f} {h:.2f}' style='width:90vmin;height:90vmin;"
+            f"border:1px solid #ccc'>{''.join(shapes)}</svg></body></html>")
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(page)
+    tmp.replace(path)
+
+
 def watch(session: zenoh.Session, run_id: str | None, console: Console | None = None,
-          refresh: float = 4.0, wait: float = 10.0) -> int:
+          refresh: float = 4.0, wait: float = 10.0, map_file: Path | None = None) -> int:
     """Show one run until it ends (0) or Ctrl-C (130); 1 when no such run answers within ``wait`` s."""
     console = console or Console()
     if run_id is None:
@@ -176,6 +213,12 @@ def watch(session: zenoh.Session, run_id: str | None, console: Console | None = 
             session.liveliness().declare_subscriber(keys.alive_all, view.on_alive,
                                                     history=True)]
     started = time.monotonic()
+    bounds = [float("inf"), float("inf"), float("-inf"), float("-inf")]
+
+    def draw_map() -> None:
+        if map_file is not None and view.status is not None:
+            write_map(view.status, map_file, bounds)
+
     try:
         if console.is_terminal:
             with Live(view.render(), console=console, refresh_per_second=refresh, transient=False) as live:
@@ -184,11 +227,14 @@ def watch(session: zenoh.Session, run_id: str | None, console: Console | None = 
                         break
                     time.sleep(1 / refresh)
                     live.update(view.render())
+                    draw_map()
                 live.update(view.render())
         else:
             while not view.coordinator_gone and not _gave_up(view, started, wait):
                 time.sleep(1.0)
                 print(view.line(), flush=True)
+                draw_map()
+        draw_map()
     except KeyboardInterrupt:
         return 130
     finally:

@@ -23,7 +23,7 @@ from typing import Any
 
 SENT = "sent"
 DELIVERED = "delivered"
-DROP_REASONS = ("out_of_range", "loss", "queue_full", "receiver_dead", "no_such_receiver", "run_ended")
+DROP_REASONS = ("out_of_range", "loss", "queue_full", "receiver_dead", "no_such_receiver", "run_ended", "late")
 OUTCOMES = (SENT, DELIVERED) + DROP_REASONS
 LEDGER_COLUMNS = ("tick", "sender", "kind", "outcome", "messages", "bytes")
 RECEIVER_COLUMNS = ("tick", "sender", "receiver", "kind", "outcome", "bytes")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import os
 import queue
+import time
 from pathlib import Path
 
 import zenoh
@@ -65,6 +66,13 @@ class Proxy:
         self.malformed = 0
         self._last = [0, 0, 0, 0, 0]
         self._last_drops: dict[str, int] = dict(self.ledger.dropped)
+        # the real-time clock: a tick is routed when every agent answered or `answer_within` wall
+        # seconds after its world sample arrived, whichever comes first; later answers are late
+        self.answer_by: float | None = None
+        self.routed = -1  # the last tick routed
+        self.members: dict[int, list[int]] = {}  # tick -> agents alive then (recent ticks, for late answers)
+        self.answered: dict[int, int] = {}  # agent -> the last tick it answered
+        self.late_events: dict[str, int] = {}
 
     # -- events ----------------------------------------------------------------------------------
     def _on_agent_alive(self, sample: zenoh.Sample) -> None:
@@ -98,13 +106,22 @@ class Proxy:
 
     def _loop(self) -> int:
         while True:
-            what, data = self.events.get()
+            try:
+                wait = None if self.answer_by is None else max(0.0, self.answer_by - time.monotonic())
+                what, data = self.events.get(timeout=wait)
+            except queue.Empty:  # the deadline of the tick in hand passed: route what came
+                assert self.world is not None
+                self._route(self.world)
+                self.world = None
+                continue
             if what == "gone":
                 log.error("netem: the coordinator went away; exiting (ledger left as %s)", self.part.name)
                 return 3
             if what == "stop":
                 last = int(unpack(data)[0])
                 log.info("netem: run over after tick %d; closing the ledger", last)
+                if self.spec.answer_within is not None:
+                    self._await_last_answers(last)
                 self._finish(last)
                 log.info("netem: ledger balanced and written; report sent")
                 return 0
@@ -124,13 +141,21 @@ class Proxy:
                 self.radio.confirm()  # tick `world.tick` happens: the inboxes made for it arrived
                 self.world = world
                 self._note_losses(world)
+                if self.spec.answer_within is not None:
+                    self.answer_by = time.monotonic() + self.spec.answer_within
+                    self.members[world.tick] = list(world.ids)
+                    self.members.pop(world.tick - 1000, None)
             elif what == "out":
                 try:
                     out = decode_agent_out(data)
                 except WireError as exc:
                     self._malformed(self.keys.agent_out_all, exc)
                     continue
-                self.outs.setdefault(out.tick, {})[out.agent_id] = out
+                self.answered[out.agent_id] = max(out.tick, self.answered.get(out.agent_id, -1))
+                if out.tick <= self.routed:
+                    self._late(out)
+                else:
+                    self.outs.setdefault(out.tick, {})[out.agent_id] = out
             if self.world is not None and self._complete(self.world):
                 self._route(self.world)
                 self.world = None
@@ -153,8 +178,39 @@ class Proxy:
         got = self.outs.get(w.tick, {})
         return all(a in got or a in self.lost for a in w.ids)
 
+    def _late(self, out: AgentOut) -> None:
+        """An answer for a tick already routed (real-time clock): its messages are booked late."""
+        self.radio.late(self.routed + 1, out.agent_id, out.messages, self.members.get(out.tick, []))
+        for name, n in out.events.items():
+            self.late_events[name] = self.late_events.get(name, 0) + n
+
+    def _await_last_answers(self, last: int, timeout: float = 10.0) -> None:
+        """Book every answer still on its way for the last ticks (each agent answers in order)."""
+        until = time.monotonic() + timeout
+        left: set[int] = set()
+        while any(self.answered.get(a, -1) < last for a in self.members.get(last, [])
+                  if a not in self.lost and a not in left):
+            try:
+                what, data = self.events.get(timeout=max(0.0, until - time.monotonic()))
+            except queue.Empty:
+                log.warning("netem: some agents never answered up to tick %d", last)
+                return
+            if what == "out":
+                try:
+                    out = decode_agent_out(data)
+                except WireError as exc:
+                    self._malformed(self.keys.agent_out_all, exc)
+                    continue
+                self.answered[out.agent_id] = max(out.tick, self.answered.get(out.agent_id, -1))
+                self._late(out)
+            elif what == "left":
+                left.add(data[0])
+
     def _route(self, w: World) -> None:
+        self.answer_by = None
+        self.routed = w.tick
         outs = self.outs.pop(w.tick, {})
+        late = [a for a in w.ids if a not in outs and a not in self.lost]  # only ever on the real-time clock
         members = set(w.ids)
         self.radio.route(w.tick, w.ids, w.xs, w.ys, {a: o.messages for a, o in outs.items() if a in members})
         alive_next = [a for a in w.alive_next if a not in self.lost]
@@ -164,7 +220,7 @@ class Proxy:
         now = [led.messages_sent, led.bytes_sent, led.copies, led.delivered, led.dropped_total]
         counters = [a - b for a, b in zip(now, self._last)]
         self._last = now
-        events: dict[str, int] = {}
+        events, self.late_events = self.late_events, {}
         for a in sorted(outs):
             for name, n in outs[a].events.items():
                 events[name] = events.get(name, 0) + n
@@ -172,7 +228,7 @@ class Proxy:
         self._last_drops = dict(led.dropped)
         step = NetemStep(w.tick, {a: o.action for a, o in outs.items() if a in members},
                          {a: encode_inbox(v) for a, v in inboxes.items()}, counters, self.lost_unreported, events,
-                         drops)
+                         drops, late)
         self.lost_unreported = []
         self.step_pub.put(encode_netem_step(step))
 

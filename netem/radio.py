@@ -12,6 +12,9 @@ Order of the checks for one message sent at tick k (a copy gets the first reason
 3. range: distance between sender and receiver at tick k greater than ``range`` -> ``out_of_range``.
 4. loss: an independent Bernoulli draw per copy -> ``loss``.
 
+On the real-time clock a sample that reaches the proxy after its tick's deadline is not routed:
+every copy of its messages is ``late`` (:meth:`Radio.late`).
+
 A message that survives is scheduled. With a ``rate`` cap it is transmitted after the ones queued
 before it, taking ``size / rate`` seconds; idle time earns no credit (tc-netem ``rate``). It is
 delivered at the first tick at or after the end of its transmission, never before k+1, plus
@@ -120,6 +123,20 @@ class Radio:
             return
         deliver = max(tick + 1, math.ceil(end / self.dt - _EPS)) + p.latency
         self._pending[deliver].append((receivers.tolist(), sender, kind, msg.payload, tick))
+
+    def late(self, book_at: int, sender: int, messages: Iterable[RadioMessage], alive: Sequence[int]) -> None:
+        """Messages of a sample that reached the proxy after its tick's deadline (real-time clock):
+        each is sent and every copy (one per intended receiver among ``alive``, the agents alive
+        at the tick it was meant for) dropped as ``late``, booked at tick ``book_at``."""
+        ledger = self.ledger
+        for msg in messages:
+            size = len(msg.payload)
+            if msg.dest == BROADCAST:
+                to = [int(a) for a in alive if a != sender]
+            else:
+                to = list(msg.dest) if isinstance(msg.dest, tuple) else [msg.dest]
+            ledger.sent(book_at, sender, msg.kind, size, len(to))
+            ledger.book(book_at, sender, msg.kind, size, "late", len(to), to)
 
     def deliver(self, tick: int, alive: Iterable[int]) -> dict[int, list[list]]:
         """Inboxes for ``tick``: ``{receiver: [[sender, kind, payload], ...]}`` for agents in ``alive``.

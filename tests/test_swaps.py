@@ -48,17 +48,18 @@ def test_swapped_agents_give_the_files_of_a_run_where_nothing_moved(tmp_path, ba
 
 
 def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path):
-    sets = ["allocator.name=cbba", "run.duration=400", "run.stop_when_done=false"]
+    sets = ["allocator.name=cbba", "run.duration=1000", "run.stop_when_done=false"]
     asked = {}
     threads = []
 
     def ask(keys, endpoint):
-        proc = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
-                               "--agent", "2", "--to", "local"], capture_output=True, text=True, timeout=120)
-        asked["rc"], asked["out"], asked["err"] = proc.returncode, proc.stdout, proc.stderr
+        # The refused request goes first: the run may end soon after the good swap is done.
         bad = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
                               "--agent", "99", "--to", "local"], capture_output=True, text=True, timeout=60)
         asked["bad"] = (bad.returncode, bad.stderr)
+        proc = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
+                               "--agent", "2", "--to", "local"], capture_output=True, text=True, timeout=120)
+        asked["rc"], asked["out"], asked["err"] = proc.returncode, proc.stdout, proc.stderr
 
     def from_another_terminal(keys, endpoint):
         threads.append(threading.Thread(target=ask, args=(keys, endpoint)))

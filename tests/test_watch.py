@@ -31,7 +31,8 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
     runner.start()
     main_fd, child_fd = pty.openpty()
     fcntl.ioctl(child_fd, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 140, 0, 0))
-    watcher = subprocess.Popen([sys.executable, "-m", "swarmbed", "watch", "--connect", endpoint, "--wait", "30"],
+    watcher = subprocess.Popen([sys.executable, "-m", "swarmbed", "watch", "--connect", endpoint, "--wait", "30",
+                                "--map", str(tmp_path / "map.html")],
                                stdin=child_fd, stdout=child_fd, stderr=child_fd, close_fds=True,
                                env={**os.environ, "TERM": "xterm-256color", "COLUMNS": "140", "LINES": "40"})
     os.close(child_fd)
@@ -70,3 +71,7 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
     assert text.rstrip().endswith("is over (its coordinator left)")
     for agent in range(6):  # one table row per agent
         assert re.search(rf"│\s+{agent} │\s+(up|-) │", text), agent
+    page = (tmp_path / "map.html").read_text()  # the live map's last state: every agent and every task
+    assert "http-equiv='refresh'" in page and "tick 2,500 of 2,500" in page
+    assert page.count("<circle") == 6 and page.count("<title>agent") == 6
+    assert page.count("<rect") == summary["tasks_total"] - summary["tasks_completed"]

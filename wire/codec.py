@@ -248,21 +248,22 @@ class NetemStep:
     lost: list[int]  # agents whose process vanished while the proxy waited for them
     events: dict[str, int]  # the agents' event counts of this tick, summed
     drops: dict[str, int]  # copies dropped at this tick, by reason (those that had any)
+    late: list[int]  # real-time clock: agents whose output missed this tick's deadline
 
 
 def encode_netem_step(s: NetemStep) -> bytes:
-    return pack([s.tick, s.actions, s.inboxes, s.counters, s.lost, s.events, s.drops])
+    return pack([s.tick, s.actions, s.inboxes, s.counters, s.lost, s.events, s.drops, s.late])
 
 
 def decode_netem_step(data: bytes) -> NetemStep:
     msg = unpack(data)
-    _expect(isinstance(msg, list) and len(msg) == 7,
-            "netem step must be [tick, actions, inboxes, counters, lost, events, drops]")
-    tick, actions, inboxes, counters, lost, events, drops = msg
+    _expect(isinstance(msg, list) and len(msg) == 8,
+            "netem step must be [tick, actions, inboxes, counters, lost, events, drops, late]")
+    tick, actions, inboxes, counters, lost, events, drops, late = msg
     _expect(_is_int(tick) and isinstance(actions, dict) and isinstance(inboxes, dict), "bad netem step")
     _expect(isinstance(counters, list) and len(counters) == 5 and isinstance(lost, list), "bad netem step")
-    _expect(isinstance(events, dict) and isinstance(drops, dict), "bad netem step")
-    return NetemStep(tick, actions, inboxes, counters, lost, events, drops)
+    _expect(isinstance(events, dict) and isinstance(drops, dict) and isinstance(late, list), "bad netem step")
+    return NetemStep(tick, actions, inboxes, counters, lost, events, drops, late)
 
 
 STATUS_KEYS = ("name", "tick", "time", "ticks", "wall_s", "row", "network", "drops", "alive")

@@ -27,7 +27,12 @@ class Strict(BaseModel):
 
 class RunSection(Strict):
     seed: int = Field(0, ge=0, description="run seed; every random source derives from it")
-    clock: Literal["lockstep"] = Field("lockstep", description="lockstep: ticks advance when everyone has acted")
+    clock: Literal["lockstep", "realtime"] = Field(
+        "lockstep", description="lockstep: a tick ends when every agent has acted; realtime: ticks follow the wall")
+    speed: float = Field(1.0, gt=0, description="realtime: simulated seconds per wall second")
+    deadline: float = Field(0.8, gt=0, le=1, description="realtime: part of a tick an agent has to answer in")
+    on_late: Literal["stop", "hold"] = Field(
+        "stop", description="realtime: a late agent's robot stops for that tick, or holds its last command")
     dt: float = Field(1.0, gt=0, description="simulated seconds per tick")
     duration: float = Field(3000.0, gt=0, description="simulated seconds before the run stops")
     tick_timeout: float = Field(60.0, gt=0, description="wall seconds a tick may wait for a silent process")
@@ -165,12 +170,14 @@ class AgentSpec(Strict):
 
 
 class NetemSpec(Strict):
-    """Everything the netem proxy needs: its radio parameters and the run's size and seed."""
+    """Everything the netem proxy needs: its radio parameters, the run's size and seed, and, on the
+    real-time clock, how long after a tick starts it stops waiting for agents (wall seconds)."""
 
     seed: int
     dt: float
     agents: int
     network: NetworkSection
+    answer_within: float | None = None
 
 
 def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
@@ -179,4 +186,6 @@ def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
 
 
 def netem_spec(exp: Experiment) -> NetemSpec:
-    return NetemSpec(seed=exp.run.seed, dt=exp.run.dt, agents=exp.agents.count, network=exp.network)
+    r = exp.run
+    within = r.deadline * r.dt / r.speed if r.clock == "realtime" else None
+    return NetemSpec(seed=r.seed, dt=r.dt, agents=exp.agents.count, network=exp.network, answer_within=within)
