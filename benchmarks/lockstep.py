@@ -69,13 +69,13 @@ def raw_baseline(n: int, ticks: int) -> float:
         session.close()
 
 
-def swarmbed_run(n: int, ticks: int) -> dict:
+def swarmbed_run(n: int, ticks: int, auth: bool = True) -> dict:
     exp = cfg.load(ROOT / "experiments" / "quickstart.yaml", [
         f"agents.count={n}", "allocator={name: noop, peers: 5}", "scenario.initial_tasks=0",
         "run.stop_when_done=false", f"run.duration={ticks}", "network.range=null", "run.record_every=1000000",
     ])
     with tempfile.TemporaryDirectory() as out:
-        result = run_experiment(exp, Path(out), progress=False)
+        result = run_experiment(exp, Path(out), progress=False, auth=auth)
     t = result.timings
     return {"ticks_per_s": t["ticks_per_s"], "startup_s": t["startup_s"], "rss_mb": t["agent_rss_mb_mean"],
             "copies": result.summary["network"]["copies"]}

@@ -64,12 +64,31 @@ def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> 
 
 def cmd_run(args: argparse.Namespace) -> int:
     from swarmbed.experiments.runner import run_experiment
+    from swarmbed.wire.credentials import CredentialsError, read_credentials
 
     exp = cfg.load(args.experiment, args.set, args.seed)
+    try:
+        admitted = [read_credentials(path) for path in args.admit]
+    except CredentialsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
-    result = run_experiment(exp, out, progress=not args.no_progress, listen=args.listen)
+    result = run_experiment(exp, out, progress=not args.no_progress, listen=args.listen, auth=not args.no_auth,
+                            admit=admitted)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
+    return 0
+
+
+def cmd_credentials(args: argparse.Namespace) -> int:
+    from swarmbed.wire.credentials import CredentialsError, Identity, write_credentials
+
+    try:
+        path = write_credentials(Path(args.file), Identity.new(args.user, args.role))
+    except (CredentialsError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{path}: {args.role} {args.user!r}; admit it with swarmbed run --admit {path}")
     return 0
 
 
@@ -259,23 +278,41 @@ def cmd_check_scenario(args: argparse.Namespace) -> int:
 
 def cmd_host(args: argparse.Namespace) -> int:
     from swarmbed.experiments.host import serve
+    from swarmbed.wire.credentials import CredentialsError
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logs = Path(args.logs) if args.logs else Path("runs") / "hosts" / args.name
-    return serve(args.name, args.connect, args.listen, logs, args.zenoh_config, args.mode)
+    try:
+        return serve(args.name, args.connect, args.listen, logs, args.zenoh_config, args.mode, args.credentials)
+    except CredentialsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
 
 
-def cmd_hosts(args: argparse.Namespace) -> int:
+def _client_session(args: argparse.Namespace):
+    """A client session from the shared zenoh flags, or None after printing why it cannot open
+    (no route to the endpoint, refused credentials, an unreadable credentials file)."""
     import zenoh
 
-    from swarmbed.experiments.host import host_info, visible_hosts
+    from swarmbed.wire.credentials import CredentialsError
     from swarmbed.wire.session import zenoh_config
 
     try:
-        session = zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config))
+        return zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config, args.credentials))
+    except CredentialsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
     except zenoh.ZError as exc:
-        print(f"error: cannot reach {', '.join(args.connect) or 'any endpoint (give --connect)'}: {exc}",
+        hint = "" if args.credentials else " (a run's hub admits only processes with credentials: give --credentials)"
+        print(f"error: cannot reach {', '.join(args.connect) or 'any endpoint (give --connect)'}: {exc}{hint}",
               file=sys.stderr)
+    return None
+
+
+def cmd_hosts(args: argparse.Namespace) -> int:
+    from swarmbed.experiments.host import host_info, visible_hosts
+
+    session = _client_session(args)
+    if session is None:
         return 2
     with session:
         names = visible_hosts(session, timeout=args.timeout)
@@ -291,16 +328,11 @@ def cmd_hosts(args: argparse.Namespace) -> int:
 
 
 def cmd_watch(args: argparse.Namespace) -> int:
-    import zenoh
 
     from swarmbed.experiments.watch import WatchError, watch
-    from swarmbed.wire.session import zenoh_config
 
-    try:
-        session = zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config))
-    except zenoh.ZError as exc:
-        print(f"error: cannot reach {', '.join(args.connect) or 'any endpoint (give --connect)'}: {exc}",
-              file=sys.stderr)
+    session = _client_session(args)
+    if session is None:
         return 2
     with session:
         try:
@@ -314,10 +346,7 @@ def cmd_swap(args: argparse.Namespace) -> int:
     """Ask a running run to move one agent to another host before its next tick; wait for the outcome."""
     import json
 
-    import zenoh
-
     from swarmbed.wire.keys import Keys
-    from swarmbed.wire.session import zenoh_config
 
     key = Keys(args.run).swap
 
@@ -327,10 +356,8 @@ def cmd_swap(args: argparse.Namespace) -> int:
                 return json.loads(reply.ok.payload.to_bytes())
         return None
 
-    try:
-        session = zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config))
-    except zenoh.ZError as exc:
-        print(f"error: cannot reach {', '.join(args.connect)}: {exc}", file=sys.stderr)
+    session = _client_session(args)
+    if session is None:
         return 2
     with session:
         answer = ask({"agent": args.agent, "to": args.to})
@@ -364,7 +391,19 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.add_argument("--listen", "-l", action="append", default=[], metavar="ENDPOINT",
                      help="also listen here, for the routers of hosts in the placement (e.g. tcp/0.0.0.0:7447)")
+    run.add_argument("--admit", action="append", default=[], metavar="CREDENTIALS",
+                     help="a credentials file (swarmbed credentials) of a host or an operator the hub admits "
+                          "besides the run's own processes (repeatable)")
+    run.add_argument("--no-auth", action="store_true",
+                     help="no authentication or access control: anyone who reaches the hub may join and publish")
     run.set_defaults(func=cmd_run)
+
+    cr = sub.add_parser("credentials", help="make a credentials file for a host daemon or an operator (watch, swap)")
+    cr.add_argument("file", help="the file to write (created with mode 600)")
+    cr.add_argument("--user", required=True, help="the user name (letters, digits, no ':' or spaces)")
+    cr.add_argument("--role", choices=["operator", "host"], default="operator",
+                    help="operator: watch a run and ask for swaps; host: a host daemon (default: operator)")
+    cr.set_defaults(func=cmd_credentials)
 
     bt = sub.add_parser("bt", help="behavior-tree tools")
     bt_sub = bt.add_subparsers(dest="bt_command", required=True)

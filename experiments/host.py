@@ -19,7 +19,9 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 import signal
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -29,6 +31,7 @@ import psutil
 import zenoh
 
 from swarmbed.experiments.launcher import Children
+from swarmbed.wire.credentials import Identity, dictionary_line, read_credentials, write_credentials
 from swarmbed.wire.keys import HOSTS, HostKeys, host_name_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
@@ -51,8 +54,10 @@ class HostError(RuntimeError):
 
 
 class Host:
-    def __init__(self, name: str, session: zenoh.Session, endpoint: str, logs: Path) -> None:
+    def __init__(self, name: str, session: zenoh.Session, endpoint: str, logs: Path,
+                 agent_credentials: str | None = None) -> None:
         self.name = name
+        self.agent_credentials = agent_credentials  # what its agents present to its router, if it asks
         self.keys = HostKeys(name)
         self.session = session
         self.endpoint = endpoint  # where this host's agents connect: its own router
@@ -92,9 +97,11 @@ class Host:
                     and p.poll() is None]
             if busy:
                 return {"error": f"agents {busy} of run {run_id} already run on host {self.name}"}
+            identity = ["--credentials", self.agent_credentials] if self.agent_credentials else []
             for i in ids:
                 children.spawn(process_name(i, incarnation), AGENT_MODULE,
-                               ["--run-id", run_id, "--connect", self.endpoint, "--id", str(i), *map(str, extra)])
+                               ["--run-id", run_id, "--connect", self.endpoint, *identity, "--id", str(i),
+                                *map(str, extra)])
         log.info("host %s: started agents %s of run %s", self.name, ids, run_id)
         return {"started": ids, "logs": str(self.logs / run_id)}
 
@@ -158,14 +165,35 @@ class Host:
 
 
 def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_config_file: str | None = None,
-          mode: str = "router") -> int:
-    """Run the host daemon until SIGINT or SIGTERM: a router (or peer) for this machine."""
+          mode: str = "router", credentials: str | None = None) -> int:
+    """Run the host daemon until SIGINT or SIGTERM: a router (or peer) for this machine.
+
+    ``credentials``: a host credentials file the hubs it connects to admit (``swarmbed run --admit``).
+    With it, the router also requires credentials of whoever connects to it: the daemon makes one
+    identity for the agents it starts (in a private folder, gone when it stops), so that a stray
+    process on this machine cannot reach a hub through it."""
     listen = listen or [free_loopback_endpoint()]
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    with zenoh.open(zenoh_config(mode, connect, listen, zenoh_config_file)) as session:
-        host = Host(name, session, listen[0], logs)
+    private = Path(tempfile.mkdtemp(prefix=f"swarmbed-host-{name}-")) if credentials else None
+    settings: dict[str, object] = {}
+    agent_credentials = None
+    if credentials and private:
+        mine, local = read_credentials(credentials), Identity.new(f"{name}-agents", "agent")
+        agent_credentials = str(write_credentials(private / "agents.json", local))
+        dictionary = write_credentials(private / "router.dictionary", local)
+        dictionary.write_text(dictionary_line(local) + "\n")
+        settings["transport/auth/usrpwd"] = {"user": mine.user, "password": mine.password,
+                                             "dictionary_file": str(dictionary)}
+    try:
+        session = zenoh.open(zenoh_config(mode, connect, listen, zenoh_config_file, settings=settings))
+    except BaseException:
+        if private:
+            shutil.rmtree(private, ignore_errors=True)
+        raise
+    with session:
+        host = Host(name, session, listen[0], logs, agent_credentials)
         host.declare()
         log.info("host %s: router on %s, connecting to %s; agents log to %s", name, ", ".join(listen),
                  ", ".join(connect) or "nothing", logs)
@@ -175,6 +203,8 @@ def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_co
                 host.reap()
         finally:
             host.close()
+            if private:
+                shutil.rmtree(private, ignore_errors=True)
     log.info("host %s: stopped", name)
     return 0
 
@@ -201,17 +231,21 @@ def host_info(session: zenoh.Session, name: str, timeout: float = 5.0) -> dict |
     return _get_json(session, HostKeys(name).info, None, timeout)
 
 
-def wait_for_hosts(session: zenoh.Session, names: list[str], timeout: float, endpoint_hint: str) -> None:
+def wait_for_hosts(session: zenoh.Session, names: list[str], timeout: float, endpoint_hint: str,
+                   auth: bool = True) -> None:
     """Until every named host holds its token; else a HostError naming the missing ones and the
-    command that starts each."""
+    command that starts each (``auth``: with the credentials a hub that requires them admits)."""
     deadline = time.monotonic() + timeout
     missing = sorted(set(names))
     while missing:
         missing = sorted(set(names) - set(visible_hosts(session, timeout=1.0)))
         if missing and time.monotonic() > deadline:
-            commands = "\n".join(f"    swarmbed host --name {h} --connect {endpoint_hint}" for h in missing)
+            creds = " --credentials FILE" if auth else ""
+            commands = "\n".join(f"    swarmbed host --name {h} --connect {endpoint_hint}{creds}" for h in missing)
+            admit = ("\nwhere FILE is a host credentials file (swarmbed credentials FILE --user NAME --role host) "
+                     "this run admits (swarmbed run --admit FILE)") if auth else ""
             raise HostError(f"hosts not reachable after {timeout:.0f} s: {', '.join(missing)}; start each on its "
-                            f"machine with:\n{commands}")
+                            f"machine with:\n{commands}{admit}")
 
 
 def start_agents(session: zenoh.Session, host: str, run_id: str, agents: list[int], args: list[str] | None = None,

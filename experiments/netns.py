@@ -22,6 +22,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from swarmbed.wire.credentials import Identity, write_credentials
+
 
 def _ip(*args: str, ns: str | None = None, check: bool = True) -> subprocess.CompletedProcess:
     cmd = ["ip", *(["netns", "exec", ns, "ip"] if ns else []), *args]
@@ -53,11 +55,17 @@ class Lab:
     namespaces: list[str] = field(default_factory=list)
     links: list[str] = field(default_factory=list)
     daemons: dict[str, subprocess.Popen] = field(default_factory=dict)
+    identities: dict[str, Identity] = field(default_factory=dict)  # each daemon's host credentials
     hub_port: int = 0
 
     @property
     def bridge_ip(self) -> str:
         return f"198.18.{self.net}.1"
+
+    @property
+    def admitted(self) -> list[Identity]:
+        """The hosts' credentials, for ``run_experiment(..., admit=lab.admitted)``."""
+        return list(self.identities.values())
 
     @property
     def hub(self) -> str:
@@ -83,8 +91,11 @@ class Lab:
 
     def start_daemon(self, name: str, ns: str) -> None:
         log = open(self.logs / f"host_{name}.log", "wb")
+        identity = self.identities.setdefault(name, Identity.new(f"host-{name}", "host"))
+        credentials = write_credentials(self.logs / f"host_{name}.credentials", identity)
         cmd = ["ip", "netns", "exec", ns, sys.executable, "-m", "swarmbed", "host", "--name", name,
-               "--connect", self.hub, "--listen", "tcp/127.0.0.1:7447", "--logs", str(self.logs / name)]
+               "--connect", self.hub, "--listen", "tcp/127.0.0.1:7447", "--logs", str(self.logs / name),
+               "--credentials", str(credentials)]
         self.daemons[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         log.close()
 

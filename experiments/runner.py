@@ -19,6 +19,7 @@ from tqdm import tqdm
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import Coordinator, RunError
+from swarmbed.experiments.access import RunAccess, agent_user
 from swarmbed.experiments.config import Experiment, resolve_experiment, to_yaml
 from swarmbed.experiments.host import (
     HostError,
@@ -29,6 +30,7 @@ from swarmbed.experiments.host import (
     wait_for_hosts,
 )
 from swarmbed.experiments.launcher import ChildExited, Children
+from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.schema import LOCAL, hosts_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
@@ -46,24 +48,29 @@ class RunResult:
     timings: dict
 
 
-def open_hub(listen: Sequence[str] = (), attempts: int = 5) -> tuple[zenoh.Session, str]:
+def open_hub(listen: Sequence[str] = (), attempts: int = 5,
+             settings: dict[str, object] | None = None) -> tuple[zenoh.Session, str]:
     """A router session listening on a free loopback TCP port (the run's own processes connect
-    there) and on ``listen`` (where other hosts' routers connect)."""
+    there) and on ``listen`` (where other hosts' routers connect); ``settings``: e.g. the run's
+    authentication and access control (:meth:`RunAccess.hub_settings`)."""
     last: Exception | None = None
     for _ in range(attempts):
         endpoint = free_loopback_endpoint()
         try:
-            return zenoh.open(zenoh_config("router", listen=[endpoint, *listen])), endpoint
+            return zenoh.open(zenoh_config("router", listen=[endpoint, *listen], settings=settings)), endpoint
         except zenoh.ZError as exc:  # the port was taken between probe and bind
             last = exc
     raise RunError(f"could not listen on a loopback port: {last}")
 
 
 def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
-                   on_ready: Callable[[Keys, str], None] | None = None, listen: Sequence[str] = ()) -> RunResult:
+                   on_ready: Callable[[Keys, str], None] | None = None, listen: Sequence[str] = (),
+                   auth: bool = True, admit: Sequence[Identity] = ()) -> RunResult:
     """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
     (tests use it to reach the run's keys from outside). ``listen``: endpoints where the hub also
-    listens, for the routers of the hosts in ``exp.placement``."""
+    listens, for the routers of the hosts in ``exp.placement``. ``auth``: the hub admits only
+    processes with the run's credentials and holds each to its own keys (:mod:`.access`), plus the
+    operators and hosts in ``admit``; without it, anyone who reaches the hub may do anything."""
     out_dir.mkdir(parents=True, exist_ok=True)
     for name in RESULT_FILES:  # a stale summary must never vouch for a new, unfinished run
         (out_dir / name).unlink(missing_ok=True)
@@ -76,7 +83,13 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     keys = Keys(secrets.token_hex(6))
     where = hosts_of(exp.placement, exp.agents.count)
     remote = sorted({h for h in where.values() if h != LOCAL})
-    session, endpoint = open_hub(listen)
+    access = RunAccess(keys, range(exp.agents.count), admit) if auth else None
+    try:
+        session, endpoint = open_hub(listen, settings=access.hub_settings() if access else None)
+    except BaseException:
+        if access:
+            access.close()
+        raise
     children = Children(log_dir)
     coord = Coordinator(exp, resolved.scenario(), resolved.allocator_cls, resolved.targets, keys, session, out_dir,
                         where)
@@ -84,14 +97,20 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     try:
         coord.declare()
         common = ["--run-id", keys.run_id, "--connect", endpoint]
-        children.spawn("netem", "swarmbed.netem", [*common, "--out", str(out_dir)])
+
+        def identity(process: str) -> list[str]:
+            return ["--credentials", access.credentials(process)] if access else []
+
+        children.spawn("netem", "swarmbed.netem", [*common, *identity("netem"), "--out", str(out_dir)])
         for i in range(exp.agents.count):
             if where[i] == LOCAL:
-                children.spawn(f"agent_{i}", "swarmbed.agent_runtime", [*common, "--id", str(i)])
+                children.spawn(f"agent_{i}", "swarmbed.agent_runtime",
+                               [*common, *identity(agent_user(i)), "--id", str(i)])
         hosts = {}
         if remote:
             try:
-                wait_for_hosts(session, remote, exp.run.join_timeout, listen[0] if listen else endpoint)
+                wait_for_hosts(session, remote, exp.run.join_timeout, listen[0] if listen else endpoint,
+                               auth=access is not None)
                 for host in remote:
                     hosts[host] = host_info(session, host)
                     start_agents(session, host, keys.run_id, [i for i, h in where.items() if h == host])
@@ -101,9 +120,11 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         def place(agent: int, host: str, incarnation: int) -> None:
             args = ["--id", str(agent), "--incarnation", str(incarnation), "--restore"]
             if host == LOCAL:
-                children.spawn(process_name(agent, incarnation), "swarmbed.agent_runtime", [*common, *args])
+                children.spawn(process_name(agent, incarnation), "swarmbed.agent_runtime",
+                               [*common, *identity(agent_user(agent)), *args])
                 return
-            wait_for_hosts(session, [host], min(5.0, exp.run.join_timeout), listen[0] if listen else endpoint)
+            wait_for_hosts(session, [host], min(5.0, exp.run.join_timeout), listen[0] if listen else endpoint,
+                           auth=access is not None)
             start_agents(session, host, keys.run_id, [agent], args=args[2:])
             if host not in started:
                 started.append(host)
@@ -155,6 +176,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             "ticks_per_s": (coord.last_tick + 1) / run_s if run_s > 0 else None,
             "run_id": keys.run_id,
             "endpoint": endpoint,
+            "auth": access is not None,
             "startup_s": t_joined - t_start,
             "total_s": time.perf_counter() - t_start,
             "rss_mb": rss,
@@ -172,5 +194,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         children.kill_all()
         coord.close()
         session.close()
+        if access:
+            access.close()
         for partial in out_dir.glob("*.part"):  # a run that did not complete leaves no half-written file
             partial.unlink(missing_ok=True)

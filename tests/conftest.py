@@ -6,6 +6,7 @@ import psutil
 import pytest
 
 from swarmbed.experiments import config as cfg
+from swarmbed.wire.credentials import Identity, write_credentials
 
 pytest_plugins = ("tests.netns",)  # the `lab` fixture: stand-in hosts in network namespaces
 
@@ -15,6 +16,15 @@ QUICKSTART = ROOT / "experiments" / "quickstart.yaml"
 
 def experiment(*overrides: str, base: Path = QUICKSTART) -> cfg.Experiment:
     return cfg.load(base, list(overrides))
+
+
+RESULTS = ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv", "config.yaml")
+
+
+def same_results(a: Path, b: Path) -> None:
+    """The result files of two runs are byte-identical."""
+    for name in RESULTS:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), f"{name} differs"
 
 
 def read_ledger(run_dir: Path) -> list[dict]:
@@ -41,3 +51,18 @@ def no_orphans():
     for p in left:
         p.kill()
     assert not left, f"processes left behind: {[(p.pid, p.cmdline()[:4]) for p in left]}"
+
+
+class Operator:
+    """An operator's credentials file, as ``swarmbed credentials FILE --user NAME`` makes it: admit
+    ``identity`` to a run (``admit=[operator.identity]``), hand ``args`` to a client command."""
+
+    def __init__(self, folder: Path) -> None:
+        self.identity = Identity.new("tester", "operator")
+        self.path = write_credentials(folder / "operator.json", self.identity)
+        self.args = ["--credentials", str(self.path)]
+
+
+@pytest.fixture
+def operator(tmp_path) -> Operator:
+    return Operator(tmp_path)

@@ -13,18 +13,12 @@ import pytest
 
 from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments.runner import run_experiment
-from tests.conftest import QUICKSTART, experiment
+from tests.conftest import QUICKSTART, experiment, same_results
 
-RESULTS = ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv", "config.yaml")
 SAR = QUICKSTART.parent / "sar" / "_base.yaml"
 
 
-def _same_files(a, b):
-    for name in RESULTS:
-        assert (a / name).read_bytes() == (b / name).read_bytes(), f"{name} differs"
-
-
-def test_agents_split_over_three_hosts_give_the_all_local_results(lab, tmp_path):
+def test_agents_split_over_three_hosts_give_the_all_local_results(lab, tmp_path, operator):
     for name in ("h1", "h2", "h3"):
         lab.add_host(name)
     sets = ["agents.count=20", "allocator={name: cbba}", "run.duration=150", "run.stop_when_done=false"]
@@ -33,11 +27,13 @@ def test_agents_split_over_three_hosts_give_the_all_local_results(lab, tmp_path)
     seen = {}
 
     def look(keys, endpoint):
-        seen["hosts"] = subprocess.run([sys.executable, "-m", "swarmbed", "hosts", "--connect", endpoint],
+        seen["hosts"] = subprocess.run([sys.executable, "-m", "swarmbed", "hosts", "--connect", endpoint,
+                                        *operator.args],
                                        capture_output=True, text=True, timeout=30).stdout
 
-    spread = run_experiment(placed, tmp_path / "spread", progress=False, listen=[lab.hub], on_ready=look)
-    _same_files(tmp_path / "local", tmp_path / "spread")
+    spread = run_experiment(placed, tmp_path / "spread", progress=False, listen=[lab.hub],
+                            admit=[*lab.admitted, operator.identity], on_ready=look)
+    same_results(tmp_path / "local", tmp_path / "spread")
     assert spread.summary["network"]["messages_sent"] == local.summary["network"]["messages_sent"] > 0
     deployment = (tmp_path / "spread" / "deployment.json").read_text()
     assert '"19": "h2"' in deployment and '"13": "h3"' in deployment
@@ -52,8 +48,8 @@ def test_search_and_rescue_over_two_hosts_gives_the_all_local_results(lab, tmp_p
     sets = ["allocator.name=cbba-etc", "run.duration=40"]
     run_experiment(experiment(*sets, base=SAR), tmp_path / "local", progress=False)
     run_experiment(experiment(*sets, "placement={a: '0-9', b: '10-19'}", base=SAR), tmp_path / "spread",
-                   progress=False, listen=[lab.hub])
-    _same_files(tmp_path / "local", tmp_path / "spread")
+                   progress=False, listen=[lab.hub], admit=lab.admitted)
+    same_results(tmp_path / "local", tmp_path / "spread")
 
 
 def _kill_when_running(lab, name, delay):
@@ -68,7 +64,7 @@ def test_a_host_that_dies_takes_its_agents_and_the_run_accounts_for_them(lab, tm
     long = ["allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
             "agents.count=6", "placement={doomed: '0-1', fine: '2-3'}"]
     result = run_experiment(experiment(*long, "run.duration=3000", "run.allow_agent_failures=true"),
-                            tmp_path / "allowed", progress=False, listen=[lab.hub],
+                            tmp_path / "allowed", progress=False, listen=[lab.hub], admit=lab.admitted,
                             on_ready=_kill_when_running(lab, "doomed", 1.0))
     assert set(result.summary["agents_lost"]) == {"0", "1"}
     net = result.summary["network"]
@@ -78,7 +74,7 @@ def test_a_host_that_dies_takes_its_agents_and_the_run_accounts_for_them(lab, tm
     lab.start_daemon("doomed", lab.namespaces[0])  # the machine comes back for the next run
     with pytest.raises(RunError, match=r"agent [01] stopped at tick \d+ .* logs of host doomed"):
         run_experiment(experiment(*long, "run.duration=1000000"), tmp_path / "strict", progress=False,
-                       listen=[lab.hub], on_ready=_kill_when_running(lab, "doomed", 1.0))
+                       listen=[lab.hub], admit=lab.admitted, on_ready=_kill_when_running(lab, "doomed", 1.0))
 
 
 def test_a_missing_host_is_named_with_the_command_that_starts_it(lab, tmp_path):
@@ -86,7 +82,7 @@ def test_a_missing_host_is_named_with_the_command_that_starts_it(lab, tmp_path):
     t0 = time.monotonic()
     with pytest.raises(RunError) as info:
         run_experiment(experiment("placement={here: 0, gone: '1-2'}", "run.join_timeout=3"), tmp_path,
-                       progress=False, listen=[lab.hub])
+                       progress=False, listen=[lab.hub], admit=lab.admitted)
     msg = str(info.value)
     assert "hosts not reachable after 3 s: gone" in msg and f"swarmbed host --name gone --connect {lab.hub}" in msg
     assert time.monotonic() - t0 < 20
@@ -103,8 +99,8 @@ def test_ten_swaps_between_hosts_give_the_all_local_results(lab, tmp_path):
     swaps = ", ".join(f"{{agent: {int(rng.integers(8))}, tick: {t}, to: {['h1', 'h2', 'local'][int(rng.integers(3))]}}}"
                       for t in ticks)
     run_experiment(experiment(*sets, "placement={h1: '0-2', h2: '3-5'}", f"swaps=[{swaps}]"), tmp_path / "moved",
-                   progress=False, listen=[lab.hub])
-    _same_files(tmp_path / "local", tmp_path / "moved")
+                   progress=False, listen=[lab.hub], admit=lab.admitted)
+    same_results(tmp_path / "local", tmp_path / "moved")
     with open(tmp_path / "moved" / "swaps.csv") as f:
         records = list(csv.DictReader(f))
     assert len(records) == 10 and all(r["outcome"] == "ok" for r in records), records
@@ -118,8 +114,8 @@ def test_a_swap_to_a_dead_host_fails_and_the_agent_goes_on_where_it_was(lab, tmp
     sets = ["allocator={name: cbba}", "run.duration=60", "run.stop_when_done=false"]
     run_experiment(experiment(*sets), tmp_path / "local", progress=False)
     run_experiment(experiment(*sets, "placement={alive: '0-1'}", "swaps=[{agent: 1, tick: 10, to: dead}]"),
-                   tmp_path / "tried", progress=False, listen=[lab.hub])
-    _same_files(tmp_path / "local", tmp_path / "tried")
+                   tmp_path / "tried", progress=False, listen=[lab.hub], admit=lab.admitted)
+    same_results(tmp_path / "local", tmp_path / "tried")
     with open(tmp_path / "tried" / "swaps.csv") as f:
         (record,) = list(csv.DictReader(f))
     assert record["outcome"] == "failed" and "cannot start it on dead" in record["reason"]
@@ -133,7 +129,8 @@ def test_sigterm_on_a_host_daemon_stops_its_agents_and_leaves_nothing(lab, tmp_p
 
     exp = experiment("allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
                      "run.duration=3000", "run.allow_agent_failures=true", "placement={h: '0-1'}")
-    result = run_experiment(exp, tmp_path, progress=False, listen=[lab.hub], on_ready=stop_the_daemon_soon)
+    result = run_experiment(exp, tmp_path, progress=False, listen=[lab.hub], admit=lab.admitted,
+                            on_ready=stop_the_daemon_soon)
     assert set(result.summary["agents_lost"]) == {"0", "1"}
     assert lab.daemons["h"].wait(timeout=20) == 0
     assert lab.pids("h") == []

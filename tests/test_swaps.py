@@ -15,15 +15,9 @@ from swarmbed.experiments import config as cfg
 from swarmbed.experiments.runner import run_experiment
 from swarmbed.plugins.conformance import ConformanceError, check_snapshot
 from swarmbed.plugins.registry import register
-from tests.conftest import QUICKSTART, experiment
+from tests.conftest import QUICKSTART, experiment, same_results
 
-RESULTS = ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv", "config.yaml")
 SAR = QUICKSTART.parent / "sar" / "_base.yaml"
-
-
-def _same_files(a, b):
-    for name in RESULTS:
-        assert (a / name).read_bytes() == (b / name).read_bytes(), f"{name} differs"
 
 
 def _swaps(run_dir):
@@ -42,12 +36,12 @@ def test_swapped_agents_give_the_files_of_a_run_where_nothing_moved(tmp_path, ba
     ticks = sorted(int(t) for t in rng.choice(np.arange(1, 100), 6, replace=False))
     swaps = ", ".join(f"{{agent: {int(rng.integers(n))}, tick: {t}, to: local}}" for t in ticks)
     run_experiment(experiment(*sets, f"swaps=[{swaps}]", base=base), tmp_path / "moved", progress=False)
-    _same_files(tmp_path / "still", tmp_path / "moved")
+    same_results(tmp_path / "still", tmp_path / "moved")
     records = _swaps(tmp_path / "moved")
     assert [r["outcome"] for r in records] == ["ok"] * 6 and all(int(r["snapshot_bytes"]) > 0 for r in records)
 
 
-def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path):
+def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path, operator):
     sets = ["allocator.name=cbba", "run.duration=1000", "run.stop_when_done=false"]
     asked = {}
     threads = []
@@ -55,24 +49,27 @@ def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path):
     def ask(keys, endpoint):
         # The refused request goes first: the run may end soon after the good swap is done.
         bad = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
-                              "--agent", "99", "--to", "local"], capture_output=True, text=True, timeout=60)
+                              "--agent", "99", "--to", "local", *operator.args],
+                             capture_output=True, text=True, timeout=60)
         asked["bad"] = (bad.returncode, bad.stderr)
         proc = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
-                               "--agent", "2", "--to", "local"], capture_output=True, text=True, timeout=120)
+                               "--agent", "2", "--to", "local", *operator.args],
+                              capture_output=True, text=True, timeout=120)
         asked["rc"], asked["out"], asked["err"] = proc.returncode, proc.stdout, proc.stderr
 
     def from_another_terminal(keys, endpoint):
         threads.append(threading.Thread(target=ask, args=(keys, endpoint)))
         threads[-1].start()
 
-    run_experiment(experiment(*sets), tmp_path / "moved", progress=False, on_ready=from_another_terminal)
+    run_experiment(experiment(*sets), tmp_path / "moved", progress=False, on_ready=from_another_terminal,
+                   admit=[operator.identity])
     threads[0].join(timeout=60)
     assert asked["rc"] == 0, asked["err"]
     assert "swap of agent 2 from local to local before tick" in asked["out"] and ": ok," in asked["out"]
     assert asked["bad"][0] == 2 and "a swap request is" in asked["bad"][1]
     assert [r["agent"] for r in _swaps(tmp_path / "moved")] == ["2"]
     run_experiment(experiment(*sets), tmp_path / "still", progress=False)
-    _same_files(tmp_path / "still", tmp_path / "moved")
+    same_results(tmp_path / "still", tmp_path / "moved")
 
 
 STUCK = textwrap.dedent('''
@@ -111,7 +108,7 @@ def test_state_that_cannot_move_is_refused_and_the_old_process_goes_on(tmp_path)
     assert record["outcome"] == "failed" and "snapshot_failed" in record["reason"]
     assert "state.allocator.lock: cannot snapshot a _thread.lock" in record["reason"]  # names what and where
     run_experiment(experiment(*sets), tmp_path / "still", progress=False)
-    _same_files(tmp_path / "still", tmp_path / "tried")
+    same_results(tmp_path / "still", tmp_path / "tried")
 
 
 def test_a_swap_to_a_host_that_is_not_there_fails_and_the_old_process_goes_on(tmp_path):
@@ -120,7 +117,7 @@ def test_a_swap_to_a_host_that_is_not_there_fails_and_the_old_process_goes_on(tm
     (record,) = _swaps(tmp_path / "tried")
     assert record["outcome"] == "failed" and "cannot start it on nowhere" in record["reason"]
     run_experiment(experiment(*sets), tmp_path / "still", progress=False)
-    _same_files(tmp_path / "still", tmp_path / "tried")
+    same_results(tmp_path / "still", tmp_path / "tried")
 
 
 def test_the_snapshot_check_fails_for_an_allocator_that_forgets_its_state():

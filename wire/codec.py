@@ -25,6 +25,12 @@ TAG_SNAPSHOT, TAG_RESUME, TAG_RETIRE = 2, 3, 4
 CONTROLS = {TAG_SNAPSHOT: "snapshot", TAG_RESUME: "resume", TAG_RETIRE: "retire"}
 
 
+# The largest sample an agent may send, or receive in one tick (its observation and inbox); a
+# larger one is malformed (dropped and counted) before it is unpacked, so that junk cannot make a
+# process allocate without bound.
+MAX_AGENT_SAMPLE_BYTES = 16 * 2**20
+
+
 class WireError(ValueError):
     """A sample that does not follow the wire contract."""
 
@@ -33,7 +39,9 @@ def pack(obj: Any) -> bytes:
     return msgpack.packb(obj, use_bin_type=True)
 
 
-def unpack(data: bytes) -> Any:
+def unpack(data: bytes, max_bytes: int | None = None) -> Any:
+    if max_bytes is not None and len(data) > max_bytes:
+        raise WireError(f"oversized: {len(data):,} bytes, more than the {max_bytes:,} a sample may have")
     try:
         return msgpack.unpackb(data, raw=False, strict_map_key=False)
     except Exception as exc:  # msgpack raises several unrelated exception types
@@ -155,7 +163,7 @@ class ControlIn:
 
 
 def decode_agent_in(data: bytes) -> TickIn | StopIn | ControlIn:
-    msg = unpack(data)
+    msg = unpack(data, MAX_AGENT_SAMPLE_BYTES)
     _expect(isinstance(msg, list) and bool(msg) and _is_int(msg[0]), "agent input must be [tag, ...]")
     if msg[0] == TAG_TICK:
         _expect(len(msg) == 4, "tick must be [0, tick, obs, inbox]")
@@ -190,7 +198,7 @@ def encode_agent_out(tick: int, agent_id: int, action: list, messages: list[Radi
 
 
 def decode_agent_out(data: bytes) -> AgentOut:
-    msg = unpack(data)
+    msg = unpack(data, MAX_AGENT_SAMPLE_BYTES)
     _expect(isinstance(msg, list) and len(msg) == 5, "agent output must be [tick, id, action, messages, events]")
     tick, agent_id, action, messages, events = msg
     _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")

@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import socket
 from collections.abc import Sequence
 
 import zenoh
+
+from swarmbed.wire.credentials import CredentialsError, read_credentials
 
 
 def zenoh_config(
@@ -19,7 +22,12 @@ def zenoh_config(
     connect: Sequence[str] = (),
     listen: Sequence[str] = (),
     config_file: str | None = None,
+    credentials: str | None = None,
+    settings: dict[str, object] | None = None,
 ) -> zenoh.Config:
+    """A session configuration. ``credentials``: a credentials file (see
+    :mod:`swarmbed.wire.credentials`) whose user and password the session presents to the router it
+    connects to; ``settings``: further configuration entries, by their path (e.g. ``access_control``)."""
     conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
@@ -27,6 +35,11 @@ def zenoh_config(
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if listen:
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    if credentials:
+        identity = read_credentials(credentials)
+        conf.insert_json5("transport/auth/usrpwd", json.dumps({"user": identity.user, "password": identity.password}))
+    for path, value in (settings or {}).items():
+        conf.insert_json5(path, json.dumps(value))
     return conf
 
 
@@ -40,10 +53,23 @@ def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client"
     g.add_argument("--listen", "-l", action="append", default=[], metavar="ENDPOINT",
                    help="endpoint to listen on (repeatable)")
     g.add_argument("--config", dest="zenoh_config", metavar="FILE", help="a zenoh JSON5 configuration file")
+    g.add_argument("--credentials", metavar="FILE",
+                   help="a credentials file (user and password, mode 600) for a hub that requires them")
 
 
 def open_from_args(args: argparse.Namespace) -> zenoh.Session:
-    return zenoh.open(zenoh_config(args.mode, args.connect, args.listen, args.zenoh_config))
+    """A child process's session from its flags. One that cannot open (nothing listens there, the
+    hub refuses the credentials, the credentials file is unreadable) ends the process with exit
+    code 2 and a message that says where and why."""
+    try:
+        return zenoh.open(zenoh_config(args.mode, args.connect, args.listen, args.zenoh_config, args.credentials))
+    except CredentialsError as exc:
+        logging.getLogger("swarmbed").error("%s", exc)
+    except zenoh.ZError as exc:
+        who = f"credentials of {args.credentials}" if args.credentials else "no credentials"
+        logging.getLogger("swarmbed").error("cannot open a session to %s with %s: %s", ", ".join(args.connect) or
+                                            "any endpoint", who, str(exc).split("  at ")[0])
+    raise SystemExit(2)
 
 
 def free_loopback_endpoint() -> str:

@@ -1,0 +1,126 @@
+"""Who may join a run and what each may do: per-run credentials and the hub's access-control rules.
+
+Both are Zenoh's own mechanisms, enforced by the hub router (the coordinator's session), not by our
+code: user/password authentication (``transport/auth/usrpwd``) refuses a session without valid
+credentials at connect time, and access control (``access_control``, default deny) refuses every
+message a subject is not allowed, before it reaches any subscriber.
+
+Identities of one run (users in the hub's dictionary):
+
+=============  =================================================================================
+``netem``      the proxy: takes agents' outputs, the world and the stop order; publishes steps
+``agent-<i>``  agent i: publishes only ``agent/<i>/out``, reports and snapshots only for itself,
+               receives only ``agent/<i>/in``
+operators      files made by ``swarmbed credentials --role operator`` and admitted with
+               ``swarmbed run --admit``: read everything (``swarmbed watch``), ask for swaps
+hosts          files made with ``--role host``: a host daemon's router, which carries its own
+               agents' traffic (so the hub can hold it only to agent keys) and serves start/stop
+=============  =================================================================================
+
+The coordinator publishes the world, ticks and agent inputs from inside the hub, where no rule
+applies; no remote identity may publish them.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+
+from swarmbed.wire.credentials import Identity, dictionary_line, write_credentials
+from swarmbed.wire.keys import HOSTS, Keys
+
+EVERY_MESSAGE = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token",
+                 "declare_liveliness_subscriber", "liveliness_query"]
+
+
+def _allow(rule_id: str, messages: list[str], key_exprs: list[str], flow: str = "ingress") -> dict:
+    return {"id": rule_id, "permission": "allow", "flows": [flow], "messages": messages, "key_exprs": key_exprs}
+
+
+def agent_user(agent_id: int) -> str:
+    return f"agent-{agent_id}"
+
+
+def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str], hosts: Iterable[str]) -> dict:
+    """The hub's ``access_control`` section for one run (default deny)."""
+    k, root = keys, keys.root
+    alive = f"{root}/alive/**"
+    rules = [
+        _allow("deliver", EVERY_MESSAGE, ["**"], flow="egress"),  # what a subject may send is held at ingress
+        _allow("netem", ["put"], [k.netem_step]),
+        _allow("netem-subscribe", ["declare_subscriber"], [k.world, k.agent_out_all, k.netem_stop]),
+        _allow("netem-query", ["query"], [k.netem_config, k.netem_report]),
+        _allow("netem-alive", ["liveliness_token"], [k.alive_netem]),
+        _allow("watch-alive", ["declare_liveliness_subscriber", "liveliness_query"], [alive]),
+        _allow("operator-read", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+               [f"{root}/**", f"{HOSTS}/**"]),
+        _allow("operator-ask", ["query"], [k.swap, f"{HOSTS}/*/info"]),
+        _allow("operator-find", ["liveliness_query"], [f"{keys.root.split('/')[0]}/*/alive/coordinator"]),
+        _allow("host-serve", ["declare_queryable", "reply", "liveliness_token"], [f"{HOSTS}/**"]),
+        _allow("host-carry", ["put", "declare_subscriber", "query"], [f"{root}/agent/**", k.agent_config]),
+        _allow("host-carry-alive", ["liveliness_token", "declare_liveliness_subscriber", "liveliness_query"],
+               [alive]),
+    ]
+    subjects: list[dict] = [{"id": "netem", "usernames": ["netem"]}]
+    policies: list[dict] = [{"subjects": ["netem"], "rules": ["deliver", "netem", "netem-subscribe", "netem-query",
+                                                                 "netem-alive", "watch-alive"]}]
+    for i in agent_ids:
+        user = agent_user(i)
+        rules += [
+            _allow(f"{user}-put", ["put"], [k.agent_out(i)]),
+            _allow(f"{user}-subscribe", ["declare_subscriber"], [k.agent_in(i)]),
+            _allow(f"{user}-query", ["query"], [k.agent_config, k.agent_report(i), k.agent_snapshot(i)]),
+            _allow(f"{user}-alive", ["liveliness_token"], [k.alive_agent_any(i)]),
+        ]
+        subjects.append({"id": user, "usernames": [user]})
+        policies.append({"subjects": [user], "rules": ["deliver", "watch-alive", f"{user}-put", f"{user}-subscribe",
+                                                       f"{user}-query", f"{user}-alive"]})
+    operators, hosts = list(operators), list(hosts)
+    if operators:
+        subjects.append({"id": "operators", "usernames": operators})
+        policies.append({"subjects": ["operators"], "rules": ["deliver", "operator-read", "operator-ask",
+                                                                   "operator-find"]})
+    if hosts:
+        subjects.append({"id": "hosts", "usernames": hosts})
+        policies.append({"subjects": ["hosts"], "rules": ["deliver", "host-serve", "host-carry", "host-carry-alive"]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
+
+
+class RunAccess:
+    """One run's identities: a private folder (mode 700, removed by :meth:`close`) holding the hub's
+    dictionary and one credentials file per process the launcher spawns."""
+
+    def __init__(self, keys: Keys, agent_ids: Iterable[int], admitted: Iterable[Identity] = ()) -> None:
+        self.keys = keys
+        self.agent_ids = sorted(agent_ids)
+        self.admitted = list(admitted)
+        taken = {"netem", *map(agent_user, self.agent_ids)}
+        for identity in self.admitted:
+            if identity.user in taken:
+                raise ValueError(f"admitted user {identity.user!r} clashes with a name the run gives its own processes")
+        self.folder = Path(tempfile.mkdtemp(prefix=f"swarmbed-{keys.run_id}-"))  # mode 700
+        own = [Identity.new("netem", "netem")] + [Identity.new(agent_user(i), "agent") for i in self.agent_ids]
+        self.files = {identity.user: write_credentials(self.folder / f"{identity.user}.json", identity)
+                      for identity in own}
+        dictionary = self.folder / "hub.dictionary"
+        write_credentials(dictionary, own[0])  # created private, then filled
+        dictionary.write_text("".join(dictionary_line(i) + "\n" for i in own + self.admitted))
+        self.dictionary = dictionary
+
+    def credentials(self, process: str) -> str:
+        """The credentials file of ``netem`` or ``agent-<i>``."""
+        return str(self.files[process])
+
+    def hub_settings(self) -> dict[str, object]:
+        return {
+            "transport/auth/usrpwd": {"dictionary_file": str(self.dictionary)},
+            "access_control": access_rules(
+                self.keys, self.agent_ids,
+                operators=[i.user for i in self.admitted if i.role != "host"],
+                hosts=[i.user for i in self.admitted if i.role == "host"]),
+        }
+
+    def close(self) -> None:
+        shutil.rmtree(self.folder, ignore_errors=True)

@@ -1,0 +1,140 @@
+"""Admission and access control: the hub (a real Zenoh router) refuses sessions without the run's
+credentials, and holds every identity to its own keys; refused messages never reach our code."""
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from swarmbed.experiments.access import RunAccess, access_rules
+from swarmbed.experiments.runner import run_experiment
+from swarmbed.wire.credentials import CredentialsError, Identity, read_credentials, write_credentials
+from swarmbed.wire.keys import Keys
+from swarmbed.wire.membership import hand_over
+from swarmbed.wire.session import zenoh_config
+from tests.conftest import experiment, same_results
+
+BLOCK = zenoh.CongestionControl.BLOCK
+
+
+def stolen(keys: Keys, user: str) -> Path:
+    """The credentials file the launcher wrote for one of its processes: another process of the
+    same user can read it (the model trusts the user's own account, nobody else's)."""
+    [path] = Path(tempfile.gettempdir()).glob(f"swarmbed-{keys.run_id}-*/{user}.json")
+    return path
+
+
+def agent_cmd(keys: Keys, endpoint: str, agent: int, *extra: str) -> list[str]:
+    return [sys.executable, "-m", "swarmbed", "agent", "--connect", endpoint, "--run-id", keys.run_id,
+            "--id", str(agent), *extra]
+
+
+def test_credentials_files_are_private_and_checked(tmp_path):
+    path = write_credentials(tmp_path / "c.json", Identity.new("someone", "operator"))
+    assert (path.stat().st_mode & 0o777) == 0o600 and read_credentials(path).user == "someone"
+    path.chmod(0o644)
+    with pytest.raises(CredentialsError, match="readable by others"):
+        read_credentials(path)
+    (tmp_path / "junk.json").write_text("[1, 2]")
+    (tmp_path / "junk.json").chmod(0o600)
+    with pytest.raises(CredentialsError, match="junk.json: not a JSON object"):
+        read_credentials(tmp_path / "junk.json")
+    with pytest.raises(CredentialsError, match="must be non-empty"):
+        Identity.new("a:b", "host")
+
+
+def test_the_launcher_keeps_credentials_off_the_command_line_and_removes_them():
+    access = RunAccess(Keys("abc123"), range(3))
+    assert (access.folder.stat().st_mode & 0o777) == 0o700
+    assert all((Path(access.credentials(u)).stat().st_mode & 0o777) == 0o600 for u in ("netem", "agent-2"))
+    assert len(access.dictionary.read_text().splitlines()) == 4
+    with pytest.raises(ValueError, match="clashes"):
+        RunAccess(Keys("abc123"), range(3), [Identity.new("agent-1", "operator")])
+    access.close()
+    assert not access.folder.exists()
+    rules = access_rules(Keys("abc123"), [0], operators=["me"], hosts=[])
+    assert rules["default_permission"] == "deny" and {p["subjects"][0] for p in rules["policies"]} == {
+        "netem", "agent-0", "operators"}
+
+
+def test_only_processes_with_the_runs_credentials_join(tmp_path):
+    tried = {}
+
+    def intruders(keys: Keys, endpoint: str) -> None:
+        with pytest.raises(zenoh.ZError):
+            zenoh.open(zenoh_config("client", [endpoint]))
+        wrong = write_credentials(tmp_path / "wrong.json", Identity("agent-1", "not-the-password", "agent"))
+        with pytest.raises(zenoh.ZError):
+            zenoh.open(zenoh_config("client", [endpoint], credentials=str(wrong)))
+        for name, extra in (("none", ()), ("wrong", ("--credentials", str(wrong)))):
+            proc = subprocess.run(agent_cmd(keys, endpoint, 1, *extra), capture_output=True, text=True, timeout=60)
+            tried[name] = (proc.returncode, proc.stderr)
+        # one of the run's own identities, used by a second process: our code refuses it
+        for name, agent in (("twin", 1), ("other", 2), ("outside", 99)):
+            proc = subprocess.run(agent_cmd(keys, endpoint, agent, "--credentials", str(stolen(keys, "agent-1"))),
+                                  capture_output=True, text=True, timeout=60)
+            tried[name] = (proc.returncode, proc.stderr)
+
+    result = run_experiment(experiment("run.duration=300", "run.stop_when_done=false"), tmp_path / "run",
+                            progress=False, on_ready=intruders)
+    none_rc, none_err = tried["none"]
+    assert none_rc == 2 and "cannot open a session" in none_err and "no credentials" in none_err
+    assert tried["wrong"][0] == 2 and "wrong.json" in tried["wrong"][1]
+    assert tried["twin"][0] == 2 and "already running" in tried["twin"][1]
+    assert tried["other"][0] == 2 and "already running" in tried["other"][1]
+    assert tried["outside"][0] == 2 and "outside 0..4" in tried["outside"][1]
+    assert result.summary["ticks"] == 300 and not result.summary["agents_lost"]
+    assert not list(Path(tempfile.gettempdir()).glob(f"swarmbed-{result.timings['run_id']}-*"))
+
+
+def test_an_agent_may_publish_only_on_its_own_keys(tmp_path):
+    """Agent 3's identity, in a second process, tries everything that is not agent 3's: the router
+    refuses it all, so our decoders never see it and the results are those of a clean run."""
+    seen = {}
+
+    def impostor(keys: Keys, endpoint: str) -> None:
+        with zenoh.open(zenoh_config("client", [endpoint], credentials=str(stolen(keys, "agent-3")))) as s:
+            heard = []  # agent 4's inputs, which the hub would forward had it accepted this subscription
+            sub = s.declare_subscriber(keys.agent_in(4), lambda sample: heard.append(1))
+            time.sleep(0.5)
+            sub.undeclare()
+            seen["heard"] = len(heard)
+            for key in (keys.agent_out(4), keys.agent_in(4), keys.world, keys.netem_step, keys.netem_stop,
+                        keys.status, keys.agent_report(4), keys.root + "/anything"):
+                for junk in (b"\xc1", b"\x93\x01\x02", os.urandom(64)):
+                    s.put(key, junk, congestion_control=BLOCK)
+            seen["report taken"] = hand_over(s, keys.agent_report(4), b"\xc1", timeout=2)
+            seen["stop taken"] = hand_over(s, keys.netem_report, b"\xc1", timeout=2)
+
+    sets = ["allocator={name: noop, peers: 3}", "scenario.initial_tasks=0", "run.stop_when_done=false",
+            "run.duration=400"]
+    attacked = run_experiment(experiment(*sets), tmp_path / "attacked", progress=False, on_ready=impostor)
+    run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
+    assert seen == {"report taken": False, "stop taken": False, "heard": 0}
+    assert attacked.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}
+    same_results(tmp_path / "clean", tmp_path / "attacked")
+
+
+def test_an_operator_watches_and_asks_but_cannot_publish(tmp_path, operator):
+    seen = {}
+
+    def look(keys: Keys, endpoint: str) -> None:
+        with zenoh.open(zenoh_config("client", [endpoint], credentials=str(operator.path))) as s:
+            outs = []
+            sub = s.declare_subscriber(keys.agent_out_all, lambda sample: outs.append(1))
+            for _ in range(5):
+                s.put(keys.agent_out(0), b"\xc1", congestion_control=BLOCK)
+                s.put(keys.world, b"\xc1", congestion_control=BLOCK)
+            time.sleep(0.5)
+            sub.undeclare()
+            seen["outs"] = len(outs)
+
+    result = run_experiment(experiment("run.duration=600", "run.stop_when_done=false"), tmp_path / "run",
+                            progress=False, on_ready=look, admit=[operator.identity])
+    assert seen["outs"] > 0  # it reads what agents send
+    assert result.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}

@@ -1,0 +1,71 @@
+"""Credentials files: who a process is when it connects to a run's hub.
+
+A credentials file is a small JSON object ``{"user": ..., "password": ..., "role": ...}`` readable
+only by its owner (like an ssh key, a file that others may read is refused). The password is sent
+to the hub by Zenoh's own user/password authentication (``transport/auth/usrpwd``); swarmbed never
+puts it on a command line, where ``ps`` would show it, and never writes it to a run directory.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+import stat
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+# roles a credentials file made by ``swarmbed credentials`` may have; the processes a run spawns
+# itself get their own identities (netem, agent-<id>) from the launcher
+ROLES = ("operator", "host")
+
+
+class CredentialsError(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class Identity:
+    user: str
+    password: str
+    role: str
+
+    @classmethod
+    def new(cls, user: str, role: str) -> Identity:
+        if not user or ":" in user or any(c.isspace() for c in user):
+            raise CredentialsError(f"user name {user!r}: must be non-empty, without ':' or spaces")
+        return cls(user, secrets.token_urlsafe(24), role)
+
+
+def write_credentials(path: Path, identity: Identity) -> Path:
+    """Write ``identity`` to ``path``, created readable and writable by its owner only."""
+    path = Path(path)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        os.fchmod(f.fileno(), 0o600)  # an existing file keeps its mode through O_CREAT
+        json.dump(asdict(identity), f)
+    return path
+
+
+def read_credentials(path: str | Path) -> Identity:
+    """The identity in ``path``; a CredentialsError names the file and what is wrong with it."""
+    path = Path(path)
+    try:
+        mode = path.stat().st_mode
+        text = path.read_text()
+    except OSError as exc:
+        raise CredentialsError(f"credentials file {path}: {exc.strerror}") from None
+    if mode & (stat.S_IRWXG | stat.S_IRWXO):
+        raise CredentialsError(f"credentials file {path}: readable by others (mode {stat.S_IMODE(mode):o}); "
+                               f"run chmod 600 {path}")
+    try:
+        data = json.loads(text)
+        identity = Identity(str(data["user"]), str(data["password"]), str(data.get("role", "operator")))
+    except (ValueError, KeyError, TypeError):
+        raise CredentialsError(f"credentials file {path}: not a JSON object with user and password") from None
+    return identity
+
+
+def dictionary_line(identity: Identity) -> str:
+    """The line of a Zenoh usrpwd dictionary file that admits ``identity``."""
+    return f"{identity.user}:{identity.password}"
