@@ -119,7 +119,7 @@ class Coordinator:
             serve_text(s, k.agent_config, agent_spec(self.exp, self.targets).model_dump_json()),
             serve_text(s, k.netem_config, netem_spec(self.exp).model_dump_json()),
             s.declare_subscriber(k.netem_step, lambda x: put(("step", x.payload.to_bytes()))),
-            accept_handovers(s, k.agent_report_all, lambda _key, data: put(("report", data))),
+            accept_handovers(s, k.agent_report_all, lambda key, data: put(("report", (key, data)))),
             accept_handovers(s, k.netem_report, lambda _key, data: put(("netem_report", data))),
             s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True),
             s.declare_queryable(k.agent_snapshot_all, self._on_snapshot_query),
@@ -341,16 +341,27 @@ class Coordinator:
                 held.append(event)
         self._pushback.extend(held)
 
-    def _on_report(self, data: bytes, tick: int) -> None:
+    def _decode_report(self, key: str, data: bytes) -> dict | None:
+        """An agent's report, if it is well formed and names the agent whose key it came on
+        (else dropped and counted)."""
         try:
             rep = decode_report(data)
-        except WireError as exc:
-            self._malformed(self.keys.agent_report_all, exc)
+            agent = rep.get("agent")
+            if not isinstance(agent, int) or not 0 <= agent < self.n:
+                raise WireError(f"report names no agent of this run: {agent!r}")
+            if agent != agent_id_of(key):
+                raise WireError(f"report of agent {agent} on another agent's key")
+        except ValueError as exc:  # WireError, or a key without an agent id
+            self._malformed(key, exc)
+            return None
+        return rep
+
+    def _on_report(self, sample: tuple[str, bytes], tick: int) -> None:
+        rep = self._decode_report(*sample)
+        if rep is None:
             return
-        agent = rep.get("agent")
-        if not isinstance(agent, int) or not 0 <= agent < self.n:
-            self._malformed(self.keys.agent_report_all, WireError(f"report names no agent of this run: {agent!r}"))
-        elif rep["kind"] == "fatal":
+        agent = rep["agent"]
+        if rep["kind"] == "fatal":
             self.fatal[agent] = rep
             self._lose(agent, rep.get("tick", tick), "it raised an exception")
         elif rep["kind"] == "final":
@@ -438,12 +449,10 @@ class Coordinator:
                 if what == "snapshot" and data == agent and wanted[0] == "snapshot":
                     return "snapshot"
                 if what == "report":
-                    try:
-                        rep = decode_report(data)
-                    except WireError as exc:
-                        self._malformed(self.keys.agent_report_all, exc)
+                    rep = self._decode_report(*data)
+                    if rep is None:
                         continue
-                    if rep.get("agent") == agent and rep.get("kind") in wanted:
+                    if rep["agent"] == agent and rep.get("kind") in wanted:
                         return "restored" if rep["kind"] == "restored" else f"{rep['kind']}: {rep.get('error')}"
                 if what == "leave" and not data.endswith(("/coordinator", "/netem")) and agent_id_of(data) == agent:
                     gone = incarnation_of(data)

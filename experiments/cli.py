@@ -65,17 +65,19 @@ def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> 
 def cmd_run(args: argparse.Namespace) -> int:
     from swarmbed.experiments.runner import run_experiment
     from swarmbed.wire.credentials import CredentialsError, read_credentials
+    from swarmbed.wire.session import tls_from_args
 
     exp = cfg.load(args.experiment, args.set, args.seed)
     try:
         admitted = [read_credentials(path) for path in args.admit]
+        tls = tls_from_args(args)
     except CredentialsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
     result = run_experiment(exp, out, progress=not args.no_progress, listen=args.listen, auth=not args.no_auth,
-                            admit=admitted)
+                            admit=admitted, tls=tls)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
 
@@ -89,6 +91,20 @@ def cmd_credentials(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"{path}: {args.role} {args.user!r}; admit it with swarmbed run --admit {path}")
+    return 0
+
+
+def cmd_certs(args: argparse.Namespace) -> int:
+    from swarmbed.experiments.certs import CertError, make_certs
+
+    try:
+        written = make_certs(Path(args.folder), args.machines, args.days)
+    except (CertError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for path in written:
+        print(path)
+    print("copy ca.pem and a machine's NAME.pem and NAME.key to it (never ca.key); see the README's TLS section")
     return 0
 
 
@@ -279,11 +295,13 @@ def cmd_check_scenario(args: argparse.Namespace) -> int:
 def cmd_host(args: argparse.Namespace) -> int:
     from swarmbed.experiments.host import serve
     from swarmbed.wire.credentials import CredentialsError
+    from swarmbed.wire.session import tls_from_args
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logs = Path(args.logs) if args.logs else Path("runs") / "hosts" / args.name
     try:
-        return serve(args.name, args.connect, args.listen, logs, args.zenoh_config, args.mode, args.credentials)
+        return serve(args.name, args.connect, args.listen, logs, args.zenoh_config, args.mode, args.credentials,
+                     tls_from_args(args))
     except CredentialsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -295,10 +313,11 @@ def _client_session(args: argparse.Namespace):
     import zenoh
 
     from swarmbed.wire.credentials import CredentialsError
-    from swarmbed.wire.session import zenoh_config
+    from swarmbed.wire.session import tls_from_args, zenoh_config
 
     try:
-        return zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config, args.credentials))
+        return zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config, args.credentials,
+                                       tls_from_args(args)))
     except CredentialsError as exc:
         print(f"error: {exc}", file=sys.stderr)
     except zenoh.ZError as exc:
@@ -396,6 +415,9 @@ def main(argv: list[str] | None = None) -> int:
                           "besides the run's own processes (repeatable)")
     run.add_argument("--no-auth", action="store_true",
                      help="no authentication or access control: anyone who reaches the hub may join and publish")
+    run.add_argument("--tls", metavar="DIR", help="certificates (swarmbed certs) for --listen tls/HOST:PORT endpoints")
+    run.add_argument("--tls-name", metavar="NAME", default="hub",
+                     help="the certificate in --tls DIR the hub presents (default: hub)")
     run.set_defaults(func=cmd_run)
 
     cr = sub.add_parser("credentials", help="make a credentials file for a host daemon or an operator (watch, swap)")
@@ -404,6 +426,13 @@ def main(argv: list[str] | None = None) -> int:
     cr.add_argument("--role", choices=["operator", "host"], default="operator",
                     help="operator: watch a run and ask for swaps; host: a host daemon (default: operator)")
     cr.set_defaults(func=cmd_credentials)
+
+    ce = sub.add_parser("certs", help="a certificate authority and per-machine certificates for TLS between machines")
+    ce.add_argument("folder", help="where the CA (ca.pem, ca.key) and the certificates go; the CA is reused")
+    ce.add_argument("machines", nargs="+", metavar="NAME[=ADDR,...]",
+                    help="a machine and the addresses others reach it by, e.g. hub=192.0.2.10 labpc2=labpc2.lab")
+    ce.add_argument("--days", type=_positive, default=365, help="validity (default 365 days)")
+    ce.set_defaults(func=cmd_certs)
 
     bt = sub.add_parser("bt", help="behavior-tree tools")
     bt_sub = bt.add_subparsers(dest="bt_command", required=True)

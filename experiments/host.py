@@ -165,19 +165,20 @@ class Host:
 
 
 def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_config_file: str | None = None,
-          mode: str = "router", credentials: str | None = None) -> int:
+          mode: str = "router", credentials: str | None = None, tls: dict[str, object] | None = None) -> int:
     """Run the host daemon until SIGINT or SIGTERM: a router (or peer) for this machine.
 
     ``credentials``: a host credentials file the hubs it connects to admit (``swarmbed run --admit``).
     With it, the router also requires credentials of whoever connects to it: the daemon makes one
     identity for the agents it starts (in a private folder, gone when it stops), so that a stray
-    process on this machine cannot reach a hub through it."""
+    process on this machine cannot reach a hub through it. ``tls``: :func:`~swarmbed.wire.session.tls_settings`
+    for ``tls/`` endpoints."""
     listen = listen or [free_loopback_endpoint()]
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     private = Path(tempfile.mkdtemp(prefix=f"swarmbed-host-{name}-")) if credentials else None
-    settings: dict[str, object] = {}
+    settings: dict[str, object] = dict(tls or {})
     agent_credentials = None
     if credentials and private:
         mine, local = read_credentials(credentials), Identity.new(f"{name}-agents", "agent")

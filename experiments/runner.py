@@ -65,12 +65,15 @@ def open_hub(listen: Sequence[str] = (), attempts: int = 5,
 
 def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                    on_ready: Callable[[Keys, str], None] | None = None, listen: Sequence[str] = (),
-                   auth: bool = True, admit: Sequence[Identity] = ()) -> RunResult:
+                   auth: bool = True, admit: Sequence[Identity] = (),
+                   tls: dict[str, object] | None = None) -> RunResult:
     """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
     (tests use it to reach the run's keys from outside). ``listen``: endpoints where the hub also
     listens, for the routers of the hosts in ``exp.placement``. ``auth``: the hub admits only
     processes with the run's credentials and holds each to its own keys (:mod:`.access`), plus the
-    operators and hosts in ``admit``; without it, anyone who reaches the hub may do anything."""
+    operators and hosts in ``admit``; without it, anyone who reaches the hub may do anything.
+    ``tls``: the hub's certificates (:func:`~swarmbed.wire.session.tls_settings`) for ``tls/``
+    endpoints in ``listen``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     for name in RESULT_FILES:  # a stale summary must never vouch for a new, unfinished run
         (out_dir / name).unlink(missing_ok=True)
@@ -85,7 +88,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     remote = sorted({h for h in where.values() if h != LOCAL})
     access = RunAccess(keys, range(exp.agents.count), admit) if auth else None
     try:
-        session, endpoint = open_hub(listen, settings=access.hub_settings() if access else None)
+        session, endpoint = open_hub(listen, settings={**(access.hub_settings() if access else {}), **(tls or {})})
     except BaseException:
         if access:
             access.close()

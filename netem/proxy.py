@@ -89,7 +89,7 @@ class Proxy:
         put = self.events.put
         subs = [
             s.declare_subscriber(k.world, lambda x: put(("world", x.payload.to_bytes()))),
-            s.declare_subscriber(k.agent_out_all, lambda x: put(("out", x.payload.to_bytes()))),
+            s.declare_subscriber(k.agent_out_all, lambda x: put(("out", (str(x.key_expr), x.payload.to_bytes())))),
             s.declare_subscriber(k.netem_stop, lambda x: put(("stop", x.payload.to_bytes()))),
             s.liveliness().declare_subscriber(k.alive_agents, self._on_agent_alive),
             s.liveliness().declare_subscriber(k.alive_coordinator, self._on_coordinator),
@@ -146,12 +146,9 @@ class Proxy:
                     self.members[world.tick] = list(world.ids)
                     self.members.pop(world.tick - 1000, None)
             elif what == "out":
-                try:
-                    out = decode_agent_out(data)
-                except WireError as exc:
-                    self._malformed(self.keys.agent_out_all, exc)
+                out = self._take_out(*data)
+                if out is None:
                     continue
-                self.answered[out.agent_id] = max(out.tick, self.answered.get(out.agent_id, -1))
                 if out.tick <= self.routed:
                     self._late(out)
                 else:
@@ -159,6 +156,26 @@ class Proxy:
             if self.world is not None and self._complete(self.world):
                 self._route(self.world)
                 self.world = None
+
+    def _take_out(self, key: str, data: bytes) -> AgentOut | None:
+        """An agent's output, if it follows the contract: decodable, sent on its own agent's key,
+        for the tick in hand (or, on the real-time clock, a late answer to one already routed),
+        and the first for its tick. Anything else is malformed: dropped and counted."""
+        try:
+            out = decode_agent_out(data)
+            if agent_id_of(key) != out.agent_id:
+                raise WireError(f"output of agent {out.agent_id} on another agent's key")
+            if out.tick > self.routed + 1:
+                raise WireError(f"output for tick {out.tick} while tick {self.routed + 1} is in hand")
+            if out.tick <= self.routed and self.spec.answer_within is None:
+                raise WireError(f"output for tick {out.tick}, already routed")
+            if out.tick <= self.answered.get(out.agent_id, -1):
+                raise WireError(f"a second output of agent {out.agent_id} for tick {out.tick}")
+        except WireError as exc:
+            self._malformed(key, exc)
+            return None
+        self.answered[out.agent_id] = out.tick
+        return out
 
     def _malformed(self, key: str, exc: Exception) -> None:
         self.malformed += 1
@@ -196,13 +213,9 @@ class Proxy:
                 log.warning("netem: some agents never answered up to tick %d", last)
                 return
             if what == "out":
-                try:
-                    out = decode_agent_out(data)
-                except WireError as exc:
-                    self._malformed(self.keys.agent_out_all, exc)
-                    continue
-                self.answered[out.agent_id] = max(out.tick, self.answered.get(out.agent_id, -1))
-                self._late(out)
+                out = self._take_out(*data)
+                if out is not None:
+                    self._late(out)
             elif what == "left":
                 left.add(data[0])
 

@@ -1,18 +1,22 @@
 """Admission and access control: the hub (a real Zenoh router) refuses sessions without the run's
 credentials, and holds every identity to its own keys; refused messages never reach our code."""
 
+import json
 import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import zenoh
 
 from swarmbed.experiments.access import RunAccess, access_rules
 from swarmbed.experiments.runner import run_experiment
+from swarmbed.wire.codec import encode_agent_out, pack
 from swarmbed.wire.credentials import CredentialsError, Identity, read_credentials, write_credentials
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
@@ -138,3 +142,63 @@ def test_an_operator_watches_and_asks_but_cannot_publish(tmp_path, operator):
                             progress=False, on_ready=look, admit=[operator.identity])
     assert seen["outs"] > 0  # it reads what agents send
     assert result.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}
+
+
+def test_junk_at_every_key_is_refused_or_counted_and_changes_nothing(tmp_path, operator):
+    """10,000 junk samples during a run (random bytes, msgpack of the wrong shape, outputs naming
+    another agent or a tick that never comes, a 10 MB payload) at every key the run listens on,
+    from two authenticated processes: agent 3's identity and an operator. What the router lets
+    through (agent 3's own output and report keys) our code drops and counts, one by one; the
+    results are those of a clean run."""
+    rng = np.random.default_rng(5)
+    sent = {"out": 0, "report": 0}
+    done = threading.Event()
+
+    def junk_kinds():
+        yield os.urandom(int(rng.integers(1, 200)))
+        yield pack({"tick": 1})
+        yield pack([1, 2, 3])
+        yield encode_agent_out(0, 4, ["none"], [])  # another agent's output
+        yield encode_agent_out(10**6, 3, ["none"], [])  # a tick that never comes
+
+    def attack(keys: Keys, endpoint: str) -> None:
+        every = [*(keys.agent_in(i) for i in range(5)), *(keys.agent_out(i) for i in range(5)), keys.world,
+                 keys.netem_step, keys.netem_stop, keys.status, keys.swap, keys.root + "/anything"]
+        for who in (str(stolen(keys, "agent-3")), str(operator.path)):
+            with zenoh.open(zenoh_config("client", [endpoint], credentials=who)) as s:
+                for n in range(490):
+                    for key in every:
+                        for junk in junk_kinds() if n % 49 == 0 else [os.urandom(16)]:
+                            s.put(key, junk, congestion_control=BLOCK)
+                            if key == keys.agent_out(3) and who != str(operator.path):
+                                sent["out"] += 1
+                huge = os.urandom(10 * 2**20)
+                s.put(keys.agent_out(3), huge, congestion_control=BLOCK)
+                s.put(keys.world, huge, congestion_control=BLOCK)
+                if who != str(operator.path):
+                    sent["out"] += 1
+                for junk in (b"\xc1", pack({"kind": "fatal", "agent": 4}), pack({"kind": "final"})):
+                    if who == str(operator.path):  # refused by the router: nothing would answer
+                        s.get(keys.agent_report(3), payload=junk, timeout=0.5)
+                    elif hand_over(s, keys.agent_report(3), junk, timeout=5):
+                        sent["report"] += 1
+                s.get(keys.agent_snapshot(4), payload=b"\xc1", timeout=0.5)
+        done.set()
+
+    def in_the_background(keys: Keys, endpoint: str) -> None:
+        threading.Thread(target=attack, args=(keys, endpoint), daemon=True).start()
+
+    sets = ["agents.count=5", "allocator={name: noop, peers: 3}", "scenario.initial_tasks=0",
+            "run.stop_when_done=false", "run.duration=3000"]
+    attacked = run_experiment(experiment(*sets), tmp_path / "attacked", progress=False, on_ready=in_the_background,
+                              admit=[operator.identity])
+    assert done.is_set(), "the run ended before all junk was sent"
+    run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
+    assert sent == {"out": 531, "report": 3}  # of 16,972 junk samples in all
+    assert attacked.summary["network"]["malformed"] == {"coordinator": 3, "netem": 531, "agents": 0}
+    summaries = [json.loads((tmp_path / run / "summary.json").read_text()) for run in ("clean", "attacked")]
+    for s in summaries:
+        s["network"].pop("malformed")
+    assert summaries[0] == summaries[1]
+    for name in ("timeseries.csv", "agents.csv", "network_ledger.csv"):
+        assert (tmp_path / "clean" / name).read_bytes() == (tmp_path / "attacked" / name).read_bytes(), name

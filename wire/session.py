@@ -11,6 +11,7 @@ import json
 import logging
 import socket
 from collections.abc import Sequence
+from pathlib import Path
 
 import zenoh
 
@@ -43,6 +44,24 @@ def zenoh_config(
     return conf
 
 
+def tls_settings(folder: str | Path, name: str) -> dict[str, object]:
+    """Configuration entries for machine ``name``'s TLS links (``tls/HOST:PORT`` endpoints), as
+    ``swarmbed certs`` lays them out in ``folder``: both ends of every link present a certificate of
+    the folder's CA (mutual authentication), and a connecting end checks the name it dialled."""
+    folder = Path(folder)
+    needed = [folder / "ca.pem", folder / f"{name}.pem", folder / f"{name}.key"]
+    missing = [str(p) for p in needed if not p.exists()]
+    if missing:
+        raise CredentialsError(f"TLS files missing: {', '.join(missing)} "
+                               f"(swarmbed certs {folder} {name}=ADDRESS makes them)")
+    ca, cert, key = (str(p.resolve()) for p in needed)
+    return {"transport/link/tls": {
+        "root_ca_certificate": ca, "enable_mtls": True, "verify_name_on_connect": True,
+        "listen_certificate": cert, "listen_private_key": key,
+        "connect_certificate": cert, "connect_private_key": key,
+    }}
+
+
 def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client") -> None:
     """The flags every swarmbed process accepts, as zenoh-python's examples share them."""
     g = parser.add_argument_group("zenoh")
@@ -55,6 +74,10 @@ def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client"
     g.add_argument("--config", dest="zenoh_config", metavar="FILE", help="a zenoh JSON5 configuration file")
     g.add_argument("--credentials", metavar="FILE",
                    help="a credentials file (user and password, mode 600) for a hub that requires them")
+    g.add_argument("--tls", metavar="DIR", help="certificates made by swarmbed certs, for tls/HOST:PORT endpoints")
+    g.add_argument("--tls-name", metavar="NAME",
+                   help="whose certificate in --tls DIR this process presents (default: the host's --name, else "
+                        "this machine's host name)")
 
 
 def open_from_args(args: argparse.Namespace) -> zenoh.Session:
@@ -62,7 +85,8 @@ def open_from_args(args: argparse.Namespace) -> zenoh.Session:
     hub refuses the credentials, the credentials file is unreadable) ends the process with exit
     code 2 and a message that says where and why."""
     try:
-        return zenoh.open(zenoh_config(args.mode, args.connect, args.listen, args.zenoh_config, args.credentials))
+        return zenoh.open(zenoh_config(args.mode, args.connect, args.listen, args.zenoh_config, args.credentials,
+                                       tls_from_args(args)))
     except CredentialsError as exc:
         logging.getLogger("swarmbed").error("%s", exc)
     except zenoh.ZError as exc:
@@ -70,6 +94,14 @@ def open_from_args(args: argparse.Namespace) -> zenoh.Session:
         logging.getLogger("swarmbed").error("cannot open a session to %s with %s: %s", ", ".join(args.connect) or
                                             "any endpoint", who, str(exc).split("  at ")[0])
     raise SystemExit(2)
+
+
+def tls_from_args(args: argparse.Namespace) -> dict[str, object] | None:
+    """:func:`tls_settings` for ``--tls DIR [--tls-name NAME]``, or None without ``--tls``."""
+    if not getattr(args, "tls", None):
+        return None
+    name = args.tls_name or getattr(args, "name", None) or socket.gethostname()
+    return tls_settings(args.tls, name)
 
 
 def free_loopback_endpoint() -> str:
