@@ -30,14 +30,13 @@ from typing import Any
 import psutil
 import zenoh
 
-from swarmbed.experiments.launcher import Children
+from swarmbed.experiments.launcher import AGENT_MODULE, Children, ForkServerError
 from swarmbed.wire.credentials import Identity, dictionary_line, read_credentials, write_credentials
 from swarmbed.wire.keys import HOSTS, HostKeys, host_name_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 log = logging.getLogger("swarmbed.host")
 
-AGENT_MODULE = "swarmbed.agent_runtime"
 
 
 def process_name(agent: int, incarnation: int = 0) -> str:
@@ -92,7 +91,10 @@ class Host:
                     log_dir.mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
                     return {"error": f"cannot write logs to {log_dir}: {exc.strerror}"}
-                children = self.runs[run_id] = Children(log_dir)
+                try:
+                    children = self.runs[run_id] = Children(log_dir, fork_agents=True)
+                except ForkServerError as exc:
+                    return {"error": str(exc)}
             busy = [i for i in ids if (p := children.procs.get(process_name(i, incarnation))) is not None
                     and p.poll() is None]
             if busy:
@@ -150,7 +152,7 @@ class Host:
         """Forget runs whose agents have all exited."""
         with self.lock:
             for run_id in [r for r, ch in self.runs.items() if all(p.poll() is not None for p in ch.procs.values())]:
-                del self.runs[run_id]
+                self.runs.pop(run_id).kill_all()  # nothing left to kill but the run's fork server
 
     def close(self) -> None:
         for entity in reversed(self._entities):

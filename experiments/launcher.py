@@ -2,18 +2,25 @@
 
 Children are spawned (never forked from a process holding a Zenoh session), in their own session
 so that Ctrl-C reaches only the launcher, and they ask the kernel to terminate them if the launcher
-dies. Each writes its output to ``logs/<name>.log`` in the run directory.
+dies. Each writes its output to ``logs/<name>.log`` in the run directory. Agents come from a fork
+server (:mod:`.forkserver`) where one is running: a process that imported everything once.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import queue
+import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 import psutil
+
+AGENT_MODULE = "swarmbed.agent_runtime"
 
 
 class ChildExited(RuntimeError):
@@ -28,13 +35,130 @@ def _peak_rss_mb(pid: int) -> float:
     raise ValueError("no VmHWM")
 
 
-class Children:
-    def __init__(self, log_dir: Path) -> None:
-        self.log_dir = log_dir
-        self.procs: dict[str, subprocess.Popen] = {}
-        self.started_at: dict[str, float] = {}
+class ForkedProcess:
+    """A child of the fork server, with the part of :class:`subprocess.Popen`'s interface the
+    launcher uses (the server reaps it and reports its exit code)."""
 
-    def spawn(self, name: str, module: str, args: list[str]) -> subprocess.Popen:
+    def __init__(self, server: ForkServer, pid: int) -> None:
+        self.server = server
+        self.pid = pid
+        self.returncode: int | None = None
+
+    def poll(self) -> int | None:
+        if self.returncode is None:
+            self.returncode = self.server.exit_code(self.pid)
+        return self.returncode
+
+    def wait(self, timeout: float | None = None) -> int:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self.poll() is None:
+            if deadline is not None and time.monotonic() > deadline:
+                raise subprocess.TimeoutExpired(f"agent pid {self.pid}", timeout or 0.0)
+            time.sleep(0.01)
+        assert self.returncode is not None
+        return self.returncode
+
+    def send_signal(self, sig: int) -> None:
+        if self.poll() is None:
+            try:
+                os.kill(self.pid, sig)
+            except ProcessLookupError:
+                pass
+
+    def terminate(self) -> None:
+        self.send_signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+
+class ForkServerError(RuntimeError):
+    pass
+
+
+class ForkServer:
+    """The launcher's end of :mod:`.forkserver`: start it, ask it for agents, learn their ends."""
+
+    def __init__(self, log_path: Path, timeout: float = 60.0) -> None:
+        self.log = open(log_path, "wb")
+        self.proc = subprocess.Popen([sys.executable, "-m", "swarmbed.experiments.forkserver", str(os.getpid())],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log,
+                                     start_new_session=True, close_fds=True)
+        self.replies: queue.SimpleQueue = queue.SimpleQueue()
+        self.exits: dict[int, int] = {}
+        self.lock = threading.Lock()
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+        try:
+            ready = self.replies.get(timeout=timeout)
+        except queue.Empty:
+            ready = None
+        if not ready or "ready" not in ready:
+            self.close()
+            raise ForkServerError(f"the agents' fork server did not start; see {log_path}")
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            event = json.loads(line)
+            if "exited" in event:
+                with self.lock:
+                    self.exits[event["exited"]] = event["code"]
+            else:
+                self.replies.put(event)
+        self.replies.put(None)  # the server is gone
+
+    def spawn(self, name: str, argv: list[str], log: Path, timeout: float = 30.0) -> ForkedProcess:
+        assert self.proc.stdin is not None
+        try:
+            self.proc.stdin.write((json.dumps({"name": name, "argv": argv, "log": str(log)}) + "\n").encode())
+            self.proc.stdin.flush()
+            reply = self.replies.get(timeout=timeout)
+        except (OSError, queue.Empty):
+            reply = None
+        if not reply or "pid" not in reply:
+            why = reply.get("error") if reply else "it is gone or did not answer"
+            raise ForkServerError(f"the fork server could not start {name}: {why}")
+        return ForkedProcess(self, reply["pid"])
+
+    def exit_code(self, pid: int) -> int | None:
+        with self.lock:
+            code = self.exits.get(pid)
+        if code is None and self.proc.poll() is not None and not psutil.pid_exists(pid):
+            return -signal.SIGTERM  # the server went first and took its children with it
+        return code
+
+    def close(self) -> None:
+        """Stop the server; its children get SIGTERM from it (and from the kernel)."""
+        if self.proc.poll() is None:
+            try:
+                assert self.proc.stdin is not None
+                self.proc.stdin.close()
+            except OSError:
+                pass
+            try:
+                self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.reader.join(timeout=5)
+        self.log.close()
+
+
+class Children:
+    def __init__(self, log_dir: Path, fork_agents: bool = False) -> None:
+        self.log_dir = log_dir
+        self.procs: dict[str, subprocess.Popen | ForkedProcess] = {}
+        self.started_at: dict[str, float] = {}
+        self.forked = fork_agents
+        self.server: ForkServer | None = ForkServer(log_dir / "forkserver.log") if fork_agents else None
+
+    def spawn(self, name: str, module: str, args: list[str]) -> subprocess.Popen | ForkedProcess:
+        if module == AGENT_MODULE and self.server is not None:
+            proc: subprocess.Popen | ForkedProcess = self.server.spawn(name, args, self.log_dir / f"{name}.log")
+            self.procs[name] = proc
+            self.started_at[name] = time.monotonic()
+            return proc
         log = open(self.log_dir / f"{name}.log", "wb")
         cmd = [sys.executable, "-m", module, *args, "--parent-pid", str(os.getpid())]
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
@@ -59,7 +183,7 @@ class Children:
                 raise ChildExited(f"{name} exited with code {rc} before the run started; "
                                   f"logs/{name}.log ends with:\n{self.log_tail(name)}")
 
-    def _each(self, read) -> dict[str, float]:
+    def _each(self, read) -> dict:
         """``read(pid)`` for every child still there."""
         out = {}
         for name, proc in self.procs.items():
@@ -72,6 +196,15 @@ class Children:
     def rss_mb(self) -> dict[str, float]:
         return self._each(lambda pid: psutil.Process(pid).memory_info().rss / 2**20)
 
+    def shared_mb(self) -> dict[str, tuple[float, float]]:
+        """Each child's proportional and unique set sizes (PSS, USS): what it costs the machine,
+        pages shared with its siblings (imported code, the fork server's heap) counted by share or
+        not at all. Reads /proc/<pid>/smaps: a few milliseconds per process."""
+        def read(pid: int) -> tuple[float, float]:
+            info = psutil.Process(pid).memory_full_info()
+            return info.pss / 2**20, info.uss / 2**20
+        return self._each(read)
+
     def cpu_s(self) -> dict[str, float]:
         """CPU seconds (user + system) each child has used so far."""
         return self._each(lambda pid: sum(psutil.Process(pid).cpu_times()[:2]))
@@ -80,7 +213,7 @@ class Children:
         """Each child's peak resident set so far (Linux VmHWM)."""
         return self._each(_peak_rss_mb)
 
-    def wait(self, timeout: float) -> dict[str, int]:
+    def wait(self, timeout: float) -> dict[str, int | None]:
         """Wait for every child to exit; terminate (then kill) whatever is left at ``timeout``."""
         deadline = time.monotonic() + timeout
         for proc in self.procs.values():
@@ -102,3 +235,6 @@ class Children:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
+        if self.server is not None:
+            self.server.close()
+            self.server = None

@@ -11,6 +11,7 @@ import resource
 import secrets
 import time
 from collections.abc import Callable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,7 +30,7 @@ from swarmbed.experiments.host import (
     stop_agents,
     wait_for_hosts,
 )
-from swarmbed.experiments.launcher import ChildExited, Children
+from swarmbed.experiments.launcher import ChildExited, Children, ForkServerError
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.schema import LOCAL, hosts_of
@@ -66,14 +67,15 @@ def open_hub(listen: Sequence[str] = (), attempts: int = 5,
 def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                    on_ready: Callable[[Keys, str], None] | None = None, listen: Sequence[str] = (),
                    auth: bool = True, admit: Sequence[Identity] = (),
-                   tls: dict[str, object] | None = None) -> RunResult:
+                   tls: dict[str, object] | None = None, fork_agents: bool = True) -> RunResult:
     """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
     (tests use it to reach the run's keys from outside). ``listen``: endpoints where the hub also
     listens, for the routers of the hosts in ``exp.placement``. ``auth``: the hub admits only
     processes with the run's credentials and holds each to its own keys (:mod:`.access`), plus the
     operators and hosts in ``admit``; without it, anyone who reaches the hub may do anything.
     ``tls``: the hub's certificates (:func:`~swarmbed.wire.session.tls_settings`) for ``tls/``
-    endpoints in ``listen``."""
+    endpoints in ``listen``. ``fork_agents``: local agents come from a fork server that imported
+    everything once (:mod:`.forkserver`); without it each is a fresh interpreter."""
     out_dir.mkdir(parents=True, exist_ok=True)
     for name in RESULT_FILES:  # a stale summary must never vouch for a new, unfinished run
         (out_dir / name).unlink(missing_ok=True)
@@ -86,14 +88,19 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     keys = Keys(secrets.token_hex(6))
     where = hosts_of(exp.placement, exp.agents.count)
     remote = sorted({h for h in where.values() if h != LOCAL})
-    access = RunAccess(keys, range(exp.agents.count), admit) if auth else None
-    try:
-        session, endpoint = open_hub(listen, settings={**(access.hub_settings() if access else {}), **(tls or {})})
-    except BaseException:
+    with ExitStack() as undo:  # what is set up before the run's own try: undone if a later step fails
+        access = RunAccess(keys, range(exp.agents.count), admit) if auth else None
         if access:
-            access.close()
-        raise
-    children = Children(log_dir)
+            undo.callback(access.close)
+        # the fork server first: it is spawned, never forked, but it needs no session of ours
+        try:
+            children = Children(log_dir, fork_agents=fork_agents)
+        except ForkServerError as exc:
+            raise RunError(str(exc)) from None
+        t_server = time.perf_counter()
+        undo.callback(children.kill_all)
+        session, endpoint = open_hub(listen, settings={**(access.hub_settings() if access else {}), **(tls or {})})
+        undo.pop_all()
     coord = Coordinator(exp, resolved.scenario(), resolved.allocator_cls, resolved.targets, keys, session, out_dir,
                         where)
     started: list[str] = []
@@ -104,11 +111,14 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         def identity(process: str) -> list[str]:
             return ["--credentials", access.credentials(process)] if access else []
 
-        children.spawn("netem", "swarmbed.netem", [*common, *identity("netem"), "--out", str(out_dir)])
-        for i in range(exp.agents.count):
-            if where[i] == LOCAL:
-                children.spawn(f"agent_{i}", "swarmbed.agent_runtime",
-                               [*common, *identity(agent_user(i)), "--id", str(i)])
+        try:
+            children.spawn("netem", "swarmbed.netem", [*common, *identity("netem"), "--out", str(out_dir)])
+            for i in range(exp.agents.count):
+                if where[i] == LOCAL:
+                    children.spawn(f"agent_{i}", "swarmbed.agent_runtime",
+                                   [*common, *identity(agent_user(i)), "--id", str(i)])
+        except ForkServerError as exc:
+            raise RunError(str(exc)) from None
         hosts = {}
         if remote:
             try:
@@ -141,6 +151,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                 stop_agents(session, host, keys.run_id, [agent], incarnation)
 
         coord.place, coord.unplace = place, unplace
+        t_spawned = time.perf_counter()
         results.write_json(out_dir / DEPLOYMENT, {"run_id": keys.run_id, "hub": [endpoint, *listen],
                                                   "placement": {str(i): h for i, h in where.items()}, "hosts": hosts})
         try:
@@ -165,6 +176,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         finally:
             bar.close()
         rss = children.rss_mb()
+        shared = {k: v for k, v in children.shared_mb().items() if k.startswith("agent_")}
         peak = children.peak_rss_mb()
         usage = resource.getrusage(resource.RUSAGE_SELF)
         peak["coordinator"] = usage.ru_maxrss / 1024
@@ -187,6 +199,10 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             "cpu_s": {"coordinator": usage.ru_utime + usage.ru_stime, "netem": cpu.get("netem"),
                       "agents_total": sum(agent_cpu), "agent_max": max(agent_cpu, default=None)},
             "agent_rss_mb_mean": sum(agent_rss) / len(agent_rss) if agent_rss else None,
+            "agent_pss_mb_mean": sum(p for p, _ in shared.values()) / len(shared) if shared else None,
+            "agent_uss_mb_mean": sum(u for _, u in shared.values()) / len(shared) if shared else None,
+            "startup": {"fork_server_s": t_server - t_start if children.forked else None,
+                        "spawn_s": t_spawned - t_server, "join_s": t_joined - t_spawned},
             "exit_codes": exit_codes,
         }
         summary = coord.write_results(timings)

@@ -222,6 +222,8 @@ class Proxy:
     def _route(self, w: World) -> None:
         self.answer_by = None
         self.routed = w.tick
+        if w.tick == 0:
+            log.info("netem: tick 0 routed; the run is under way")
         outs = self.outs.pop(w.tick, {})
         late = [a for a in w.ids if a not in outs and a not in self.lost]  # only ever on the real-time clock
         members = set(w.ids)

@@ -23,7 +23,14 @@ LONG_NOOP = ["--set", "allocator={name: noop, peers: 2}", "--set", "scenario.ini
 
 
 def _agents_of(runner: psutil.Process) -> list[psutil.Process]:
-    return [p for p in runner.children() if "agent_runtime" in " ".join(p.cmdline())]
+    return [p for p in runner.children(recursive=True) if "agent_runtime" in " ".join(p.cmdline())]
+
+
+def _under_way(run_dir) -> bool:
+    try:
+        return "tick 0 routed" in (run_dir / "logs" / "netem.log").read_text()
+    except OSError:
+        return False
 
 
 @pytest.mark.parametrize("allow", [False, True])
@@ -35,10 +42,10 @@ def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
     runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(runner.pid)
     deadline = time.monotonic() + 60
-    while len(_agents_of(proc)) < 5 or not (tmp_path / "logs").exists():
+    while len(_agents_of(proc)) < 5 or not _under_way(tmp_path):
         assert runner.poll() is None and time.monotonic() < deadline, runner.communicate()
         time.sleep(0.1)
-    time.sleep(1.5)  # well into the run
+    time.sleep(0.5)  # well into the run
     children = proc.children(recursive=True)
     victim = next(p for p in _agents_of(proc) if "--id 2" in " ".join(p.cmdline()))
     killed_at = time.monotonic()
@@ -66,10 +73,10 @@ def _start_long_run(tmp_path):
     runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(runner.pid)
     deadline = time.monotonic() + 60
-    while len(_agents_of(proc)) < 5:
+    while len(_agents_of(proc)) < 5 or not _under_way(tmp_path):
         assert runner.poll() is None and time.monotonic() < deadline, runner.communicate()
         time.sleep(0.1)
-    time.sleep(1.5)
+    time.sleep(0.5)
     return runner, proc, proc.children(recursive=True)
 
 

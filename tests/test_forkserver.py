@@ -1,0 +1,59 @@
+"""Agents forked from the fork server: the same results as fresh interpreters, visible in ps under
+their own command line, and gone with whatever dies above them."""
+
+import signal
+import subprocess
+import sys
+import time
+
+import psutil
+
+from swarmbed.experiments.runner import run_experiment
+from tests.conftest import QUICKSTART, ROOT, experiment, same_results
+
+
+def test_forked_agents_give_the_results_of_fresh_interpreters(tmp_path):
+    sets = ["allocator={name: cbba}", "run.duration=300", "run.stop_when_done=false"]
+    forked = run_experiment(experiment(*sets), tmp_path / "forked", progress=False, fork_agents=True)
+    fresh = run_experiment(experiment(*sets), tmp_path / "fresh", progress=False, fork_agents=False)
+    same_results(tmp_path / "fresh", tmp_path / "forked")
+    assert forked.timings["startup"]["fork_server_s"] is not None and fresh.timings["startup"]["fork_server_s"] is None
+    # forked agents share what the server imported: each holds less of its own
+    assert forked.timings["agent_uss_mb_mean"] < fresh.timings["agent_uss_mb_mean"]
+
+
+def _run_until_under_way(tmp_path) -> tuple[subprocess.Popen, psutil.Process]:
+    cmd = [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
+           "--set", "allocator={name: noop, peers: 2}", "--set", "run.stop_when_done=false",
+           "--set", "run.duration=1000000"]
+    runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while "tick 0 routed" not in ((tmp_path / "logs" / "netem.log").read_text()
+                                  if (tmp_path / "logs" / "netem.log").exists() else ""):
+        assert runner.poll() is None and time.monotonic() < deadline, runner.communicate()
+        time.sleep(0.1)
+    return runner, psutil.Process(runner.pid)
+
+
+def test_forked_agents_show_their_command_line_and_die_with_the_launcher(tmp_path):
+    runner, proc = _run_until_under_way(tmp_path)
+    everyone = proc.children(recursive=True)
+    agents = [p for p in everyone if "-m swarmbed.agent_runtime" in " ".join(p.cmdline())]
+    assert sorted(int(" ".join(p.cmdline()).split("--id ")[1].split()[0]) for p in agents) == [0, 1, 2, 3, 4]
+    server = next(p for p in everyone if "swarmbed.experiments.forkserver" in " ".join(p.cmdline()))
+    assert all(a.ppid() == server.pid for a in agents)
+    runner.send_signal(signal.SIGKILL)  # no clean-up code runs: the kernel's death signals must do it
+    runner.communicate(timeout=30)
+    _, alive = psutil.wait_procs(everyone, timeout=15)
+    assert not alive, f"orphans: {[(p.pid, p.cmdline()[:4]) for p in alive]}"
+
+
+def test_a_dead_fork_server_takes_its_agents_and_the_run_says_so(tmp_path):
+    runner, proc = _run_until_under_way(tmp_path)
+    everyone = proc.children(recursive=True)
+    server = next(p for p in everyone if "swarmbed.experiments.forkserver" in " ".join(p.cmdline()))
+    server.send_signal(signal.SIGKILL)
+    _, err = runner.communicate(timeout=60)
+    assert runner.returncode == 1 and "stopped at tick" in err and "agent" in err
+    _, alive = psutil.wait_procs(everyone, timeout=15)
+    assert not alive
