@@ -1,11 +1,14 @@
-"""CBBA, GRAPE and FCG on the SPACE MT-SR scenario: simulated seconds per wall second and the peak
-RSS of the largest process, at 10, 50 and 100 agents over 3000 simulated seconds.
+"""CBBA, GRAPE and FCG on the SPACE MT-SR scenario: simulated seconds per wall second, the peak
+RSS of the largest process and the memory the agents hold, at 10, 50 and 100 agents over 3000
+simulated seconds and at 200 and 500 over a shorter horizon (``--large-duration``).
 
-    python benchmarks/allocators.py                 # the full table (about 10 minutes)
+    python benchmarks/allocators.py                          # N = 10, 50, 100 (about 10 minutes)
+    python benchmarks/allocators.py --n 200 500 --allocators fcg cbba
     python benchmarks/allocators.py --n 10 --duration 500
 
 Printed next to the public SPACE simulator's own figures, measured on this machine kind
-(single process, v1.2.12): 50 agents CBBA 130, GRAPE 230, FCG 640; 100 agents 19, 84, 264.
+(single process, v1.2.12): 50 agents CBBA 130, GRAPE 230, FCG 640; 100 agents 19, 84, 264;
+200 agents CBBA 3.3, GRAPE 27 (as the speed issue quotes them).
 """
 
 from __future__ import annotations
@@ -20,18 +23,21 @@ from swarmbed.experiments.runner import run_experiment
 ROOT = Path(__file__).resolve().parent.parent
 
 SPACE_REFERENCE = {(50, "cbba"): 130, (50, "grape"): 230, (50, "fcg"): 640,
-                   (100, "cbba"): 19, (100, "grape"): 84, (100, "fcg"): 264}
+                   (100, "cbba"): 19, (100, "grape"): 84, (100, "fcg"): 264,
+                   (200, "cbba"): 3.3, (200, "grape"): 27}
+LARGE = 200  # from this many agents on, the shorter horizon
 
 
 def measure(n: int, allocator: str, duration: float) -> dict:
     exp = cfg.load(ROOT / "experiments" / "space_mtsr.yaml",
                    [f"agents.count={n}", f"allocator.name={allocator}", f"run.duration={duration}",
-                    "run.stop_when_done=false"])
+                    "run.stop_when_done=false", "run.join_timeout=600"])
     with tempfile.TemporaryDirectory() as out:
         result = run_experiment(exp, Path(out), progress=False)
     t = result.timings
     return {"sim_per_wall": exp.run.dt * (result.summary["ticks"]) / t["run_s"],
             "peak_rss_mb": max(t["peak_rss_mb"].values()), "startup_s": t["startup_s"],
+            "agents_uss_gb": t["agent_uss_mb_mean"] * n / 1024,
             "bytes": result.summary["network"]["bytes_sent"]}
 
 
@@ -40,16 +46,19 @@ def main() -> None:
     ap.add_argument("--n", type=int, nargs="+", default=[10, 50, 100])
     ap.add_argument("--allocators", nargs="+", default=["cbba", "grape", "fcg"])
     ap.add_argument("--duration", type=float, default=3000.0)
+    ap.add_argument("--large-duration", type=float, default=300.0, help=f"horizon from {LARGE} agents on")
     args = ap.parse_args()
-    print(f"{'N':>4} {'allocator':>9} {'sim s/wall s':>13} {'SPACE':>6} {'ratio':>6} {'peak RSS MB':>12} "
-          f"{'start-up s':>10} {'payload MB':>10}")
+    print(f"{'N':>4} {'allocator':>9} {'sim s':>6} {'sim s/wall s':>13} {'SPACE':>6} {'ratio':>6} {'peak RSS MB':>12} "
+          f"{'agents USS GB':>13} {'start-up s':>10} {'payload MB':>10}")
     for n in args.n:
+        duration = args.large_duration if n >= LARGE else args.duration
         for name in args.allocators:
-            m = measure(n, name, args.duration)
+            m = measure(n, name, duration)
             ref = SPACE_REFERENCE.get((n, name))
             ratio = f"{m['sim_per_wall'] / ref:6.2f}" if ref else f"{'-':>6}"
-            print(f"{n:>4} {name:>9} {m['sim_per_wall']:>13.1f} {ref or '-':>6} {ratio} {m['peak_rss_mb']:>12.0f} "
-                  f"{m['startup_s']:>10.1f} {m['bytes'] / 1e6:>10.2f}", flush=True)
+            print(f"{n:>4} {name:>9} {duration:>6.0f} {m['sim_per_wall']:>13.1f} {ref or '-':>6} {ratio} "
+                  f"{m['peak_rss_mb']:>12.0f} {m['agents_uss_gb']:>13.2f} {m['startup_s']:>10.1f} "
+                  f"{m['bytes'] / 1e6:>10.2f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -1,11 +1,13 @@
-"""Lock-step throughput: swarmbed (no-op allocator, each agent messages 5 peers per tick) next to a
-raw Zenoh baseline measured in the same run (a hub ticks N client processes; each sends one message
-through a relay process to 5 others, waits for the 5 it is owed, then replies).
+"""Lock-step throughput: swarmbed (no-op allocator, each agent messages 5 peers per tick) next to two
+raw Zenoh baselines measured in the same run: the relay (a hub ticks N client processes; each sends
+one message through a relay process to 5 others, waits for the 5 it is owed, then replies) and the
+bare barrier floor (one sample in and one out per client per tick, nothing else).
 
     python benchmarks/lockstep.py            # N = 10, 50, 100
     python benchmarks/lockstep.py --n 10 20  # other sizes
 
-Prints ticks per second of both, their ratio, swarmbed's start-up time and RSS per agent process.
+Prints ticks per second of all three, swarmbed's ratio to each, its start-up time and the memory
+each agent process holds of its own (USS).
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ ROOT = Path(__file__).resolve().parent.parent
 BLOCK = zenoh.CongestionControl.BLOCK
 
 
-def raw_baseline(n: int, ticks: int) -> float:
+def raw_baseline(n: int, ticks: int, fanout: int = 5) -> float:
+    """Ticks per second of ``n`` raw Zenoh clients; ``fanout`` 0: the bare barrier (no relay)."""
     session, endpoint = open_hub()
     ns = f"bench/{time.monotonic_ns()}"
     alive: queue.SimpleQueue = queue.SimpleQueue()
@@ -40,11 +43,12 @@ def raw_baseline(n: int, ticks: int) -> float:
     relay_pub = session.declare_publisher(f"{ns}/relay", congestion_control=BLOCK)
     script = str(ROOT / "benchmarks" / "raw_zenoh.py")
     env_cmd = [sys.executable, script]
-    procs = [subprocess.Popen([*env_cmd, "relay", "--ns", ns, "--connect", endpoint, "--n", str(n)], cwd=ROOT)]
-    procs += [subprocess.Popen([*env_cmd, "client", "--ns", ns, "--connect", endpoint, "--id", str(i)], cwd=ROOT)
-              for i in range(n)]
+    procs = [subprocess.Popen([*env_cmd, "relay", "--ns", ns, "--connect", endpoint, "--n", str(n)], cwd=ROOT)
+             ] if fanout else []
+    procs += [subprocess.Popen([*env_cmd, "client", "--ns", ns, "--connect", endpoint, "--id", str(i),
+                                "--fanout", str(fanout)], cwd=ROOT) for i in range(n)]
     try:
-        for _ in range(n + 1):
+        for _ in range(len(procs)):
             alive.get(timeout=120)
         t0 = time.perf_counter()
         for k in range(ticks):
@@ -77,7 +81,7 @@ def swarmbed_run(n: int, ticks: int, auth: bool = True) -> dict:
     with tempfile.TemporaryDirectory() as out:
         result = run_experiment(exp, Path(out), progress=False, auth=auth)
     t = result.timings
-    return {"ticks_per_s": t["ticks_per_s"], "startup_s": t["startup_s"], "rss_mb": t["agent_rss_mb_mean"],
+    return {"ticks_per_s": t["ticks_per_s"], "startup_s": t["startup_s"], "uss_mb": t["agent_uss_mb_mean"],
             "copies": result.summary["network"]["copies"]}
 
 
@@ -86,14 +90,16 @@ def main() -> None:
     ap.add_argument("--n", type=int, nargs="+", default=[10, 50, 100])
     ap.add_argument("--seconds", type=float, default=6.0, help="rough measuring time per case")
     args = ap.parse_args()
-    print(f"{'N':>4} {'raw ticks/s':>12} {'swarmbed ticks/s':>17} {'ratio':>6} {'startup s':>10} {'RSS/agent MB':>13}")
+    print(f"{'N':>4} {'barrier ticks/s':>15} {'relay ticks/s':>13} {'swarmbed ticks/s':>17} {'/barrier':>8} "
+          f"{'/relay':>6} {'startup s':>10} {'USS/agent MB':>13}")
     for n in args.n:
         guess = {10: 800, 50: 120, 100: 40}.get(n, max(20, 4000 // n))
         ticks = max(50, int(guess * args.seconds))
+        floor = raw_baseline(n, 2 * ticks, fanout=0)
         raw = raw_baseline(n, ticks)
         ours = swarmbed_run(n, ticks)
-        print(f"{n:>4} {raw:>12.1f} {ours['ticks_per_s']:>17.1f} {ours['ticks_per_s'] / raw:>6.2f} "
-              f"{ours['startup_s']:>10.1f} {ours['rss_mb']:>13.1f}", flush=True)
+        print(f"{n:>4} {floor:>15.1f} {raw:>13.1f} {ours['ticks_per_s']:>17.1f} {ours['ticks_per_s'] / floor:>8.2f} "
+              f"{ours['ticks_per_s'] / raw:>6.2f} {ours['startup_s']:>10.1f} {ours['uss_mb']:>13.1f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 """The raw Zenoh baseline's processes: a client (ticked by the bench, relays one message, replies)
-and the relay. Started by ``benchmarks/lockstep.py``; not part of swarmbed."""
+and the relay; with ``--fanout 0`` the bare barrier (a client replies to each tick at once, no
+relay). Started by ``benchmarks/lockstep.py``; not part of swarmbed."""
 
 import argparse
 import queue
@@ -12,7 +13,7 @@ from swarmbed.wire.session import zenoh_config
 BLOCK = zenoh.CongestionControl.BLOCK
 
 
-def client(s: zenoh.Session, ns: str, i: int) -> None:
+def client(s: zenoh.Session, ns: str, i: int, fanout: int) -> None:
     events: queue.SimpleQueue = queue.SimpleQueue()
     subs = [s.declare_subscriber(f"{ns}/c/{i}/tick", lambda x: events.put(("tick", x.payload.to_bytes()))),
             s.declare_subscriber(f"{ns}/c/{i}/relay", lambda x: events.put(("relay", x.payload.to_bytes())))]
@@ -27,13 +28,14 @@ def client(s: zenoh.Session, ns: str, i: int) -> None:
             (k,) = struct.unpack("<q", data)
             if k < 0:
                 break
-            to_relay.put(struct.pack("<qq", k, i) + b"\0" * 16)
+            if fanout:
+                to_relay.put(struct.pack("<qq", k, i) + b"\0" * 16)
             waiting = k
         else:
             k = struct.unpack("<q", data[:8])[0]
             relayed[k] = relayed.get(k, 0) + 1
-        if waiting is not None and relayed.get(waiting, 0) >= FANOUT:
-            relayed.pop(waiting)
+        if waiting is not None and relayed.get(waiting, 0) >= fanout:
+            relayed.pop(waiting, None)
             done.put(struct.pack("<qq", waiting, i))
             waiting = None
     token.undeclare()
@@ -70,6 +72,7 @@ if __name__ == "__main__":
     ap.add_argument("--connect", required=True)
     ap.add_argument("--id", type=int, default=0)
     ap.add_argument("--n", type=int, default=0)
+    ap.add_argument("--fanout", type=int, default=FANOUT, help="messages each client waits for per tick (0: none)")
     a = ap.parse_args()
     with zenoh.open(zenoh_config("client", connect=[a.connect])) as session:
-        client(session, a.ns, a.id) if a.role == "client" else relay(session, a.ns, a.n)
+        client(session, a.ns, a.id, a.fanout) if a.role == "client" else relay(session, a.ns, a.n)
