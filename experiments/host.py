@@ -180,7 +180,8 @@ def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_co
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     private = Path(tempfile.mkdtemp(prefix=f"swarmbed-host-{name}-")) if credentials else None
-    settings: dict[str, object] = dict(tls or {})
+    # its agents connect all at once (forked by the hundred): take that many handshakes at a time
+    settings: dict[str, object] = {"transport/unicast/accept_pending": 1024, **(tls or {})}
     agent_credentials = None
     if credentials and private:
         mine, local = read_credentials(credentials), Identity.new(f"{name}-agents", "agent")

@@ -99,7 +99,12 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             raise RunError(str(exc)) from None
         t_server = time.perf_counter()
         undo.callback(children.kill_all)
-        session, endpoint = open_hub(listen, settings={**(access.hub_settings() if access else {}), **(tls or {})})
+        # every agent connects at about the same moment (the fork server starts hundreds a second):
+        # the hub must take that many handshakes at once, and that many sessions
+        capacity = {"transport/unicast/accept_pending": max(100, exp.agents.count + 16),
+                    "transport/unicast/max_sessions": max(1000, exp.agents.count + 64)}
+        session, endpoint = open_hub(listen, settings={**capacity, **(access.hub_settings() if access else {}),
+                                                       **(tls or {})})
         undo.pop_all()
     coord = Coordinator(exp, resolved.scenario(), resolved.allocator_cls, resolved.targets, keys, session, out_dir,
                         where)
