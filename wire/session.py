@@ -25,15 +25,19 @@ def zenoh_config(
     config_file: str | None = None,
     credentials: str | None = None,
     settings: dict[str, object] | None = None,
+    connect_timeout_s: float | None = None,
 ) -> zenoh.Config:
     """A session configuration. ``credentials``: a credentials file (see
     :mod:`swarmbed.wire.credentials`) whose user and password the session presents to the router it
-    connects to; ``settings``: further configuration entries, by their path (e.g. ``access_control``)."""
+    connects to; ``settings``: further configuration entries, by their path (e.g. ``access_control``);
+    ``connect_timeout_s``: keep trying to connect that long (by default one attempt)."""
     conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+        if connect_timeout_s is not None:
+            conf.insert_json5("connect/timeout_ms", json.dumps(int(connect_timeout_s * 1000)))
     if listen:
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     if credentials:
@@ -80,13 +84,17 @@ def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client"
                         "this machine's host name)")
 
 
+CHILD_CONNECT_TIMEOUT_S = 20.0
+
+
 def open_from_args(args: argparse.Namespace) -> zenoh.Session:
     """A child process's session from its flags. One that cannot open (nothing listens there, the
     hub refuses the credentials, the credentials file is unreadable) ends the process with exit
     code 2 and a message that says where and why."""
     try:
+        # a hub that hundreds of agents reach at once refuses some connections for a moment: retry
         return zenoh.open(zenoh_config(args.mode, args.connect, args.listen, args.zenoh_config, args.credentials,
-                                       tls_from_args(args)))
+                                       tls_from_args(args), connect_timeout_s=CHILD_CONNECT_TIMEOUT_S))
     except CredentialsError as exc:
         logging.getLogger("swarmbed").error("%s", exc)
     except zenoh.ZError as exc:
