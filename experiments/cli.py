@@ -307,9 +307,10 @@ def cmd_host(args: argparse.Namespace) -> int:
         return 2
 
 
-def _client_session(args: argparse.Namespace):
+def _client_session(args: argparse.Namespace, connect_timeout_s: float | None = None):
     """A client session from the shared zenoh flags, or None after printing why it cannot open
-    (no route to the endpoint, refused credentials, an unreadable credentials file)."""
+    (no route to the endpoint within ``connect_timeout_s``, refused credentials, an unreadable
+    credentials file)."""
     import zenoh
 
     from swarmbed.wire.credentials import CredentialsError
@@ -317,7 +318,7 @@ def _client_session(args: argparse.Namespace):
 
     try:
         return zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config, args.credentials,
-                                       tls_from_args(args)))
+                                       tls_from_args(args), connect_timeout_s=connect_timeout_s))
     except CredentialsError as exc:
         print(f"error: {exc}", file=sys.stderr)
     except zenoh.ZError as exc:
@@ -350,7 +351,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
 
     from swarmbed.experiments.watch import WatchError, watch
 
-    session = _client_session(args)
+    session = _client_session(args, connect_timeout_s=args.wait)  # the run may not be up yet
     if session is None:
         return 2
     with session:
@@ -507,7 +508,8 @@ def main(argv: list[str] | None = None) -> int:
 
     wat = sub.add_parser("watch", help="a live view of a running experiment (read-only)")
     wat.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
-    wat.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the run to answer")
+    wat.add_argument("--wait", type=float, default=10.0,
+                     help="seconds to wait for the hub to listen and the run to answer")
     wat.add_argument("--map", metavar="FILE.html", help="also keep a map of the run in FILE.html (reloads itself)")
     add_zenoh_args(wat)
     wat.set_defaults(func=cmd_watch)
