@@ -92,7 +92,6 @@ class Coordinator:
         self.drops_cum: dict[str, int] = {}
         # the real-time clock's own accounting (wall-clock facts: never part of a lock-step run's files)
         self.late_ticks: dict[int, int] = {}  # agent -> ticks it missed
-        self.late_per_tick: list[int] = []
         self.start_lags: list[float] = []  # wall seconds each tick started after its time
         self.last_action: dict[int, list] = {}
         self.last_tick = -1
@@ -254,7 +253,6 @@ class Coordinator:
                     actions = {**{a: self.last_action[a] for a in step.late if a in self.last_action}, **actions}
             if self.realtime:
                 self.last_action.update(actions)
-                self.late_per_tick.append(len(step.late))
             w.apply({a: act for a, act in actions.items() if w.alive[a]})
             for name, n in step.events.items():
                 self.event_totals[name] = self.event_totals.get(name, 0) + n
@@ -543,14 +541,13 @@ class Coordinator:
         r = self.exp.run
         lags = np.asarray(self.start_lags) * 1000
         tolerance_ms = 100 * r.dt / r.speed
+        spread = ([float(v) for v in np.percentile(lags, [50, 99, 100])] if len(lags) else [None] * 3)
         return {
             "speed": r.speed, "deadline": r.deadline, "on_late": r.on_late,
             "late_ticks_total": sum(self.late_ticks.values()),
             "late_ticks": {str(a): n for a, n in sorted(self.late_ticks.items())},
             "ticks_started_late": int((lags > tolerance_ms).sum()),
-            "start_lag_ms": {"p50": float(np.percentile(lags, 50)) if len(lags) else None,
-                             "p99": float(np.percentile(lags, 99)) if len(lags) else None,
-                             "max": float(lags.max()) if len(lags) else None},
+            "start_lag_ms": dict(zip(("p50", "p99", "max"), spread)),
         }
 
     def transport(self, summary: dict) -> dict:

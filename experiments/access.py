@@ -28,8 +28,8 @@ import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
-from swarmbed.wire.credentials import Identity, dictionary_line, write_credentials
-from swarmbed.wire.keys import HOSTS, Keys
+from swarmbed.wire.credentials import Identity, write_credentials, write_dictionary
+from swarmbed.wire.keys import HOSTS, PREFIX, Keys
 
 EVERY_MESSAGE = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token",
                  "declare_liveliness_subscriber", "liveliness_query"]
@@ -57,7 +57,7 @@ def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str],
         _allow("operator-read", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
                [f"{root}/**", f"{HOSTS}/**"]),
         _allow("operator-ask", ["query"], [k.swap, f"{HOSTS}/*/info"]),
-        _allow("operator-find", ["liveliness_query"], [f"{keys.root.split('/')[0]}/*/alive/coordinator"]),
+        _allow("operator-find", ["liveliness_query"], [f"{PREFIX}/*/alive/coordinator"]),
         _allow("host-serve", ["declare_queryable", "reply", "liveliness_token"], [f"{HOSTS}/**"]),
         _allow("host-carry", ["put", "declare_subscriber", "query"], [f"{root}/agent/**", k.agent_config]),
         _allow("host-carry-alive", ["liveliness_token", "declare_liveliness_subscriber", "liveliness_query"],
@@ -104,10 +104,7 @@ class RunAccess:
         own = [Identity.new("netem", "netem")] + [Identity.new(agent_user(i), "agent") for i in self.agent_ids]
         self.files = {identity.user: write_credentials(self.folder / f"{identity.user}.json", identity)
                       for identity in own}
-        dictionary = self.folder / "hub.dictionary"
-        write_credentials(dictionary, own[0])  # created private, then filled
-        dictionary.write_text("".join(dictionary_line(i) + "\n" for i in own + self.admitted))
-        self.dictionary = dictionary
+        self.dictionary = write_dictionary(self.folder / "hub.dictionary", own + self.admitted)
 
     def credentials(self, process: str) -> str:
         """The credentials file of ``netem`` or ``agent-<i>``."""

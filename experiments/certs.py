@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import datetime
 import ipaddress
-import os
 from pathlib import Path
+
+from swarmbed.wire.credentials import open_private
 
 CA = "ca"
 
@@ -34,9 +35,7 @@ def _crypto():
 
 def _write_key(path: Path, key) -> None:
     _, _, serialization, _, _, _ = _crypto()
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "wb") as f:
-        os.fchmod(f.fileno(), 0o600)
+    with open_private(path, "wb") as f:
         f.write(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
                                   serialization.NoEncryption()))
 

@@ -31,7 +31,7 @@ import psutil
 import zenoh
 
 from swarmbed.experiments.launcher import AGENT_MODULE, Children, ForkServerError
-from swarmbed.wire.credentials import Identity, dictionary_line, read_credentials, write_credentials
+from swarmbed.wire.credentials import Identity, read_credentials, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, HostKeys, host_name_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
@@ -179,15 +179,15 @@ def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_co
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    private = Path(tempfile.mkdtemp(prefix=f"swarmbed-host-{name}-")) if credentials else None
     # its agents connect all at once (forked by the hundred): take that many handshakes at a time
     settings: dict[str, object] = {"transport/unicast/accept_pending": 1024, **(tls or {})}
+    private: Path | None = None
     agent_credentials = None
-    if credentials and private:
+    if credentials:
         mine, local = read_credentials(credentials), Identity.new(f"{name}-agents", "agent")
+        private = Path(tempfile.mkdtemp(prefix=f"swarmbed-host-{name}-"))
         agent_credentials = str(write_credentials(private / "agents.json", local))
-        dictionary = write_credentials(private / "router.dictionary", local)
-        dictionary.write_text(dictionary_line(local) + "\n")
+        dictionary = write_dictionary(private / "router.dictionary", [local])
         settings["transport/auth/usrpwd"] = {"user": mine.user, "password": mine.password,
                                              "dictionary_file": str(dictionary)}
     try:

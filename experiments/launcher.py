@@ -154,16 +154,15 @@ class Children:
         self.server: ForkServer | None = ForkServer(log_dir / "forkserver.log") if fork_agents else None
 
     def spawn(self, name: str, module: str, args: list[str]) -> subprocess.Popen | ForkedProcess:
+        log_path = self.log_dir / f"{name}.log"
+        proc: subprocess.Popen | ForkedProcess
         if module == AGENT_MODULE and self.server is not None:
-            proc: subprocess.Popen | ForkedProcess = self.server.spawn(name, args, self.log_dir / f"{name}.log")
-            self.procs[name] = proc
-            self.started_at[name] = time.monotonic()
-            return proc
-        log = open(self.log_dir / f"{name}.log", "wb")
-        cmd = [sys.executable, "-m", module, *args, "--parent-pid", str(os.getpid())]
-        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                start_new_session=True, close_fds=True)
-        log.close()
+            proc = self.server.spawn(name, args, log_path)
+        else:
+            with open(log_path, "wb") as log:
+                proc = subprocess.Popen([sys.executable, "-m", module, *args, "--parent-pid", str(os.getpid())],
+                                        stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                        start_new_session=True, close_fds=True)
         self.procs[name] = proc
         self.started_at[name] = time.monotonic()
         return proc

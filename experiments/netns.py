@@ -18,6 +18,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -121,6 +122,8 @@ class Lab:
                     pass
             time.sleep(0.05)
         daemon.wait(timeout=10)
+        for private in Path(tempfile.gettempdir()).glob(f"swarmbed-host-{name}-*"):  # its identities, never removed
+            shutil.rmtree(private, ignore_errors=True)
 
     def pids(self, name: str) -> list[str]:
         ns = self.namespaces[list(self.daemons).index(name)]

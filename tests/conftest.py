@@ -27,6 +27,14 @@ def same_results(a: Path, b: Path) -> None:
         assert (a / name).read_bytes() == (b / name).read_bytes(), f"{name} differs"
 
 
+def under_way(run_dir: Path) -> bool:
+    """Whether the run writing to ``run_dir`` has routed its first tick (the proxy logs it)."""
+    try:
+        return "tick 0 routed" in (run_dir / "logs" / "netem.log").read_text()
+    except OSError:
+        return False
+
+
 def read_ledger(run_dir: Path) -> list[dict]:
     with open(run_dir / "network_ledger.csv") as f:
         return [{**r, "tick": int(r["tick"]), "sender": int(r["sender"]), "messages": int(r["messages"]),

@@ -16,7 +16,7 @@ from swarmbed.wire.codec import EMPTY_INBOX, MAX_AGENT_SAMPLE_BYTES, encode_tick
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
 from swarmbed.wire.session import zenoh_config
-from tests.conftest import QUICKSTART, ROOT, experiment
+from tests.conftest import QUICKSTART, ROOT, experiment, under_way
 
 LONG_NOOP = ["--set", "allocator={name: noop, peers: 2}", "--set", "scenario.initial_tasks=0",
              "--set", "run.stop_when_done=false", "--set", "run.duration=1000000"]
@@ -24,13 +24,6 @@ LONG_NOOP = ["--set", "allocator={name: noop, peers: 2}", "--set", "scenario.ini
 
 def _agents_of(runner: psutil.Process) -> list[psutil.Process]:
     return [p for p in runner.children(recursive=True) if "agent_runtime" in " ".join(p.cmdline())]
-
-
-def _under_way(run_dir) -> bool:
-    try:
-        return "tick 0 routed" in (run_dir / "logs" / "netem.log").read_text()
-    except OSError:
-        return False
 
 
 @pytest.mark.parametrize("allow", [False, True])
@@ -42,7 +35,7 @@ def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
     runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(runner.pid)
     deadline = time.monotonic() + 60
-    while len(_agents_of(proc)) < 5 or not _under_way(tmp_path):
+    while len(_agents_of(proc)) < 5 or not under_way(tmp_path):
         assert runner.poll() is None and time.monotonic() < deadline, runner.communicate()
         time.sleep(0.1)
     time.sleep(0.5)  # well into the run
@@ -73,7 +66,7 @@ def _start_long_run(tmp_path):
     runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(runner.pid)
     deadline = time.monotonic() + 60
-    while len(_agents_of(proc)) < 5 or not _under_way(tmp_path):
+    while len(_agents_of(proc)) < 5 or not under_way(tmp_path):
         assert runner.poll() is None and time.monotonic() < deadline, runner.communicate()
         time.sleep(0.1)
     time.sleep(0.5)

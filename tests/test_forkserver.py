@@ -1,15 +1,19 @@
 """Agents forked from the fork server: the same results as fresh interpreters, visible in ps under
 their own command line, and gone with whatever dies above them."""
 
+import json
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import psutil
 
 from swarmbed.experiments.runner import run_experiment
-from tests.conftest import QUICKSTART, ROOT, experiment, same_results
+from tests.conftest import QUICKSTART, ROOT, experiment, same_results, under_way
 
 
 def test_forked_agents_give_the_results_of_fresh_interpreters(tmp_path):
@@ -28,8 +32,7 @@ def _run_until_under_way(tmp_path) -> tuple[subprocess.Popen, psutil.Process]:
            "--set", "run.duration=1000000"]
     runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
-    while "tick 0 routed" not in ((tmp_path / "logs" / "netem.log").read_text()
-                                  if (tmp_path / "logs" / "netem.log").exists() else ""):
+    while not under_way(tmp_path):
         assert runner.poll() is None and time.monotonic() < deadline, runner.communicate()
         time.sleep(0.1)
     return runner, psutil.Process(runner.pid)
@@ -46,6 +49,9 @@ def test_forked_agents_show_their_command_line_and_die_with_the_launcher(tmp_pat
     runner.communicate(timeout=30)
     _, alive = psutil.wait_procs(everyone, timeout=15)
     assert not alive, f"orphans: {[(p.pid, p.cmdline()[:4]) for p in alive]}"
+    run_id = json.loads((tmp_path / "deployment.json").read_text())["run_id"]
+    for private in Path(tempfile.gettempdir()).glob(f"swarmbed-{run_id}-*"):  # the killed launcher's identities
+        shutil.rmtree(private)
 
 
 def test_a_dead_fork_server_takes_its_agents_and_the_run_says_so(tmp_path):

@@ -12,8 +12,10 @@ import json
 import os
 import secrets
 import stat
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import IO
 
 # roles a credentials file made by ``swarmbed credentials`` may have; the processes a run spawns
 # itself get their own identities (netem, agent-<id>) from the launcher
@@ -37,14 +39,20 @@ class Identity:
         return cls(user, secrets.token_urlsafe(24), role)
 
 
+def open_private(path: str | Path, mode: str = "w") -> IO:
+    """``path`` opened for writing (``"w"`` or ``"wb"``), emptied and readable by its owner only
+    (mode 600, also when it existed before)."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    f = os.fdopen(fd, mode)
+    os.fchmod(fd, 0o600)  # an existing file keeps its mode through O_CREAT
+    return f
+
+
 def write_credentials(path: Path, identity: Identity) -> Path:
     """Write ``identity`` to ``path``, created readable and writable by its owner only."""
-    path = Path(path)
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w") as f:
-        os.fchmod(f.fileno(), 0o600)  # an existing file keeps its mode through O_CREAT
+    with open_private(path) as f:
         json.dump(asdict(identity), f)
-    return path
+    return Path(path)
 
 
 def read_credentials(path: str | Path) -> Identity:
@@ -66,6 +74,9 @@ def read_credentials(path: str | Path) -> Identity:
     return identity
 
 
-def dictionary_line(identity: Identity) -> str:
-    """The line of a Zenoh usrpwd dictionary file that admits ``identity``."""
-    return f"{identity.user}:{identity.password}"
+def write_dictionary(path: Path, identities: Iterable[Identity]) -> Path:
+    """A Zenoh usrpwd dictionary file (``user:password`` lines) admitting ``identities``, created
+    readable by its owner only."""
+    with open_private(path) as f:
+        f.writelines(f"{i.user}:{i.password}\n" for i in identities)
+    return Path(path)
