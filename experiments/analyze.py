@@ -1,4 +1,4 @@
-"""``swarmbed analyze SWEEP_DIR [SWEEP_DIR ...]``: tables and figures from sweeps' ``sweep.csv``.
+"""``swarmbed analyze SWEEP_DIR [SWEEP_DIR ...]``: tables and figures from sweeps' ``sweep.parquet`` (or ``sweep.csv``).
 
 - ``scenario_summary.csv`` / ``.md``: per scenario and metric, n, mean, sd, median and the 95 %
   confidence interval of the mean (Student t).
@@ -28,7 +28,7 @@ import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from swarmbed.experiments.stats import compare  # noqa: E402
-from swarmbed.experiments.sweep import SPEC, TABLE  # noqa: E402
+from swarmbed.experiments.sweep import PARQUET, SPEC, TABLE, read_table  # noqa: E402
 
 METRICS = {
     "mission_time": "mission completion time (s)",
@@ -60,10 +60,10 @@ class AnalyzeError(ValueError):
 def load(sweep_dirs: list[Path]) -> pd.DataFrame:
     frames = []
     for sweep_dir in sweep_dirs:
-        table, spec = sweep_dir / TABLE, sweep_dir / SPEC
-        if not table.exists() or not spec.exists():
+        spec = sweep_dir / SPEC
+        if not spec.exists() or not ((sweep_dir / TABLE).exists() or (sweep_dir / PARQUET).exists()):
             raise AnalyzeError(f"{sweep_dir}: no {TABLE} / {SPEC}; run `swarmbed sweep` into it first")
-        df = pd.read_csv(table)
+        df = read_table(sweep_dir)
         df["sweep"] = json.loads(spec.read_text())["name"]
         frames.append(df)
     df = pd.concat(frames, ignore_index=True)

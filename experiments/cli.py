@@ -10,6 +10,7 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from swarmbed.agent_runtime.bt import BTError, load_tree, palette_xml
 from swarmbed.agent_runtime.node_sets import node_registry
@@ -17,6 +18,9 @@ from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments import config as cfg
 from swarmbed.plugins import registry
 from swarmbed.wire.session import add_zenoh_args
+
+if TYPE_CHECKING:
+    from swarmbed.experiments.executors import Executor
 
 
 def _keys_epilog() -> str:
@@ -194,15 +198,57 @@ def cmd_params(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_sweep(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.sweep import load_sweep, run_sweep
+def _sweep_executor(args: argparse.Namespace, out: Path) -> Executor:
+    from swarmbed.experiments import executors
 
+    if args.executor != "slurm" and (args.slurm_partition or args.slurm_cluster or args.detach):
+        raise executors.ExecutorError("--slurm-*, --detach: only with --executor slurm")
+    if args.executor != "dask" and args.scheduler:
+        raise executors.ExecutorError("--scheduler: only with --executor dask")
+    return executors.get(args.executor, jobs=args.jobs, folder=out / ".submitit", partition=args.slurm_partition,
+                         time=args.slurm_time, parallel=args.jobs, cluster=args.slurm_cluster, detach=args.detach,
+                         scheduler=args.scheduler)
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from swarmbed.experiments.executors import ExecutorError
+    from swarmbed.experiments.sweep import load_sweep, run_sweep, status
+
+    if args.status:
+        try:
+            table = status(Path(args.status), args.stale_after)
+        except cfg.ConfigError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        table.loc["all"] = table.sum()
+        print(table.fillna(0).astype(int).to_string())
+        return 0
+    if not args.sweep:
+        print("error: give a sweep file (or --status DIR)", file=sys.stderr)
+        return 2
     sweep = load_sweep(args.sweep, args.runs, args.grid, args.set, args.seed)
     out = Path(args.out) if args.out else Path("runs") / sweep.name
-    table = run_sweep(sweep, out, args.jobs, progress=not args.no_progress)
+    try:
+        executor = _sweep_executor(args, out)
+    except ExecutorError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        table = run_sweep(sweep, out, args.jobs, progress=not args.no_progress and not args.detach,
+                          executor=executor, stale_after=args.stale_after)
+    except ExecutorError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.detach:
+        print(f"submitted: {executor.describe()}\nprogress: swarmbed sweep --status {out}\n"
+              f"when they are done, the same command again writes {out}/sweep.csv and sweep.parquet")
+        return 0
     ok = table[table["status"] == "ok"]
     print(f"sweep: {out}/sweep.csv  ({len(ok)} of {len(table)} runs complete, "
-          f"{len(sweep.scenarios)} scenarios x {sweep.runs} runs)")
+          f"{len(sweep.scenarios)} scenarios x {sweep.runs} runs; {executor.describe()})")
+    held = int((table["status"] == "running").sum())
+    if held:
+        print(f"{held} runs are held by another sweep command on {out}: swarmbed sweep --status {out}")
     metrics: list[str] = []
     for kind in ok["scenario_kind"].dropna().unique() if "scenario_kind" in ok else ():
         metrics += [m for m in registry.resolve_scenario(kind).outcome_metrics if m not in metrics]
@@ -451,9 +497,22 @@ def main(argv: list[str] | None = None) -> int:
     par.set_defaults(func=cmd_params)
 
     sw = sub.add_parser("sweep", help="Monte Carlo runs over scenarios, in parallel and resumable")
-    sw.add_argument("sweep", help="sweep YAML (base + scenarios/grid + runs) or a plain experiment")
+    sw.add_argument("sweep", nargs="?", help="sweep YAML (base + scenarios/grid + runs) or a plain experiment")
+    sw.add_argument("--status", metavar="DIR", help="print done / running / failed / missing runs per scenario")
     sw.add_argument("--out", help="sweep directory (default: runs/<name>)")
-    sw.add_argument("--jobs", "-j", type=_positive, help="runs at once (default: one per core)")
+    sw.add_argument("--jobs", "-j", type=_positive,
+                    help="runs at once (local: default one per core; slurm: the array's parallelism)")
+    sw.add_argument("--executor", choices=["local", "slurm", "dask"], default="local",
+                    help="where runs execute (default local; slurm needs swarmbed[slurm], dask swarmbed[dask])")
+    sw.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="the Dask scheduler (--executor dask)")
+    sw.add_argument("--slurm-partition", help="Slurm partition (--executor slurm)")
+    sw.add_argument("--slurm-time", default="120", help="time limit per run: minutes or H:MM:SS (default 120)")
+    sw.add_argument("--slurm-cluster", choices=["slurm", "local"],
+                    help="'local': submitit's stand-in, one process per array task on this machine (a dry run)")
+    sw.add_argument("--detach", action="store_true", help="submit the array job and return (--executor slurm)")
+    sw.add_argument("--stale-after", type=float, default=120.0, metavar="S",
+                    help="a run claimed by a process that has not shown life for S seconds is taken over "
+                         "(default 120; a dead process on this host at once)")
     sw.add_argument("--runs", "-n", type=_positive, help="runs per scenario (overrides the file)")
     sw.add_argument("--seed", type=int, help="sweep seed (overrides the file)")
     sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")

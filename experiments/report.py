@@ -27,6 +27,7 @@ from scipy import stats
 
 import swarmbed
 from swarmbed.experiments.palette import DROP_COLORS
+from swarmbed.experiments.sweep import PARQUET, TABLE, read_table
 from swarmbed.plugins.registry import PluginError, resolve_scenario
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
@@ -251,7 +252,7 @@ def _ci(values: pd.Series) -> float:
 
 def sweep_report(sweep: Path) -> tuple[str, int]:
     """The HTML of one sweep's report and how many figures it has."""
-    table = pd.read_csv(sweep / "sweep.csv")
+    table = read_table(sweep)
     ok = table[table["status"] == "ok"]
     if ok.empty:
         raise ReportError(f"{sweep}: no completed run in sweep.csv")
@@ -292,7 +293,7 @@ def report(folder: Path, out: Path | None = None) -> Path:
     """Write the report of a run or a sweep folder; returns the file."""
     if (folder / "summary.json").exists():
         text, _ = run_report(folder)
-    elif (folder / "sweep.csv").exists():
+    elif (folder / TABLE).exists() or (folder / PARQUET).exists():
         text, _ = sweep_report(folder)
     else:
         raise ReportError(f"{folder}: neither a completed run (no summary.json) nor a sweep (no sweep.csv)")

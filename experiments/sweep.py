@@ -26,29 +26,33 @@ redone. A failed run writes ``error.txt`` and does not stop the sweep. The sweep
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import itertools
 import json
-import multiprocessing
 import os
-import signal
+import socket
+import sys
+import time
 import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
-import psutil
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from tqdm import tqdm
 
 from swarmbed.coordinator import results
+from swarmbed.experiments import claims
 from swarmbed.experiments import config as cfg
+from swarmbed.experiments.executors import Executor, Outcome, resources_for
 
 TABLE = "sweep.csv"
+PARQUET = "sweep.parquet"
+ATTEMPTS = "attempts.jsonl"
 SPEC = "sweep.json"
 ERROR = "error.txt"
 
@@ -168,20 +172,38 @@ def plan(sweep: Sweep, out: Path) -> list[RunSpec]:
             for sc in sweep.scenarios for r in range(sweep.runs)]
 
 
-def _execute(spec: RunSpec) -> tuple[str, str]:
-    """One run, in a worker process. Returns (status, detail)."""
+def _record_attempt(run_dir: Path, **fields: Any) -> None:
+    """One line of ``attempts.jsonl``: where and when a run was tried and how it ended (which node
+    ran it, on a cluster; not a result file, so it never takes part in byte comparisons)."""
+    line = json.dumps({"host": socket.gethostname(), "pid": os.getpid(), "ppid": os.getppid(), **fields})
+    with open(run_dir / ATTEMPTS, "a") as f:
+        f.write(line + "\n")
+
+
+def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S) -> Outcome:
+    """One run, wherever an executor placed it: claim its directory, run it, release the claim.
+    Returns (status, detail); a run another process holds is left to it ("claimed")."""
     from swarmbed.experiments.runner import run_experiment
 
     out = Path(spec.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / ERROR).unlink(missing_ok=True)
-    try:
-        run_experiment(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra), out, progress=False)
-        return "ok", ""
-    except Exception as exc:  # a failed run is recorded, the sweep goes on (an interrupt is not a failure)
-        detail = f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}"
-        results.write_atomic(out / ERROR, detail)
-        return "failed", f"{type(exc).__name__}: {exc}"
+    claim = claims.take(out, stale_after)
+    if isinstance(claim, claims.Holder):
+        return "claimed", f"held by {claim.describe()}"
+    with claim:
+        if (out / results.SUMMARY).exists():  # completed by someone else since it was planned
+            return "ok", "done elsewhere"
+        (out / ERROR).unlink(missing_ok=True)
+        started = time.time()
+        _record_attempt(out, event="start", time=started)
+        try:
+            run_experiment(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra), out, progress=False)
+            outcome: Outcome = ("ok", "")
+        except Exception as exc:  # a failed run is recorded, the sweep goes on (an interrupt is not a failure)
+            detail = f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}"
+            results.write_atomic(out / ERROR, detail)
+            outcome = ("failed", f"{type(exc).__name__}: {exc}")
+        _record_attempt(out, event="end", time=time.time(), outcome=outcome[0], wall_s=round(time.time() - started, 3))
+        return outcome
 
 
 def flatten(summary: dict, prefix: str = "") -> dict[str, Any]:
@@ -201,102 +223,147 @@ def flatten(summary: dict, prefix: str = "") -> dict[str, Any]:
     return row
 
 
-def collect(sweep: Sweep, out: Path) -> pd.DataFrame:
+def run_status(run_dir: Path, stale_after: float = claims.STALE_AFTER_S) -> str:
+    """``ok`` (summary.json), ``running`` (a live claim), ``failed`` (error.txt), ``interrupted``
+    (a claim whose holder is gone: the next sweep command redoes it) or ``missing``."""
+    if (run_dir / results.SUMMARY).exists():
+        return "ok"
+    holder = claims.holder(run_dir)
+    if holder is not None:
+        return "running" if holder.alive(stale_after) else "interrupted"
+    return "failed" if (run_dir / ERROR).exists() else "missing"
+
+
+def collect(sweep: Sweep, out: Path, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame:
     rows = []
     for spec in plan(sweep, out):
         run_dir = Path(spec.out_dir)
         row = {"scenario": spec.scenario.name, "run": spec.index, "seed": spec.seed}
         row.update({k: json.dumps(v) if isinstance(v, (dict, list)) else v for k, v in spec.scenario.overrides})
-        summary = run_dir / results.SUMMARY
-        if summary.exists():
-            row["status"] = "ok"
-            row.update(flatten(json.loads(summary.read_text())))
+        row["status"] = run_status(run_dir, stale_after)
+        if row["status"] == "ok":
+            row.update(flatten(json.loads((run_dir / results.SUMMARY).read_text())))
             transport = run_dir / results.TRANSPORT  # measured, not reproducible: in its own columns
             if transport.exists():
                 row.update(flatten(json.loads(transport.read_text())["totals"], "wire."))
-        else:
-            row["status"] = "failed" if (run_dir / ERROR).exists() else "missing"
-            if (run_dir / ERROR).exists():
-                lines = [ln for ln in (run_dir / ERROR).read_text().split("\n\n", 1)[0].splitlines() if ln.strip()]
-                row["error"] = " | ".join(dict.fromkeys([lines[0], lines[-1]])) if lines else "unknown error"
+        elif row["status"] == "failed":
+            lines = [ln for ln in (run_dir / ERROR).read_text().split("\n\n", 1)[0].splitlines() if ln.strip()]
+            row["error"] = " | ".join(dict.fromkeys([lines[0], lines[-1]])) if lines else "unknown error"
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def _parquet_ready(table: pd.DataFrame) -> pd.DataFrame:
+    """Columns Arrow can type: an object column holding more than one kind of value (a grid over
+    numbers and names, say) is written as text."""
+    table = table.copy()
+    for name in [c for c in table.columns if table[c].dtype == object]:
+        kinds = {type(v) for v in table[name].dropna()}
+        if len(kinds) > 1:
+            table[name] = table[name].map(lambda v: v if v is None or (isinstance(v, float) and np.isnan(v))
+                                          else str(v))
+    return table
+
+
+def write_tables(table: pd.DataFrame, out: Path) -> None:
+    """``sweep.csv`` and ``sweep.parquet`` (every run's summary flattened, one file to read for
+    thousands of runs), each written whole or not at all."""
+    tmp = out / (TABLE + ".part")
+    table.to_csv(tmp, index=False)
+    os.replace(tmp, out / TABLE)
+    tmp = out / (PARQUET + ".part")
+    _parquet_ready(table).to_parquet(tmp, index=False)
+    os.replace(tmp, out / PARQUET)
+
+
+def read_table(sweep_dir: Path) -> pd.DataFrame:
+    """A sweep's table: ``sweep.parquet`` where it is at least as new as ``sweep.csv``, else the CSV."""
+    parquet, csv = sweep_dir / PARQUET, sweep_dir / TABLE
+    if parquet.exists() and (not csv.exists() or parquet.stat().st_mtime_ns >= csv.stat().st_mtime_ns):
+        return pd.read_parquet(parquet)
+    return pd.read_csv(csv)
 
 
 class SweepInterrupted(KeyboardInterrupt):
     """Ctrl-C during a sweep; the message says what completed and how to resume."""
 
 
-def _exit(signum: int, _frame: object) -> None:
-    raise SystemExit(128 + signum)
-
-
-def _leave_interrupts_to_the_main_process() -> None:
-    """Pool workers: Ctrl-C is the sweep's to handle, so that a run never records it as a failure
-    (a Python-level handler, not SIG_IGN: the runs' own children get the default action back), and
-    SIGTERM from the sweep ends the run through its cleanup (children stopped, partial files gone)."""
-    signal.signal(signal.SIGINT, lambda *_: None)
-    signal.signal(signal.SIGTERM, _exit)
-
-
-def _stop_descendants(grace: float = 10.0) -> None:
-    """Stop every process this one started. The pool workers are asked first (SIGTERM: each ends
-    its run through the runner's cleanup, which stops that run's processes); whatever is left
-    after ``grace`` seconds is killed."""
-    family = [p for p in psutil.Process().children(recursive=True)
-              if "multiprocessing.resource_tracker" not in " ".join(_cmdline(p))]
-    workers = [p for p in psutil.Process().children() if p in family]
-    for procs, stop in ((workers, psutil.Process.terminate), (family, psutil.Process.kill)):
-        for p in procs:
-            try:
-                stop(p)
-            except psutil.NoSuchProcess:
-                pass
-        psutil.wait_procs(procs, timeout=grace)
-
-
-def _cmdline(p: psutil.Process) -> list[str]:
-    try:
-        return p.cmdline()
-    except psutil.Error:
-        return []
-
-
 def _complete(specs: list[RunSpec]) -> int:
     return sum(1 for s in specs if (Path(s.out_dir) / results.SUMMARY).exists())
 
 
-def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool = True) -> pd.DataFrame:
+def write_spec(sweep: Sweep, out: Path) -> None:
+    results.write_json(out / SPEC, {"name": sweep.name, "base": str(sweep.base), "seed": sweep.seed,
+                                    "runs": sweep.runs, "factors": sweep.factors, "extra": sweep.extra,
+                                    "scenarios": {s.name: dict(s.overrides) for s in sweep.scenarios}})
+
+
+def read_spec(out: Path) -> Sweep:
+    """The sweep a directory was made by, from its ``sweep.json``."""
+    try:
+        data = json.loads((out / SPEC).read_text())
+        return Sweep(data["name"], Path(data["base"]), int(data["seed"]), int(data["runs"]),
+                     [SweepScenario(name, tuple(over.items())) for name, over in data["scenarios"].items()],
+                     list(data["factors"]), list(data["extra"]))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise cfg.ConfigError(f"{out}: not a sweep directory (no readable {SPEC}: {exc})") from None
+
+
+def status(out: Path, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame:
+    """Runs per scenario by status (ok, running, failed, interrupted, missing), one row per scenario."""
+    sweep = read_spec(out)
+    rows = [(spec.scenario.name, run_status(Path(spec.out_dir), stale_after)) for spec in plan(sweep, out)]
+    table = pd.crosstab(pd.Series([r[0] for r in rows], name="scenario"), pd.Series([r[1] for r in rows],
+                                                                                     name="status"))
+    order = [c for c in ("ok", "running", "failed", "interrupted", "missing") if c in table.columns]
+    table = table.reindex(columns=order).reindex([s.name for s in sweep.scenarios])
+    table.columns.name = None
+    return table
+
+
+def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool = True,
+              executor: Executor | None = None, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame:
+    """Run every incomplete run of ``sweep`` into ``out`` through ``executor`` (default: the local
+    process pool with ``jobs`` workers), then write the tables. Runs another command holds are
+    left to it; runs that never started because a worker died are started again once."""
+    from swarmbed.experiments import executors
+
     if jobs is not None and jobs < 1:
         raise cfg.ConfigError(f"--jobs {jobs}: at least one run must be able to go at once")
     out.mkdir(parents=True, exist_ok=True)
     specs = plan(sweep, out)
-    for spec in specs[: len(sweep.scenarios)]:  # every scenario is valid before anything starts
-        experiment_for(spec.base, spec.scenario, spec.seed, spec.extra)
-    results.write_json(out / SPEC, {"name": sweep.name, "base": str(sweep.base), "seed": sweep.seed,
-                                    "runs": sweep.runs, "factors": sweep.factors, "extra": sweep.extra,
-                                    "scenarios": {s.name: dict(s.overrides) for s in sweep.scenarios}})
-    todo = [s for s in specs if not (Path(s.out_dir) / results.SUMMARY).exists()]
+    agents: dict[str, int] = {}  # per scenario name
+    for spec in specs:  # every scenario is valid before anything starts
+        if spec.scenario.name not in agents:
+            agents[spec.scenario.name] = experiment_for(spec.base, spec.scenario, spec.seed, spec.extra).agents.count
+    write_spec(sweep, out)
+    executor = executor or executors.get("local", jobs=jobs)
+    todo = [s for s in specs if run_status(Path(s.out_dir), stale_after) != "ok"]
     done_before = len(specs) - len(todo)
-    jobs = jobs or os.cpu_count() or 1
     bar = tqdm(total=len(specs), initial=done_before, unit="run", desc=sweep.name, disable=not progress)
-    pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
-                                  initializer=_leave_interrupts_to_the_main_process)
+    fn = partial(execute, stale_after=stale_after)
+    retried: set[str] = set()
     try:
-        futures = {pool.submit(_execute, s): s for s in todo}
-        for fut in cf.as_completed(futures):
-            status, detail = fut.result()
-            if status != "ok":
-                bar.write(f"failed: {futures[fut].out_dir}: {detail}")
-            bar.update(1)
+        while todo:
+            again = []
+            sizes = [resources_for(agents[s.scenario.name]) for s in todo]
+            for index, (state, detail) in executor.map(fn, todo, sizes):
+                spec = todo[index]
+                if state == "lost" and claims.holder(Path(spec.out_dir)) is None and spec.out_dir not in retried:
+                    retried.add(spec.out_dir)  # its worker died before it began: it never ran
+                    again.append(spec)
+                    continue
+                if state != "ok":
+                    bar.write(f"{state}: {spec.out_dir}: {detail}", file=sys.stderr)
+                bar.update(1)
+            todo = again
     except KeyboardInterrupt:
-        pool.shutdown(wait=False, cancel_futures=True)  # nothing new starts
-        _stop_descendants()  # and what runs stops now
+        executor.cancel()
         bar.close()
         for spec in specs:  # an incomplete run leaves no half-written file behind
             if not (Path(spec.out_dir) / results.SUMMARY).exists():
-                for partial in Path(spec.out_dir).glob("*.part"):
-                    partial.unlink(missing_ok=True)
+                for partial_file in Path(spec.out_dir).glob("*.part"):
+                    partial_file.unlink(missing_ok=True)
         done = _complete(specs)
         raise SweepInterrupted(
             f"interrupted: {done} of {len(specs)} runs are complete ({done - done_before} finished in this session); "
@@ -304,9 +371,7 @@ def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool =
             f"the other {len(specs) - done}.") from None
     finally:
         bar.close()
-    pool.shutdown(wait=True)
-    table = collect(sweep, out)
-    tmp = out / (TABLE + ".part")
-    table.to_csv(tmp, index=False)
-    os.replace(tmp, out / TABLE)
+        executor.close()
+    table = collect(sweep, out, stale_after)
+    write_tables(table, out)
     return table
