@@ -10,6 +10,10 @@ from pydantic import BaseModel, ConfigDict
 
 from swarmbed.agent_runtime.view import LocalView
 
+#: what :meth:`Allocator.decide` returns to keep the agent still this tick (no task, no exploring):
+#: SPACE's GRAPE holds its agents while their partition converges. Task ids are never negative.
+HOLD = -2
+
 
 class NoParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -66,4 +70,4 @@ class Allocator(abc.ABC):
 
     @abc.abstractmethod
     def decide(self, view: LocalView) -> int | None:
-        """Return the task to work on now, or None (the tree then explores)."""
+        """Return the task to work on now, None (the tree then explores) or :data:`HOLD` (stay put)."""

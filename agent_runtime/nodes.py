@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from swarmbed.agent_runtime.allocator import HOLD
 from swarmbed.agent_runtime.bt import InputPort, NodeRegistry, OutputPort, StatefulAction, Status, SyncAction
 
 
@@ -39,6 +40,9 @@ class DecisionMakingNode(SyncAction):
     def tick(self):
         ctx = self.config.context
         task = ctx.allocator.decide(ctx.view)
+        if task == HOLD:  # stay put: no task to execute, and no exploring either
+            self.set_output("task_id", None)
+            return Status.SUCCESS
         self.set_output("task_id", task)
         return Status.FAILURE if task is None else Status.SUCCESS
 

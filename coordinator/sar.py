@@ -6,8 +6,13 @@ lifetime. A robot sees victims and robots in its vision cone (range and full ang
 heading, the direction it last moved in), not their colours. Within ``inspect_range`` it can
 inspect a victim (learns the colour: a mismatch counts as a failed rescue), then rescue it if the
 colours match (a robot turns to the victim it inspects or rescues, and learns the outcome of its
-own actions). Moves, inspections and rescues fail with their probabilities; a failed move leaves
-the robot stuck for ``move_penalty`` seconds. In steady state a rescued or expired victim is
+own actions). Inspecting takes ``inspect_time`` seconds and rescuing ``rescue_time`` seconds: the
+robot is busy meanwhile (its tree keeps ticking; the world ignores its actions), and the outcome
+(the colour learnt, the victim rescued, or a failure) happens when the action ends, if the victim is
+still there; an action that ends within the tick it began in takes effect in that tick. Durations
+are rounded up to whole ticks, so results converge as ``run.dt`` shrinks (tests/test_world.py pins
+it). Moves, inspections and rescues fail with their probabilities; a failed move leaves the robot
+stuck for ``move_penalty`` seconds. In steady state a rescued or expired victim is
 replaced at once; in finite mode it is not. After ``agent_loss_grace`` seconds each robot is lost
 for good with probability ``agent_loss`` per step (tick).
 
@@ -32,6 +37,11 @@ from swarmbed.wire.observation import Observation as AnyObservation
 
 ALIVE, RESCUED, EXPIRED, UNUSED = 0, 1, 2, 3
 COLOR_NAMES = ("red", "green", "blue")
+# The paper gives no durations for inspecting and rescuing; these are calibrated on the
+# non-communicating `tree` strategy alone (docs/reproduction.md, "Calibration") and then frozen
+# for every strategy and scenario.
+INSPECT_TIME = 25.0
+RESCUE_TIME = 10.0
 
 
 class SARParams(BaseModel):
@@ -50,8 +60,10 @@ class SARParams(BaseModel):
     inspect_fail: float = Field(0.0, ge=0, le=1, description="probability that an inspection fails")
     rescue_fail: float = Field(0.0, ge=0, le=1, description="probability that a rescue fails")
     move_penalty: float = Field(0.5, ge=0, description="seconds a robot is stuck after a failed move")
-    inspect_time: float = Field(0.0, ge=0, description="extra seconds an inspection keeps the robot busy (0: one tick)")
-    rescue_time: float = Field(0.0, ge=0, description="extra seconds a rescue keeps the robot busy (0: one tick)")
+    inspect_time: float = Field(INSPECT_TIME, ge=0, description="seconds an inspection takes; its result comes at "
+                                "the end (calibrated on tree: docs/reproduction.md)")
+    rescue_time: float = Field(RESCUE_TIME, ge=0, description="seconds a rescue takes; the victim is saved at the end"
+                               " (calibrated on tree: docs/reproduction.md)")
     agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
     agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
     colors_for_bidding: Literal["auto", "always", "never"] = Field(
@@ -146,6 +158,7 @@ class SARWorld(World):
         self.inspected: dict[int, set[int]] = {}  # victim -> robots that inspected it
         self.results: dict[int, list[list[int]]] = {}  # robot -> inspection results for its next observation
         self.rescued_by: dict[int, list[int]] = {}  # robot -> victims it rescued, for its next observation
+        self.pending: dict[int, tuple[str, int, int]] = {}  # robot -> (inspect|rescue, victim, tick it ends in)
         self.tick = 0
         self._spawn(sc.victims)
 
@@ -198,6 +211,7 @@ class SARWorld(World):
 
     def kill(self, agent_id: int) -> None:
         self.alive[agent_id] = False
+        self.pending.pop(agent_id, None)  # what it was doing dies with it
 
     def draw_losses(self) -> list[int]:
         """Robots lost at the next tick (one draw per live robot once the grace period is over)."""
@@ -248,10 +262,43 @@ class SARWorld(World):
             return action[1]
         return None
 
+    def _ticks(self, seconds: float) -> int:
+        """Whole ticks that ``seconds`` of activity starting now occupy (at least this one)."""
+        return max(1, math.ceil(seconds / self.dt - 1e-9))
+
     def _busy(self, i: int, seconds: float) -> None:
-        """The robot does nothing for ``seconds`` after this tick (whole ticks, rounded up)."""
-        if seconds > 0:
-            self.busy_until[i] = self.tick + 1 + math.ceil(seconds / self.dt - 1e-9)
+        """The robot is occupied from this tick for ``seconds`` (whole ticks, rounded up)."""
+        self.busy_until[i] = self.tick + self._ticks(seconds)
+
+    def _begin(self, i: int, name: str, v: int, seconds: float) -> None:
+        """Start a timed action; it ends (and takes effect) in the last tick it occupies."""
+        self._busy(i, seconds)
+        self.pending[i] = (name, v, int(self.busy_until[i]) - 1)
+        if self.busy_until[i] - 1 == self.tick:
+            self._finish(i)
+
+    def _finish(self, i: int) -> None:
+        """The end of robot i's inspection or rescue: the outcome, if the victim is still there."""
+        name, v, _ = self.pending.pop(i)
+        if not self._in_reach(i, v):
+            self.stale_actions[i] += 1  # it expired, or another robot rescued it, meanwhile
+        elif name == "inspect":
+            if self.fail_rng.random() < self.sc.inspect_fail:
+                self.counts["inspect_failures"] += 1
+                return
+            self.counts["inspections"] += 1
+            if i not in self.inspected.setdefault(v, set()):
+                self.inspected[v].add(i)
+                if self.vcolor[v] != self.color[i]:
+                    self.counts["failed_rescues"] += 1
+            self.results.setdefault(i, []).append([v, int(self.vcolor[v])])
+        else:
+            if self.fail_rng.random() < self.sc.rescue_fail:
+                self.counts["rescue_failures"] += 1
+                return
+            self.rescues[i] += 1
+            self.rescued_by.setdefault(i, []).append(v)
+            self._end(v, RESCUED)
 
     def _move(self, i: int, tx: float, ty: float) -> None:
         if self.fail_rng.random() < self.sc.move_fail:
@@ -282,6 +329,8 @@ class SARWorld(World):
         """Advance one tick; robots act in id order on the state of this tick."""
         for i in map(int, np.flatnonzero(self.alive)):
             if self.busy_until[i] > self.tick:
+                if i in self.pending and self.pending[i][2] == self.tick:
+                    self._finish(i)
                 continue
             action = actions.get(i, ["stop"])
             name = action[0] if action else None
@@ -293,25 +342,10 @@ class SARWorld(World):
             elif name == "goto_task" and v is not None:
                 self._move(i, float(self.vx[v]), float(self.vy[v]))
             elif name == "inspect" and v is not None and self._in_reach(i, v):
-                if self.fail_rng.random() < self.sc.inspect_fail:
-                    self.counts["inspect_failures"] += 1
-                    continue
-                self.counts["inspections"] += 1
-                self._busy(i, self.sc.inspect_time)
-                if i not in self.inspected.setdefault(v, set()):
-                    self.inspected[v].add(i)
-                    if self.vcolor[v] != self.color[i]:
-                        self.counts["failed_rescues"] += 1
-                self.results.setdefault(i, []).append([v, int(self.vcolor[v])])
+                self._begin(i, "inspect", v, self.sc.inspect_time)
             elif (name == "rescue" and v is not None and self._in_reach(i, v) and i in self.inspected.get(v, ())
                   and self.vcolor[v] == self.color[i]):
-                if self.fail_rng.random() < self.sc.rescue_fail:
-                    self.counts["rescue_failures"] += 1
-                    continue
-                self.rescues[i] += 1
-                self._busy(i, self.sc.rescue_time)
-                self.rescued_by.setdefault(i, []).append(v)
-                self._end(v, RESCUED)
+                self._begin(i, "rescue", v, self.sc.rescue_time)
             elif name == "abandon" and v is not None:
                 self.counts["abandons"] += 1
             elif name in ("inspect", "rescue") and v is not None and self.vstatus[v] != ALIVE:

@@ -21,7 +21,12 @@ scenarios are compared on common random numbers (paired runs), and runs within a
 independent. Each run has its own directory ``<out>/<scenario>/run_<r>``; a run whose directory
 holds a ``summary.json`` is complete and is kept when the sweep is started again, anything else is
 redone. A failed run writes ``error.txt`` and does not stop the sweep. The sweep ends with
-``sweep.csv``: one row per run with the scenario parameters, the seed and every summary metric.
+``sweep.csv`` and ``sweep.parquet``: one row per run with the scenario parameters, the seed and
+every summary metric.
+
+Where runs execute is an executor's business (:mod:`.executors`: the local pool, Slurm, Dask);
+each calls :func:`execute`, which claims the run's directory first (:mod:`.claims`), so several
+sweep commands, on one machine or many, can work on one directory at once.
 """
 
 from __future__ import annotations

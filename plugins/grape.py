@@ -5,9 +5,16 @@ Each agent holds a partition (agent -> task, or the void task), an evolution num
 timestamp. Each tick: (1) distributed mutex (Algorithm 2): adopt the partition with the highest
 evolution number among its own and its neighbours' (ties: the higher timestamp); if the adopted
 partition differs from the one it held, the agent becomes unsatisfied; (2) if unsatisfied, the
-decision (Algorithm 1): join the coalition of highest utility among the tasks it sees, the void
-task (utility 0) included; a move increments the evolution number and draws a fresh timestamp;
-then the agent is satisfied; (3) broadcast its (evolution number, timestamp, partition).
+decision (Algorithm 1): join the coalition of highest utility among the tasks it sees; a move
+increments the evolution number and draws a fresh timestamp; then the agent is satisfied; (3)
+broadcast its (evolution number, timestamp, partition).
+
+As SPACE's MT-SR plugin does (the defaults): there is no void task, so an agent joins the visible
+task of highest utility even when that utility is negative (with Eq. 1, R_j in [6, 60] and
+distances in the hundreds, it mostly is), and an agent holds still on a tick where its partition
+was not converged (the mutex changed it, or it decided). ``void_task: true`` offers the original
+GRAPE's void task (utility 0: an agent farther from every task than their workloads are worth
+wanders instead); ``hold_while_converging: false`` lets agents move toward their task meanwhile.
 
 Utility (SPACE Eq. 1): ``u_i(t_j, |S_j|) = R_j / |S_j| - cost_weight * d_ij * |S_j| ** social_inhibition``
 with R_j the task's remaining workload and d_ij the distance to it. SPACE's additions: the initial
@@ -21,7 +28,7 @@ import math
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.plugins.base import Allocator, LocalView
+from swarmbed.plugins.base import HOLD, Allocator, LocalView
 from swarmbed.plugins.taskbook import TaskBook
 
 KIND = "grape"
@@ -33,6 +40,10 @@ class GRAPEParams(BaseModel):
     cost_weight: float = Field(1.0, ge=0, description="weight of the distance cost")
     social_inhibition: float = Field(100.0, ge=0, description="f_s: exponent on the coalition size")
     nearest_start: bool = Field(True, description="start (and restart after completion) at the nearest task")
+    void_task: bool = Field(False, description="offer the void task (utility 0) of the original GRAPE; SPACE's "
+                            "MT-SR adaptation does not")
+    hold_while_converging: bool = Field(True, description="stay still on a tick where the partition was not "
+                                        "converged (SPACE's MT-SR behaviour)")
 
 
 class GRAPE(Allocator):
@@ -79,11 +90,14 @@ class GRAPE(Allocator):
                 nearest = min(view.tasks.values(), key=lambda t: (view.distance_to(t), t.id))
                 self._move(nearest.id)
         self.mutex(view)
-        if not self.satisfied:
+        converging = not self.satisfied
+        if converging:
             self.choose(view)
         view.broadcast(KIND, [self.evolution, self.stamp, sorted(self.partition.items())])
         task = self.partition.get(me, VOID)
-        return task if task != VOID and task in view.tasks else None
+        if task == VOID or task not in view.tasks:
+            return None
+        return HOLD if converging and self.params.hold_while_converging else task
 
     def _move(self, task: int) -> None:
         if task == VOID:
@@ -114,11 +128,11 @@ class GRAPE(Allocator):
     def choose(self, view: LocalView) -> None:
         """Algorithm 1: move to the coalition of highest utility if it beats the current one."""
         current = self.partition.get(self.agent_id, VOID)
-        if current != VOID and current not in view.tasks:
-            current_u = -math.inf  # out of sight or done: any choice is better
+        if (current != VOID and current not in view.tasks) or (current == VOID and not self.params.void_task):
+            current_u = -math.inf  # out of sight, done, or no task while there is no void task: any task is better
         else:
             current_u = self.utility(view, current, self.coalition_size(current, True))
-        best_task, best_u = VOID, 0.0
+        best_task, best_u = (VOID, 0.0) if self.params.void_task else (VOID, -math.inf)
         for task in sorted(view.tasks):
             u = self.utility(view, task, self.coalition_size(task, True))
             if u > best_u:

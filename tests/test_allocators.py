@@ -101,10 +101,15 @@ def _grape_utility(inst, params, agent, task, size):
 
 
 @pytest.mark.parametrize("params", [
-    {"cost_weight": 1.0, "social_inhibition": 100.0},
+    {"cost_weight": 1.0, "social_inhibition": 100.0, "void_task": True},
+    {"cost_weight": 0.05, "social_inhibition": 1.0, "void_task": True},
+    {"cost_weight": 1.0, "social_inhibition": 100.0},  # SPACE's MT-SR: no void task
     {"cost_weight": 0.05, "social_inhibition": 1.0},
 ])
 def test_grape_ends_in_a_nash_stable_partition(params):
+    """Every agent agrees on the partition and none gains by moving alone: to another task, or,
+    where the void task is offered, to it. Without it every agent holds a task."""
+    void = params.get("void_task", False)
     for case in range(150):
         rng = np.random.default_rng(case)
         inst = random_instance(500 + case, int(rng.integers(2, 9)), int(rng.integers(1, 7)), size=50.0)
@@ -113,10 +118,12 @@ def test_grape_ends_in_a_nash_stable_partition(params):
         assert all(a.partition == partition for a in agents), f"case {case}: agents disagree"
         assert all(a.satisfied for a in agents)
         sizes = {t: sum(1 for v in partition.values() if v == t) for t in inst.tasks}
+        if not void:
+            assert len(partition) == len(inst.agents), f"case {case}: an agent holds no task"
         for i in range(len(inst.agents)):
             mine = partition.get(i, VOID)
             u_now = _grape_utility(inst, params, i, mine, sizes.get(mine, 0))
-            for other in [VOID, *inst.tasks]:
+            for other in [VOID, *inst.tasks] if void else list(inst.tasks):
                 if other != mine:
                     u = _grape_utility(inst, params, i, other, sizes[other] + 1 if other != VOID else 0)
                     assert u <= u_now + 1e-9, f"case {case}: agent {i} prefers {other} ({u}) to {mine} ({u_now})"

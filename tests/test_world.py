@@ -1,10 +1,13 @@
 """Kinematic limits and the MT-SR bookkeeping (no processes needed)."""
 
 import math
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from swarmbed.coordinator.kinematics import Limits, step
+from swarmbed.coordinator.sar import ALIVE
 from swarmbed.experiments.config import resolve_experiment
 from tests.conftest import experiment
 
@@ -67,3 +70,75 @@ def test_invalid_actions_are_counted_and_treated_as_stop():
     w = MTSRWorld(exp, np.random.default_rng(0))
     w.apply({0: ["fly", 1], 1: ["goto_task", 9999]})
     assert list(w.invalid_actions) == [1, 1]
+
+
+SAR_BASE = Path(__file__).resolve().parent.parent / "experiments" / "sar" / "_base.yaml"
+
+
+def _sar_world(dt, seed=0, *overrides):
+    exp = experiment(f"run.dt={dt}", *overrides, base=SAR_BASE)
+    return resolve_experiment(exp).scenario().make_world(np.random.default_rng(seed))
+
+
+def test_sar_actions_take_their_duration_in_seconds_whatever_the_tick():
+    """One robot on a victim of its colour: the inspection's result comes inspect_time after it
+    began, the robot rescues at once, and the victim is saved rescue_time later; the same instant
+    at every dt that divides the durations, and never before it at any dt."""
+    for dt in (1.0, 0.5, 0.25, 0.1, 0.3):
+        w = _sar_world(dt, 0, "agents.count=1", "scenario.victims=1", "scenario.replace=false",
+                       "scenario.inspect_time=3", "scenario.rescue_time=2", "scenario.lifetime=1000")
+        w.vx[0], w.vy[0], w.vcolor[0] = w.ax[0], w.ay[0], w.color[0]
+        seen = rescued_at = None
+        while rescued_at is None and w.time < 20:
+            if seen is None:
+                w.apply({0: ["inspect", 0]})
+                if w.results.get(0):
+                    seen = w.time
+            else:
+                w.apply({0: ["rescue", 0]})
+                if w.counts["rescued"]:
+                    rescued_at = w.time
+        exact = dt in (1.0, 0.5, 0.25, 0.1)
+        assert seen == pytest.approx(3.0) if exact else 3.0 <= seen < 3.0 + dt, (dt, seen)
+        assert rescued_at == pytest.approx(5.0) if exact else 5.0 <= rescued_at < 5.0 + 2 * dt, (dt, rescued_at)
+
+
+def _greedy_rescues(dt, seed, seconds=600.0, *overrides):
+    """A tree-like policy with full knowledge of positions, straight on the world: nearest victim
+    not known to mismatch, go, inspect, rescue if the colours match."""
+    w = _sar_world(dt, seed, "agents.count=6", "scenario.victims=20", *overrides)
+    target: dict[int, int] = {}
+    mismatched: set[tuple[int, int]] = set()
+    while w.time < seconds - 1e-9:
+        actions = {}
+        for i in range(w.n):
+            t = target.get(i)
+            if t is not None and (w.vstatus[t] != ALIVE or (i, t) in mismatched):
+                t = None
+            if t is None:
+                alive = [v for v in np.flatnonzero(w.vstatus[:w.nv] == ALIVE) if (i, int(v)) not in mismatched]
+                if not alive:
+                    continue
+                t = int(min(alive, key=lambda v: math.hypot(w.vx[v] - w.ax[i], w.vy[v] - w.ay[i])))
+                target[i] = t
+            if not w._in_reach(i, t):
+                actions[i] = ["goto_task", t]
+            elif i not in w.inspected.get(t, ()):
+                actions[i] = ["inspect", t]
+            elif w.vcolor[t] != w.color[i]:
+                mismatched.add((i, t))
+            else:
+                actions[i] = ["rescue", t]
+        w.apply(actions)
+    return w.counts["rescued"]
+
+
+def test_sar_results_converge_as_the_tick_shrinks():
+    """Mean rescues over 8 seeds at dt 1, 0.5, 0.25, 0.1, 0.05: the last two agree within 5 % and
+    closer than the first two; and no run beats the bound the durations set (each rescue takes a
+    robot at least inspect_time + rescue_time = 40 s: 6 robots x 600 s / 40 s = 90)."""
+    runs = {dt: [_greedy_rescues(dt, seed) for seed in range(8)] for dt in (1.0, 0.5, 0.25, 0.1, 0.05)}
+    means = [np.mean(r) for r in runs.values()]
+    assert abs(means[-1] - means[-2]) <= 0.05 * means[-1], means
+    assert abs(means[-1] - means[-2]) < abs(means[0] - means[1]), means
+    assert max(max(r) for r in runs.values()) <= 90, runs
