@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from swarmbed.plugins.base import HOLD
 from swarmbed.plugins.cbba import CBBA
 from swarmbed.plugins.conformance import random_instance, run_all, simulate
 from swarmbed.plugins.consensus import table
@@ -127,3 +128,14 @@ def test_grape_ends_in_a_nash_stable_partition(params):
                 if other != mine:
                     u = _grape_utility(inst, params, i, other, sizes[other] + 1 if other != VOID else 0)
                     assert u <= u_now + 1e-9, f"case {case}: agent {i} prefers {other} ({u}) to {mine} ({u_now})"
+
+
+@pytest.mark.parametrize("hold", [True, False])
+def test_grape_holds_its_agents_still_while_the_partition_converges(hold):
+    """SPACE's MT-SR GRAPE (the default): on a tick where an agent's partition changed it returns
+    HOLD (stay put); once converged, its task. Without holding it heads for its task at once."""
+    inst = random_instance(7, 5, 4, size=50.0)
+    trace = simulate("grape", {"hold_while_converging": hold}, inst, 60, seed=1)
+    first, last = trace.decisions[0], trace.decisions[-1]
+    assert all(d == HOLD for d in first.values()) if hold else all(d in inst.tasks for d in first.values())
+    assert all(d in inst.tasks for d in last.values())  # converged: everyone on a task

@@ -187,3 +187,21 @@ def test_a_run_whose_worker_was_killed_is_redone_by_the_next_command(sweep_file,
     assert (victim[0] / "summary.json").exists() and not (victim[0] / claims.CLAIM).exists()
     assert [a["event"] for a in _attempts(victim[0])] == ["start", "start", "end"]
     assert all(len(_attempts(d)) == n for d, n in done.items())  # the others were kept
+
+
+def test_a_detached_slurm_sweep_is_watched_with_status_and_collected_by_the_same_command(sweep_file, tmp_path):
+    """--detach submits the array and returns; --status follows it; the same command again (once
+    everything is done) runs nothing and writes the tables."""
+    out = tmp_path / "detached"
+    cmd = _sweep_cmd(sweep_file, out, "--executor", "slurm", "--slurm-cluster", "local", "--slurm-time", "0:10:00")
+    first = subprocess.run([*cmd, "--detach"], capture_output=True, text=True, timeout=120)
+    assert first.returncode == 0 and "submitted: slurm (array job" in first.stdout, first
+    assert f"swarmbed sweep --status {out}" in first.stdout
+    deadline = time.monotonic() + 240
+    while (table := status(out)).get("ok", pd.Series(dtype=int)).sum() < 4:
+        assert time.monotonic() < deadline, table
+        time.sleep(1)
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0 and "4 of 4 runs complete" in again.stdout, again
+    assert all(len(_attempts(d)) == 2 for d in out.glob("*/run_*"))  # nothing ran twice
+    assert (out / "sweep.parquet").exists()

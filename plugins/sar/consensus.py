@@ -16,6 +16,7 @@ mattering. ``negotiations`` counts the rounds a robot starts.
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import ClassVar
 
@@ -29,6 +30,7 @@ from swarmbed.plugins.sar.interval import IntervalParams, next_interval
 from swarmbed.plugins.sar.nodes import SAR_NODES
 
 BIDS = "bids"
+log = logging.getLogger("swarmbed.agent.cbba_etc")
 
 
 class ConsensusParams(SARParams):
@@ -171,6 +173,8 @@ class CBBATree(SARConsensus):
 class ETCParams(ConsensusParams, IntervalParams):
     theta_bid_change: float = Field(0.1, ge=0, description="Tr_delta_bid: utility change of the primary task")
     theta_outbid_margin: float = Field(0.05, ge=0, description="Tr_conflict: margin over a known winning bid")
+    trace_rounds: bool = Field(False, description="log every round (time, triggers fired, Lc, dLc, interval) to the "
+                               "agent's log, for audits (docs/reproduction.md)")
 
 
 class CBBAETC(SARConsensus):
@@ -214,4 +218,9 @@ class CBBAETC(SARConsensus):
         return any(fired.values())
 
     def adapt_interval(self) -> None:
+        before = self.interval
         self.interval = next_interval(self.interval, self.lost_last, self.lost_last - self.lost_before, self.params)
+        if self.params.trace_rounds:
+            fired = ",".join(name for name, on in self.last_triggers.items() if on)
+            log.info("round t=%.3f triggers=%s Lc=%d dLc=%d interval=%.3f->%.3f", self.now, fired, self.lost_last,
+                     self.lost_last - self.lost_before, before, self.interval)
