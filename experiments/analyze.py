@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -27,6 +28,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
+from swarmbed.experiments.palette import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
 from swarmbed.experiments.stats import compare  # noqa: E402
 from swarmbed.experiments.sweep import PARQUET, SPEC, TABLE, read_table  # noqa: E402
 
@@ -58,13 +60,17 @@ class AnalyzeError(ValueError):
 
 
 def load(sweep_dirs: list[Path]) -> pd.DataFrame:
-    frames = []
+    """Completed runs of the sweeps, one row each; ``attrs["factors"]``: the keys they vary."""
+    frames: list[pd.DataFrame] = []
+    factors: list[str] = []
     for sweep_dir in sweep_dirs:
         spec = sweep_dir / SPEC
         if not spec.exists() or not ((sweep_dir / TABLE).exists() or (sweep_dir / PARQUET).exists()):
             raise AnalyzeError(f"{sweep_dir}: no {TABLE} / {SPEC}; run `swarmbed sweep` into it first")
         df = read_table(sweep_dir)
-        df["sweep"] = json.loads(spec.read_text())["name"]
+        meta = json.loads(spec.read_text())
+        df["sweep"] = meta["name"]
+        factors += [f for f in meta.get("factors", []) if f not in factors]
         frames.append(df)
     df = pd.concat(frames, ignore_index=True)
     df = df[df["status"] == "ok"].copy()
@@ -73,6 +79,7 @@ def load(sweep_dirs: list[Path]) -> pd.DataFrame:
     df[ALLOCATOR] = df["allocator"].map(_allocator_label)  # every summary names its allocator
     if len(sweep_dirs) > 1:
         df["scenario"] = df["sweep"] + "/" + df["scenario"]
+    df.attrs["factors"] = factors
     return df
 
 
@@ -112,108 +119,175 @@ def _allocator_label(value) -> str:
     return str(value)
 
 
+# -- figure style: one name and one colour per strategy in every figure, vector output beside PNG,
+#    sized for a paper's column (3.5 in) or page (7 in) at 8-9 pt text ------------------------------
+COLUMN_IN, PAGE_IN = 3.5, 7.16
+STYLE: Any = {  # matplotlib types rc keys as literals
+    "font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8, "xtick.labelsize": 7, "ytick.labelsize": 7,
+    "legend.fontsize": 7, "axes.spines.top": False, "axes.spines.right": False, "savefig.bbox": "tight",
+    "pdf.fonttype": 42, "svg.fonttype": "none"}
+MEDIAN = {"color": "black", "linewidth": 1.4}  # visible on every fill colour
+
+
+def _ordered(strategies) -> list[str]:
+    """The papers' order (CBBA-ETC Table 2, SPACE Fig. 3), then any others by name."""
+    known = [s for s in STRATEGY_ORDER if s in set(strategies)]
+    return known + sorted(set(strategies) - set(known))
+
+
+def _save(fig, out: Path, stem: str) -> Path:
+    """PNG for the page, PDF and SVG for the paper; returns the PNG."""
+    for ext in ("pdf", "svg"):
+        fig.savefig(out / f"{stem}.{ext}")
+    fig.savefig(out / f"{stem}.png", dpi=200)
+    plt.close(fig)
+    return out / f"{stem}.png"
+
+
+def _boxes(ax, data: list, positions, width: float, colors: list[str]) -> None:
+    bp = ax.boxplot(data, positions=positions, widths=width, patch_artist=True, manage_ticks=False,
+                    medianprops=MEDIAN, flierprops={"markersize": 2.5, "alpha": 0.6})
+    for box, color in zip(bp["boxes"], colors):
+        box.set_facecolor(color)
+        box.set_alpha(0.75)
+
+
+def _log_counts(ax, axis: str = "y") -> None:
+    """A log-like axis for counts that shows zero (the tree strategy sends no message): linear
+    below 1, logarithmic above, zero clear of the axis."""
+    if axis == "y":
+        ax.set_yscale("symlog", linthresh=1.0)
+        ax.set_ylim(-0.5, max(10.0, ax.get_ylim()[1]))  # a zero sits just above the axis
+    else:
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_xlim(-0.5, max(10.0, ax.get_xlim()[1]))
+
+
 def fig3(df: pd.DataFrame, metric: str, out: Path) -> Path | None:
     if metric not in df or df[metric].dropna().empty:
         return None
     have = all(c in df for c in (AGENTS, RANGE)) and df[ALLOCATOR].notna().all()
-    if not have:
-        fig, ax = plt.subplots(figsize=(max(4, 1.2 * df["scenario"].nunique()), 4))
-        groups = sorted(df["scenario"].unique())
-        ax.boxplot([df.loc[df["scenario"] == g, metric].dropna() for g in groups], tick_labels=groups)
-        ax.set_ylabel(METRICS[metric])
-        ax.tick_params(axis="x", rotation=30)
-    else:
-        algos = sorted(df[ALLOCATOR].unique())
-        counts = sorted(df[AGENTS].unique())
-        ranges = sorted(df[RANGE].unique())
-        fig, axes = plt.subplots(1, len(counts), figsize=(4.2 * len(counts), 4), sharey=True, squeeze=False)
-        width = 0.8 / len(algos)
-        colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-        for ax, n in zip(axes[0], counts):
-            sub = df[df[AGENTS] == n]
-            for a, algo in enumerate(algos):
-                data = [sub.loc[(sub[RANGE] == r) & (sub[ALLOCATOR] == algo), metric].dropna()
-                        for r in ranges]
-                pos = np.arange(len(ranges)) + (a - (len(algos) - 1) / 2) * width
-                bp = ax.boxplot(data, positions=pos, widths=width * 0.9, patch_artist=True, manage_ticks=False)
-                for box in bp["boxes"]:
-                    box.set_facecolor(colors[a % len(colors)])
-                    box.set_alpha(0.6)
-                ax.plot([], [], color=colors[a % len(colors)], lw=6, alpha=0.6, label=algo)
-            ax.set_xticks(range(len(ranges)), [str(r) for r in ranges])
-            ax.set_xlabel("communication range")
-            ax.set_title(f"{n} agents")
-        axes[0][0].set_ylabel(METRICS[metric])
-        axes[0][-1].legend()
-    fig.tight_layout()
-    path = out / f"fig_{metric.replace('.', '_')}.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    with plt.rc_context(STYLE):
+        if not have:
+            groups = sorted(df["scenario"].unique())
+            fig, ax = plt.subplots(figsize=(max(COLUMN_IN, 0.5 * len(groups)), 2.8))
+            _boxes(ax, [df.loc[df["scenario"] == g, metric].dropna() for g in groups], np.arange(len(groups)), 0.6,
+                   ["0.75"] * len(groups))
+            ax.set_xticks(range(len(groups)), groups)
+            ax.set_ylabel(METRICS[metric])
+            ax.tick_params(axis="x", rotation=30)
+        else:
+            algos = _ordered(df[ALLOCATOR].unique())
+            counts = sorted(df[AGENTS].unique())
+            ranges = sorted(df[RANGE].unique())
+            fig, axes = plt.subplots(1, len(counts), figsize=(PAGE_IN, 2.4), sharey=True, squeeze=False)
+            width = 0.8 / len(algos)
+            for ax, n in zip(axes[0], counts):
+                sub = df[df[AGENTS] == n]
+                for a, algo in enumerate(algos):
+                    data = [sub.loc[(sub[RANGE] == r) & (sub[ALLOCATOR] == algo), metric].dropna() for r in ranges]
+                    pos = np.arange(len(ranges)) + (a - (len(algos) - 1) / 2) * width
+                    _boxes(ax, data, pos, width * 0.85, [strategy_color(algo)] * len(ranges))
+                    ax.plot([], [], color=strategy_color(algo), lw=5, alpha=0.75, label=strategy_label(algo))
+                ax.set_xticks(range(len(ranges)), [str(r) for r in ranges])
+                ax.set_xlabel("communication range")
+                ax.set_title(f"{n} agents")
+            axes[0][0].set_ylabel(METRICS[metric])
+            axes[0][-1].legend(frameon=False)
+        return _save(fig, out, f"fig_{metric.replace('.', '_')}")
 
 
 def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
     written = []
-    strategies = sorted(df[ALLOCATOR].unique())
+    strategies = _ordered(df[ALLOCATOR].unique())
+    labels = [strategy_label(g) for g in strategies]
+    colors = [strategy_color(g) for g in strategies]
     per = {g: df[df[ALLOCATOR] == g] for g in strategies}
-    # mean rescued and expired per trial with 95 % CI bars
-    fig, ax = plt.subplots(figsize=(1.4 * len(strategies) + 2, 4))
     x = np.arange(len(strategies))
-    for k, (metric, label) in enumerate((("rescued", "rescued"), ("expired", "expired"))):
-        means = [per[g][metric].mean() for g in strategies]
-        cis = [_ci(per[g][metric]) for g in strategies]
-        err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
-        ax.bar(x + (k - 0.5) * 0.4, means, 0.4, yerr=np.nan_to_num(err), capsize=3, label=label)
-    ax.set_xticks(x, strategies)
-    ax.set_ylabel("victims per trial (mean, 95% CI)")
-    ax.legend()
-    fig.tight_layout()
-    written.append(out / "fig_rescued_expired.png")
-    fig.savefig(written[-1], dpi=110)
-    plt.close(fig)
-    # boxplots per trial
-    shown = [m for m in SAR_METRICS if m in df]
-    fig, axes = plt.subplots(1, len(shown), figsize=(3.2 * len(shown), 3.8), squeeze=False)
-    for ax, metric in zip(axes[0], shown):
-        ax.boxplot([per[g][metric].dropna() for g in strategies], tick_labels=strategies)
-        ax.set_title(SAR_METRICS[metric], fontsize=9)
-        ax.tick_params(axis="x", rotation=45)
-        if metric.startswith("network") or metric == "negotiations":
-            ax.set_yscale("symlog")
-    fig.tight_layout()
-    written.append(out / "fig_boxplots.png")
-    fig.savefig(written[-1], dpi=110)
-    plt.close(fig)
-    # rescued against messages sent
-    fig, ax = plt.subplots(figsize=(5.5, 4))
-    for g in strategies:
-        ax.scatter(per[g]["network.messages_sent"] + 1, per[g]["rescued"], s=14, label=g)
-    ax.set_xscale("log")
-    ax.set_xlabel("messages sent per trial (+1, log)")
-    ax.set_ylabel("victims rescued per trial")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    written.append(out / "fig_rescued_vs_messages.png")
-    fig.savefig(written[-1], dpi=110)
-    plt.close(fig)
-    # messages against victim count and robot count (when the sweeps vary them)
-    for key, label, name in (("scenario.victims", "victims", "fig_messages_vs_victims.png"),
-                             (AGENTS, "robots", "fig_messages_vs_robots.png")):
-        counts = df.get("agents" if key == AGENTS else key)
-        if counts is None or counts.nunique() < 2:
-            continue
-        fig, ax = plt.subplots(figsize=(5.5, 4))
-        for g in strategies:
-            means = df[df[ALLOCATOR] == g].groupby(counts)["network.messages_sent"].mean()
-            ax.plot(means.index, means.to_numpy() + 1, marker="o", label=g)
-        ax.set_yscale("log")
-        ax.set_xlabel(label)
-        ax.set_ylabel("messages sent per trial (+1, log)")
-        ax.legend(fontsize=8)
+    with plt.rc_context(STYLE):
+        # mean rescued and expired per trial with 95 % CI bars: rescued filled, expired hatched
+        fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
+        for k, metric in enumerate(("rescued", "expired")):
+            means = np.array([per[g][metric].mean() for g in strategies])
+            cis = [_ci(per[g][metric]) for g in strategies]
+            err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
+            ax.bar(x + (k - 0.5) * 0.4, means, 0.4, yerr=np.nan_to_num(err), capsize=2, color=colors,
+                   alpha=0.85 if k == 0 else 0.35, hatch=None if k == 0 else "///", edgecolor="0.2", linewidth=0.5,
+                   error_kw={"elinewidth": 0.8})
+        ax.bar([], [], color="0.5", label="rescued")
+        ax.bar([], [], color="0.5", alpha=0.35, hatch="///", label="expired")
+        ax.set_xticks(x, labels, rotation=30, ha="right")
+        ax.set_ylabel("victims per trial (mean, 95 % CI)")
+        ax.legend(frameon=False)
+        written.append(_save(fig, out, "fig_rescued_expired"))
+        # boxplots per trial
+        shown = [m for m in SAR_METRICS if m in df]
+        cols = min(3, len(shown))
+        rows = -(-len(shown) // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(PAGE_IN, 2.3 * rows), squeeze=False)
+        for ax, metric in zip(axes.flat, shown):
+            _boxes(ax, [per[g][metric].dropna() for g in strategies], x, 0.6, colors)
+            ax.set_xticks(x, labels, rotation=30, ha="right")
+            ax.set_title(SAR_METRICS[metric])
+            if metric.startswith("network") or metric == "negotiations":
+                _log_counts(ax)
+        for ax in list(axes.flat)[len(shown):]:
+            ax.set_visible(False)
         fig.tight_layout()
-        written.append(out / name)
-        fig.savefig(written[-1], dpi=110)
-        plt.close(fig)
+        written.append(_save(fig, out, "fig_boxplots"))
+        # rescued against messages sent
+        fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.8))
+        for g in strategies:
+            ax.scatter(per[g]["network.messages_sent"], per[g]["rescued"], s=10, color=strategy_color(g),
+                       label=strategy_label(g), alpha=0.8, linewidths=0)
+        _log_counts(ax, "x")
+        ax.set_xlabel("messages sent per trial (symlog: 0 shown)")
+        ax.set_ylabel("victims rescued per trial")
+        ax.legend(frameon=False, ncol=2)
+        written.append(_save(fig, out, "fig_rescued_vs_messages"))
+        # messages against victim count and robot count (when the sweeps vary them)
+        for key, label, name in (("scenario.victims", "victims", "fig_messages_vs_victims"),
+                                 (AGENTS, "robots", "fig_messages_vs_robots")):
+            counts = df.get("agents" if key == AGENTS else key)
+            if counts is None or counts.nunique() < 2:
+                continue
+            fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
+            for g in strategies:
+                means = df[df[ALLOCATOR] == g].groupby(counts)["network.messages_sent"].mean()
+                ax.plot(means.index, means.to_numpy(), marker="o", ms=3, color=strategy_color(g),
+                        label=strategy_label(g))
+            _log_counts(ax)
+            ax.set_xlabel(label)
+            ax.set_ylabel("messages sent per trial (symlog)")
+            ax.legend(frameon=False, ncol=2)
+            written.append(_save(fig, out, name))
+        written += _factor_figures(df, out, strategies)
+    return written
+
+
+def _factor_figures(df: pd.DataFrame, out: Path, strategies: list[str]) -> list[Path]:
+    """For each numeric factor a sweep varies other than the agent and victim counts (the tick
+    length of the dt study, a failure rate): the outcome per strategy against it, mean and 95 % CI."""
+    written = []
+    factors = [f for f in df.attrs.get("factors", []) if f in df and f not in (ALLOCATOR, "allocator.name", AGENTS,
+                                                                                "scenario.victims")]
+    for factor in factors:
+        values = pd.to_numeric(df[factor], errors="coerce")
+        if values.isna().any() or values.nunique() < 2:
+            continue
+        fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
+        for g in strategies:
+            sub = df[df[ALLOCATOR] == g]
+            xs = sorted(values[sub.index].unique())
+            means = [sub.loc[values[sub.index] == v, "rescued"].mean() for v in xs]
+            cis = [_ci(sub.loc[values[sub.index] == v, "rescued"]) for v in xs]
+            ax.errorbar(xs, means, yerr=np.nan_to_num([[m - lo for m, (lo, _) in zip(means, cis)],
+                                                       [hi - m for m, (_, hi) in zip(means, cis)]]),
+                        marker="o", ms=3, capsize=2, color=strategy_color(g), label=strategy_label(g))
+        ax.set_xlabel(factor)
+        ax.set_ylabel("victims rescued per trial (mean, 95 % CI)")
+        ax.legend(frameon=False)
+        written.append(_save(fig, out, f"fig_rescued_vs_{factor.replace('.', '_')}"))
     return written
 
 
