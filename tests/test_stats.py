@@ -43,6 +43,10 @@ def test_sar_analysis_of_two_sweeps(tmp_path):
     names = {p.name for p in analyze(dirs, control="cbba-etc")}
     assert {"statistics.csv", "statistics.md", "fig_rescued_expired.png", "fig_boxplots.png",
             "fig_rescued_vs_messages.png", "fig_messages_vs_victims.png"} <= names
+    for png in (n for n in names if n.endswith(".png")):  # vector copies for papers, the papers' names
+        assert (dirs[0] / png).with_suffix(".pdf").stat().st_size > 0
+        svg = (dirs[0] / png).with_suffix(".svg").read_text()
+        assert "CBBA-ETC" in svg and "Tree" in svg, png
     stats = pd.read_csv(dirs[0] / "statistics.csv")
     assert set(stats["sweep"]) == {"v10", "v20"} and set(stats["strategy"]) == {"tree"}
     row = stats[(stats["sweep"] == "v10") & (stats["metric"] == "network.messages_sent")].iloc[0]
