@@ -300,15 +300,17 @@ def _complete(specs: list[RunSpec]) -> int:
 def write_spec(sweep: Sweep, out: Path) -> None:
     results.write_json(out / SPEC, {"name": sweep.name, "base": str(sweep.base), "seed": sweep.seed,
                                     "runs": sweep.runs, "factors": sweep.factors, "extra": sweep.extra,
-                                    "scenarios": {s.name: dict(s.overrides) for s in sweep.scenarios}})
+                                    "scenarios": {s.name: dict(s.overrides) for s in sweep.scenarios},
+                                    "order": [s.name for s in sweep.scenarios]})  # the keys above get sorted
 
 
 def read_spec(out: Path) -> Sweep:
     """The sweep a directory was made by, from its ``sweep.json``."""
     try:
         data = json.loads((out / SPEC).read_text())
+        order = data.get("order") or list(data["scenarios"])
         return Sweep(data["name"], Path(data["base"]), int(data["seed"]), int(data["runs"]),
-                     [SweepScenario(name, tuple(over.items())) for name, over in data["scenarios"].items()],
+                     [SweepScenario(name, tuple(data["scenarios"][name].items())) for name in order],
                      list(data["factors"]), list(data["extra"]))
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise cfg.ConfigError(f"{out}: not a sweep directory (no readable {SPEC}: {exc})") from None

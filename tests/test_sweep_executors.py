@@ -64,6 +64,8 @@ def test_local_sweep_writes_csv_and_parquet_with_the_same_rows(local_sweep):
     assert parquet["mission_time"].tolist() == csv["mission_time"].tolist()
     assert read_table(local_sweep).equals(parquet)
     assert not list(local_sweep.rglob(claims.CLAIM))  # every claim was released
+    table = status(local_sweep)  # per scenario, in the sweep's order
+    assert table.index.tolist() == ["range-30", "range-60"] and table["ok"].tolist() == [2, 2]
 
 
 def test_slurm_executor_through_submitit_gives_the_local_bytes(sweep_file, local_sweep):
