@@ -78,6 +78,8 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation
                     continue  # an order for the other process of a swap
                 if msg.order == "snapshot":
                     frozen = _hand_over_state(session, keys, runtime, incarnation, malformed, report)
+                elif msg.order == "checkpoint" and not frozen:
+                    _checkpoint(runtime, incarnation, malformed, report)
                 elif msg.order == "resume":
                     frozen = False
                     log.info("agent %d: swap cancelled; going on here", agent_id)
@@ -135,6 +137,17 @@ def _hand_over_state(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, 
         return False
     log.info("agent %d: state handed over (%d bytes); waiting to retire or resume", agent_id, len(state))
     return True
+
+
+def _checkpoint(runtime: AgentRuntime, incarnation: int, malformed: int, report) -> None:
+    """Report this agent's state and go on (the coordinator keeps the last to restart it from)."""
+    try:
+        state = runtime.snapshot({"malformed": malformed})
+    except StateError as exc:  # nothing to restart from: the agent would start fresh
+        log.warning("agent %d: no checkpoint: %s", runtime.agent_id, exc)
+        return
+    report({"kind": "checkpoint", "agent": runtime.agent_id, "incarnation": incarnation, "ticks": runtime.ticks,
+            "state": state})
 
 
 def _add_args(ap) -> None:

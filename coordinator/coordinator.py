@@ -13,7 +13,9 @@ from __future__ import annotations
 import json
 import logging
 import queue
+import threading
 import time
+from array import array
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -25,6 +27,7 @@ from swarmbed.coordinator import results
 from swarmbed.coordinator.scenario import Scenario
 from swarmbed.wire.codec import (
     EMPTY_INBOX,
+    TAG_CHECKPOINT,
     TAG_RESUME,
     TAG_RETIRE,
     TAG_SNAPSHOT,
@@ -43,12 +46,16 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
 from swarmbed.wire.lifecycle import WORLD, component_rng
 from swarmbed.wire.membership import accept_handovers, serve_text
-from swarmbed.wire.schema import Experiment, Targets, agent_spec, netem_spec
+from swarmbed.wire.rowfile import RowFile
+from swarmbed.wire.schema import LOCAL, Experiment, Targets, agent_spec, netem_spec
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
 STATUS_EVERY = 0.25  # wall seconds between progress samples for watchers
 SWAPS = "swaps.csv"
+RESTARTS = "restarts.csv"
+RESTART_COLUMNS = ["tick", "agent", "lost_at_tick", "incarnation", "host", "checkpoint_tick", "outcome", "reason",
+                   "wait_ms"]
 
 
 class RunError(RuntimeError):
@@ -81,9 +88,8 @@ class Coordinator:
         self.reports: dict[int, dict] = {}
         self.netem_report: dict | None = None
         self.malformed = 0
-        self.rows: list[list] = []
-        self.trajectories: list[tuple[int, int, float, float, str]] = []
-        self.marker_rows: list[tuple] = []  # (tick, marker, x, y, label, appear|vanish)
+        # the time series (and trajectories, markers) stream to disk as the run goes (see run())
+        self.tables: dict[str, RowFile] = {}
         self._markers: dict[int, tuple[float, float, str]] = {}
         self.realtime = exp.run.clock == "realtime"
         self._row_columns = (list(self.world.row()) + ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
@@ -92,10 +98,15 @@ class Coordinator:
         self.drops_cum: dict[str, int] = {}
         # the real-time clock's own accounting (wall-clock facts: never part of a lock-step run's files)
         self.late_ticks: dict[int, int] = {}  # agent -> ticks it missed
-        self.start_lags: list[float] = []  # wall seconds each tick started after its time
+        self.start_lags = array("d")  # wall seconds each tick started after its time
         self.last_action: dict[int, list] = {}
         self.last_tick = -1
         self.wall: dict[str, float] = {}
+        # for soak monitors (wall-clock facts, never in a run's result files)
+        self.stop_requested = threading.Event()  # end the run after the tick under way (soak's duration)
+        self.tick_started = 0.0  # perf_counter at the start of the tick under way
+        self.slowest_tick = (0.0, -1)  # (wall seconds, tick): the longest a tick took from start to start
+        self.slowest_in_interval = 0.0  # the same since a monitor last read it (and set it to 0)
         self._entities: list = []
         self._pushback: list[tuple[str, Any]] = []
         # moving agents between processes (swaps)
@@ -107,8 +118,13 @@ class Coordinator:
         self.swap_requests: queue.SimpleQueue[tuple[int, str, int]] = queue.SimpleQueue()  # (agent, host, number)
         self.swap_log: list[dict[str, Any]] = []
         self.requested_swaps: dict[int, dict[str, Any] | None] = {}  # number -> its record once done
-        # place(agent, host, incarnation) starts a restoring process; unplace(...) stops one (the runner's)
-        self.place: Callable[[int, str, int], None] | None = None
+        # agents whose process died, started again (run.on_agent_loss: restart)
+        self.down: dict[int, int] = {}  # agent -> tick its process was found dead, until it is restarted
+        self.checkpoints: dict[int, tuple[int, bytes]] = {}  # agent -> (tick, state) of its last checkpoint
+        self.restart_log: list[dict[str, Any]] = []
+        # place(agent, host, incarnation, restore) starts a process (restoring the snapshot held for it,
+        # or fresh); unplace(...) stops one (the runner's)
+        self.place: Callable[..., None] | None = None
         self.unplace: Callable[[int, str, int], None] | None = None
 
     # -- setup -----------------------------------------------------------------------------------
@@ -208,22 +224,45 @@ class Coordinator:
     def _record_markers(self, k: int) -> None:
         """Rows for the markers that appeared, changed or vanished since the last recorded tick."""
         now = self.world.markers()
+        markers = self.tables[results.MARKERS]
         for m in sorted(self._markers.keys() - now.keys()):
-            self.marker_rows.append((k, m, "", "", "", "vanish"))
+            markers.write((k, m, "", "", "", "vanish"))
         for m in sorted(now):
             if self._markers.get(m) != now[m]:
-                self.marker_rows.append((k, m, *now[m], "appear"))
+                markers.write((k, m, *now[m], "appear"))
         self._markers = now
 
     # -- the tick loop (lock-step, or paced by the wall on the real-time clock) -----------------------
+    def _open_tables(self) -> None:
+        columns = {results.TIMESERIES: self._row_columns}
+        if self.exp.run.record_trajectories:
+            columns[results.TRAJECTORIES] = ["tick", "agent", "x", "y", "label"]
+            columns[results.MARKERS] = ["tick", "marker", "x", "y", "label", "event"]
+        self.tables = {name: RowFile(self.out_dir / name, cols) for name, cols in columns.items()}
+
+    def abandon_tables(self) -> list[Path]:
+        """The run did not complete: keep the rows streamed so far as ``partial_*`` files."""
+        kept = [table.abandon() for table in self.tables.values()]
+        self.tables.clear()
+        return [p for p in kept if p is not None]
+
     def run(self, on_tick: Callable[[int, float], None] | None = None) -> None:
         w, r = self.world, self.exp.run
+        self._open_tables()
+        series = self.tables[results.TIMESERIES]
         inboxes: dict[int, bytes] = {}
         t0 = status_at = time.perf_counter()
         period = r.dt / r.speed  # wall seconds per tick on the real-time clock
         for k in range(self.exp.ticks):
-            if w.finished and self.exp.run.stop_when_done:
+            if (w.finished and self.exp.run.stop_when_done) or self.stop_requested.is_set():
                 break
+            now = time.perf_counter()
+            if k:
+                took = now - self.tick_started
+                self.slowest_in_interval = max(self.slowest_in_interval, took)
+                if took > self.slowest_tick[0]:
+                    self.slowest_tick = (took, k - 1)
+            self.tick_started = now
             if self.realtime:
                 lag = time.perf_counter() - (t0 + k * period)
                 if lag < 0:
@@ -233,10 +272,14 @@ class Coordinator:
             ids, xs, ys = w.positions()
             if self.exp.run.record_trajectories:
                 labels = w.agent_labels()
-                self.trajectories += [(k, i, x, y, labels.get(i, "")) for i, x, y in zip(ids, xs, ys)]
+                self.tables[results.TRAJECTORIES].write_many(
+                    (k, i, x, y, labels.get(i, "")) for i, x, y in zip(ids, xs, ys))
                 self._record_markers(k)
             if k > 0:
                 self._swap_due(k)
+                self._restart_due(k)
+                if r.snapshot_every and k % r.snapshot_every == 0 and r.agent_loss == "restart":
+                    self._ask_checkpoints()
             doomed = w.draw_losses()  # lost at tick k+1: the proxy must not deliver to them then
             incarnations = {a: i for a, i in self.incarnation.items() if i}
             self.world_pub.put(encode_world(World(k, ids, xs, ys, [i for i in ids if i not in doomed], incarnations)))
@@ -267,12 +310,14 @@ class Coordinator:
                 row = w.row()
                 events = [self.event_totals.get(e, 0) for e in self.event_names]
                 clock = [len(step.late), round(1000 * self.start_lags[-1], 3)] if self.realtime else []
-                self.rows.append(list(row.values()) + self.net_cum + events + clock)
+                series.write(list(row.values()) + self.net_cum + events + clock)
             if on_tick:
                 on_tick(w.tick, w.time)
             if time.perf_counter() - status_at >= STATUS_EVERY:
                 status_at = time.perf_counter()
                 self._publish_status(status_at - t0)
+                for table in self.tables.values():
+                    table.tick()
         self._publish_status(time.perf_counter() - t0)
         self.wall["run_s"] = time.perf_counter() - t0
 
@@ -364,17 +409,78 @@ class Coordinator:
             self._lose(agent, rep.get("tick", tick), "it raised an exception")
         elif rep["kind"] == "final":
             self.reports[agent] = rep
+        elif rep["kind"] == "checkpoint":
+            state = rep.get("state")
+            if rep.get("incarnation") == self.incarnation.get(agent, 0) and isinstance(state, bytes):
+                self.checkpoints[agent] = (self.checkpoint_tick, state)
 
     def _lose(self, agent: int, tick: int, why: str) -> None:
-        if agent in self.lost:
+        if agent in self.lost or agent in self.down:
             return
         fatal = self.fatal.get(agent)
         detail = f"\n{fatal['error']}\n{fatal.get('traceback', '')}" if fatal else ""
-        if not self.exp.run.allow_agent_failures:
+        policy = self.exp.run.agent_loss
+        if policy == "fail":
             raise RunError(f"agent {agent} stopped at tick {tick} because {why}; see {self._log_of(agent)}"
-                           f" (set run.allow_agent_failures to go on without it){detail}")
+                           f" (set run.on_agent_loss to continue or restart to go on){detail}")
+        if policy == "restart" and fatal is None and self.place is not None:
+            # a crashed process is started again at the next tick; a plugin that raised would raise again
+            log.warning("coordinator: agent %d lost at tick %d (%s); restarting it", agent, tick, why)
+            self.down[agent] = tick
+            return
         self.lost[agent] = tick
         self.world.kill(agent)
+
+    # -- agents that come back (run.on_agent_loss: restart) ------------------------------------------
+    checkpoint_tick = -1
+
+    def _ask_checkpoints(self) -> None:
+        """Every live agent reports its state before this tick (kept, the last of each, to restart it)."""
+        self.checkpoint_tick = self.last_tick + 1
+        for i in map(int, np.flatnonzero(self.world.alive)):
+            if i not in self.lost and i not in self.down:
+                self.agent_pubs[i].put(encode_control(TAG_CHECKPOINT, self.incarnation.get(i, 0)))
+
+    def _restart_due(self, k: int) -> None:
+        for agent in sorted(self.down):
+            record = self._restart(agent, k)
+            self.restart_log.append(record)
+            if record["outcome"] != "ok":
+                lost_at = self.down.pop(agent)
+                self.lost[agent] = lost_at
+                self.world.kill(agent)
+
+    def _restart(self, agent: int, k: int) -> dict[str, Any]:
+        """Start agent ``agent`` again before tick ``k``, under its id, on its host: from its last
+        checkpoint if there is one, else fresh. Messages to it while it was gone were booked
+        ``receiver_dead`` by the proxy."""
+        t0 = time.perf_counter()
+        new = self.incarnation.get(agent, 0) + 1
+        host = self.hosts.get(agent, LOCAL)
+        checkpoint = self.checkpoints.get(agent)
+        record: dict[str, Any] = {"tick": k, "agent": agent, "lost_at_tick": self.down[agent], "incarnation": new,
+                                  "host": host, "checkpoint_tick": checkpoint[0] if checkpoint else "",
+                                  "outcome": "failed", "reason": "", "wait_ms": 0.0}
+        assert self.place is not None
+        if checkpoint:
+            self.snapshots[agent] = checkpoint[1]
+        try:
+            self.place(agent, host, new, restore=checkpoint is not None)
+            got = self._await_swap_event(agent, -1, new, ("restored", "restore_failed") if checkpoint else
+                                         ("join", "join"))
+        except Exception as exc:
+            got = f"cannot start it on {host}: {exc}"
+        finally:
+            self.snapshots.pop(agent, None)
+        record["wait_ms"] = round((time.perf_counter() - t0) * 1000, 3)
+        if got in ("restored", "join"):
+            self.incarnation[agent] = new
+            del self.down[agent]
+            record["outcome"] = "ok"
+        else:
+            record["reason"] = got
+            log.warning("coordinator: agent %d could not be restarted before tick %d: %s", agent, k, got)
+        return record
 
     # -- moving agents (swaps) ---------------------------------------------------------------------
     def _swap_due(self, k: int) -> None:
@@ -446,6 +552,8 @@ class Coordinator:
                     return f"no {wanted[0]} within {self.exp.run.tick_timeout:.0f} s"
                 if what == "snapshot" and data == agent and wanted[0] == "snapshot":
                     return "snapshot"
+                if what == "join" and wanted[0] == "join" and data == self.keys.alive_agent(agent, new):
+                    return "join"
                 if what == "report":
                     rep = self._decode_report(*data)
                     if rep is None:
@@ -482,6 +590,9 @@ class Coordinator:
     def stop_and_collect(self, timeout: float = 30.0) -> None:
         """Tell the proxy and every live agent that the run is over; collect their final reports."""
         self.stop_pub.put(pack([self.last_tick]))
+        for agent, tick in sorted(self.down.items()):  # died in the last tick: never restarted
+            self.lost[agent] = tick
+        self.down.clear()
         retired = sorted(self.retired)
         live = [i for i in range(self.n) if i not in self.lost]
         for i in live:
@@ -509,7 +620,8 @@ class Coordinator:
         assert self.netem_report is not None, "summary() before the proxy's final report"
         net = self.netem_report["totals"]
         agent_bytes = sum(b for r in self.reports.values() for _, b in r["sent"].values())
-        all_reported = len(self.reports) == self.n
+        # a restarted agent's own counters begin again (or at its checkpoint): only the ledger has them all
+        all_reported = len(self.reports) == self.n and not self.restart_log
         return {
             "name": exp.name,
             "scenario_kind": exp.scenario.kind,
@@ -521,6 +633,7 @@ class Coordinator:
             **{name: self.event_totals.get(name, 0) for name in self.event_names},
             "events": dict(sorted(self.event_totals.items())),
             "agents_lost": {str(a): t for a, t in sorted(self.lost.items())},
+            **({"agent_restarts": sum(r["outcome"] == "ok" for r in self.restart_log)} if self.restart_log else {}),
             **({"realtime": self.clock_summary()} if self.realtime else {}),
             "network": {
                 **net,
@@ -589,10 +702,9 @@ class Coordinator:
         summary = self.summary()
         assert self.netem_report is not None
         per_sender = self.netem_report["per_sender"]
-        results.write_csv(out / results.TIMESERIES, self._row_columns, self.rows)
-        if self.exp.run.record_trajectories:
-            results.write_csv(out / results.TRAJECTORIES, ["tick", "agent", "x", "y", "label"], self.trajectories)
-            results.write_csv(out / results.MARKERS, ["tick", "marker", "x", "y", "label", "event"], self.marker_rows)
+        for table in self.tables.values():
+            table.finish()
+        self.tables.clear()
         columns = w.per_agent()
         net_cols = ["messages", "bytes", "copies", "delivered"]
         rows = []
@@ -607,5 +719,8 @@ class Coordinator:
         if self.swap_log:  # wall-clock pauses: not among the files that repeat byte for byte
             cols = ["tick", "agent", "from", "to", "outcome", "reason", "snapshot_bytes", "pause_ms"]
             results.write_csv(out / SWAPS, cols, [[r[c] for c in cols] for r in self.swap_log])
+        if self.restart_log:
+            results.write_csv(out / RESTARTS, RESTART_COLUMNS, [[r[c] for c in RESTART_COLUMNS]
+                                                                for r in self.restart_log])
         results.write_json(out / results.SUMMARY, summary)
         return summary

@@ -50,7 +50,7 @@ def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str],
     rules = [
         _allow("deliver", EVERY_MESSAGE, ["**"], flow="egress"),  # what a subject may send is held at ingress
         _allow("netem", ["put"], [k.netem_step]),
-        _allow("netem-subscribe", ["declare_subscriber"], [k.world, k.agent_out_all, k.netem_stop]),
+        _allow("netem-subscribe", ["declare_subscriber"], [k.world, k.agent_out_all, k.netem_stop, k.netem_control]),
         _allow("netem-query", ["query"], [k.netem_config, k.netem_report]),
         _allow("netem-alive", ["liveliness_token"], [k.alive_netem]),
         _allow("watch-alive", ["declare_liveliness_subscriber", "liveliness_query"], [alive]),

@@ -86,6 +86,27 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_soak(args: argparse.Namespace) -> int:
+    from swarmbed.experiments.chaos import ChaosError, load_chaos
+    from swarmbed.experiments.soak import Thresholds, format_verdict, parse_duration, soak
+
+    try:
+        duration = parse_duration(args.duration)
+        plan = load_chaos(Path(args.chaos)) if args.chaos else None
+    except (ValueError, ChaosError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    exp = cfg.load(args.experiment, args.set, args.seed)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    out = Path(args.out) if args.out else Path("runs") / f"soak-{exp.name}" / f"seed{exp.run.seed}-{stamp}"
+    limits = Thresholds(args.max_rss_slope, args.max_fd_growth, args.max_stall)
+    print(f"soak: {exp.name}, {exp.agents.count} agents, {duration:.0f} s of wall time"
+          f"{f', chaos from {args.chaos}' if plan else ''}; files in {out}", flush=True)
+    result = soak(exp, out, duration, plan, args.interval, limits, auth=not args.no_auth)
+    print(format_verdict(result))
+    return 0 if result["passed"] else 1
+
+
 def cmd_credentials(args: argparse.Namespace) -> int:
     from swarmbed.wire.credentials import CredentialsError, Identity, write_credentials
 
@@ -466,6 +487,24 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--tls-name", metavar="NAME", default="hub",
                      help="the certificate in --tls DIR the hub presents (default: hub)")
     run.set_defaults(func=cmd_run)
+
+    so = sub.add_parser("soak", help="run an experiment for a wall-clock duration under faults; every process "
+                                      "watched; a verdict at the end (exit 1 on a breach)")
+    so.add_argument("experiment", help="experiment YAML file")
+    so.add_argument("--duration", required=True, help="wall time: 90s, 30m, 2h, 1h30m")
+    so.add_argument("--chaos", metavar="CHAOS.yaml", help="faults to inject (see docs/soak.md)")
+    so.add_argument("--out", help="soak directory (default: runs/soak-<name>/seed<seed>-<time>)")
+    so.add_argument("--seed", type=int, help="run seed (overrides run.seed; also seeds the chaos)")
+    so.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
+    so.add_argument("--interval", type=float, default=5.0, help="wall seconds between samples (default 5)")
+    so.add_argument("--max-rss-slope", type=float, default=10.0, metavar="PCT_PER_H",
+                    help="largest RSS growth of any process over the second half, %% per hour (default 10)")
+    so.add_argument("--max-fd-growth", type=float, default=10.0, metavar="PER_H",
+                    help="largest growth of open file descriptors of any process, per hour (default 10)")
+    so.add_argument("--max-stall", type=float, default=10.0, metavar="S",
+                    help="longest a tick may take, wall seconds (default 10)")
+    so.add_argument("--no-auth", action="store_true", help="no authentication or access control on the hub")
+    so.set_defaults(func=cmd_soak)
 
     cr = sub.add_parser("credentials", help="make a credentials file for a host daemon or an operator (watch, swap)")
     cr.add_argument("file", help="the file to write (created with mode 600)")

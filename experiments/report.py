@@ -290,13 +290,18 @@ def sweep_report(sweep: Path) -> tuple[str, int]:
 
 
 def report(folder: Path, out: Path | None = None) -> Path:
-    """Write the report of a run or a sweep folder; returns the file."""
-    if (folder / "summary.json").exists():
+    """Write the report of a soak, a run or a sweep folder; returns the file."""
+    from swarmbed.experiments.soak_page import is_soak, soak_report
+
+    if is_soak(folder):
+        text, _ = soak_report(folder)
+    elif (folder / "summary.json").exists():
         text, _ = run_report(folder)
     elif (folder / TABLE).exists() or (folder / PARQUET).exists():
         text, _ = sweep_report(folder)
     else:
-        raise ReportError(f"{folder}: neither a completed run (no summary.json) nor a sweep (no sweep.csv)")
+        raise ReportError(f"{folder}: neither a completed run (no summary.json), a sweep (no sweep.csv) nor a soak "
+                          "(no soak_processes.csv)")
     out = out or folder / "report.html"
     tmp = out.with_name(out.name + ".part")
     tmp.write_text(text)

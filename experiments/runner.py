@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import zenoh
 from tqdm import tqdm
@@ -33,6 +34,7 @@ from swarmbed.experiments.host import (
 from swarmbed.experiments.launcher import ChildExited, Children, ForkServerError
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
+from swarmbed.wire.rowfile import PARTIAL_PREFIX, keep_partial
 from swarmbed.wire.schema import LOCAL, hosts_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
@@ -40,6 +42,26 @@ DEPLOYMENT = "deployment.json"  # where each agent ran; not a result (the same e
 RESULT_FILES = (results.SUMMARY, results.TIMESERIES, results.AGENTS, results.TIMINGS, results.TRANSPORT,
                 results.TRAJECTORIES, results.MARKERS,
                 "network_ledger.csv", "network_ledger_receivers.parquet", DEPLOYMENT)
+
+
+@dataclass
+class LiveRun:
+    """A run under way, as an observer sees it (soak monitors and chaos): the coordinator (read
+    its counters, ask it to stop), the local child processes, the hub session and the keys."""
+
+    exp: Experiment
+    out_dir: Path
+    coordinator: Coordinator
+    children: Children
+    session: zenoh.Session
+    keys: Keys
+
+
+class RunObserver(Protocol):
+    def start(self, run: LiveRun) -> None: ...
+
+    def stop(self) -> None:
+        """The ticks are over (or the run failed): finish, undo anything done to the processes."""
 
 
 @dataclass
@@ -67,7 +89,8 @@ def open_hub(listen: Sequence[str] = (), attempts: int = 5,
 def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                    on_ready: Callable[[Keys, str], None] | None = None, listen: Sequence[str] = (),
                    auth: bool = True, admit: Sequence[Identity] = (),
-                   tls: dict[str, object] | None = None, fork_agents: bool = True) -> RunResult:
+                   tls: dict[str, object] | None = None, fork_agents: bool = True,
+                   observers: Sequence[RunObserver] = ()) -> RunResult:
     """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
     (tests use it to reach the run's keys from outside). ``listen``: endpoints where the hub also
     listens, for the routers of the hosts in ``exp.placement``. ``auth``: the hub admits only
@@ -75,10 +98,12 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     operators and hosts in ``admit``; without it, anyone who reaches the hub may do anything.
     ``tls``: the hub's certificates (:func:`~swarmbed.wire.session.tls_settings`) for ``tls/``
     endpoints in ``listen``. ``fork_agents``: local agents come from a fork server that imported
-    everything once (:mod:`.forkserver`); without it each is a fresh interpreter."""
+    everything once (:mod:`.forkserver`); without it each is a fresh interpreter. ``observers``
+    are started once everyone joined and stopped when the ticks are over (:mod:`.soak`)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     for name in RESULT_FILES:  # a stale summary must never vouch for a new, unfinished run
         (out_dir / name).unlink(missing_ok=True)
+        (out_dir / (PARTIAL_PREFIX + name)).unlink(missing_ok=True)
     log_dir = out_dir / "logs"
     log_dir.mkdir(exist_ok=True)
     resolved = resolve_experiment(exp)
@@ -135,8 +160,8 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                     started.append(host)
             except HostError as exc:
                 raise RunError(str(exc)) from None
-        def place(agent: int, host: str, incarnation: int) -> None:
-            args = ["--id", str(agent), "--incarnation", str(incarnation), "--restore"]
+        def place(agent: int, host: str, incarnation: int, restore: bool = True) -> None:
+            args = ["--id", str(agent), "--incarnation", str(incarnation), *(["--restore"] if restore else [])]
             if host == LOCAL:
                 children.spawn(process_name(agent, incarnation), "swarmbed.agent_runtime",
                                [*common, *identity(agent_user(agent)), *args])
@@ -176,10 +201,17 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                 bar.update(sim_time - shown[0])
                 shown[0] = sim_time
 
+        live = LiveRun(exp, out_dir, coord, children, session, keys)
+        running: list[RunObserver] = []
         try:
+            for observer in observers:
+                observer.start(live)
+                running.append(observer)
             coord.run(on_tick)
         finally:
             bar.close()
+            for observer in reversed(running):
+                observer.stop()
         rss = children.rss_mb()
         shared = {k: v for k, v in children.shared_mb().items() if k.startswith("agent_")}
         peak = children.peak_rss_mb()
@@ -220,5 +252,11 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         session.close()
         if access:
             access.close()
-        for partial in out_dir.glob("*.part"):  # a run that did not complete leaves no half-written file
-            partial.unlink(missing_ok=True)
+        # a run that did not complete leaves no half-written file under a result's name: the rows it
+        # streamed are kept as partial_<name> once ticks ran (readable, for a post-mortem)
+        coord.abandon_tables()
+        for partial in out_dir.glob("*.part"):
+            if coord.last_tick >= 0:
+                keep_partial(partial)
+            else:
+                partial.unlink(missing_ok=True)

@@ -14,12 +14,12 @@ it is written in row groups as ticks close and only on request.
 
 from __future__ import annotations
 
-import csv
-import io
 from collections import defaultdict
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
+
+from swarmbed.wire.rowfile import RowFile
 
 SENT = "sent"
 DELIVERED = "delivered"
@@ -73,14 +73,13 @@ class ReceiverLog:
 
 
 class Ledger:
-    """Accumulates rows tick by tick and streams finished ticks to a CSV text sink."""
+    """Accumulates rows tick by tick and streams finished ticks to a :class:`RowFile` (whose
+    columns are :data:`LEDGER_COLUMNS`)."""
 
-    def __init__(self, sink: io.TextIOBase | None = None, receivers: ReceiverLog | None = None) -> None:
+    def __init__(self, sink: RowFile | None = None, receivers: ReceiverLog | None = None) -> None:
         self.receivers = receivers
         self._open: dict[tuple[int, int, str, str], list[int]] = defaultdict(lambda: [0, 0])
-        self._writer = csv.writer(sink, lineterminator="\n") if sink is not None else None
-        if self._writer:
-            self._writer.writerow(LEDGER_COLUMNS)
+        self._sink = sink
         self.messages_sent = 0
         self.bytes_sent = 0
         self.copies = 0
@@ -135,8 +134,8 @@ class Ledger:
         done = sorted(k for k in self._open if k[0] <= tick)
         for key in done:
             messages, nbytes = self._open.pop(key)
-            if self._writer:
-                self._writer.writerow((*key, messages, nbytes))
+            if self._sink is not None:
+                self._sink.write((*key, messages, nbytes))
         if self.receivers is not None:
             self.receivers.flush()
 

@@ -17,14 +17,16 @@ from pathlib import Path
 
 import zenoh
 
-from swarmbed.netem.ledger import Ledger, ReceiverLog
+from swarmbed.netem.ledger import LEDGER_COLUMNS, Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio
 from swarmbed.wire.codec import (
     AgentOut,
+    NetemControl,
     NetemStep,
     WireError,
     World,
     decode_agent_out,
+    decode_netem_control,
     decode_world,
     encode_inbox,
     encode_netem_step,
@@ -34,6 +36,7 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
 from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
 from swarmbed.wire.membership import fetch_spec, hand_over
+from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.schema import NetemSpec
 from swarmbed.wire.session import open_from_args
 from swarmbed.wire.transport import tcp_counters
@@ -50,8 +53,7 @@ class Proxy:
         self.keys = keys
         self.session = session
         self.out_dir = out_dir
-        self.part = out_dir / (LEDGER_FILE + ".part")
-        self.sink = open(self.part, "w", newline="")
+        self.sink = RowFile(out_dir / LEDGER_FILE, LEDGER_COLUMNS)
         self.receivers: ReceiverLog | None = None
         if spec.network.ledger == "per_receiver":
             self.receivers = ReceiverLog(out_dir / (RECEIVER_LEDGER_FILE + ".part"))
@@ -73,6 +75,7 @@ class Proxy:
         self.members: dict[int, list[int]] = {}  # tick -> agents alive then (recent ticks, for late answers)
         self.answered: dict[int, int] = {}  # agent -> the last tick it answered
         self.late_events: dict[str, int] = {}
+        self.controls: list[NetemControl] = []  # parameter changes not yet in force (chaos)
 
     # -- events ----------------------------------------------------------------------------------
     def _on_agent_alive(self, sample: zenoh.Sample) -> None:
@@ -91,6 +94,7 @@ class Proxy:
             s.declare_subscriber(k.world, lambda x: put(("world", x.payload.to_bytes()))),
             s.declare_subscriber(k.agent_out_all, lambda x: put(("out", (str(x.key_expr), x.payload.to_bytes())))),
             s.declare_subscriber(k.netem_stop, lambda x: put(("stop", x.payload.to_bytes()))),
+            s.declare_subscriber(k.netem_control, lambda x: put(("control", x.payload.to_bytes()))),
             s.liveliness().declare_subscriber(k.alive_agents, self._on_agent_alive),
             s.liveliness().declare_subscriber(k.alive_coordinator, self._on_coordinator),
         ]
@@ -102,7 +106,7 @@ class Proxy:
             token.undeclare()
             for sub in subs:
                 sub.undeclare()
-            self.sink.close()
+            self.sink.flush()
 
     def _loop(self) -> int:
         while True:
@@ -115,7 +119,7 @@ class Proxy:
                 self.world = None
                 continue
             if what == "gone":
-                log.error("netem: the coordinator went away; exiting (ledger left as %s)", self.part.name)
+                log.error("netem: the coordinator went away; exiting (ledger left as %s)", self.sink.part.name)
                 return 3
             if what == "stop":
                 last = int(unpack(data)[0])
@@ -125,6 +129,9 @@ class Proxy:
                 self._finish(last)
                 log.info("netem: ledger balanced and written; report sent")
                 return 0
+            if what == "control":
+                self._take_control(data)
+                continue
             if what == "left":  # lost only if that process is the agent's current one (not one swapped out)
                 self.gone.add(data)
                 self._note_losses(self.world)
@@ -177,15 +184,42 @@ class Proxy:
         self.answered[out.agent_id] = out.tick
         return out
 
+    def _take_control(self, data: bytes) -> None:
+        """A change of the radio's parameters from a tick on; one for a tick already routed is
+        malformed (it would rewrite the past)."""
+        try:
+            control = decode_netem_control(data)
+            if control.from_tick <= self.routed:
+                raise WireError(f"control for tick {control.from_tick}, already routed")
+            self.spec.network.model_validate({**self.spec.network.model_dump(), **control.overrides})
+        except (WireError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
+            self._malformed(self.keys.netem_control, exc)
+            return
+        self.controls.append(control)
+
+    def _apply_controls(self, tick: int) -> None:
+        """Put in force every change due at or before ``tick``, in the order they came."""
+        due = [c for c in self.controls if c.from_tick <= tick]
+        if not due:
+            return
+        self.controls = [c for c in self.controls if c.from_tick > tick]
+        for control in due:
+            self.radio.params = self.spec.network.model_copy(update=control.overrides)
+            log.info("netem: from tick %d the radio is %s (%s)", tick, control.overrides or "as configured",
+                     control.label)
+
     def _malformed(self, key: str, exc: Exception) -> None:
         self.malformed += 1
         if self.malformed <= 20:
             log.warning("netem: malformed sample on %s dropped: %s", key, exc)
 
     def _note_losses(self, w: World | None) -> None:
-        """Agents whose current process (as tick ``w`` names it) has left are lost."""
+        """Agents whose current process (as tick ``w`` names it) has left are lost (until a new
+        process of theirs is current)."""
         if w is None:
             return
+        # an agent started again (run.on_agent_loss: restart) is back once the world names its new process
+        self.lost = {a for a in self.lost if (a, w.incarnation(a)) in self.gone}
         for agent, incarnation in self.gone:
             if agent not in self.lost and incarnation == w.incarnation(agent):
                 self.lost.add(agent)
@@ -227,10 +261,12 @@ class Proxy:
         outs = self.outs.pop(w.tick, {})
         late = [a for a in w.ids if a not in outs and a not in self.lost]  # only ever on the real-time clock
         members = set(w.ids)
+        self._apply_controls(w.tick)
         self.radio.route(w.tick, w.ids, w.xs, w.ys, {a: o.messages for a, o in outs.items() if a in members})
         alive_next = [a for a in w.alive_next if a not in self.lost]
         inboxes = self.radio.deliver(w.tick + 1, alive_next)
         self.ledger.close_tick(w.tick)
+        self.sink.tick()
         led = self.ledger
         now = [led.messages_sent, led.bytes_sent, led.copies, led.delivered, led.dropped_total]
         counters = [a - b for a, b in zip(now, self._last)]
@@ -251,10 +287,7 @@ class Proxy:
         self.radio.finish(last_tick)
         self.ledger.close_tick(1 << 62)
         self.ledger.check()
-        self.sink.flush()
-        os.fsync(self.sink.fileno())
-        self.sink.close()
-        os.replace(self.part, self.out_dir / LEDGER_FILE)
+        self.sink.finish()
         files = [LEDGER_FILE]
         if self.receivers is not None:
             self.receivers.close()

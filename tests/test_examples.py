@@ -1,6 +1,7 @@
 """Every shipped file is an example, and every example is a test (as Mesa runs its examples): each
 behavior tree loads with the node set the CLI and the runtime share, each experiment and sweep file
-expands to valid experiments, and each runs a few ticks through real processes."""
+expands to valid experiments, and each runs a few ticks through real processes; each chaos file
+(faults for swarmbed soak) loads."""
 
 from pathlib import Path
 
@@ -8,13 +9,16 @@ import pytest
 import yaml
 
 from swarmbed.experiments import config as cfg
+from swarmbed.experiments.chaos import load_chaos
 from swarmbed.experiments.cli import main
 from swarmbed.experiments.runner import run_experiment
 from swarmbed.experiments.sweep import experiment_for, load_sweep
 
 ROOT = Path(__file__).resolve().parent.parent
 TREES = sorted([*(ROOT / "agent_runtime" / "trees").glob("*.xml"), *(ROOT / "plugins").rglob("*.xml")])
-FILES = sorted((ROOT / "experiments").rglob("*.yaml"))
+YAML = sorted((ROOT / "experiments").rglob("*.yaml"))
+CHAOS = [f for f in YAML if "events" in (yaml.safe_load(f.read_text()) or {})]  # faults for swarmbed soak
+FILES = [f for f in YAML if f not in CHAOS]
 SWEEPS = [f for f in FILES if "base" in (yaml.safe_load(f.read_text()) or {})]
 EXPERIMENTS = [f for f in FILES if f not in SWEEPS]
 
@@ -24,7 +28,12 @@ def _id(path: Path) -> str:
 
 
 def test_there_are_examples():
-    assert len(TREES) >= 7 and len(EXPERIMENTS) >= 3 and len(SWEEPS) >= 16
+    assert len(TREES) >= 7 and len(EXPERIMENTS) >= 3 and len(SWEEPS) >= 16 and CHAOS
+
+
+@pytest.mark.parametrize("path", CHAOS, ids=_id)
+def test_every_shipped_chaos_file_loads(path):
+    assert load_chaos(path).events
 
 
 def test_every_shipped_tree_loads(capsys):

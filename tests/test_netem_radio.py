@@ -111,14 +111,13 @@ def test_params_reject_out_of_range_values():
 def test_receiver_ledger_books_each_copy_once_and_sums_to_the_sender_ledger(tmp_path):
     """Random traffic through every drop path (addressing, queue, range, loss, death, run end):
     the per-copy Parquet rows add up, per (tick, sender, kind, outcome), to the sender ledger."""
-    import io
-
     import pandas as pd
 
-    from swarmbed.netem.ledger import Ledger, ReceiverLog
+    from swarmbed.netem.ledger import LEDGER_COLUMNS, Ledger, ReceiverLog
+    from swarmbed.wire.rowfile import RowFile
 
     rng = np.random.default_rng(7)
-    sink = io.StringIO()
+    sink = RowFile(tmp_path / "ledger.csv", LEDGER_COLUMNS, chunk_rows=7)  # small chunks: several writes
     path = tmp_path / "receivers.parquet"
     ledger = Ledger(sink, ReceiverLog(path, group=50))  # small row groups: several flushes
     n = 6
@@ -145,8 +144,7 @@ def test_receiver_ledger_books_each_copy_once_and_sums_to_the_sender_ledger(tmp_
     assert set(per_copy["outcome"]) >= {"delivered", "loss", "out_of_range", "receiver_dead", "no_such_receiver"}
     to_self = per_copy[per_copy["sender"] == per_copy["receiver"]]
     assert set(to_self["outcome"]) <= {"no_such_receiver"}  # addressed to itself: refused, never delivered
-    sink.seek(0)
-    rows = pd.read_csv(sink)
+    rows = pd.read_csv(sink.finish())
     copies = rows[rows["outcome"] != "sent"].set_index(["tick", "sender", "kind", "outcome"]).sort_index()
     summed = per_copy.groupby(["tick", "sender", "kind", "outcome"]).agg(messages=("bytes", "size"),
                                                                          bytes=("bytes", "sum"))

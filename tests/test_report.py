@@ -111,11 +111,19 @@ ERROR_PROBE = ("<script>window.__errors=[];addEventListener('error',e=>__errors.
                "p.id='errors';p.textContent=JSON.stringify(__errors);document.body.appendChild(p)},0));</script>")
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="no Chromium here (Debian: apt-get install chromium; .ci/run does)")
+NO_CHROMIUM = "no Chromium here (Debian: apt-get install chromium; .ci/run does)"
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason=NO_CHROMIUM)
 @pytest.mark.parametrize("which", ["run", "sweep"])
 def test_reports_render_every_plot_in_a_real_browser(which, runs, sweep_dir, tmp_path):
     folder = runs["a"] if which == "run" else sweep_dir
-    page = report(folder, tmp_path / "page.html").read_text()
+    assert_renders(report(folder, tmp_path / "page.html").read_text(), tmp_path)
+
+
+def assert_renders(page: str, tmp_path) -> None:
+    """Open ``page`` in headless Chromium: no script error, and every plot drew its SVG."""
+    assert CHROMIUM is not None
     probed = tmp_path / "probed.html"
     probed.write_text(page.replace("<head>", "<head>" + ERROR_PROBE, 1))
     dom = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--user-data-dir=" +

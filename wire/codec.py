@@ -22,7 +22,9 @@ TAG_TICK = 0
 TAG_STOP = 1
 # swap orders, each for one incarnation of the agent (the other process of a swap ignores it)
 TAG_SNAPSHOT, TAG_RESUME, TAG_RETIRE = 2, 3, 4
-CONTROLS = {TAG_SNAPSHOT: "snapshot", TAG_RESUME: "resume", TAG_RETIRE: "retire"}
+# a checkpoint: the agent reports its state and goes on (kept to restart it after a crash)
+TAG_CHECKPOINT = 5
+CONTROLS = {TAG_SNAPSHOT: "snapshot", TAG_RESUME: "resume", TAG_RETIRE: "retire", TAG_CHECKPOINT: "checkpoint"}
 
 
 # The largest sample an agent may send, or receive in one tick (its observation and inbox); a
@@ -134,6 +136,36 @@ def encode_tick(tick: int, obs: dict, inbox: bytes) -> bytes:
     return pack([TAG_TICK, tick, obs, inbox])
 
 
+# --- launcher -> netem proxy: the radio's parameters changed (chaos) --------------------------
+
+NETEM_OVERRIDABLE = ("loss", "rate", "range", "latency")
+
+
+@dataclass(frozen=True, slots=True)
+class NetemControl:
+    """From tick ``from_tick`` on, the radio's parameters are the run's with ``overrides`` (an empty
+    map: the run's own again); ``label`` names the cause in the proxy's log."""
+
+    from_tick: int
+    overrides: dict[str, Any]
+    label: str
+
+
+def encode_netem_control(control: NetemControl) -> bytes:
+    return pack([control.from_tick, control.overrides, control.label])
+
+
+def decode_netem_control(data: bytes) -> NetemControl:
+    msg = unpack(data)
+    _expect(isinstance(msg, list) and len(msg) == 3, "netem control must be [from_tick, overrides, label]")
+    tick, overrides, label = msg
+    _expect(_is_int(tick) and tick >= 0, "from_tick must be a non-negative int")
+    _expect(isinstance(overrides, dict) and all(k in NETEM_OVERRIDABLE for k in overrides),
+            f"overrides must be a map of {', '.join(NETEM_OVERRIDABLE)}")
+    _expect(isinstance(label, str), "label must be a string")
+    return NetemControl(tick, overrides, label)
+
+
 def encode_stop(reason: str) -> bytes:
     return pack([TAG_STOP, reason])
 
@@ -156,7 +188,7 @@ class StopIn:
 
 @dataclass(frozen=True, slots=True)
 class ControlIn:
-    """A swap order: ``order`` is snapshot, resume or retire, for one ``incarnation``."""
+    """An order for one ``incarnation``: snapshot, resume or retire (a swap), or checkpoint."""
 
     order: str
     incarnation: int

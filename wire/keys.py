@@ -29,6 +29,11 @@ class Keys:
     def netem_stop(self) -> str:
         return f"{self.root}/netem/stop"
 
+    # launcher (chaos) -> netem proxy: the radio's parameters changed from a tick on
+    @property
+    def netem_control(self) -> str:
+        return f"{self.root}/netem/control"
+
     # coordinator -> agent i: one sample per tick (observation + inbox), or a stop order
     def agent_in(self, agent_id: int) -> str:
         return f"{self.root}/agent/{agent_id}/in"

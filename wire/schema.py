@@ -37,10 +37,20 @@ class RunSection(Strict):
     duration: float = Field(3000.0, gt=0, description="simulated seconds before the run stops")
     tick_timeout: float = Field(60.0, gt=0, description="wall seconds a tick may wait for a silent process")
     join_timeout: float = Field(120.0, gt=0, description="wall seconds to wait for every process to join")
-    allow_agent_failures: bool = Field(False, description="go on without an agent whose process dies")
+    allow_agent_failures: bool = Field(False, description="the same as on_agent_loss: continue (kept for old files)")
+    on_agent_loss: Literal["fail", "continue", "restart"] = Field(
+        "fail", description="when an agent's process dies: stop the run, go on without it, or start it again "
+                            "under its id (from its last checkpoint where there is one)")
+    snapshot_every: int = Field(0, ge=0, description="restart: ticks between the agents' checkpoints (0: none, "
+                                                     "a restarted agent starts fresh)")
     record_every: int = Field(1, ge=1, description="ticks between time-series rows")
     record_trajectories: bool = Field(False, description="write trajectories.csv and markers.csv (for swarmbed replay)")
     stop_when_done: bool = Field(True, description="end the run once every task there will be is done")
+
+    @property
+    def agent_loss(self) -> Literal["fail", "continue", "restart"]:
+        """``on_agent_loss``, with the older ``allow_agent_failures: true`` read as ``continue``."""
+        return "continue" if self.allow_agent_failures and self.on_agent_loss == "fail" else self.on_agent_loss
 
 
 class AgentsSection(Strict):

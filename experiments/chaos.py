@@ -1,0 +1,303 @@
+"""Faults injected into a running experiment, from YAML, seeded, each logged with how it ended.
+
+A chaos file lists events; each happens at listed wall times (``at``, seconds after the run got
+under way) or at a rate (``every``: the mean wall seconds between two, exponential gaps)::
+
+    seed: 3                 # optional: the run's seed otherwise
+    events:
+      - action: kill_agent  # SIGKILL one live agent, drawn at random (or from `agents`)
+        every: 20
+      - action: stop_agent  # SIGSTOP one, SIGCONT it `for` seconds later
+        at: [15, 40]
+        for: 2
+      - action: loss_burst  # the radio loses copies with probability `loss` for `for` seconds
+        every: 30
+        for: 5
+        loss: 0.5
+      - action: rate_cap    # the radio's per-sender rate cap (bytes per simulated second)
+        at: [25]
+        for: 10
+        rate: 200
+
+Radio changes reach the netem proxy on its control key and take effect from a tick after the one
+under way (:class:`~swarmbed.wire.codec.NetemControl`); the copies they drop are booked in the
+ledger like any other. While one is in force a second replaces it; its end restores the run's own
+parameters. Only agents that run on this machine are signalled. An agent stopped longer than
+Zenoh's lease (10 s) loses its session: keep ``for`` short for ``stop_agent``.
+
+``chaos.csv`` gets one row per event once its ending is known: wall seconds, tick, action,
+target, detail, outcome.
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import os
+import signal
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from swarmbed.experiments.host import process_name
+from swarmbed.experiments.runner import LiveRun
+from swarmbed.wire.codec import NetemControl, encode_netem_control
+from swarmbed.wire.rowfile import RowFile
+
+log = logging.getLogger("swarmbed.chaos")
+CHAOS_FILE = "chaos.csv"
+CHAOS_COLUMNS = ["wall_s", "tick", "action", "target", "detail", "outcome"]
+RESOLVE_WITHIN = 30.0  # wall seconds an event's ending is waited for before it is called unresolved
+
+
+class ChaosError(ValueError):
+    """A chaos file that cannot be used; the message names the file and the entry."""
+
+
+class ChaosEvent(BaseModel):
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    action: Literal["kill_agent", "stop_agent", "loss_burst", "rate_cap"]
+    at: list[float] = Field(default_factory=list, description="wall seconds after the run got under way")
+    every: float | None = Field(None, gt=0, description="mean wall seconds between two (exponential gaps)")
+    duration: float = Field(0.0, ge=0, alias="for", description="seconds a stop or a radio change lasts")
+    agents: list[int] | None = Field(None, description="draw targets from these agents only")
+    loss: float | None = Field(None, ge=0, le=1)
+    rate: float | None = Field(None, gt=0)
+
+    @model_validator(mode="after")
+    def _complete(self) -> ChaosEvent:
+        if not self.at and self.every is None:
+            raise ValueError("give `at` (wall seconds) or `every` (mean seconds between two)")
+        if self.action in ("stop_agent", "loss_burst", "rate_cap") and self.duration <= 0:
+            raise ValueError(f"{self.action} needs `for` (seconds it lasts)")
+        if self.action == "loss_burst" and self.loss is None:
+            raise ValueError("loss_burst needs `loss` (probability a copy is lost)")
+        if self.action == "rate_cap" and self.rate is None:
+            raise ValueError("rate_cap needs `rate` (bytes per simulated second)")
+        return self
+
+
+class ChaosPlan(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    seed: int | None = Field(None, ge=0, description="seed of the draws; the run's seed when absent")
+    events: list[ChaosEvent] = Field(default_factory=list)
+
+
+def load_chaos(path: Path) -> ChaosPlan:
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ChaosError(f"{path}: {exc}") from None
+    try:
+        return ChaosPlan.model_validate(data or {})
+    except ValidationError as exc:
+        where = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        raise ChaosError(f"{path}: {where}") from None
+
+
+@dataclass(order=True)
+class _Due:
+    at: float
+    order: int
+    event: ChaosEvent = field(compare=False)
+    kind: str = field(compare=False, default="begin")  # begin | end (of a stop or a radio change)
+    data: dict[str, Any] = field(compare=False, default_factory=dict)
+
+
+class Chaos:
+    """Runs a :class:`ChaosPlan` against a live run (a :class:`~swarmbed.experiments.runner.RunObserver`)."""
+
+    def __init__(self, plan: ChaosPlan, horizon_s: float, seed: int) -> None:
+        self.plan = plan
+        self.horizon_s = horizon_s
+        self.rng = np.random.default_rng(np.random.SeedSequence(plan.seed if plan.seed is not None else seed)
+                                         .spawn(1)[0])
+        self.rows: list[list[Any]] = []  # every resolved event (also in chaos.csv)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._pending: list[tuple[float, dict[str, Any]]] = []  # (give up at, record)
+        self._stopped: set[int] = set()  # pids SIGSTOPped and not yet continued
+        self._radio_label: str | None = None
+
+    # -- schedule ------------------------------------------------------------------------------
+    def schedule(self) -> list[_Due]:
+        """Every event's start within the horizon, in time order (drawn once, from the seed)."""
+        due: list[_Due] = []
+        for i, event in enumerate(self.plan.events):
+            times = [t for t in event.at if t <= self.horizon_s]
+            if event.every is not None:
+                t = float(self.rng.exponential(event.every))
+                while t <= self.horizon_s:
+                    times.append(t)
+                    t += float(self.rng.exponential(event.every))
+            due += [_Due(t, i, event) for t in times]
+        return sorted(due)
+
+    # -- observer ------------------------------------------------------------------------------
+    def start(self, run: LiveRun) -> None:
+        self.run = run
+        self.table = RowFile(run.out_dir / CHAOS_FILE, CHAOS_COLUMNS, chunk_rows=1)
+        self.control = run.session.declare_publisher(run.keys.netem_control)
+        self.t0 = time.monotonic()
+        self._thread = threading.Thread(target=self._loop, name="chaos", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10)
+        for pid in list(self._stopped):  # never leave a process stopped
+            self._signal(pid, signal.SIGCONT)
+        self._resolve(final=True)
+        self.table.finish()
+        self.control.undeclare()
+
+    # -- the loop ------------------------------------------------------------------------------
+    def _loop(self) -> None:
+        queue = self.schedule()
+        heapq.heapify(queue)
+        order = len(queue)
+        while not self._stop.is_set():
+            now = time.monotonic() - self.t0
+            while queue and queue[0].at <= now:
+                due = heapq.heappop(queue)
+                try:
+                    end = self._act(due)
+                except Exception as exc:  # a fault that could not be injected is logged, never fatal
+                    log.exception("chaos: %s failed", due.event.action)
+                    self._record(due, "", "", f"not injected: {exc}")
+                    end = None
+                if end is not None:
+                    order += 1
+                    heapq.heappush(queue, _Due(due.at + due.event.duration, order, due.event, "end", end))
+            self._resolve()
+            self._stop.wait(0.05)
+
+    def _act(self, due: _Due) -> dict[str, Any] | None:
+        event, coord = due.event, self.run.coordinator
+        if due.kind == "end":
+            if event.action == "stop_agent":
+                self._signal(due.data["pid"], signal.SIGCONT)
+                due.data["record"]["resumed_tick"] = coord.last_tick
+            else:
+                self._radio(NetemControl(coord.last_tick + 2, {}, f"end of {event.action}"))
+                due.data["record"]["end_tick"] = coord.last_tick + 2
+                due.data["record"]["drops_end"] = dict(coord.drops_cum)
+            due.data["record"]["ended"] = True
+            return None
+        if event.action in ("kill_agent", "stop_agent"):
+            target = self._draw_agent(event)
+            if target is None:
+                self._record(due, "", "", "skipped: no live local agent")
+                return None
+            agent, pid = target
+            if event.action == "kill_agent":
+                self._signal(pid, signal.SIGKILL)
+                self._pend(due, agent, f"SIGKILL pid {pid}", {"kind": "kill", "agent": agent,
+                                                               "tick": coord.last_tick})
+                return None
+            self._signal(pid, signal.SIGSTOP)
+            late_before = coord.late_ticks.get(agent, 0)
+            record = self._pend(due, agent, f"SIGSTOP pid {pid} for {event.duration:g} s",
+                                {"kind": "stop", "agent": agent, "tick": coord.last_tick, "late_before": late_before,
+                                 "ended": False})
+            return {"pid": pid, "record": record}
+        overrides = {"loss": event.loss} if event.action == "loss_burst" else {"rate": event.rate}
+        start = coord.last_tick + 2
+        self._radio(NetemControl(start, overrides, event.action))
+        detail = ", ".join(f"{k} {v:g}" for k, v in overrides.items()) + f" for {event.duration:g} s"
+        record = self._pend(due, "netem", detail, {"kind": "radio", "start_tick": start, "ended": False,
+                                                   "drops_start": dict(coord.drops_cum)})
+        return {"record": record}
+
+    def _draw_agent(self, event: ChaosEvent) -> tuple[int, int] | None:
+        coord, procs = self.run.coordinator, self.run.children.procs
+        candidates = []
+        for agent in event.agents if event.agents is not None else range(coord.n):
+            if agent in coord.lost or agent in coord.down or not coord.world.alive[agent]:
+                continue
+            proc = procs.get(process_name(agent, coord.incarnation.get(agent, 0)))
+            if proc is not None and proc.poll() is None and proc.pid not in self._stopped:
+                candidates.append((agent, proc.pid))
+        if not candidates:
+            return None
+        return candidates[int(self.rng.integers(len(candidates)))]
+
+    def _signal(self, pid: int, sig: int) -> None:
+        try:
+            os.kill(pid, sig)
+        except ProcessLookupError:
+            pass
+        if sig == signal.SIGSTOP:
+            self._stopped.add(pid)
+        elif sig == signal.SIGCONT:
+            self._stopped.discard(pid)
+
+    def _radio(self, control: NetemControl) -> None:
+        self.control.put(encode_netem_control(control))
+
+    # -- outcomes ------------------------------------------------------------------------------
+    def _pend(self, due: _Due, target: Any, detail: str, state: dict[str, Any]) -> dict[str, Any]:
+        record = {"wall_s": round(due.at, 3), "action": due.event.action, "target": target, "detail": detail,
+                  **state}
+        self._pending.append((time.monotonic() + due.event.duration + RESOLVE_WITHIN, record))
+        return record
+
+    def _record(self, due: _Due, target: Any, detail: str, outcome: str) -> None:
+        self._write({"wall_s": round(due.at, 3), "tick": self.run.coordinator.last_tick,
+                     "action": due.event.action, "target": target, "detail": detail}, outcome)
+
+    def _write(self, record: dict[str, Any], outcome: str) -> None:
+        row = [record["wall_s"], record.get("tick", record.get("start_tick", "")), record["action"],
+               record["target"], record["detail"], outcome]
+        self.rows.append(row)
+        self.table.write(row)
+
+    def _resolve(self, final: bool = False) -> None:
+        still = []
+        for give_up, record in self._pending:
+            outcome = self._outcome(record)
+            if outcome is None and (final or time.monotonic() > give_up):
+                why = "the run ended first" if final else f"no ending within {RESOLVE_WITHIN:g} s"
+                outcome = f"unresolved: {why}"
+            if outcome is None:
+                still.append((give_up, record))
+            else:
+                self._write(record, outcome)
+        self._pending = still
+
+    def _outcome(self, record: dict[str, Any]) -> str | None:
+        coord = self.run.coordinator
+        if record["kind"] == "kill":
+            agent = record["agent"]
+            for r in coord.restart_log:
+                if r["agent"] == agent and r["lost_at_tick"] >= record["tick"]:
+                    if r["outcome"] != "ok":
+                        return f"restart failed: {r['reason']}"
+                    source = f"checkpoint of tick {r['checkpoint_tick']}" if r["checkpoint_tick"] != "" else "fresh"
+                    return f"restarted before tick {r['tick']} ({source}, {r['wait_ms']:.0f} ms)"
+            if agent in coord.lost:
+                return f"lost at tick {coord.lost[agent]} (on_agent_loss: {coord.exp.run.agent_loss})"
+            return None
+        if not record["ended"]:
+            return None
+        if record["kind"] == "stop":
+            agent = record["agent"]
+            if agent in coord.lost:
+                return f"lost at tick {coord.lost[agent]}"
+            if coord.last_tick <= record["resumed_tick"] + 1:
+                return None  # resumed: wait until it answered a tick again
+            late = coord.late_ticks.get(agent, 0) - record["late_before"]
+            waited = f", {late} late ticks" if coord.realtime else ""
+            return f"resumed at tick {record['resumed_tick']}{waited}"
+        if coord.last_tick < record["end_tick"]:
+            return None
+        drops = {k: v - record["drops_start"].get(k, 0) for k, v in record["drops_end"].items()}
+        booked = ", ".join(f"{n} {reason}" for reason, n in sorted(drops.items()) if n) or "no drops"
+        return f"in force ticks {record['start_tick']}-{record['end_tick'] - 1}: {booked}"

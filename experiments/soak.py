@@ -1,0 +1,278 @@
+"""``swarmbed soak``: an experiment left running for a wall-clock duration, every process watched,
+faults injected (:mod:`.chaos`), and a verdict at the end.
+
+The run is an ordinary run (lock-step or real-time, as the experiment says) whose simulated
+duration is unbounded and which stops when the wall duration is up. A :class:`Monitor` samples
+every local process of the run with psutil every ``interval`` seconds and appends rows as it goes:
+
+- ``soak_processes.csv``: wall_s, tick, process, kind, pid, rss_mb, cpu_pct, fds, threads, tcp
+  (TCP connections: a process's Zenoh session is one link to the hub; the hub holds one per process)
+- ``soak_run.csv``: wall_s, tick, sim_s, ticks_per_s, slowest_tick_ms (lock-step: the longest a
+  tick took in the interval), start_lag_ms (real time: the largest in the interval), messages and
+  bytes per second, copies, delivered, dropped, in_flight (copies not yet delivered or dropped),
+  agents alive / down / lost, restarts
+
+The verdict (``soak_verdict.json``, printed, exit code 1 on a breach) fits each process's RSS and
+open file descriptors over the second half of the run (where start-up growth is over): the RSS
+slope in % per hour (Theil-Sen, robust to the steps an allocator's arenas make) and the fd growth
+per hour (a restarted agent's process over the second half of its own life; a process that lived
+less than a quarter of the soak is listed without a slope), reported per process kind as the worst
+process of that kind; the longest stall; the
+ledger's conservation; every fault and how it ended; ticks/s at the start and at the end. Each is
+held to a threshold the user can set. A short soak extrapolates its slopes to an hour: a one-off
+step of a few tens of MB (Zenoh starts its runtimes' threads lazily, e.g. at a process's first
+query, and each new thread's malloc arena shows in RSS) reads as hundreds of % per hour over a
+minute and as a few % over hours. Give short soaks wider RSS thresholds (the test suite does).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import psutil
+
+from swarmbed.coordinator import results
+from swarmbed.experiments.chaos import Chaos, ChaosPlan
+from swarmbed.experiments.runner import LiveRun, RunObserver, run_experiment
+from swarmbed.wire.rowfile import RowFile
+from swarmbed.wire.schema import Experiment
+
+PROCESSES = "soak_processes.csv"
+RUN = "soak_run.csv"
+VERDICT = "soak_verdict.json"
+PROCESS_COLUMNS = ["wall_s", "tick", "process", "kind", "pid", "rss_mb", "cpu_pct", "fds", "threads", "tcp"]
+RUN_COLUMNS = ["wall_s", "tick", "sim_s", "ticks_per_s", "slowest_tick_ms", "start_lag_ms", "messages_per_s",
+               "bytes_per_s", "copies", "delivered", "dropped", "in_flight", "agents_alive", "agents_down",
+               "agents_lost", "restarts"]
+UNBOUNDED_S = 1e9  # the simulated duration of a soak: it ends on the wall clock
+MIN_SAMPLES = 10  # a process sampled fewer times (or alive for less than a quarter of the soak) gets no slope
+
+
+def parse_duration(text: str) -> float:
+    """``90``, ``90s``, ``30m``, ``2h``, ``1h30m`` -> seconds."""
+    parts = re.fullmatch(r"\s*(?:(\d+(?:\.\d+)?)h)?\s*(?:(\d+(?:\.\d+)?)m)?\s*(?:(\d+(?:\.\d+)?)s?)?\s*", text)
+    if not text.strip() or parts is None or not any(parts.groups()):
+        raise ValueError(f"not a duration: {text!r} (e.g. 90s, 30m, 2h, 1h30m)")
+    h, m, s = (float(g) if g else 0.0 for g in parts.groups())
+    return h * 3600 + m * 60 + s
+
+
+@dataclass
+class Thresholds:
+    max_rss_slope_pct_h: float = 10.0
+    max_fd_growth_h: float = 10.0
+    max_stall_s: float = 10.0
+
+
+def kind_of(name: str) -> str:
+    return "agent" if name.startswith("agent_") else name
+
+
+class Monitor:
+    """Samples the run's processes and counters every ``interval`` wall seconds; stops the run
+    when ``duration_s`` is up (a :class:`~swarmbed.experiments.runner.RunObserver`)."""
+
+    def __init__(self, duration_s: float, interval: float = 5.0) -> None:
+        self.duration_s = duration_s
+        self.interval = interval
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._procs: dict[int, psutil.Process] = {}
+        self.started = 0.0
+
+    def start(self, run: LiveRun) -> None:
+        self.run = run
+        self.processes = RowFile(run.out_dir / PROCESSES, PROCESS_COLUMNS)
+        self.counters = RowFile(run.out_dir / RUN, RUN_COLUMNS)
+        self.started = time.monotonic()
+        self._last = (self.started, -1, [0] * 5, 0)  # (time, tick, network counters, index into start lags)
+        self._thread = threading.Thread(target=self._loop, name="soak-monitor", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+        self._sample()  # the state at the end
+        self.processes.finish()
+        self.counters.finish()
+
+    def _loop(self) -> None:
+        coord = self.run.coordinator
+        self._sample()
+        while not self._stop.wait(self.interval - (time.monotonic() - self.started) % self.interval):
+            self._sample()
+            if time.monotonic() - self.started >= self.duration_s:
+                coord.stop_requested.set()
+
+    def _watched(self) -> dict[str, int]:
+        """Name -> pid of every local process of the run still there."""
+        children = self.run.children
+        pids = {"coordinator": os.getpid()}
+        if children.server is not None:
+            pids["forkserver"] = children.server.proc.pid
+        for name, proc in children.procs.items():
+            if proc.poll() is None:
+                pids[name] = proc.pid
+        return pids
+
+    def _sample(self) -> None:
+        now = time.monotonic()
+        coord = self.run.coordinator
+        tick = coord.last_tick
+        wall = round(now - self.started, 3)
+        for name, pid in self._watched().items():
+            try:
+                proc = self._procs.get(pid)
+                if proc is None:
+                    proc = self._procs[pid] = psutil.Process(pid)
+                    proc.cpu_percent(None)  # the first reading is a baseline
+                with proc.oneshot():
+                    row = [wall, tick, name, kind_of(name.split(".")[0]), pid,
+                           round(proc.memory_info().rss / 2**20, 3), proc.cpu_percent(None), proc.num_fds(),
+                           proc.num_threads(), len(proc.net_connections("tcp"))]
+            except (psutil.Error, OSError):
+                continue  # it exited between the listing and the reading
+            self.processes.write(row)
+        last_time, last_tick, last_net, lag_index = self._last
+        span = max(now - last_time, 1e-9)
+        net = list(coord.net_cum)
+        lags = coord.start_lags[lag_index:]
+        slowest, coord.slowest_in_interval = coord.slowest_in_interval, 0.0
+        alive = int(np.count_nonzero(coord.world.alive))
+        self.counters.write([
+            wall, tick, round(coord.world.time, 6), round((tick - last_tick) / span, 3), round(1000 * slowest, 3),
+            round(1000 * max(lags), 3) if len(lags) else "", round((net[0] - last_net[0]) / span, 3),
+            round((net[1] - last_net[1]) / span, 3), net[2], net[3], net[4], net[2] - net[3] - net[4], alive,
+            len(coord.down), len(coord.lost), sum(r["outcome"] == "ok" for r in coord.restart_log)])
+        self._last = (now, tick, net, lag_index + len(lags))
+        self.processes.flush()  # one sample, one chunk: a kill loses at most the sample under way
+        self.counters.flush()
+
+
+def _theil_sen(t: np.ndarray, y: np.ndarray) -> float:
+    from scipy.stats import theilslopes
+
+    if len(t) < 3 or np.ptp(t) <= 0:
+        return 0.0
+    return float(theilslopes(y, t)[0])
+
+
+def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summary: dict | None,
+            failure: str | None, slowest_tick: tuple[float, int]) -> dict[str, Any]:
+    """The soak's verdict from its files (see the module docstring)."""
+    import pandas as pd
+
+    procs = pd.read_csv(out_dir / PROCESSES)
+    counters = pd.read_csv(out_dir / RUN)
+    end = float(procs["wall_s"].max()) if len(procs) else 0.0
+    per_process = []
+    for name, life in procs.groupby("process"):
+        first, last = float(life["wall_s"].min()), float(life["wall_s"].max())
+        if len(life) < MIN_SAMPLES or last - first < end / 4:  # e.g. an agent killed early: no trend to read
+            per_process.append({"process": name, "kind": life["kind"].iloc[0], "samples": len(life),
+                                "short_lived": True, "rss_mb_last": float(life["rss_mb"].iloc[-1])})
+            continue
+        rows = life[life["wall_s"] >= (first + last) / 2]  # the second half of this process's life
+        t, rss, fds = rows["wall_s"].to_numpy(float), rows["rss_mb"].to_numpy(float), rows["fds"].to_numpy(float)
+        mean_rss = float(rss.mean()) if len(rss) else 0.0
+        slope = _theil_sen(t, rss) * 3600 / mean_rss * 100 if mean_rss else 0.0
+        fd_slope = float(np.polyfit(t, fds, 1)[0]) * 3600 if len(t) >= 3 and np.ptp(t) > 0 else 0.0
+        per_process.append({"process": name, "kind": rows["kind"].iloc[0], "samples": len(rows),
+                            "rss_mb_mean": round(mean_rss, 2), "rss_slope_pct_h": round(slope, 2),
+                            "fd_growth_h": round(fd_slope, 2), "fds_last": int(fds[-1]) if len(fds) else 0})
+    by_kind: dict[str, dict[str, Any]] = {}
+    for p in per_process:
+        if p.get("short_lived"):
+            continue
+        worst = by_kind.setdefault(p["kind"], {"processes": 0, "rss_slope_pct_h": -math.inf, "fd_growth_h": -math.inf,
+                                              "rss_mb_peak": 0.0})
+        worst["processes"] += 1
+        if p["rss_slope_pct_h"] > worst["rss_slope_pct_h"]:
+            worst.update(rss_slope_pct_h=p["rss_slope_pct_h"], worst_rss=p["process"])
+        if p["fd_growth_h"] > worst["fd_growth_h"]:
+            worst.update(fd_growth_h=p["fd_growth_h"], worst_fds=p["process"])
+    for kind, rows in procs.groupby("kind"):
+        if kind in by_kind:
+            by_kind[kind]["rss_mb_peak"] = round(float(rows["rss_mb"].max()), 2)
+    tenth = max(1, len(counters) // 10)
+    steady = counters[counters["wall_s"] > 0]
+    rate_start = float(steady["ticks_per_s"].head(tenth).mean()) if len(steady) else 0.0
+    rate_end = float(steady["ticks_per_s"].tail(tenth).mean()) if len(steady) else 0.0
+    net = (summary or {}).get("network", {})
+    conserved = (bool(net) and net["copies"] == net["delivered"] + net["dropped_total"])
+    faults = [dict(zip(["wall_s", "tick", "action", "target", "detail", "outcome"], row)) for row in chaos_rows]
+    bad_faults = [f for f in faults if str(f["outcome"]).startswith(("unresolved", "restart failed", "not injected"))]
+    breaches = []
+    for _kind, worst in sorted(by_kind.items()):
+        if worst["rss_slope_pct_h"] > limits.max_rss_slope_pct_h:
+            breaches.append(f"RSS of {worst['worst_rss']} grows {worst['rss_slope_pct_h']:.1f} %/h "
+                            f"(limit {limits.max_rss_slope_pct_h:g})")
+        if worst["fd_growth_h"] > limits.max_fd_growth_h:
+            breaches.append(f"open files of {worst['worst_fds']} grow {worst['fd_growth_h']:.1f}/h "
+                            f"(limit {limits.max_fd_growth_h:g})")
+    if slowest_tick[0] > limits.max_stall_s:
+        breaches.append(f"tick {slowest_tick[1]} took {slowest_tick[0]:.1f} s (limit {limits.max_stall_s:g})")
+    if failure:
+        breaches.append(f"the run stopped: {failure}")
+    elif not conserved:
+        breaches.append("the ledger does not balance (copies != delivered + dropped)")
+    breaches += [f"{f['action']} at {f['wall_s']} s: {f['outcome']}" for f in bad_faults]
+    return {
+        "passed": not breaches, "breaches": breaches,
+        "wall_s": end, "ticks": int(counters["tick"].max()) + 1 if len(counters) else 0,
+        "ticks_per_s": {"start": round(rate_start, 3), "end": round(rate_end, 3)},
+        "longest_stall_s": round(slowest_tick[0], 3), "longest_stall_tick": slowest_tick[1],
+        "conserved": conserved, "network": {k: net.get(k) for k in ("messages_sent", "copies", "delivered",
+                                                                    "dropped_total")},
+        "agents_lost": (summary or {}).get("agents_lost"), "restarts": (summary or {}).get("agent_restarts", 0),
+        "faults": faults, "by_kind": by_kind, "processes": per_process,
+        "thresholds": vars(limits),
+    }
+
+
+def soak(exp: Experiment, out_dir: Path, duration_s: float, chaos: ChaosPlan | None = None, interval: float = 5.0,
+         limits: Thresholds | None = None, progress: bool = True, **run_options: Any) -> dict[str, Any]:
+    """Run ``exp`` for ``duration_s`` wall seconds under ``chaos``; write and return the verdict."""
+    from swarmbed.coordinator.coordinator import RunError
+
+    exp = exp.model_copy(update={"run": exp.run.model_copy(update={"duration": UNBOUNDED_S,
+                                                                    "stop_when_done": False})})
+    monitor = Monitor(duration_s, interval)
+    injector = Chaos(chaos, duration_s, exp.run.seed) if chaos and chaos.events else None
+    observers: list[RunObserver] = [monitor, *([injector] if injector else [])]
+    summary, failure = None, None
+    try:
+        summary = run_experiment(exp, out_dir, progress=False, observers=observers, **run_options).summary
+    except RunError as exc:
+        failure = str(exc)
+    if not (out_dir / PROCESSES).exists():
+        raise RunError(failure or "the soak never got under way")
+    live = getattr(monitor, "run", None)  # set once the run got under way
+    slowest = live.coordinator.slowest_tick if live else (0.0, -1)
+    result = verdict(out_dir, limits or Thresholds(), injector.rows if injector else [], summary, failure, slowest)
+    results.write_json(out_dir / VERDICT, result)
+    return result
+
+
+def format_verdict(v: dict[str, Any]) -> str:
+    lines = [f"soak verdict: {'PASSED' if v['passed'] else 'FAILED'} after {v['wall_s']:.0f} s, {v['ticks']} ticks "
+             f"({v['ticks_per_s']['start']:.1f} ticks/s at the start, {v['ticks_per_s']['end']:.1f} at the end)"]
+    for kind, worst in sorted(v["by_kind"].items()):
+        lines.append(f"  {kind:<12} x{worst['processes']:<4} RSS slope {worst['rss_slope_pct_h']:+8.1f} %/h   "
+                     f"fds {worst['fd_growth_h']:+7.1f}/h   peak RSS {worst['rss_mb_peak']:.0f} MB")
+    lines.append(f"  longest stall {v['longest_stall_s']:.2f} s (tick {v['longest_stall_tick']}); ledger "
+                 f"{'balanced' if v['conserved'] else 'NOT balanced'}; restarts {v['restarts']}; "
+                 f"agents lost {len(v['agents_lost'] or {})}")
+    for f in v["faults"]:
+        lines.append(f"  fault {f['wall_s']:>8.1f} s tick {f['tick']}: {f['action']} {f['target']}: {f['outcome']}")
+    lines += [f"  BREACH: {b}" for b in v["breaches"]]
+    return "\n".join(lines)

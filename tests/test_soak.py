@@ -1,0 +1,206 @@
+"""Soak tests: a run left going for a wall-clock time under faults, every process watched, a verdict.
+
+Real runs: agents are OS processes on real Zenoh sessions, killed and stopped with real signals;
+the loss burst reaches the real proxy on its control key."""
+
+import csv
+import json
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pandas as pd
+import pytest
+
+from swarmbed.coordinator import results
+from swarmbed.experiments.chaos import ChaosError, ChaosPlan, load_chaos
+from swarmbed.experiments.report import report
+from swarmbed.experiments.soak import PROCESSES, RUN, VERDICT, Thresholds, parse_duration, soak
+from swarmbed.wire.rowfile import RowFile
+from tests.conftest import ROOT, experiment
+from tests.test_report import CHROMIUM, NO_CHROMIUM, assert_renders
+
+SOAK = ROOT / "experiments" / "soak" / "sar_soak.yaml"
+# A minute's soak extrapolates its slopes to an hour, so a one-off step of ~20 MB (Zenoh starting a
+# runtime's threads) reads as up to ~700 %/h here; the leaking allocator below grows by >20,000 %/h
+SHORT = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=10.0)
+
+
+def test_a_streamed_table_is_the_table_written_at_once_and_parses_at_every_moment(tmp_path):
+    rows = [[i, f"a,{i}", i / 3, "" if i % 2 else None] for i in range(10)]
+    results.write_csv(tmp_path / "whole.csv", ["n", "text", "x", "maybe"], rows)
+    table = RowFile(tmp_path / "streamed.csv", ["n", "text", "x", "maybe"], chunk_rows=3, chunk_s=3600)
+    for i, row in enumerate(rows):
+        table.write(row)
+        on_disk = pd.read_csv(table.part)  # whole rows only, a header always: what a kill would leave
+        assert len(on_disk) == (i + 1) // 3 * 3
+    assert table.finish().read_bytes() == (tmp_path / "whole.csv").read_bytes()
+    left = RowFile(tmp_path / "cut.csv", ["n"])
+    left.write([1])
+    kept = left.abandon()
+    assert kept == tmp_path / "partial_cut.csv" and kept.read_text() == "n\n1\n"
+    assert not (tmp_path / "cut.csv").exists() and not (tmp_path / "cut.csv.part").exists()
+
+
+def test_durations_and_chaos_files_are_checked_with_clear_errors(tmp_path):
+    assert parse_duration("90") == 90 and parse_duration("2h") == 7200 and parse_duration("1h30m") == 5400
+    with pytest.raises(ValueError, match="not a duration"):
+        parse_duration("soon")
+    bad = tmp_path / "chaos.yaml"
+    bad.write_text("events:\n  - action: loss_burst\n    at: [3]\n    for: 2\n")
+    with pytest.raises(ChaosError, match=r"chaos.yaml: events\.0.*needs `loss`"):
+        load_chaos(bad)
+    bad.write_text("events:\n  - action: melt_cpu\n    at: [3]\n")
+    with pytest.raises(ChaosError, match=r"events\.0\.action"):
+        load_chaos(bad)
+    out = subprocess.run([sys.executable, "-m", "swarmbed", "soak", str(SOAK), "--duration", "5s", "--chaos", str(bad)],
+                         capture_output=True, text=True, cwd=tmp_path)
+    assert out.returncode == 2 and "melt_cpu" not in out.stdout and "action" in out.stderr
+
+
+@pytest.fixture(scope="module")
+def chaos_soak(tmp_path_factory):
+    """Kills (each agent restarted from its checkpoint), a stop, a loss burst and a rate cap, in a
+    60-second soak of 8 agents."""
+    plan = ChaosPlan.model_validate({"events": [
+        {"action": "kill_agent", "at": [8, 22, 38]},
+        {"action": "stop_agent", "at": [15], "for": 1.5},
+        {"action": "loss_burst", "at": [28], "for": 5, "loss": 0.6},
+        {"action": "rate_cap", "at": [46], "for": 4, "rate": 30},
+    ]})
+    out = tmp_path_factory.mktemp("chaos") / "soak"
+    return out, soak(experiment("agents.count=8", base=SOAK), out, 60, plan, interval=1.0, limits=SHORT)
+
+
+def test_a_minute_of_chaos_is_survived_accounted_and_judged(chaos_soak, tmp_path):
+    """The verdict passes, every fault says how it ended, the ledger balances."""
+    out, v = chaos_soak
+    assert v["passed"], v["breaches"]
+    assert v["wall_s"] >= 59 and v["conserved"] and v["restarts"] == 3
+    outcomes = {f["action"]: [] for f in v["faults"]}
+    for f in v["faults"]:
+        outcomes[f["action"]].append(f["outcome"])
+    assert len(outcomes["kill_agent"]) == 3
+    assert all(o.startswith("restarted before tick") and "checkpoint of tick" in o for o in outcomes["kill_agent"])
+    assert outcomes["stop_agent"][0].startswith("resumed at tick")
+    assert outcomes["loss_burst"][0].startswith("in force ticks") and " loss" in outcomes["loss_burst"][0]
+    assert outcomes["rate_cap"][0].startswith("in force ticks")
+    with open(out / "chaos.csv") as f:
+        assert len(list(csv.DictReader(f))) == 6
+    restarts = pd.read_csv(out / "restarts.csv")
+    assert list(restarts["outcome"]) == ["ok"] * 3 and (restarts["checkpoint_tick"] % 400 == 0).all()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["agent_restarts"] == 3 and summary["agents_lost"] == {}
+    assert summary["network"]["dropped"]["loss"] > 0  # only the burst loses copies: the run's loss is 0
+    assert summary["network"]["bytes_agree"] is None  # restarted agents' own counters began again
+    procs = pd.read_csv(out / PROCESSES)
+    assert set(procs["kind"]) == {"coordinator", "netem", "forkserver", "agent"}
+    assert procs["process"].str.fullmatch(r"agent_\d+\.1").sum() > 0  # the restarted processes were watched
+    run = pd.read_csv(out / RUN)
+    assert (run["in_flight"] >= 0).all() and run["tick"].is_monotonic_increasing
+    assert json.loads((out / VERDICT).read_text())["passed"]
+    page = report(out, tmp_path / "soak.html").read_text()
+    assert "Verdict: passed" in page and page.count("restarted before tick") == 3
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason=NO_CHROMIUM)
+def test_the_soak_page_draws_every_plot_in_a_real_browser(chaos_soak, tmp_path):
+    assert_renders(report(chaos_soak[0], tmp_path / "soak.html").read_text(), tmp_path)
+
+
+LEAKY = textwrap.dedent('''
+    from swarmbed.plugins.noop import NoopAllocator
+
+    class Leaky(NoopAllocator):
+        """Keeps 1 MB more every tick, forever: what a soak is there to catch."""
+        hoard = []
+
+        def decide(self, view):
+            self.hoard.append(bytearray(1 << 20))
+            return super().decide(view)
+''')
+
+
+def test_an_allocator_that_leaks_fails_the_verdict_on_its_rss(tmp_path):
+    plugin = tmp_path / "leaky.py"
+    plugin.write_text(LEAKY)
+    exp = experiment(f"allocator={{name: '{plugin}:Leaky'}}", "agents.count=3", "run.dt=0.1")
+    v = soak(exp, tmp_path / "soak", 16, interval=1.0, limits=SHORT)
+    assert not v["passed"]
+    assert v["by_kind"]["agent"]["rss_slope_pct_h"] > 5 * SHORT.max_rss_slope_pct_h
+    assert any(b.startswith("RSS of agent_") for b in v["breaches"])
+    assert not any("coordinator" in b or "netem" in b for b in v["breaches"])
+
+
+def test_a_killed_soak_leaves_files_that_parse(tmp_path):
+    out = tmp_path / "soak"
+    cmd = [sys.executable, "-m", "swarmbed", "soak", str(SOAK), "--duration", "10m", "--out", str(out),
+           "--interval", "0.5", "--set", "agents.count=4"]
+    soak_proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 90
+    def rows(name: str) -> int:
+        part = out / (name + ".part")
+        return len(part.read_text().splitlines()) - 1 if part.exists() else 0
+
+    while rows(RUN) < 8 or rows("timeseries.csv") < 1:  # the time series is flushed every 5 s
+        assert soak_proc.poll() is None and time.monotonic() < deadline
+        time.sleep(0.2)
+    soak_proc.send_signal(signal.SIGKILL)  # no clean-up at all: the children follow (PR_SET_PDEATHSIG)
+    soak_proc.wait()
+    time.sleep(1.0)
+    for name in (RUN, PROCESSES, "timeseries.csv", "network_ledger.csv"):
+        table = pd.read_csv(out / (name + ".part"))  # a header and whole rows
+        assert len(table.columns) > 3, name
+    assert len(pd.read_csv(out / ("timeseries.csv.part"))) > 0
+    assert not (out / "summary.json").exists() and not (out / VERDICT).exists()
+    assert "No verdict" in report(out, tmp_path / "killed.html").read_text()  # reported from its .part files
+
+
+def test_a_run_that_stops_keeps_its_rows_as_partial_files(tmp_path):
+    """A run that fails after ticks ran keeps the rows it streamed, never under a result's name."""
+    from swarmbed.coordinator.coordinator import RunError
+    from swarmbed.experiments.runner import run_experiment
+
+    plugin = tmp_path / "boom.py"
+    plugin.write_text(textwrap.dedent('''
+        from swarmbed.plugins.base import Allocator
+
+        class Boom(Allocator):
+            def decide(self, view):
+                if view.tick == 30 and self.agent_id == 1:
+                    raise RuntimeError("boom")
+                return None
+    '''))
+    out = tmp_path / "run"
+    with pytest.raises(RunError, match="boom"):
+        run_experiment(experiment(f"allocator={{name: '{plugin}:Boom'}}"), out, progress=False)
+    series = pd.read_csv(out / "partial_timeseries.csv")
+    assert 25 <= len(series) <= 31
+    assert "outcome" in pd.read_csv(out / "partial_network_ledger.csv").columns
+    assert not list(out.glob("*.part")) and not (out / "timeseries.csv").exists()
+    assert not (out / "summary.json").exists()
+
+
+@pytest.mark.parametrize("policy", ["continue", "restart"])
+def test_a_killed_agent_is_lost_or_restarted_and_copies_to_it_are_booked(policy, tmp_path):
+    """on_agent_loss: continue loses the agent for good (the copies its peers address to it are
+    receiver_dead); restart (no checkpoints here) starts it fresh before the next tick (copies
+    routed while the proxy saw it gone are receiver_dead: none, if it came back first)."""
+    plan = ChaosPlan.model_validate({"events": [{"action": "kill_agent", "at": [3], "agents": [2]}]})
+    exp = experiment("agents.count=5", "allocator={name: noop, peers: 4}", "run.stop_when_done=false",
+                     f"run.on_agent_loss={policy}")
+    v = soak(exp, tmp_path / "soak", 10, plan, interval=1.0, limits=SHORT)
+    assert v["passed"], v["breaches"]
+    outcome = v["faults"][0]["outcome"]
+    summary = json.loads((tmp_path / "soak" / "summary.json").read_text())
+    assert v["conserved"]
+    if policy == "continue":
+        assert list(v["agents_lost"]) == ["2"] and v["restarts"] == 0
+        assert outcome.startswith("lost at tick") and "continue" in outcome
+        assert summary["network"]["dropped"]["receiver_dead"] > 0
+    else:
+        assert v["agents_lost"] == {} and v["restarts"] == 1 and outcome.startswith("restarted") and "fresh" in outcome
+        alive = pd.read_csv(tmp_path / "soak" / "agents.csv")
+        assert alive.loc[2, "alive"] == 1 and alive.loc[2, "messages_sent"] > 0
