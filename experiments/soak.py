@@ -94,6 +94,7 @@ class Monitor:
         self.counters = RowFile(run.out_dir / RUN, RUN_COLUMNS)
         self.started = time.monotonic()
         self._last = (self.started, -1, [0] * 5, 0)  # (time, tick, network counters, index into start lags)
+        self._sample()  # before the first tick: the processes as they joined
         self._thread = threading.Thread(target=self._loop, name="soak-monitor", daemon=True)
         self._thread.start()
 
@@ -107,7 +108,6 @@ class Monitor:
 
     def _loop(self) -> None:
         coord = self.run.coordinator
-        self._sample()
         while not self._stop.wait(self.interval - (time.monotonic() - self.started) % self.interval):
             self._sample()
             if time.monotonic() - self.started >= self.duration_s:

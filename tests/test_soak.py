@@ -204,3 +204,20 @@ def test_a_killed_agent_is_lost_or_restarted_and_copies_to_it_are_booked(policy,
         assert v["agents_lost"] == {} and v["restarts"] == 1 and outcome.startswith("restarted") and "fresh" in outcome
         alive = pd.read_csv(tmp_path / "soak" / "agents.csv")
         assert alive.loc[2, "alive"] == 1 and alive.loc[2, "messages_sent"] > 0
+
+
+def test_on_the_real_time_clock_a_stopped_agent_misses_ticks_and_the_soak_says_how_many(tmp_path):
+    """SIGSTOP for 1.5 s at 10 ticks per second: the agent misses about 15 ticks (booked late), the
+    run's clock goes on, and the fault's outcome counts them."""
+    plan = ChaosPlan.model_validate({"events": [{"action": "stop_agent", "at": [3], "for": 1.5, "agents": [1]}]})
+    exp = experiment("agents.count=4", "allocator={name: noop, peers: 3}", "run.stop_when_done=false",
+                     "run.clock=realtime", "run.dt=1", "run.speed=10")
+    v = soak(exp, tmp_path / "soak", 8, plan, interval=1.0, limits=SHORT)
+    assert v["passed"], v["breaches"]
+    late = int(v["faults"][0]["outcome"].split(", ")[1].split()[0])
+    assert 10 <= late <= 20, v["faults"][0]["outcome"]
+    summary = json.loads((tmp_path / "soak" / "summary.json").read_text())
+    assert summary["realtime"]["late_ticks"] == {"1": late}
+    assert summary["network"]["dropped"]["late"] > 0 and v["conserved"]
+    run = pd.read_csv(tmp_path / "soak" / RUN)
+    assert run["start_lag_ms"].notna().any()
