@@ -55,6 +55,7 @@ class LiveRun:
     children: Children
     session: zenoh.Session
     keys: Keys
+    hosts: dict[str, dict | None]  # host name -> what its daemon said of itself (cores, memory, pid)
 
 
 class RunObserver(Protocol):
@@ -201,7 +202,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                 bar.update(sim_time - shown[0])
                 shown[0] = sim_time
 
-        live = LiveRun(exp, out_dir, coord, children, session, keys)
+        live = LiveRun(exp, out_dir, coord, children, session, keys, hosts)
         running: list[RunObserver] = []
         try:
             for observer in observers:

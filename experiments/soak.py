@@ -3,7 +3,8 @@ faults injected (:mod:`.chaos`), and a verdict at the end.
 
 The run is an ordinary run (lock-step or real-time, as the experiment says) whose simulated
 duration is unbounded and which stops when the wall duration is up. A :class:`Monitor` samples
-every local process of the run with psutil every ``interval`` seconds and appends rows as it goes:
+every process of the run on this machine (host daemons of stand-in hosts and their agents too)
+with psutil every ``interval`` seconds and appends rows as it goes:
 
 - ``soak_processes.csv``: wall_s, tick, process, kind, pid, rss_mb, cpu_pct, fds, threads, tcp
   (TCP connections: a process's Zenoh session is one link to the hub; the hub holds one per process)
@@ -41,6 +42,7 @@ import psutil
 
 from swarmbed.coordinator import results
 from swarmbed.experiments.chaos import Chaos, ChaosPlan
+from swarmbed.experiments.host import process_name
 from swarmbed.experiments.runner import LiveRun, RunObserver, run_experiment
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.schema import Experiment
@@ -73,7 +75,9 @@ class Thresholds:
 
 
 def kind_of(name: str) -> str:
-    return "agent" if name.startswith("agent_") else name
+    if name.startswith("agent_"):
+        return "agent"
+    return "host" if name.startswith("host_") else name
 
 
 class Monitor:
@@ -122,6 +126,8 @@ class Monitor:
         for name, proc in children.procs.items():
             if proc.poll() is None:
                 pids[name] = proc.pid
+        for host, info in self.run.hosts.items():
+            pids.update(_host_processes(host, (info or {}).get("pid")))
         return pids
 
     def _sample(self) -> None:
@@ -156,6 +162,26 @@ class Monitor:
         self._last = (now, tick, net, lag_index + len(lags))
         self.processes.flush()  # one sample, one chunk: a kill loses at most the sample under way
         self.counters.flush()
+
+
+def _host_processes(host: str, pid: int | None) -> dict[str, int]:
+    """A host daemon that runs on this machine (a stand-in host in a network namespace, or a second
+    daemon here) and its agents, as ``host_<name>`` and ``agent_<i>[.<n>]@<name>``; nothing for a
+    host on another machine (its daemon's pid is not a process here)."""
+    try:
+        daemon = psutil.Process(pid) if pid else None
+        if daemon is None or f"--name {host}" not in " ".join(daemon.cmdline()):
+            return {}
+        found = {f"host_{host}": daemon.pid}
+        for child in daemon.children(recursive=True):
+            args = child.cmdline()
+            if "swarmbed.agent_runtime" in args and "--id" in args:
+                agent = int(args[args.index("--id") + 1])
+                incarnation = int(args[args.index("--incarnation") + 1]) if "--incarnation" in args else 0
+                found[f"{process_name(agent, incarnation)}@{host}"] = child.pid
+        return found
+    except (psutil.Error, ValueError, IndexError):
+        return {}
 
 
 def _theil_sen(t: np.ndarray, y: np.ndarray) -> float:

@@ -221,3 +221,16 @@ def test_on_the_real_time_clock_a_stopped_agent_misses_ticks_and_the_soak_says_h
     assert summary["network"]["dropped"]["late"] > 0 and v["conserved"]
     run = pd.read_csv(tmp_path / "soak" / RUN)
     assert run["start_lag_ms"].notna().any()
+
+
+def test_host_daemons_on_this_machine_and_their_agents_are_watched(lab, tmp_path):
+    """Agents placed on a stand-in host (a network namespace with its own daemon) are sampled
+    under their host's name, and so is the daemon."""
+    lab.add_host("h1")
+    exp = experiment("agents.count=4", "allocator={name: noop, peers: 2}", "run.stop_when_done=false",
+                     "placement={h1: '0-1'}")
+    v = soak(exp, tmp_path / "soak", 8, interval=0.5, limits=SHORT, listen=[lab.hub], admit=lab.admitted)
+    assert v["passed"], v["breaches"]
+    procs = pd.read_csv(tmp_path / "soak" / PROCESSES)
+    assert {"host_h1", "agent_0@h1", "agent_1@h1", "agent_2", "agent_3"} <= set(procs["process"])
+    assert v["by_kind"]["host"]["processes"] == 1 and v["by_kind"]["agent"]["processes"] == 4
