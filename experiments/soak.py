@@ -18,12 +18,11 @@ open file descriptors over the second half of the run (where start-up growth is 
 slope in % per hour (Theil-Sen, robust to the steps an allocator's arenas make) and the fd growth
 per hour (a restarted agent's process over the second half of its own life; a process that lived
 less than a quarter of the soak is listed without a slope), reported per process kind as the worst
-process of that kind; the longest stall; the
-ledger's conservation; every fault and how it ended; ticks/s at the start and at the end. Each is
-held to a threshold the user can set. A short soak extrapolates its slopes to an hour: a one-off
-step of a few tens of MB (Zenoh starts its runtimes' threads lazily, e.g. at a process's first
-query, and each new thread's malloc arena shows in RSS) reads as hundreds of % per hour over a
-minute and as a few % over hours. Give short soaks wider RSS thresholds (the test suite does).
+process of that kind; the longest stall; the ledger's conservation; every fault and how it ended;
+ticks/s at the start and at the end. Each is held to a threshold the user can set. A short soak
+extrapolates its slopes to an hour: a one-off step of a few MB (allocators reaching their working
+size in the first minutes) reads as hundreds of % per hour over a minute and as a few % over
+hours. Give short soaks wider RSS thresholds (the test suite does).
 """
 
 from __future__ import annotations

@@ -2,6 +2,13 @@
 
 Multicast scouting is always off: processes find each other only through explicit endpoints, so
 two runs (or two users) on one machine never discover each other.
+
+Zenoh's shared-memory transport is off unless a ``--config`` file says otherwise. With it on, a
+session's first message over 3 KB (a checkpoint, a large consensus message) makes it a 16 MB pool
+in ``/dev/shm``, and every session it reaches maps that pool: the hub held 16 MB per agent (1 GB
+at 50 agents) and kept a dead session's pool mapped, so each restarted agent added 16 MB and two
+file descriptors for good. Between a few hundred processes on one machine the copy it saves is a
+few KB per message, and a container's default 64 MB ``/dev/shm`` would fill at four agents.
 """
 
 from __future__ import annotations
@@ -34,6 +41,8 @@ def zenoh_config(
     conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    if not config_file:
+        conf.insert_json5("transport/shared_memory/enabled", "false")
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
         if connect_timeout_s is not None:
