@@ -18,12 +18,22 @@ under way) or at a rate (``every``: the mean wall seconds between two, exponenti
         at: [25]
         for: 10
         rate: 200
+      - action: cut_host    # a host's network links down for `for` seconds (or from `hosts`)
+        at: [30]
+        for: 5
 
 Radio changes reach the netem proxy on its control key and take effect from a tick after the one
 under way (:class:`~swarmbed.wire.codec.NetemControl`); the copies they drop are booked in the
 ledger like any other. While one is in force a second replaces it; its end restores the run's own
 parameters. Only agents that run on this machine are signalled. An agent stopped longer than
 Zenoh's lease (10 s) loses its session: keep ``for`` short for ``stop_agent``.
+
+``cut_host`` needs several hosts, and reaches those that are stand-ins on this machine: a host
+daemon in a network namespace of its own (:mod:`.netns`; root). Every link of the namespace but
+loopback goes down for the window and comes back with its routes. Shorter than Zenoh's lease, the
+links' TCP connections survive and the host's agents answer late (lock-step waits for them, up to
+``run.tick_timeout``); longer, its sessions are closed and its agents are lost, restarted or fail
+the run as ``run.on_agent_loss`` says. The outcome says which.
 
 ``chaos.csv`` gets one row per event once its ending is known: wall seconds, tick, action,
 target, detail, outcome.
@@ -45,6 +55,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from swarmbed.experiments import netns
 from swarmbed.experiments.host import process_name
 from swarmbed.experiments.runner import LiveRun
 from swarmbed.wire.codec import NetemControl, encode_netem_control
@@ -62,11 +73,12 @@ class ChaosError(ValueError):
 
 class ChaosEvent(BaseModel):
     model_config = ConfigDict(extra="forbid", populate_by_name=True)
-    action: Literal["kill_agent", "stop_agent", "loss_burst", "rate_cap"]
+    action: Literal["kill_agent", "stop_agent", "loss_burst", "rate_cap", "cut_host"]
     at: list[float] = Field(default_factory=list, description="wall seconds after the run got under way")
     every: float | None = Field(None, gt=0, description="mean wall seconds between two (exponential gaps)")
     duration: float = Field(0.0, ge=0, alias="for", description="seconds a stop or a radio change lasts")
     agents: list[int] | None = Field(None, description="draw targets from these agents only")
+    hosts: list[str] | None = Field(None, description="cut_host: draw from these hosts only")
     loss: float | None = Field(None, ge=0, le=1)
     rate: float | None = Field(None, gt=0)
 
@@ -74,7 +86,7 @@ class ChaosEvent(BaseModel):
     def _complete(self) -> ChaosEvent:
         if not self.at and self.every is None:
             raise ValueError("give `at` (wall seconds) or `every` (mean seconds between two)")
-        if self.action in ("stop_agent", "loss_burst", "rate_cap") and self.duration <= 0:
+        if self.action in ("stop_agent", "loss_burst", "rate_cap", "cut_host") and self.duration <= 0:
             raise ValueError(f"{self.action} needs `for` (seconds it lasts)")
         if self.action == "loss_burst" and self.loss is None:
             raise ValueError("loss_burst needs `loss` (probability a copy is lost)")
@@ -124,6 +136,7 @@ class Chaos:
         self._pending: list[tuple[float, dict[str, Any]]] = []  # (give up at, record)
         self._stopped: set[int] = set()  # pids SIGSTOPped and not yet continued
         self._radio_label: str | None = None
+        self._cut: dict[str, netns.Cut] = {}  # host -> its links taken down, until the window ends
 
     # -- schedule ------------------------------------------------------------------------------
     def schedule(self) -> list[_Due]:
@@ -152,8 +165,11 @@ class Chaos:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=10)
-        for pid in list(self._stopped):  # never leave a process stopped
+        for pid in list(self._stopped):  # never leave a process stopped, nor a host cut off
             self._signal(pid, signal.SIGCONT)
+        for cut in self._cut.values():
+            netns.reconnect(cut)
+        self._cut.clear()
         self._resolve(final=True)
         self.table.finish()
         self.control.undeclare()
@@ -185,6 +201,10 @@ class Chaos:
             if event.action == "stop_agent":
                 self._signal(due.data["pid"], signal.SIGCONT)
                 due.data["record"]["resumed_tick"] = coord.last_tick
+            elif event.action == "cut_host":
+                netns.reconnect(due.data["cut"])
+                self._cut.pop(due.data["record"]["target"], None)
+                due.data["record"]["end_tick"] = coord.last_tick
             else:
                 self._radio(NetemControl(coord.last_tick + 2, {}, f"end of {event.action}"))
                 due.data["record"]["end_tick"] = coord.last_tick + 2
@@ -208,6 +228,8 @@ class Chaos:
                                 {"kind": "stop", "agent": agent, "tick": coord.last_tick, "late_before": late_before,
                                  "ended": False})
             return {"pid": pid, "record": record}
+        if event.action == "cut_host":
+            return self._cut_host(due)
         overrides = {"loss": event.loss} if event.action == "loss_burst" else {"rate": event.rate}
         start = coord.last_tick + 2
         self._radio(NetemControl(start, overrides, event.action))
@@ -229,6 +251,26 @@ class Chaos:
             return None
         return candidates[int(self.rng.integers(len(candidates)))]
 
+    def _cut_host(self, due: _Due) -> dict[str, Any] | None:
+        coord = self.run.coordinator
+        candidates = []
+        for host, info in sorted(self.run.hosts.items()):
+            pid = (info or {}).get("pid")
+            ns = netns.namespace_of(pid) if isinstance(pid, int) else None
+            if ns is not None and host not in self._cut and (due.event.hosts is None or host in due.event.hosts):
+                candidates.append((host, ns))
+        if not candidates:
+            self._record(due, "", "", "skipped: no host of this run in a network namespace of its own here")
+            return None
+        host, ns = candidates[int(self.rng.integers(len(candidates)))]
+        cut = netns.cut_off(ns)
+        self._cut[host] = cut
+        agents = sorted(a for a, h in coord.hosts.items() if h == host)
+        record = self._pend(due, host, f"{', '.join(cut.links)} of {ns} down for {due.event.duration:g} s",
+                            {"kind": "cut", "tick": coord.last_tick, "agents": agents, "ended": False,
+                             "restarts_before": len(coord.restart_log)})
+        return {"cut": cut, "record": record}
+
     def _signal(self, pid: int, sig: int) -> None:
         try:
             os.kill(pid, sig)
@@ -248,6 +290,19 @@ class Chaos:
                   **state}
         self._pending.append((time.monotonic() + due.event.duration + RESOLVE_WITHIN, record))
         return record
+
+    def _cut_outcome(self, record: dict[str, Any]) -> str | None:
+        """Once ticks go on after the window: what became of the host's agents."""
+        coord = self.run.coordinator
+        if coord.last_tick <= record["end_tick"] + 1 or any(a in coord.down for a in record["agents"]):
+            return None
+        restarts = [r for r in coord.restart_log[record["restarts_before"]:] if r["agent"] in record["agents"]]
+        ok = sorted({r["agent"] for r in restarts if r["outcome"] == "ok"})
+        lost = sorted(a for a in record["agents"] if coord.lost.get(a, -1) >= record["tick"])
+        went = f"ticks {record['tick']}-{record['end_tick']} during the cut"
+        if not ok and not lost:
+            return f"reconnected, every agent kept its session ({went})"
+        return (f"{went}; agents restarted: {ok or 'none'}; agents lost: {lost or 'none'}")
 
     def _record(self, due: _Due, target: Any, detail: str, outcome: str) -> None:
         self._write({"wall_s": round(due.at, 3), "tick": self.run.coordinator.last_tick,
@@ -296,6 +351,8 @@ class Chaos:
             late = coord.late_ticks.get(agent, 0) - record["late_before"]
             waited = f", {late} late ticks" if coord.realtime else ""
             return f"resumed at tick {record['resumed_tick']}{waited}"
+        if record["kind"] == "cut":
+            return self._cut_outcome(record)
         if coord.last_tick < record["end_tick"]:
             return None
         drops = {k: v - record["drops_start"].get(k, 0) for k, v in record["drops_end"].items()}

@@ -214,12 +214,20 @@ def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_co
 
 
 def _get_json(session: zenoh.Session, key: str, payload: dict | None, timeout: float) -> dict | None:
+    """The JSON object a host's queryable answers, or None after ``timeout``. A query that finds
+    no queryable ends at once: just after a host's token is seen, its queryables may not have
+    reached this session's routing yet, so such a query is asked again (a query that reached the
+    host and went unanswered took the whole timeout, and is not)."""
     body = json.dumps(payload) if payload is not None else None
-    for reply in session.get(key, payload=body, timeout=timeout):
-        if reply.ok is not None:
-            answer = json.loads(reply.ok.payload.to_bytes())
-            return answer if isinstance(answer, dict) else None
-    return None
+    deadline = time.monotonic() + timeout
+    while True:
+        for reply in session.get(key, payload=body, timeout=max(0.1, deadline - time.monotonic())):
+            if reply.ok is not None:
+                answer = json.loads(reply.ok.payload.to_bytes())
+                return answer if isinstance(answer, dict) else None
+        if time.monotonic() + 0.1 >= deadline:
+            return None
+        time.sleep(0.1)
 
 
 def visible_hosts(session: zenoh.Session, timeout: float = 2.0) -> list[str]:

@@ -151,6 +151,44 @@ class Lab:
         _ip("link", "del", f"{self.tag}br", check=False)
 
 
+@dataclass
+class Cut:
+    """A namespace whose links were taken down, and what brings it back (:func:`cut_off`)."""
+    namespace: str
+    links: list[str]
+    routes: list[str]
+
+
+def namespace_of(pid: int) -> str | None:
+    """The named network namespace (``ip netns``) process ``pid`` runs in; None where it runs in
+    this process's own namespace, in an unnamed one, or where that cannot be known."""
+    try:
+        if os.stat(f"/proc/{pid}/ns/net").st_ino == os.stat("/proc/self/ns/net").st_ino:
+            return None
+        found = _ip("netns", "identify", str(pid), check=False).stdout.strip()
+    except (OSError, FileNotFoundError):
+        return None
+    return found or None
+
+
+def cut_off(ns: str) -> Cut:
+    """Take every link of namespace ``ns`` but loopback down: the host it stands for drops off the
+    network (its processes keep running; TCP peers see silence, then their lease runs out)."""
+    listing = _ip("-o", "link", "show", ns=ns).stdout.splitlines()
+    links = [line.split(":")[1].strip().split("@")[0] for line in listing if ":" in line]
+    links = [link for link in links if link != "lo"]
+    routes = [r for r in _ip("route", "show", ns=ns).stdout.splitlines() if r.strip()]
+    for link in links:
+        _ip("link", "set", link, "down", ns=ns)
+    return Cut(ns, links, routes)
+
+
+def reconnect(cut: Cut) -> None:
+    """Bring a :func:`cut_off` namespace's links up again, with every route it had."""
+    for link in cut.links:
+        _ip("link", "set", link, "up", ns=cut.namespace)
+    for route in cut.routes:  # a link's own prefix comes back with it; routes through it do not
+        _ip("route", "replace", *route.split(), ns=cut.namespace, check=False)
 
 
 class LabError(RuntimeError):

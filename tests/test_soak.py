@@ -236,6 +236,31 @@ def test_host_daemons_on_this_machine_and_their_agents_are_watched(lab, tmp_path
     assert v["by_kind"]["host"]["processes"] == 1 and v["by_kind"]["agent"]["processes"] == 4
 
 
+def test_a_host_cut_off_for_a_window_stalls_the_ticks_and_its_agents_come_back(lab, tmp_path):
+    """A stand-in host's links go down for 3 s (within Zenoh's 10 s lease): lock-step waits for
+    its agents, the links come back, every agent keeps its session and the run goes on."""
+    lab.add_host("h1")
+    exp = experiment("agents.count=4", "allocator={name: noop, peers: 3}", "run.stop_when_done=false",
+                     "placement={h1: '0-1'}")
+    plan = ChaosPlan.model_validate({"events": [{"action": "cut_host", "at": [2], "for": 3}]})
+    v = soak(exp, tmp_path / "soak", 10, chaos=plan, interval=0.5, limits=SHORT, listen=[lab.hub],
+             admit=lab.admitted)
+    assert v["passed"], v["breaches"]
+    (fault,) = v["faults"]
+    assert (fault["action"], fault["target"]) == ("cut_host", "h1")
+    assert fault["outcome"].startswith("reconnected, every agent kept its session"), fault
+    assert v["longest_stall_s"] > 2.0  # the ticks waited for the cut-off agents
+    run = pd.read_csv(tmp_path / "soak" / RUN)
+    assert run["tick"].iloc[-1] > run.loc[run["wall_s"] <= 5.5, "tick"].max()  # and went on afterwards
+    assert netns_links_up(lab)
+
+
+def netns_links_up(lab) -> bool:
+    from swarmbed.experiments.netns import _ip
+
+    return all("state DOWN" not in _ip("-o", "link", "show", ns=ns).stdout for ns in lab.namespaces)
+
+
 def test_sessions_map_no_shared_memory_pools():
     """With Zenoh's shared-memory transport on, a message over 3 KB gives its sender a 16 MB pool
     that every receiving session maps and keeps: 16 MB per agent in the hub, never given back
