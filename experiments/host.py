@@ -79,9 +79,10 @@ class Host:
         if not isinstance(ids, list) or not all(isinstance(i, int) and i >= 0 for i in ids):
             return {"error": f"start: agents must be a list of ids, got {ids!r}"}
         extra = request.get("args", [])
-        allowed = ("--restore", "--incarnation")
+        allowed = ("--restore", "--incarnation", "--log-max-mb", "--log-backups")
         if not (isinstance(extra, list) and all(a in allowed or str(a).isdigit() for a in extra)):
-            return {"error": f"start: args may be --incarnation N and --restore, got {extra!r}"}
+            return {"error": f"start: args may be --incarnation N, --restore, --log-max-mb N and --log-backups N, "
+                             f"got {extra!r}"}
         incarnation = int(extra[extra.index("--incarnation") + 1]) if "--incarnation" in extra else 0
         with self.lock:
             children = self.runs.get(run_id)

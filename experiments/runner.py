@@ -137,7 +137,8 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     started: list[str] = []
     try:
         coord.declare()
-        common = ["--run-id", keys.run_id, "--connect", endpoint]
+        logs = ["--log-max-mb", str(exp.run.log_max_mb), "--log-backups", str(exp.run.log_backups)]
+        common = ["--run-id", keys.run_id, "--connect", endpoint, *logs]
 
         def identity(process: str) -> list[str]:
             return ["--credentials", access.credentials(process)] if access else []
@@ -157,7 +158,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                                auth=access is not None)
                 for host in remote:
                     hosts[host] = host_info(session, host)
-                    start_agents(session, host, keys.run_id, [i for i, h in where.items() if h == host])
+                    start_agents(session, host, keys.run_id, [i for i, h in where.items() if h == host], args=logs)
                     started.append(host)
             except HostError as exc:
                 raise RunError(str(exc)) from None
@@ -169,7 +170,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                 return
             wait_for_hosts(session, [host], min(5.0, exp.run.join_timeout), listen[0] if listen else endpoint,
                            auth=access is not None)
-            start_agents(session, host, keys.run_id, [agent], args=args[2:])
+            start_agents(session, host, keys.run_id, [agent], args=[*args[2:], *logs])
             if host not in started:
                 started.append(host)
 

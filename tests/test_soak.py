@@ -17,6 +17,7 @@ import pytest
 from swarmbed.coordinator import results
 from swarmbed.experiments.chaos import ChaosError, ChaosPlan, load_chaos
 from swarmbed.experiments.report import report
+from swarmbed.experiments.runner import run_experiment
 from swarmbed.experiments.soak import PROCESSES, RUN, VERDICT, Thresholds, parse_duration, soak
 from swarmbed.wire.rowfile import RowFile
 from tests.conftest import ROOT, experiment
@@ -132,6 +133,37 @@ def test_an_allocator_that_leaks_fails_the_verdict_on_its_rss(tmp_path):
     assert v["by_kind"]["agent"]["rss_slope_pct_h"] > 5 * SHORT.max_rss_slope_pct_h
     assert any(b.startswith("RSS of agent_") for b in v["breaches"])
     assert not any("coordinator" in b or "netem" in b for b in v["breaches"])
+
+
+CHATTY = textwrap.dedent('''
+    import logging
+
+    from swarmbed.plugins.noop import NoopAllocator
+
+    class Chatty(NoopAllocator):
+        """Logs 4 KB and prints a line every tick: an agent that would fill a disk in a long soak."""
+
+        def decide(self, view):
+            logging.getLogger("chatty").warning("tick %d %s", view.tick, "x" * 4000)
+            print(f"printed at tick {view.tick}", flush=True)
+            return super().decide(view)
+''')
+
+
+def test_process_logs_rotate_at_their_size_keeping_their_backups(tmp_path):
+    plugin = tmp_path / "chatty.py"
+    plugin.write_text(CHATTY)
+    exp = experiment(f"allocator={{name: '{plugin}:Chatty'}}", "agents.count=2", "run.stop_when_done=false",
+                     "run.duration=1000", "run.dt=1", "run.log_max_mb=1", "run.log_backups=2")
+    run_experiment(exp, tmp_path / "run", progress=False)
+    logs = tmp_path / "run" / "logs"
+    for agent in (0, 1):
+        files = [logs / f"agent_{agent}.log", logs / f"agent_{agent}.log.1", logs / f"agent_{agent}.log.2"]
+        assert all(f.exists() for f in files) and not (logs / f"agent_{agent}.log.3").exists()
+        assert all(f.stat().st_size <= 2**20 + 5000 for f in files)
+        newest = files[0].read_text()
+        assert "printed at tick 999" in newest and "tick 999 xxx" in newest  # prints follow the rotation
+        assert "tick 0 xxx" not in "".join(f.read_text() for f in files)  # the oldest went
 
 
 def test_a_killed_soak_leaves_files_that_parse(tmp_path):

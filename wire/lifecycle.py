@@ -1,10 +1,13 @@
-"""Process lifecycle shared by swarmbed's child processes: die with the parent, seeds per component."""
+"""Process lifecycle shared by swarmbed's child processes: die with the parent, seeds per
+component, and a log that rotates (hours-long soaks must not fill the disk with one agent's
+warnings)."""
 
 from __future__ import annotations
 
 import argparse
 import ctypes
 import logging
+import logging.handlers
 import os
 import signal
 import sys
@@ -41,18 +44,60 @@ def die_with_parent(parent_pid: int | None) -> None:
         os._exit(3)
 
 
+LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
+
+
+class RotatingStderr(logging.handlers.RotatingFileHandler):
+    """Logging into the file this process's stdout and stderr were sent to, rotated at
+    ``max_bytes`` into ``name.log.1`` .. ``name.log.<backups>``. The process's own stdout and
+    stderr follow the file to each new one (``dup2``), so prints and tracebacks land in the
+    current file too, and everything is appended through one open file."""
+
+    def __init__(self, path: str, max_bytes: int, backups: int) -> None:
+        super().__init__(path, mode="a", maxBytes=max_bytes, backupCount=backups)
+        self._follow()
+
+    def _follow(self) -> None:
+        if self.stream is not None:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(self.stream.fileno(), 1)
+            os.dup2(self.stream.fileno(), 2)
+
+    def doRollover(self) -> None:
+        super().doRollover()
+        self._follow()
+
+
+def setup_logging(max_mb: int | None, backups: int) -> None:
+    """Log to stderr; where stderr is a file (as the launcher starts children) and ``max_mb`` is
+    set, rotate it at that size keeping ``backups`` older files."""
+    try:
+        path = os.readlink("/proc/self/fd/2") if max_mb else ""
+    except OSError:
+        path = ""
+    if max_mb and path.startswith("/") and os.path.isfile(path):
+        handler = RotatingStderr(path, max_mb * 2**20, backups)
+        handler.setFormatter(logging.Formatter(LOG_FORMAT))
+        logging.basicConfig(level=logging.INFO, handlers=[handler])
+    else:
+        logging.basicConfig(level=logging.INFO, format=LOG_FORMAT, stream=sys.stderr)
+
+
 def child_args(prog: str, description: str, add_args: Callable[[argparse.ArgumentParser], object],
                argv: list[str] | None) -> argparse.Namespace:
-    """Parse a child process's command line (its own flags, ``--run-id``, ``--parent-pid`` and the
-    zenoh flags), tie it to its parent and set up logging to stderr."""
+    """Parse a child process's command line (its own flags, ``--run-id``, ``--parent-pid``, the log
+    rotation and the zenoh flags), tie it to its parent and set up logging to stderr."""
     from swarmbed.wire.session import add_zenoh_args
 
     ap = argparse.ArgumentParser(prog=prog, description=description)
     ap.add_argument("--run-id", required=True, help="the run to join (see the run's timings.json)")
     add_args(ap)
     ap.add_argument("--parent-pid", type=int, help="exit when this process exits (set by the launcher)")
+    ap.add_argument("--log-max-mb", type=int, help="rotate this process's log file at this size (MB)")
+    ap.add_argument("--log-backups", type=int, default=2, help="rotated log files kept (name.log.1, ...)")
     add_zenoh_args(ap)
     args = ap.parse_args(argv)
     die_with_parent(args.parent_pid)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
+    setup_logging(args.log_max_mb, args.log_backups)
     return args

@@ -43,6 +43,8 @@ class RunSection(Strict):
                             "under its id (from its last checkpoint where there is one)")
     snapshot_every: int = Field(0, ge=0, description="restart: ticks between the agents' checkpoints (0: none, "
                                                      "a restarted agent starts fresh)")
+    log_max_mb: int = Field(20, ge=1, description="each process's log file is rotated at this size (MB)")
+    log_backups: int = Field(2, ge=0, description="rotated log files kept per process (name.log.1, ...)")
     record_every: int = Field(1, ge=1, description="ticks between time-series rows")
     record_trajectories: bool = Field(False, description="write trajectories.csv and markers.csv (for swarmbed replay)")
     stop_when_done: bool = Field(True, description="end the run once every task there will be is done")
