@@ -184,6 +184,7 @@ class SARWorld(World):
 
     def _end(self, victim: int, status: int) -> None:
         self.vstatus[victim] = status
+        self.inspected.pop(victim, None)  # read only while it is there: a soak would keep every one
         self.counts["rescued" if status == RESCUED else "expired"] += 1
         if self.sc.replace:
             self._spawn(1)
