@@ -207,3 +207,24 @@ def test_a_detached_slurm_sweep_is_watched_with_status_and_collected_by_the_same
     assert again.returncode == 0 and "4 of 4 runs complete" in again.stdout, again
     assert all(len(_attempts(d)) == 2 for d in out.glob("*/run_*"))  # nothing ran twice
     assert (out / "sweep.parquet").exists()
+
+
+def test_a_killed_sweep_process_takes_its_workers_and_their_runs_with_it(sweep_file, tmp_path):
+    """SIGKILL to the sweep itself (no chance to stop anything): its pool workers must not go on
+    with the runs already queued, unseen, and no run's process may be left behind."""
+    import psutil
+
+    out = tmp_path / "orphans"
+    cmd = _sweep_cmd(sweep_file, out, "--jobs", "2", "--set", "run.duration=1500", "--set",
+                     "run.stop_when_done=false")
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while not [d for d in out.glob("*/run_*") if under_way(d)]:
+        assert time.monotonic() < deadline and proc.poll() is None
+        time.sleep(0.1)
+    family = psutil.Process(proc.pid).children(recursive=True)
+    assert any("swarmbed.agent_runtime" in " ".join(p.cmdline()) for p in family)
+    proc.kill()
+    proc.wait()
+    _, alive = psutil.wait_procs(family, timeout=15)
+    assert not alive, [(p.pid, p.cmdline()[:4]) for p in alive]

@@ -31,13 +31,13 @@ def agent_seeds(seed: int, agent_id: int, n_agents: int, parts: int) -> list[np.
     return agents.spawn(n_agents)[agent_id].spawn(parts)
 
 
-def die_with_parent(parent_pid: int | None) -> None:
-    """Ask Linux to SIGTERM us when the process that started us goes away (no orphans)."""
+def die_with_parent(parent_pid: int | None, sig: int = signal.SIGTERM) -> None:
+    """Ask Linux to send us ``sig`` when the process that started us goes away (no orphans)."""
     if parent_pid is None or not sys.platform.startswith("linux"):
         return
     try:
         libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        libc.prctl(PR_SET_PDEATHSIG, sig)
     except OSError:
         return
     if os.getppid() != parent_pid:  # the parent died before prctl took effect

@@ -20,16 +20,20 @@ from typing import Any
 import psutil
 
 from swarmbed.experiments.executors import Executor, Outcome, Resources, RunFunction
+from swarmbed.wire.lifecycle import die_with_parent
 
 
 def _exit(signum: int, _frame: object) -> None:
     raise SystemExit(128 + signum)
 
 
-def _leave_interrupts_to_the_sweep() -> None:
+def _leave_interrupts_to_the_sweep(sweep_pid: int) -> None:
     """Pool workers: Ctrl-C is the sweep's to handle (a Python-level handler, not SIG_IGN: the
     runs' own children get the default action back), and SIGTERM from the sweep ends the run
-    through its cleanup (children stopped, partial files gone)."""
+    through its cleanup (children stopped, partial files gone). A sweep process that dies
+    without stopping its workers (killed, say) takes them with it: the pool would otherwise go
+    on with the runs already queued, unseen, and its run's processes die with the worker."""
+    die_with_parent(sweep_pid, signal.SIGKILL)
     signal.signal(signal.SIGINT, lambda *_: None)
     signal.signal(signal.SIGTERM, _exit)
 
@@ -66,7 +70,7 @@ class LocalExecutor(Executor):
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
         self.pool = cf.ProcessPoolExecutor(max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
-                                           initializer=_leave_interrupts_to_the_sweep)
+                                           initializer=_leave_interrupts_to_the_sweep, initargs=(os.getpid(),))
         return self.pool
 
     def map(self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]) -> Iterator[
