@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import threading
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -20,8 +21,15 @@ TRAJECTORIES = "trajectories.csv"
 MARKERS = "markers.csv"  # tasks or victims as they appear and vanish (with trajectories)
 
 
+def temp_beside(path: Path) -> Path:
+    """Where to write ``path`` before renaming it into place: a name of this process and thread
+    alone, so that two writers of one file (two sweep commands on one directory) never rename
+    each other's half-written file."""
+    return path.with_name(f"{path.name}.{os.getpid()}-{threading.get_ident()}.part")
+
+
 def write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".part")
+    tmp = temp_beside(path)
     with open(tmp, "w", newline="") as f:
         f.write(text)
         f.flush()
@@ -34,7 +42,7 @@ def write_json(path: Path, data: Any) -> None:
 
 
 def write_csv(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
-    tmp = path.with_name(path.name + ".part")
+    tmp = temp_beside(path)
     with open(tmp, "w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(columns)

@@ -273,10 +273,10 @@ def _parquet_ready(table: pd.DataFrame) -> pd.DataFrame:
 def write_tables(table: pd.DataFrame, out: Path) -> None:
     """``sweep.csv`` and ``sweep.parquet`` (every run's summary flattened, one file to read for
     thousands of runs), each written whole or not at all."""
-    tmp = out / (TABLE + ".part")
+    tmp = results.temp_beside(out / TABLE)
     table.to_csv(tmp, index=False)
     os.replace(tmp, out / TABLE)
-    tmp = out / (PARQUET + ".part")
+    tmp = results.temp_beside(out / PARQUET)
     _parquet_ready(table).to_parquet(tmp, index=False)
     os.replace(tmp, out / PARQUET)
 
