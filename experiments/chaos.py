@@ -302,7 +302,7 @@ class Chaos:
         went = f"ticks {record['tick']}-{record['end_tick']} during the cut"
         if not ok and not lost:
             return f"reconnected, every agent kept its session ({went})"
-        return (f"{went}; agents restarted: {ok or 'none'}; agents lost: {lost or 'none'}")
+        return f"{went}; agents restarted: {ok or 'none'}; agents lost: {lost or 'none'}"
 
     def _record(self, due: _Due, target: Any, detail: str, outcome: str) -> None:
         self._write({"wall_s": round(due.at, 3), "tick": self.run.coordinator.last_tick,

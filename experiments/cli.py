@@ -362,9 +362,10 @@ def cmd_check_scenario(args: argparse.Namespace) -> int:
 def cmd_host(args: argparse.Namespace) -> int:
     from swarmbed.experiments.host import serve
     from swarmbed.wire.credentials import CredentialsError
+    from swarmbed.wire.lifecycle import LOG_FORMAT
     from swarmbed.wire.session import tls_from_args
 
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    logging.basicConfig(level=logging.INFO, format=LOG_FORMAT)
     logs = Path(args.logs) if args.logs else Path("runs") / "hosts" / args.name
     try:
         return serve(args.name, args.connect, args.listen, logs, args.zenoh_config, args.mode, args.credentials,

@@ -166,7 +166,7 @@ def namespace_of(pid: int) -> str | None:
         if os.stat(f"/proc/{pid}/ns/net").st_ino == os.stat("/proc/self/ns/net").st_ino:
             return None
         found = _ip("netns", "identify", str(pid), check=False).stdout.strip()
-    except (OSError, FileNotFoundError):
+    except OSError:
         return None
     return found or None
 
