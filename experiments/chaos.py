@@ -36,7 +36,10 @@ links' TCP connections survive and the host's agents answer late (lock-step wait
 the run as ``run.on_agent_loss`` says. The outcome says which.
 
 ``chaos.csv`` gets one row per event once its ending is known: wall seconds, tick, action,
-target, detail, outcome.
+target, detail, outcome. An event is not started unless its window ends before the run does; one
+whose ending is still within its allowance (its window plus ``RESOLVE_WITHIN``) when the run ends
+(a kill moments before the end, say) is logged as cut short, which is not a breach; one whose
+allowance ran out without an ending is unresolved, which is.
 """
 
 from __future__ import annotations
@@ -65,6 +68,7 @@ log = logging.getLogger("swarmbed.chaos")
 CHAOS_FILE = "chaos.csv"
 CHAOS_COLUMNS = ["wall_s", "tick", "action", "target", "detail", "outcome"]
 RESOLVE_WITHIN = 30.0  # wall seconds an event's ending is waited for before it is called unresolved
+CUT_SHORT = "cut short: the run ended before its ending was due"
 
 
 class ChaosError(ValueError):
@@ -140,14 +144,20 @@ class Chaos:
 
     # -- schedule ------------------------------------------------------------------------------
     def schedule(self) -> list[_Due]:
-        """Every event's start within the horizon, in time order (drawn once, from the seed)."""
+        """Every event whose window ends within the horizon, in time order (drawn once, from the seed).
+
+        A stop or a radio change that would still be in force when the run ends is left out: its
+        ending could not be seen, so it would test nothing.
+        """
         due: list[_Due] = []
         for i, event in enumerate(self.plan.events):
-            times = [t for t in event.at if t <= self.horizon_s]
+            last_start = self.horizon_s - event.duration
+            times = [t for t in event.at if t <= last_start]
             if event.every is not None:
                 t = float(self.rng.exponential(event.every))
-                while t <= self.horizon_s:
-                    times.append(t)
+                while t <= self.horizon_s:  # every draw is taken, so the sequence does not hang on `for`
+                    if t <= last_start:
+                        times.append(t)
                     t += float(self.rng.exponential(event.every))
             due += [_Due(t, i, event) for t in times]
         return sorted(due)
@@ -318,9 +328,10 @@ class Chaos:
         still = []
         for give_up, record in self._pending:
             outcome = self._outcome(record)
-            if outcome is None and (final or time.monotonic() > give_up):
-                why = "the run ended first" if final else f"no ending within {RESOLVE_WITHIN:g} s"
-                outcome = f"unresolved: {why}"
+            if outcome is None and final and time.monotonic() <= give_up:
+                outcome = CUT_SHORT  # the run ended inside the time its ending is given: not a fault's failure
+            elif outcome is None and (final or time.monotonic() > give_up):
+                outcome = f"unresolved: no ending within {RESOLVE_WITHIN:g} s"
             if outcome is None:
                 still.append((give_up, record))
             else:

@@ -191,6 +191,12 @@ def _theil_sen(t: np.ndarray, y: np.ndarray) -> float:
     return float(theilslopes(y, t)[0])
 
 
+def fault_breaches(faults: list[dict[str, Any]]) -> list[str]:
+    """The faults that were not survived: unresolved, a restart that failed, or never injected."""
+    bad = ("unresolved", "restart failed", "not injected")
+    return [f"{f['action']} at {f['wall_s']} s: {f['outcome']}" for f in faults if str(f["outcome"]).startswith(bad)]
+
+
 def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summary: dict | None,
             failure: str | None, slowest_tick: tuple[float, int]) -> dict[str, Any]:
     """The soak's verdict from its files (see the module docstring)."""
@@ -235,7 +241,6 @@ def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summ
     net = (summary or {}).get("network", {})
     conserved = (bool(net) and net["copies"] == net["delivered"] + net["dropped_total"])
     faults = [dict(zip(["wall_s", "tick", "action", "target", "detail", "outcome"], row)) for row in chaos_rows]
-    bad_faults = [f for f in faults if str(f["outcome"]).startswith(("unresolved", "restart failed", "not injected"))]
     breaches = []
     for _kind, worst in sorted(by_kind.items()):
         if worst["rss_slope_pct_h"] > limits.max_rss_slope_pct_h:
@@ -250,7 +255,7 @@ def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summ
         breaches.append(f"the run stopped: {failure}")
     elif not conserved:
         breaches.append("the ledger does not balance (copies != delivered + dropped)")
-    breaches += [f"{f['action']} at {f['wall_s']} s: {f['outcome']}" for f in bad_faults]
+    breaches += fault_breaches(faults)
     return {
         "passed": not breaches, "breaches": breaches,
         "wall_s": end, "ticks": int(counters["tick"].max()) + 1 if len(counters) else 0,

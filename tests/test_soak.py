@@ -10,15 +10,16 @@ import subprocess
 import sys
 import textwrap
 import time
+from types import SimpleNamespace
 
 import pandas as pd
 import pytest
 
 from swarmbed.coordinator import results
-from swarmbed.experiments.chaos import ChaosError, ChaosPlan, load_chaos
+from swarmbed.experiments.chaos import CHAOS_COLUMNS, CUT_SHORT, Chaos, ChaosError, ChaosPlan, load_chaos
 from swarmbed.experiments.report import report
 from swarmbed.experiments.runner import run_experiment
-from swarmbed.experiments.soak import PROCESSES, RUN, VERDICT, Thresholds, parse_duration, soak
+from swarmbed.experiments.soak import PROCESSES, RUN, VERDICT, Thresholds, fault_breaches, parse_duration, soak
 from swarmbed.wire.rowfile import RowFile
 from tests.conftest import ROOT, experiment
 from tests.test_report import CHROMIUM, NO_CHROMIUM, assert_renders
@@ -59,6 +60,31 @@ def test_durations_and_chaos_files_are_checked_with_clear_errors(tmp_path):
     out = subprocess.run([sys.executable, "-m", "swarmbed", "soak", str(SOAK), "--duration", "5s", "--chaos", str(bad)],
                          capture_output=True, text=True, cwd=tmp_path)
     assert out.returncode == 2 and "melt_cpu" not in out.stdout and "action" in out.stderr
+
+
+def test_faults_are_scheduled_only_where_their_window_ends_in_the_run_and_one_cut_short_is_no_breach(tmp_path):
+    """A stop or a radio change still in force at the end tests nothing: it is not started. A kill
+    moments before the end whose restart could not be seen is logged as cut short, not unresolved."""
+    def plan(duration: float) -> ChaosPlan:
+        return ChaosPlan.model_validate({"seed": 4, "events": [
+            {"action": "rate_cap", "every": 10, "for": duration, "rate": 50},
+            {"action": "stop_agent", "at": [5, 95], "for": 2}]})
+    short, long = Chaos(plan(1), 100, 0).schedule(), Chaos(plan(30), 100, 0).schedule()
+    assert all(d.at + d.event.duration <= 100 for d in short + long)
+    assert [d.at for d in short if d.event.action == "stop_agent"] == [5, 95]
+    caps = [d.at for d in short if d.event.action == "rate_cap"]
+    assert [t for t in caps if t <= 70] == [d.at for d in long if d.event.action == "rate_cap"]  # the same draws
+    assert max(caps) > 70  # some were left out of the long-window plan
+    chaos = Chaos(plan(1), 100, 0)
+    chaos.run = SimpleNamespace(coordinator=SimpleNamespace(restart_log=[], lost={}))
+    chaos.table = RowFile(tmp_path / "chaos.csv", CHAOS_COLUMNS, chunk_rows=1)
+    for give_up in (time.monotonic() + 20, time.monotonic() - 1):
+        chaos._pending.append((give_up, {"wall_s": 99.0, "tick": 7, "action": "kill_agent", "target": 3,
+                                         "detail": "SIGKILL", "kind": "kill", "agent": 3}))
+    chaos._resolve(final=True)
+    assert [row[-1] for row in chaos.rows] == [CUT_SHORT, "unresolved: no ending within 30 s"]
+    rows = [dict(zip(CHAOS_COLUMNS, row)) for row in chaos.rows]
+    assert fault_breaches(rows) == ["kill_agent at 99.0 s: unresolved: no ending within 30 s"]
 
 
 @pytest.fixture(scope="module")
