@@ -37,7 +37,7 @@ class SARStrategy(Allocator):
         self.colors: dict[int, int] = {}  # victim -> colour, where known
         self.inspected: set[int] = set()  # victims this robot inspected
         self.incompatible: dict[int, float] = {}  # victim -> until when it is not retried
-        self.gone: set[int] = set()  # victims known to be rescued or expired
+        self.gone: set[int] = set()  # victims known to be rescued or expired (their ids are never reused)
         self.target: int | None = None
         self.my_color = -1
         self.reach = 5.0  # the scenario's inspection distance, as observed
@@ -60,9 +60,12 @@ class SARStrategy(Allocator):
         gone = [v for v, info in self.victims.items()
                 if v in rescued
                 or (v not in view.tasks and (view.sees(info.x, info.y) or self.expires[v] <= view.time))]
-        for v in gone:
+        for v in gone:  # what was known of it goes too: a gone victim is never a candidate again
             del self.victims[v]
             del self.expires[v]
+            self.colors.pop(v, None)
+            self.inspected.discard(v)
+            self.incompatible.pop(v, None)
             self.gone.add(v)
             self.forget(v)
         self.receive(view)

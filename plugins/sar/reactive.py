@@ -60,13 +60,19 @@ class CommStrategy(TreeStrategy):
         for msg in view.inbox:
             if msg.kind == CLAIM:
                 victim = int(msg.data)
-                self.claims[victim] = (self.now + self.params.claim_ttl, msg.sender)
+                if victim not in self.gone:
+                    self.claims[victim] = (self.now + self.params.claim_ttl, msg.sender)
             elif msg.kind == COLOR:
                 victim, color = msg.data
-                self.colors[int(victim)] = int(color)
+                if int(victim) not in self.gone:
+                    self.colors[int(victim)] = int(color)
         due = self.now - self.claimed_at >= self.params.claim_refresh
         if self.target is not None and due and self.target_valid(view):
             self._claim(view)
+
+    def forget(self, victim: int) -> None:
+        super().forget(victim)
+        self.claims.pop(victim, None)
 
     def choosable(self, v: int) -> bool:
         expiry, claimer = self.claims.get(v, (-1e18, -1))
