@@ -23,13 +23,22 @@ applies; no remote identity may publish them.
 
 from __future__ import annotations
 
+import json
+import logging
+import os
 import shutil
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
+import psutil
+
 from swarmbed.wire.credentials import Identity, write_credentials, write_dictionary
+from swarmbed.wire.lifecycle import process_alive
 from swarmbed.wire.keys import HOSTS, PREFIX, Keys
+
+log = logging.getLogger("swarmbed.access")
+OWNER = "owner.json"  # in a run's private folder: the launcher that made it (pid, start time)
 
 EVERY_MESSAGE = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token",
                  "declare_liveliness_subscriber", "liveliness_query"]
@@ -100,7 +109,9 @@ class RunAccess:
         for identity in self.admitted:
             if identity.user in taken:
                 raise ValueError(f"admitted user {identity.user!r} clashes with a name the run gives its own processes")
+        remove_orphaned_folders()
         self.folder = Path(tempfile.mkdtemp(prefix=f"swarmbed-{keys.run_id}-"))  # mode 700
+        (self.folder / OWNER).write_text(json.dumps({"pid": os.getpid(), "started": psutil.Process().create_time()}))
         own = [Identity.new("netem", "netem")] + [Identity.new(agent_user(i), "agent") for i in self.agent_ids]
         self.files = {identity.user: write_credentials(self.folder / f"{identity.user}.json", identity)
                       for identity in own}
@@ -121,3 +132,21 @@ class RunAccess:
 
     def close(self) -> None:
         shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def remove_orphaned_folders(tmp: Path | None = None) -> list[Path]:
+    """Remove the private folders of runs whose launcher is gone (killed before :meth:`RunAccess.close`
+    ran); returns them. A folder without a readable owner record, or not ours, is left alone."""
+    removed = []
+    for folder in Path(tmp or tempfile.gettempdir()).glob("swarmbed-*-*"):
+        try:
+            owner = json.loads((folder / OWNER).read_text())
+            orphaned = not process_alive(int(owner["pid"]), float(owner["started"]))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        if orphaned:
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    if removed:
+        log.info("removed %d private folders of runs whose launcher is gone", len(removed))
+    return removed

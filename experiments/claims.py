@@ -26,6 +26,8 @@ from pathlib import Path
 
 import psutil
 
+from swarmbed.wire.lifecycle import process_alive
+
 CLAIM = "claim.json"
 LOCK = "claim.lock"
 STALE_AFTER_S = 120.0  # a claim not touched for this long is abandoned (its holder's node died)
@@ -42,12 +44,8 @@ class Holder:
     touched: float  # the file's mtime
 
     def alive(self, stale_after: float = STALE_AFTER_S, now: float | None = None) -> bool:
-        if self.host == socket.gethostname():
-            try:
-                if abs(psutil.Process(self.pid).create_time() - self.started) > 1.0:
-                    return False  # the pid was reused
-            except psutil.Error:
-                return False
+        if self.host == socket.gethostname() and not process_alive(self.pid, self.started):
+            return False  # gone, or its pid was reused
         return (time.time() if now is None else now) - self.touched <= stale_after
 
     def describe(self) -> str:

@@ -8,18 +8,22 @@ import json
 import signal
 import subprocess
 import sys
+import tempfile
 import textwrap
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import pandas as pd
 import pytest
 
 from swarmbed.coordinator import results
+from swarmbed.experiments.access import OWNER, RunAccess, remove_orphaned_folders
 from swarmbed.experiments.chaos import CHAOS_COLUMNS, CUT_SHORT, Chaos, ChaosError, ChaosPlan, load_chaos
 from swarmbed.experiments.report import report
 from swarmbed.experiments.runner import run_experiment
 from swarmbed.experiments.soak import PROCESSES, RUN, VERDICT, Thresholds, fault_breaches, parse_duration, soak
+from swarmbed.wire.keys import Keys
 from swarmbed.wire.rowfile import RowFile
 from tests.conftest import ROOT, experiment
 from tests.test_report import CHROMIUM, NO_CHROMIUM, assert_renders
@@ -214,6 +218,16 @@ def test_a_killed_soak_leaves_files_that_parse(tmp_path):
     assert len(pd.read_csv(out / ("timeseries.csv.part"))) > 0
     assert not (out / "summary.json").exists() and not (out / VERDICT).exists()
     assert "No verdict" in report(out, tmp_path / "killed.html").read_text()  # reported from its .part files
+    # its private credentials folder outlived it; the next run's launcher removes it, and no live run's
+    left = [f for f in Path(tempfile.gettempdir()).glob("swarmbed-*-*")
+            if (f / OWNER).exists() and json.loads((f / OWNER).read_text())["pid"] == soak_proc.pid]
+    assert len(left) == 1
+    live = RunAccess(Keys("live"), [0])  # a new run's launcher clears what dead launchers left
+    try:
+        assert not left[0].exists() and live.folder.exists()
+        assert live.folder not in remove_orphaned_folders()  # a live launcher's folder stays
+    finally:
+        live.close()
 
 
 def test_a_run_that_stops_keeps_its_rows_as_partial_files(tmp_path):

@@ -47,6 +47,17 @@ def die_with_parent(parent_pid: int | None, sig: int = signal.SIGTERM) -> None:
 LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
 
 
+def process_alive(pid: int, started: float) -> bool:
+    """Whether process ``pid`` on this machine is still the one that started at ``started``
+    (psutil's create time): a pid the kernel gave to another process since reads as gone."""
+    import psutil  # here: agents import this module and never call this
+
+    try:
+        return abs(psutil.Process(pid).create_time() - started) <= 1.0
+    except psutil.Error:
+        return False
+
+
 class RotatingStderr(logging.handlers.RotatingFileHandler):
     """Logging into the file this process's stdout and stderr were sent to, rotated at
     ``max_bytes`` into ``name.log.1`` .. ``name.log.<backups>``. The process's own stdout and
