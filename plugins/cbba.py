@@ -39,6 +39,8 @@ class CBBAParams(BaseModel):
     discount: float = Field(0.999, gt=0, le=1, description="lambda of the time-discounted reward")
     score: Literal["time_discounted", "distance_discounted"] = "time_discounted"
     reset_after: float | None = Field(500.0, gt=0, description="seconds of empty bundle before resetting bids")
+    full_every: int = Field(10, ge=1, description="every n-th message carries the whole consensus state, those "
+                                                  "between only what changed since the one before (1: always whole)")
 
 
 class CBBA(Allocator):
@@ -48,7 +50,7 @@ class CBBA(Allocator):
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)
-        self.state = ConsensusState(agent_id)
+        self.state = ConsensusState(agent_id, self.params.full_every)
         self.book = TaskBook()
         self.empty_since: float | None = None
 

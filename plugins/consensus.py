@@ -1,6 +1,14 @@
 """CBBA's consensus state, shared by every CBBA-family allocator: winning bids ``y``, winners ``z``,
 information timestamps ``s`` (simulated time), the receiver action table (Choi, Brunet, How 2009,
-Table 1, all 17 cases), and the bundle release of Eqs. 6-7."""
+Table 1, all 17 cases), and the bundle release of Eqs. 6-7.
+
+Messages carry the whole state (every winner, bid and timestamp the agent knows) unless
+``full_every`` > 1: then every ``full_every``-th message does, and those between carry only what
+changed since the message before (``"d": 1``; a winner dropped travels as ``NONE``), unless that
+names as many entries as the whole state (rounds far apart: everything changed), which then goes. A receiver
+applies Table 1 to the tasks a delta names and takes an agent a delta does not name as no news
+about it. A neighbour that missed a message, or came into range, is whole again at the next full
+one. The full messages are byte for byte those of ``full_every = 1``."""
 
 from __future__ import annotations
 
@@ -65,16 +73,37 @@ def table(i: int, k: int, zk: int, yk: float, zi: int, yi: float, compare: Calla
 class ConsensusState:
     """One agent's CBBA knowledge and bundle."""
 
-    def __init__(self, agent_id: int) -> None:
+    def __init__(self, agent_id: int, full_every: int = 1) -> None:
         self.agent_id = agent_id
+        self.full_every = full_every
         self.y: dict[int, float] = {}
         self.z: dict[int, int] = {}
         self.s: dict[int, float] = {}  # agent -> simulated time of the latest information from it
         self.bundle: list[int] = []
         self.path: list[int] = []
         self.now = 0.0
+        self.sent = 0  # messages made
+        self.told: dict[int, tuple[int, float]] = {}  # task -> (winner, bid) as the last message had it
+        self.told_s: dict[int, float] = {}  # agent -> timestamp as the last message had it
 
     def message(self) -> dict:
+        """The state for neighbours: whole, or (``full_every`` > 1) what changed since the last one."""
+        whole = self.full_every <= 1 or self.sent % self.full_every == 0
+        self.sent += 1
+        if self.full_every <= 1:
+            return self._whole()
+        winners = {t: (self.z[t], self.y[t]) for t in self.z}
+        out = self._whole()
+        if not whole:
+            changed = [[t, w, b] for t, (w, b) in sorted(winners.items()) if self.told.get(t) != (w, b)]
+            dropped = [[t, NONE, 0.0] for t in sorted(self.told.keys() - winners.keys())]
+            stamps = [[a, _compact(ts)] for a, ts in sorted(self.s.items()) if self.told_s.get(a) != ts]
+            if len(changed) + len(dropped) + len(stamps) < len(out["w"]) + len(out["s"]):  # else whole is smaller
+                out = {"t": out["t"], "d": 1, "w": sorted(changed + dropped), "s": stamps}
+        self.told, self.told_s = winners, dict(self.s)
+        return out
+
+    def _whole(self) -> dict:
         return {
             "t": _compact(self.now),
             "w": [[t, self.z[t], self.y[t]] for t in sorted(self.z)],
@@ -84,9 +113,13 @@ class ConsensusState:
     def receive(self, sender: int, data: dict, ignore: Iterable[int] = ()) -> None:
         """Apply Table 1 to every task in a neighbour's message, then merge its timestamps."""
         i, k = self.agent_id, sender
+        delta = bool(data.get("d"))
         entries = set(map(tuple, data["w"]))
-        mine = {(t, w, y_t) for (t, w), y_t in zip(self.z.items(), (self.y[t] for t in self.z))}
-        differing = {e[0] for e in entries ^ mine}  # identical entries leave every table case unchanged
+        if delta:  # only the tasks it names; a NONE entry is a winner the sender dropped
+            differing = {t for t, w, b in entries if (self.z.get(t, NONE), self.y.get(t, 0.0)) != (w, b)}
+        else:
+            mine = {(t, w, y_t) for (t, w), y_t in zip(self.z.items(), (self.y[t] for t in self.z))}
+            differing = {e[0] for e in entries ^ mine}  # identical entries leave every table case unchanged
         theirs = {t: (w, b) for t, w, b in entries if t in differing}
         sk = dict(data["s"])
         sk[k] = data["t"]
@@ -95,7 +128,7 @@ class ConsensusState:
 
         def compare(m: int) -> int:
             mine = self.now if m == i else self.s.get(m, _NEVER)
-            their = sk.get(m, _NEVER)
+            their = sk.get(m, mine if delta else _NEVER)  # a delta says nothing new of an agent it leaves out
             return (their > mine) - (their < mine)
 
         for j in sorted(differing):

@@ -8,7 +8,7 @@ import pytest
 from swarmbed.plugins.base import HOLD
 from swarmbed.plugins.cbba import CBBA
 from swarmbed.plugins.conformance import random_instance, run_all, simulate
-from swarmbed.plugins.consensus import table
+from swarmbed.plugins.consensus import NONE, ConsensusState, table
 from swarmbed.plugins.grape import VOID
 from swarmbed.plugins.registry import entries
 
@@ -65,15 +65,45 @@ def test_cbba_converges_conflict_free_within_the_bound(score):
             assert all(len(a.bundle) == l_t for a in agents), f"case {case}: tasks left while bundles had room"
 
 
-def test_cbba_matches_sequential_greedy_with_a_path_independent_score():
+@pytest.mark.parametrize("full_every", [1, 10])
+def test_cbba_matches_sequential_greedy_with_a_path_independent_score(full_every):
+    """With whole messages, and with messages of what changed between whole ones (the default)."""
     for case in range(200):
         rng = np.random.default_rng(case)
         n_a, n_t, l_t = int(rng.integers(2, 6)), int(rng.integers(1, 15)), int(rng.integers(1, 4))
         inst = random_instance(1000 + case, n_a, n_t)
-        params = {"max_tasks": l_t, "score": "distance_discounted", "discount": 0.99, "reset_after": None}
+        params = {"max_tasks": l_t, "score": "distance_discounted", "discount": 0.99, "reset_after": None,
+                  "full_every": full_every}
         agents = simulate("cbba", params, inst, min(n_t, l_t * n_a) + 4, seed=case).allocators
         got = {t: a.agent_id for a in agents for t in a.bundle}
         assert got == sequential_greedy(inst, l_t, 0.99, inst.max_speed), f"case {case}"
+
+
+def test_cbba_messages_between_whole_ones_carry_what_changed_and_a_missed_one_is_made_good():
+    a, b = ConsensusState(0, full_every=3), ConsensusState(1, full_every=3)
+    a.add(10, 5.0)
+    a.add(11, 4.0)
+    a.s = {2: 1.0, 3: 1.0}
+    whole = a.message()
+    assert "d" not in whole and len(whole["w"]) == 2 and len(whole["s"]) == 2
+    b.receive(0, whole)
+    assert b.z == {10: 0, 11: 0}
+    a.now, a.s[3] = 1.0, 2.0
+    a.reset(10)
+    a.add(12, 3.0)
+    delta = a.message()
+    assert delta == {"t": 1, "d": 1, "w": [[10, NONE, 0.0], [12, 0, 3.0]], "s": [[3, 2]]}
+    a.now = 2.0
+    a.add(13, 2.0)
+    missed = a.message()  # lost on the way to b
+    assert missed["w"] == [[13, 0, 2.0]] and missed["s"] == []
+    b.now = 2.0
+    b.receive(0, delta)
+    assert b.z == {11: 0, 12: 0} and b.s == {0: 1, 2: 1.0, 3: 2}
+    a.now = 3.0
+    b.now = 3.0
+    b.receive(0, a.message())  # the third message is whole again
+    assert b.z == a.z == {11: 0, 12: 0, 13: 0} and b.y == a.y
 
 
 def test_cbba_receiver_table_entries():

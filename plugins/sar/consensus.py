@@ -39,6 +39,8 @@ class ConsensusParams(SARParams):
     mismatch_factor: float = Field(0.1, ge=0, description="utility factor for a known colour mismatch")
     period: float = Field(100.0, gt=0, description="cbba: forced round after this many seconds; cbba-tree: period")
     winner_timeout: float = Field(300.0, gt=0, description="forget wins by robots silent this long (s)")
+    full_every: int = Field(1, ge=1, description="every n-th round's message carries the whole state, those between "
+                                                 "only what changed (1, the paper's rounds: always whole)")
 
 
 class SARConsensus(SARStrategy):
@@ -51,7 +53,7 @@ class SARConsensus(SARStrategy):
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)
-        self.state = ConsensusState(agent_id)
+        self.state = ConsensusState(agent_id, self.params.full_every)
         self.last_round = -math.inf
         self.bundle_at_round: list[int] | None = None
         self.lost = 0  # bundle victims lost to others' bids since the last round
