@@ -26,6 +26,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+import yaml  # noqa: E402
+from matplotlib.ticker import NullLocator  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from swarmbed.experiments.palette import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
@@ -70,6 +72,7 @@ def load(sweep_dirs: list[Path]) -> pd.DataFrame:
         df = read_table(sweep_dir)
         meta = json.loads(spec.read_text())
         df["sweep"] = meta["name"]
+        _resolve_series_keys(df, sweep_dir)
         factors += [f for f in meta.get("factors", []) if f not in factors]
         frames.append(df)
     df = pd.concat(frames, ignore_index=True)
@@ -81,6 +84,28 @@ def load(sweep_dirs: list[Path]) -> pd.DataFrame:
         df["scenario"] = df["sweep"] + "/" + df["scenario"]
     df.attrs["factors"] = factors
     return df
+
+
+SERIES_KEYS = ("scenario.victims",)  # read from each run's config where a sweep does not vary them
+
+
+def _resolve_series_keys(df: pd.DataFrame, sweep_dir: Path) -> None:
+    """A sweep that leaves a series key at its base's value (the V100 of a victim-count series) gets
+    the value its runs used, from their resolved ``config.yaml``, so that series line up."""
+    for key in SERIES_KEYS:
+        if key in df and df[key].notna().all():
+            continue
+        values = []
+        for scenario, run in zip(df["scenario"], df["run"]):
+            try:
+                config = sweep_dir / str(scenario) / f"run_{int(run):03d}" / "config.yaml"
+                value: Any = yaml.safe_load(config.read_text())
+                for part in key.split("."):
+                    value = value[part]
+            except (OSError, KeyError, TypeError, yaml.YAMLError):
+                value = np.nan
+            values.append(value)
+        df[key] = df[key].fillna(pd.Series(values, index=df.index)) if key in df else values
 
 
 def _ci(values: pd.Series) -> tuple[float, float]:
@@ -245,22 +270,31 @@ def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
         ax.set_ylabel("victims rescued per trial")
         ax.legend(frameon=False, ncol=2)
         written.append(_save(fig, out, "fig_rescued_vs_messages"))
-        # messages against victim count and robot count (when the sweeps vary them)
-        for key, label, name in (("scenario.victims", "victims", "fig_messages_vs_victims"),
-                                 (AGENTS, "robots", "fig_messages_vs_robots")):
+        # messages and rescues against victim count and robot count (when the sweeps vary them)
+        for key, label in (("scenario.victims", "victims"), (AGENTS, "robots")):
             counts = df.get("agents" if key == AGENTS else key)
             if counts is None or counts.nunique() < 2:
                 continue
-            fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
-            for g in strategies:
-                means = df[df[ALLOCATOR] == g].groupby(counts)["network.messages_sent"].mean()
-                ax.plot(means.index, means.to_numpy(), marker="o", ms=3, color=strategy_color(g),
-                        label=strategy_label(g))
-            _log_counts(ax)
-            ax.set_xlabel(label)
-            ax.set_ylabel("messages sent per trial (symlog)")
-            ax.legend(frameon=False, ncol=2)
-            written.append(_save(fig, out, name))
+            for metric, ylabel, stem in (("network.messages_sent", "messages sent per trial (symlog)", "messages"),
+                                         ("rescued", "victims rescued per trial (mean, 95 % CI)", "rescued")):
+                fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
+                for g in strategies:
+                    groups = df[df[ALLOCATOR] == g].groupby(counts)[metric]
+                    means = groups.mean()
+                    cis = [_ci(v) for _, v in groups]
+                    err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
+                    ax.errorbar(means.index, means.to_numpy(), yerr=np.nan_to_num(err), marker="o", ms=3, capsize=2,
+                                color=strategy_color(g), label=strategy_label(g))
+                if stem == "messages":
+                    _log_counts(ax)
+                ax.set_xscale("log")
+                ticks = sorted(counts.dropna().unique())
+                ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
+                ax.xaxis.set_minor_locator(NullLocator())
+                ax.set_xlabel(f"{label} (log)")
+                ax.set_ylabel(ylabel)
+                ax.legend(frameon=False, ncol=2)
+                written.append(_save(fig, out, f"fig_{stem}_vs_{label}"))
         written += _factor_figures(df, out, strategies)
     return written
 

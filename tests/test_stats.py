@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.analyze import analyze
+from swarmbed.experiments.analyze import analyze, load
 from swarmbed.experiments.stats import cohens_d, compare
 from swarmbed.experiments.sweep import load_sweep, run_sweep
 from tests.conftest import ROOT
@@ -33,16 +33,19 @@ def test_cohens_d_uses_the_pooled_standard_deviation():
 def test_sar_analysis_of_two_sweeps(tmp_path):
     base = ROOT / "experiments" / "sar" / "_base.yaml"
     dirs = []
-    for victims in (10, 20):
+    for victims in (10, 20):  # the second leaves the base's victim count as it is (20)
         spec = tmp_path / f"v{victims}.yaml"
-        spec.write_text(f"name: v{victims}\nbase: {base}\nruns: 2\nset: {{scenario.victims: {victims}}}\n"
+        setting = f"set: {{scenario.victims: {victims}}}\n" if victims == 10 else ""
+        spec.write_text(f"name: v{victims}\nbase: {base}\nruns: 2\n{setting}"
                         "grid: {allocator.name: [tree, cbba-etc]}\n")
-        sweep = load_sweep(spec, extra=["agents.count=4", "run.duration=15"])
+        extra = ["agents.count=4", "run.duration=15"] + ([] if victims == 10 else [f"scenario.victims={victims}"])
+        sweep = load_sweep(spec, extra=extra)
         run_sweep(sweep, tmp_path / f"out{victims}", jobs=2, progress=False)
         dirs.append(tmp_path / f"out{victims}")
     names = {p.name for p in analyze(dirs, control="cbba-etc")}
     assert {"statistics.csv", "statistics.md", "fig_rescued_expired.png", "fig_boxplots.png",
-            "fig_rescued_vs_messages.png", "fig_messages_vs_victims.png"} <= names
+            "fig_rescued_vs_messages.png", "fig_messages_vs_victims.png", "fig_rescued_vs_victims.png"} <= names
+    assert sorted(load(dirs).groupby("sweep")["scenario.victims"].unique().map(list).sum()) == [10, 20]
     for png in (n for n in names if n.endswith(".png")):  # vector copies for papers, the papers' names
         assert (dirs[0] / png).with_suffix(".pdf").stat().st_size > 0
         svg = (dirs[0] / png).with_suffix(".svg").read_text()
