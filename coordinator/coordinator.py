@@ -120,6 +120,8 @@ class Coordinator:
         self.requested_swaps: dict[int, dict[str, Any] | None] = {}  # number -> its record once done
         # agents whose process died, started again (run.on_agent_loss: restart)
         self.down: dict[int, int] = {}  # agent -> tick its process was found dead, until it is restarted
+        self.restart_tries: dict[int, tuple[int, float]] = {}  # agent down -> (failed tries, next try, monotonic s)
+        self.tried_incarnation: dict[int, int] = {}  # agent -> the last incarnation a restart started
         self.checkpoints: dict[int, tuple[int, bytes]] = {}  # agent -> (tick, state) of its last checkpoint
         self.restart_log: list[dict[str, Any]] = []
         # place(agent, host, incarnation, restore) starts a process (restoring the snapshot held for it,
@@ -442,10 +444,24 @@ class Coordinator:
                 self.agent_pubs[i].put(encode_control(TAG_CHECKPOINT, self.incarnation.get(i, 0)))
 
     def _restart_due(self, k: int) -> None:
+        """Try each agent that is down and due: a failed try is tried again after
+        ``run.restart_backoff`` wall seconds (doubling) while ticks go on without it, until
+        ``run.restart_attempts`` tries have failed; then it is lost."""
+        r = self.exp.run
         for agent in sorted(self.down):
+            tries, due = self.restart_tries.get(agent, (0, 0.0))
+            if time.monotonic() < due:
+                continue
             record = self._restart(agent, k)
+            tries += 1
             self.restart_log.append(record)
-            if record["outcome"] != "ok":
+            if record["outcome"] == "ok":
+                self.restart_tries.pop(agent, None)
+            elif tries < r.restart_attempts:
+                record["outcome"] = "retrying"
+                self.restart_tries[agent] = (tries, time.monotonic() + r.restart_backoff * 2 ** (tries - 1))
+            else:
+                self.restart_tries.pop(agent, None)
                 lost_at = self.down.pop(agent)
                 self.lost[agent] = lost_at
                 self.world.kill(agent)
@@ -455,7 +471,8 @@ class Coordinator:
         checkpoint if there is one, else fresh. Messages to it while it was gone were booked
         ``receiver_dead`` by the proxy."""
         t0 = time.perf_counter()
-        new = self.incarnation.get(agent, 0) + 1
+        new = max(self.incarnation.get(agent, 0), self.tried_incarnation.get(agent, 0)) + 1  # a failed try's
+        self.tried_incarnation[agent] = new  # process, should it join late, is never taken for this one
         host = self.hosts.get(agent, LOCAL)
         checkpoint = self.checkpoints.get(agent)
         record: dict[str, Any] = {"tick": k, "agent": agent, "lost_at_tick": self.down[agent], "incarnation": new,
@@ -480,6 +497,11 @@ class Coordinator:
         else:
             record["reason"] = got
             log.warning("coordinator: agent %d could not be restarted before tick %d: %s", agent, k, got)
+            try:
+                if self.unplace is not None:
+                    self.unplace(agent, host, new)
+            except Exception as exc:  # the host is away: its process, if any, is stale from now on
+                log.warning("coordinator: could not stop the failed restart of agent %d on %s: %s", agent, host, exc)
         return record
 
     # -- moving agents (swaps) ---------------------------------------------------------------------

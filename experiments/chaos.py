@@ -343,7 +343,7 @@ class Chaos:
         if record["kind"] == "kill":
             agent = record["agent"]
             for r in coord.restart_log:
-                if r["agent"] == agent and r["lost_at_tick"] >= record["tick"]:
+                if r["agent"] == agent and r["lost_at_tick"] >= record["tick"] and r["outcome"] != "retrying":
                     if r["outcome"] != "ok":
                         return f"restart failed: {r['reason']}"
                     source = f"checkpoint of tick {r['checkpoint_tick']}" if r["checkpoint_tick"] != "" else "fresh"

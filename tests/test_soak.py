@@ -327,6 +327,27 @@ def test_a_host_cut_off_for_a_window_stalls_the_ticks_and_its_agents_come_back(l
     assert netns_links_up(lab)
 
 
+def test_a_restart_that_finds_its_host_away_is_tried_again_once_the_host_is_back(lab, tmp_path):
+    """A 20 s cut outlasts Zenoh's lease: the host's two agents are lost. The first tries to start
+    them find the host away and fail; later tries, after the cut, bring both back."""
+    lab.add_host("h1")
+    exp = experiment("agents.count=4", "allocator={name: noop, peers: 3}", "run.stop_when_done=false",
+                     "placement={h1: '0-1'}", "run.on_agent_loss=restart", "run.restart_attempts=4",
+                     "run.restart_backoff=2", "run.tick_timeout=30")
+    plan = ChaosPlan.model_validate({"events": [{"action": "cut_host", "at": [2], "for": 20}]})
+    limits = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=30.0)
+    v = soak(exp, tmp_path / "soak", 45, chaos=plan, interval=1.0, limits=limits, listen=[lab.hub],
+             admit=lab.admitted)
+    assert v["passed"], v["breaches"]
+    restarts = pd.read_csv(tmp_path / "soak" / "restarts.csv")
+    assert "retrying" in set(restarts["outcome"]) and "failed" not in set(restarts["outcome"]), restarts
+    assert set(restarts.loc[restarts["outcome"] == "ok", "agent"]) == {0, 1}
+    assert not restarts.duplicated(["agent", "incarnation"]).any()  # each try its own: a late joiner is never taken
+    (fault,) = v["faults"]
+    assert "agents restarted: [0, 1]; agents lost: none" in fault["outcome"], fault
+    assert netns_links_up(lab)
+
+
 def netns_links_up(lab) -> bool:
     from swarmbed.experiments.netns import _ip
 

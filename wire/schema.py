@@ -43,6 +43,10 @@ class RunSection(Strict):
                             "under its id (from its last checkpoint where there is one)")
     snapshot_every: int = Field(0, ge=0, description="restart: ticks between the agents' checkpoints (0: none, "
                                                      "a restarted agent starts fresh)")
+    restart_attempts: int = Field(3, ge=1, description="restart: tries to start a lost agent before it counts "
+                                                       "as lost (its host may be away for a while)")
+    restart_backoff: float = Field(2.0, gt=0, description="restart: wall seconds before the second try, doubling "
+                                                          "after each failed one; ticks go on meanwhile")
     log_max_mb: int = Field(20, ge=1, description="each process's log file is rotated at this size (MB)")
     log_backups: int = Field(2, ge=0, description="rotated log files kept per process (name.log.1, ...)")
     record_every: int = Field(1, ge=1, description="ticks between time-series rows")
