@@ -121,7 +121,6 @@ class Coordinator:
         # agents whose process died, started again (run.on_agent_loss: restart)
         self.down: dict[int, int] = {}  # agent -> tick its process was found dead, until it is restarted
         self.restart_tries: dict[int, tuple[int, float]] = {}  # agent down -> (failed tries, next try, monotonic s)
-        self.tried_incarnation: dict[int, int] = {}  # agent -> the last incarnation a restart started
         self.checkpoints: dict[int, tuple[int, bytes]] = {}  # agent -> (tick, state) of its last checkpoint
         self.restart_log: list[dict[str, Any]] = []
         # place(agent, host, incarnation, restore) starts a process (restoring the snapshot held for it,
@@ -452,7 +451,7 @@ class Coordinator:
             tries, due = self.restart_tries.get(agent, (0, 0.0))
             if time.monotonic() < due:
                 continue
-            record = self._restart(agent, k)
+            record = self._restart(agent, k, tries)
             tries += 1
             self.restart_log.append(record)
             if record["outcome"] == "ok":
@@ -466,13 +465,13 @@ class Coordinator:
                 self.lost[agent] = lost_at
                 self.world.kill(agent)
 
-    def _restart(self, agent: int, k: int) -> dict[str, Any]:
+    def _restart(self, agent: int, k: int, failed_tries: int = 0) -> dict[str, Any]:
         """Start agent ``agent`` again before tick ``k``, under its id, on its host: from its last
         checkpoint if there is one, else fresh. Messages to it while it was gone were booked
-        ``receiver_dead`` by the proxy."""
+        ``receiver_dead`` by the proxy. Each try is a new incarnation: a failed try's process,
+        should it join late, is never taken for this one."""
         t0 = time.perf_counter()
-        new = max(self.incarnation.get(agent, 0), self.tried_incarnation.get(agent, 0)) + 1  # a failed try's
-        self.tried_incarnation[agent] = new  # process, should it join late, is never taken for this one
+        new = self.incarnation.get(agent, 0) + 1 + failed_tries
         host = self.hosts.get(agent, LOCAL)
         checkpoint = self.checkpoints.get(agent)
         record: dict[str, Any] = {"tick": k, "agent": agent, "lost_at_tick": self.down[agent], "incarnation": new,

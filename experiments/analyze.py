@@ -95,17 +95,22 @@ def _resolve_series_keys(df: pd.DataFrame, sweep_dir: Path) -> None:
     for key in SERIES_KEYS:
         if key in df and df[key].notna().all():
             continue
-        values = []
-        for scenario, run in zip(df["scenario"], df["run"]):
-            try:
-                config = sweep_dir / str(scenario) / f"run_{int(run):03d}" / "config.yaml"
-                value: Any = yaml.safe_load(config.read_text())
-                for part in key.split("."):
-                    value = value[part]
-            except (OSError, KeyError, TypeError, yaml.YAMLError):
-                value = np.nan
-            values.append(value)
-        df[key] = df[key].fillna(pd.Series(values, index=df.index)) if key in df else values
+        first_run = df.groupby("scenario")["run"].min()  # a scenario's runs differ only in their seed
+        used = {scenario: _config_value(sweep_dir / str(scenario) / f"run_{int(run):03d}" / "config.yaml", key)
+                for scenario, run in first_run.items()}
+        values = df["scenario"].map(used)
+        df[key] = df[key].fillna(values) if key in df else values
+
+
+def _config_value(config: Path, key: str) -> Any:
+    """The value of dotted ``key`` in a run's resolved config, or NaN where it cannot be read."""
+    try:
+        value: Any = yaml.safe_load(config.read_text())
+        for part in key.split("."):
+            value = value[part]
+    except (OSError, KeyError, TypeError, yaml.YAMLError):
+        return np.nan
+    return value
 
 
 def _ci(values: pd.Series) -> tuple[float, float]:

@@ -328,10 +328,10 @@ class Chaos:
         still = []
         for give_up, record in self._pending:
             outcome = self._outcome(record)
-            if outcome is None and final and time.monotonic() <= give_up:
-                outcome = CUT_SHORT  # the run ended inside the time its ending is given: not a fault's failure
-            elif outcome is None and (final or time.monotonic() > give_up):
-                outcome = f"unresolved: no ending within {RESOLVE_WITHIN:g} s"
+            if outcome is None and (final or time.monotonic() > give_up):
+                # a run that ended inside the time an ending is given cut it short: not a fault's failure
+                expired = time.monotonic() > give_up
+                outcome = f"unresolved: no ending within {RESOLVE_WITHIN:g} s" if expired else CUT_SHORT
             if outcome is None:
                 still.append((give_up, record))
             else:

@@ -5,8 +5,8 @@ Table 1, all 17 cases), and the bundle release of Eqs. 6-7.
 Messages carry the whole state (every winner, bid and timestamp the agent knows) unless
 ``full_every`` > 1: then every ``full_every``-th message does, and those between carry only what
 changed since the message before (``"d": 1``; a winner dropped travels as ``NONE``), unless that
-names as many entries as the whole state (rounds far apart: everything changed), which then goes. A receiver
-applies Table 1 to the tasks a delta names and takes an agent a delta does not name as no news
+names as many entries as the whole state (rounds far apart: everything changed), which then goes.
+A receiver applies Table 1 to the tasks a delta names and takes an agent a delta does not name as no news
 about it. A neighbour that missed a message, or came into range, is whole again at the next full
 one. The full messages are byte for byte those of ``full_every = 1``."""
 
@@ -88,20 +88,20 @@ class ConsensusState:
 
     def message(self) -> dict:
         """The state for neighbours: whole, or (``full_every`` > 1) what changed since the last one."""
-        whole = self.full_every <= 1 or self.sent % self.full_every == 0
+        due_whole = self.sent % self.full_every == 0
         self.sent += 1
-        if self.full_every <= 1:
+        if self.full_every == 1:
             return self._whole()
         winners = {t: (self.z[t], self.y[t]) for t in self.z}
-        out = self._whole()
-        if not whole:
+        delta = None
+        if not due_whole:
             changed = [[t, w, b] for t, (w, b) in sorted(winners.items()) if self.told.get(t) != (w, b)]
             dropped = [[t, NONE, 0.0] for t in sorted(self.told.keys() - winners.keys())]
             stamps = [[a, _compact(ts)] for a, ts in sorted(self.s.items()) if self.told_s.get(a) != ts]
-            if len(changed) + len(dropped) + len(stamps) < len(out["w"]) + len(out["s"]):  # else whole is smaller
-                out = {"t": out["t"], "d": 1, "w": sorted(changed + dropped), "s": stamps}
+            if len(changed) + len(dropped) + len(stamps) < len(winners) + len(self.s):  # else whole is smaller
+                delta = {"t": _compact(self.now), "d": 1, "w": sorted(changed + dropped), "s": stamps}
         self.told, self.told_s = winners, dict(self.s)
-        return out
+        return delta or self._whole()
 
     def _whole(self) -> dict:
         return {
