@@ -33,6 +33,7 @@ import zenoh
 from swarmbed.experiments.launcher import AGENT_MODULE, Children, ForkServerError
 from swarmbed.wire.credentials import Identity, read_credentials, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, HostKeys, host_name_of
+from swarmbed.wire.lifecycle import tune_malloc
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 log = logging.getLogger("swarmbed.host")
@@ -191,6 +192,7 @@ def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_co
         dictionary = write_dictionary(private / "router.dictionary", [local])
         settings["transport/auth/usrpwd"] = {"user": mine.user, "password": mine.password,
                                              "dictionary_file": str(dictionary)}
+    tune_malloc()  # a daemon meant to stay up for days
     try:
         session = zenoh.open(zenoh_config(mode, connect, listen, zenoh_config_file, settings=settings))
     except BaseException:

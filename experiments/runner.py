@@ -34,6 +34,7 @@ from swarmbed.experiments.host import (
 from swarmbed.experiments.launcher import ChildExited, Children, ForkServerError
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
+from swarmbed.wire.lifecycle import tune_malloc
 from swarmbed.wire.rowfile import PARTIAL_PREFIX, keep_partial
 from swarmbed.wire.schema import LOCAL, hosts_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
@@ -77,6 +78,7 @@ def open_hub(listen: Sequence[str] = (), attempts: int = 5,
     """A router session listening on a free loopback TCP port (the run's own processes connect
     there) and on ``listen`` (where other hosts' routers connect); ``settings``: e.g. the run's
     authentication and access control (:meth:`RunAccess.hub_settings`)."""
+    tune_malloc()  # the hub handles every tick's messages for as long as the run goes
     last: Exception | None = None
     for _ in range(attempts):
         endpoint = free_loopback_endpoint()
