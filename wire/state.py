@@ -21,6 +21,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from swarmbed.wire.codec import pack
+
 EXT_TUPLE, EXT_SET, EXT_ARRAY, EXT_SCALAR, EXT_BIGINT, EXT_RNG, EXT_OBJECT, EXT_FROZENSET, EXT_ENUM = range(1, 10)
 
 
@@ -36,7 +38,7 @@ def pack_state(obj: Any, modules: tuple[str, ...] = ()) -> bytes:
     """``obj`` as bytes; ``modules``: plugin modules (beside swarmbed's) whose classes may be stored."""
 
     def ext(code: int, value: Any, where: str) -> msgpack.ExtType:
-        return msgpack.ExtType(code, msgpack.packb(walk(value, where), use_bin_type=True))
+        return msgpack.ExtType(code, pack(walk(value, where)))
 
     def walk(value: Any, where: str) -> Any:
         if value is None or isinstance(value, (bool, str, bytes, float)):
@@ -75,7 +77,7 @@ def pack_state(obj: Any, modules: tuple[str, ...] = ()) -> bytes:
             return ext(EXT_OBJECT, [f"{cls.__module__}:{cls.__qualname__}", fields], where)
         raise StateError(f"{where}: cannot snapshot a {cls.__module__}.{cls.__qualname__}")
 
-    return msgpack.packb(walk(obj, "state"), use_bin_type=True)
+    return pack(walk(obj, "state"))
 
 
 def _class(ref: str, modules: tuple[str, ...]) -> type:
