@@ -27,6 +27,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import NullLocator  # noqa: E402
 from scipy import stats  # noqa: E402
 
@@ -235,21 +236,27 @@ def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
     per = {g: df[df[ALLOCATOR] == g] for g in strategies}
     x = np.arange(len(strategies))
     with plt.rc_context(STYLE):
-        # mean rescued and expired per trial with 95 % CI bars: rescued filled, expired hatched
-        fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
-        for k, metric in enumerate(("rescued", "expired")):
-            means = np.array([per[g][metric].mean() for g in strategies])
-            cis = [_ci(per[g][metric]) for g in strategies]
-            err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
-            ax.bar(x + (k - 0.5) * 0.4, means, 0.4, yerr=np.nan_to_num(err), capsize=2, color=colors,
-                   alpha=0.85 if k == 0 else 0.35, hatch=None if k == 0 else "///", edgecolor="0.2", linewidth=0.5,
-                   error_kw={"elinewidth": 0.8})
-        ax.bar([], [], color="0.5", label="rescued")
-        ax.bar([], [], color="0.5", alpha=0.35, hatch="///", label="expired")
-        ax.set_xticks(x, labels, rotation=30, ha="right")
-        ax.set_ylabel("victims per trial (mean, 95 % CI)")
-        ax.legend(frameon=False)
-        written.append(_save(fig, out, "fig_rescued_expired"))
+        # mean rescued and expired per trial with 95 % CI bars: rescued filled, expired hatched; one
+        # figure per sweep where there are several (a failure level's trials are not pooled with another's)
+        sweeps = sorted(df["sweep"].unique()) if "sweep" in df and df["sweep"].nunique() > 1 else [None]
+        for sweep in sweeps:
+            rows = per if sweep is None else {g: per[g][per[g]["sweep"] == sweep] for g in strategies}
+            fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
+            for k, metric in enumerate(("rescued", "expired")):
+                means = np.array([rows[g][metric].mean() for g in strategies])
+                cis = [_ci(rows[g][metric]) for g in strategies]
+                err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
+                ax.bar(x + (k - 0.5) * 0.4, means, 0.4, yerr=np.nan_to_num(err), capsize=2, color=colors,
+                       alpha=0.85 if k == 0 else 0.35, hatch=None if k == 0 else "///", edgecolor="0.2",
+                       linewidth=0.5, error_kw={"elinewidth": 0.8})
+            ax.set_xticks(x, labels, rotation=30, ha="right")
+            ax.set_ylabel("victims per trial (mean, 95 % CI)")
+            ax.legend(handles=[Patch(facecolor="0.5", alpha=0.85, edgecolor="0.2", linewidth=0.5, label="rescued"),
+                               Patch(facecolor="0.5", alpha=0.35, hatch="///", edgecolor="0.2", linewidth=0.5,
+                                     label="expired")], frameon=False)
+            if sweep is not None:
+                ax.set_title(str(sweep))
+            written.append(_save(fig, out, "fig_rescued_expired" + ("" if sweep is None else f"_{sweep}")))
         # boxplots per trial
         shown = [m for m in SAR_METRICS if m in df]
         cols = min(3, len(shown))

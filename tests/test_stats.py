@@ -43,7 +43,9 @@ def test_sar_analysis_of_two_sweeps(tmp_path):
         run_sweep(sweep, tmp_path / f"out{victims}", jobs=2, progress=False)
         dirs.append(tmp_path / f"out{victims}")
     names = {p.name for p in analyze(dirs, control="cbba-etc")}
-    assert {"statistics.csv", "statistics.md", "fig_rescued_expired.png", "fig_boxplots.png",
+    # one rescued/expired figure per sweep: trials of different sweeps are not pooled in one bar
+    assert {"statistics.csv", "statistics.md", "fig_rescued_expired_v10.png", "fig_rescued_expired_v20.png",
+            "fig_boxplots.png",
             "fig_rescued_vs_messages.png", "fig_messages_vs_victims.png", "fig_rescued_vs_victims.png"} <= names
     assert sorted(load(dirs).groupby("sweep")["scenario.victims"].unique().map(list).sum()) == [10, 20]
     for png in (n for n in names if n.endswith(".png")):  # vector copies for papers, the papers' names
