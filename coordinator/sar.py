@@ -36,6 +36,7 @@ from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
 
 ALIVE, RESCUED, EXPIRED, UNUSED = 0, 1, 2, 3
+FORGET_AFTER = 2.0  # lifetimes after its spawn a victim's row may leave the world's arrays
 COLOR_NAMES = ("red", "green", "blue")
 # The paper gives no durations for inspecting and rescuing; these are calibrated on the
 # non-communicating `tree` strategy alone (docs/reproduction.md, "Calibration") and then frozen
@@ -150,8 +151,10 @@ class SARWorld(World):
         self.stale_actions = np.zeros(self.n, dtype=np.int64)  # aimed at a victim already gone
         self.counts = {"rescued": 0, "expired": 0, "failed_rescues": 0, "inspections": 0, "inspect_failures": 0,
                        "rescue_failures": 0, "move_failures": 0, "abandons": 0}
-        # victims, in arrays that double when full (a steady-state run spawns tens of thousands)
+        # victims base .. nv-1, in arrays that double when full. A steady-state run spawns tens of
+        # thousands; those gone for longer than FORGET_AFTER lifetimes leave the arrays (see _at)
         self.nv = 0
+        self.base = 0
         self.vx, self.vy, self.vspawn = np.zeros(0), np.zeros(0), np.zeros(0)
         self.vcolor = np.zeros(0, dtype=np.int64)
         self.vstatus = np.zeros(0, dtype=np.int64)
@@ -167,15 +170,38 @@ class SARWorld(World):
     def time(self) -> float:
         return self.tick * self.dt
 
+    def _at(self, victim: int) -> int | None:
+        """Where ``victim``'s row is in the arrays; None for one that left them.
+
+        A victim leaves once its lifetime ended more than a lifetime ago: every robot forgot it by
+        then (a robot drops a victim at the end of the lifetime it saw), so only a plugin that
+        names it from memory that old can ask for it, and such an action is stale. Until then it
+        stays, with its place and colour, for the robots that still go where it was."""
+        return victim - self.base if victim >= self.base else None
+
+    def _forget_old(self) -> None:
+        """Drop the rows of the victims that may leave (a prefix: ids are spawned in time order)."""
+        keep_after = self.time - FORGET_AFTER * self.sc.lifetime
+        first = int(np.searchsorted(self.vspawn[:self.nv - self.base], keep_after, side="left"))
+        if first:
+            for name in ("vx", "vy", "vspawn", "vcolor", "vstatus"):
+                arr = getattr(self, name)
+                arr[:len(arr) - first] = arr[first:]
+                arr[len(arr) - first:] = UNUSED if name == "vstatus" else 0
+            self.base += first
+
+    def _grow(self, grow: int) -> None:
+        self.vx, self.vy, self.vspawn = (np.concatenate([a, np.zeros(grow)]) for a in (self.vx, self.vy, self.vspawn))
+        self.vcolor = np.concatenate([self.vcolor, np.zeros(grow, dtype=np.int64)])
+        self.vstatus = np.concatenate([self.vstatus, np.full(grow, UNUSED, dtype=np.int64)])
+
     def _spawn(self, count: int) -> None:
         for _ in range(count):
-            if self.nv == len(self.vstatus):
-                grow = max(64, len(self.vstatus))
-                self.vx, self.vy, self.vspawn = (np.concatenate([a, np.zeros(grow)])
-                                                 for a in (self.vx, self.vy, self.vspawn))
-                self.vcolor = np.concatenate([self.vcolor, np.zeros(grow, dtype=np.int64)])
-                self.vstatus = np.concatenate([self.vstatus, np.full(grow, UNUSED, dtype=np.int64)])
-            v = self.nv
+            if self.nv - self.base == len(self.vstatus):
+                self._forget_old()
+                if self.nv - self.base >= 0.75 * len(self.vstatus):  # grow unless a quarter came free
+                    self._grow(max(64, len(self.vstatus)))
+            v = self.nv - self.base
             self.vx[v], self.vy[v] = self.scenario.random_point(self.spawn_rng)
             self.vcolor[v] = int(self.spawn_rng.integers(self.sc.colors))
             self.vspawn[v] = self.time
@@ -183,7 +209,7 @@ class SARWorld(World):
             self.nv += 1
 
     def _end(self, victim: int, status: int) -> None:
-        self.vstatus[victim] = status
+        self.vstatus[victim - self.base] = status
         self.inspected.pop(victim, None)  # read only while it is there: a soak would keep every one
         self.counts["rescued" if status == RESCUED else "expired"] += 1
         if self.sc.replace:
@@ -199,7 +225,7 @@ class SARWorld(World):
 
     def markers(self) -> dict[int, tuple[float, float, str]]:
         """Victims alive, labelled with their (hidden) wall colour."""
-        return {int(v): (float(self.vx[v]), float(self.vy[v]), COLOR_NAMES[int(self.vcolor[v])])
+        return {int(v) + self.base: (float(self.vx[v]), float(self.vy[v]), COLOR_NAMES[int(self.vcolor[v])])
                 for v in np.flatnonzero(self.vstatus == ALIVE)}
 
     def agent_labels(self) -> dict[int, str]:
@@ -236,10 +262,11 @@ class SARWorld(World):
         for i in map(int, robots):
             seen = np.flatnonzero(self._in_cone(i, lx, ly))
             table = np.empty(len(seen), dtype=TASK_DTYPE)
-            ids = live[seen]
+            rows = live[seen]
+            ids = rows + self.base
             table["id"], table["x"], table["y"], table["remaining"] = ids, lx[seen], ly[seen], left[seen]
-            known = [int(self.vcolor[v]) if (self.show_colors or i in self.inspected.get(int(v), ())) else -1
-                     for v in ids]
+            known = [int(self.vcolor[r]) if (self.show_colors or i in self.inspected.get(int(v), ())) else -1
+                     for r, v in zip(rows, ids)]
             table["color"] = known
             others = [int(j) for j in robots if j != i]
             visible = self._in_cone(i, self.ax[others], self.ay[others]) if others else np.zeros(0, dtype=bool)
@@ -290,9 +317,9 @@ class SARWorld(World):
             self.counts["inspections"] += 1
             if i not in self.inspected.setdefault(v, set()):
                 self.inspected[v].add(i)
-                if self.vcolor[v] != self.color[i]:
+                if self.vcolor[v - self.base] != self.color[i]:
                     self.counts["failed_rescues"] += 1
-            self.results.setdefault(i, []).append([v, int(self.vcolor[v])])
+            self.results.setdefault(i, []).append([v, int(self.vcolor[v - self.base])])
         else:
             if self.fail_rng.random() < self.sc.rescue_fail:
                 self.counts["rescue_failures"] += 1
@@ -318,13 +345,17 @@ class SARWorld(World):
 
     def _face(self, i: int, v: int) -> None:
         """A robot that inspects or rescues a victim turns to it (its vision cone covers it)."""
-        dx, dy = self.vx[v] - self.ax[i], self.vy[v] - self.ay[i]
+        r = self._at(v)
+        if r is None:
+            return
+        dx, dy = self.vx[r] - self.ax[i], self.vy[r] - self.ay[i]
         if dx or dy:
             self.heading[i] = math.atan2(dy, dx)
 
     def _in_reach(self, i: int, v: int) -> bool:
-        return (self.vstatus[v] == ALIVE and
-                math.hypot(self.vx[v] - self.ax[i], self.vy[v] - self.ay[i]) <= self.sc.inspect_range + 1e-9)
+        r = self._at(v)
+        return (r is not None and self.vstatus[r] == ALIVE and
+                math.hypot(self.vx[r] - self.ax[i], self.vy[r] - self.ay[i]) <= self.sc.inspect_range + 1e-9)
 
     def apply(self, actions: dict[int, list]) -> None:
         """Advance one tick; robots act in id order on the state of this tick."""
@@ -336,26 +367,28 @@ class SARWorld(World):
             action = actions.get(i, ["stop"])
             name = action[0] if action else None
             v = self._victim(action)
+            r = None if v is None else self._at(v)
             if name in ("inspect", "rescue") and v is not None:
                 self._face(i, v)  # it looks where the victim is (or was)
             if name == "goto" and len(action) == 3 and all(isinstance(c, (int, float)) for c in action[1:]):
                 self._move(i, float(action[1]), float(action[2]))
-            elif name == "goto_task" and v is not None:
-                self._move(i, float(self.vx[v]), float(self.vy[v]))
+            elif name == "goto_task" and r is not None:
+                self._move(i, float(self.vx[r]), float(self.vy[r]))
             elif name == "inspect" and v is not None and self._in_reach(i, v):
                 self._begin(i, "inspect", v, self.sc.inspect_time)
-            elif (name == "rescue" and v is not None and self._in_reach(i, v) and i in self.inspected.get(v, ())
-                  and self.vcolor[v] == self.color[i]):
+            elif (name == "rescue" and r is not None and self._in_reach(i, v) and i in self.inspected.get(v, ())
+                  and self.vcolor[r] == self.color[i]):
                 self._begin(i, "rescue", v, self.sc.rescue_time)
             elif name == "abandon" and v is not None:
                 self.counts["abandons"] += 1
-            elif name in ("inspect", "rescue") and v is not None and self.vstatus[v] != ALIVE:
+            elif name in ("inspect", "rescue", "goto_task") and v is not None and (
+                    r is None or self.vstatus[r] != ALIVE):
                 self.stale_actions[i] += 1  # someone was faster, or it expired: not the robot's fault
             elif name != "stop":
                 self.invalid_actions[i] += 1
         self.tick += 1
         expired = (self.vstatus == ALIVE) & (self.vspawn + self.sc.lifetime <= self.time + 1e-9)
-        for v in map(int, np.flatnonzero(expired)):
+        for v in [int(r) + self.base for r in np.flatnonzero(expired)]:  # ids: _end may move the rows
             self._end(v, EXPIRED)
 
     # -- metrics -----------------------------------------------------------------------------------

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from swarmbed.coordinator import sar
 from swarmbed.coordinator.kinematics import Limits, step
 from swarmbed.coordinator.sar import ALIVE
 from swarmbed.experiments.config import resolve_experiment
@@ -104,6 +105,10 @@ def test_sar_actions_take_their_duration_in_seconds_whatever_the_tick():
 
 
 def _greedy_rescues(dt, seed, seconds=600.0, *overrides):
+    return _greedy_world(dt, seed, seconds, *overrides).counts["rescued"]
+
+
+def _greedy_world(dt, seed, seconds=600.0, *overrides):
     """A tree-like policy with full knowledge of positions, straight on the world: nearest victim
     not known to mismatch, go, inspect, rescue if the colours match."""
     w = _sar_world(dt, seed, "agents.count=6", "scenario.victims=20", *overrides)
@@ -113,24 +118,38 @@ def _greedy_rescues(dt, seed, seconds=600.0, *overrides):
         actions = {}
         for i in range(w.n):
             t = target.get(i)
-            if t is not None and (w.vstatus[t] != ALIVE or (i, t) in mismatched):
+            if t is not None and (w._at(t) is None or w.vstatus[t - w.base] != ALIVE or (i, t) in mismatched):
                 t = None
-            if t is None:
-                alive = [v for v in np.flatnonzero(w.vstatus[:w.nv] == ALIVE) if (i, int(v)) not in mismatched]
+            if t is None:  # ids are rows + base (the world forgets victims long gone)
+                alive = [int(r) + w.base for r in np.flatnonzero(w.vstatus == ALIVE)]
+                alive = [v for v in alive if (i, v) not in mismatched]
                 if not alive:
                     continue
-                t = int(min(alive, key=lambda v: math.hypot(w.vx[v] - w.ax[i], w.vy[v] - w.ay[i])))
+                t = min(alive, key=lambda v: math.hypot(w.vx[v - w.base] - w.ax[i], w.vy[v - w.base] - w.ay[i]))
                 target[i] = t
             if not w._in_reach(i, t):
                 actions[i] = ["goto_task", t]
             elif i not in w.inspected.get(t, ()):
                 actions[i] = ["inspect", t]
-            elif w.vcolor[t] != w.color[i]:
+            elif w.vcolor[t - w.base] != w.color[i]:
                 mismatched.add((i, t))
             else:
                 actions[i] = ["rescue", t]
         w.apply(actions)
-    return w.counts["rescued"]
+    return w
+
+
+def test_victims_long_gone_leave_the_world_arrays_and_no_outcome_changes(monkeypatch):
+    """A steady-state world keeps rows for recent victims only (a soak spawns tens of thousands of
+    victims); forgetting the ones gone for more than a lifetime changes nothing a robot sees."""
+    kept = _greedy_world(1.0, 3, 3000.0)
+    monkeypatch.setattr(sar, "FORGET_AFTER", math.inf)
+    whole = _greedy_world(1.0, 3, 3000.0)
+    assert kept.summary() == whole.summary() and kept.counts["rescued"] > 0
+    assert kept.markers() == whole.markers() and kept.row() == whole.row()
+    assert whole.base == 0 and len(whole.vstatus) >= whole.nv
+    assert kept.base > 0 and len(kept.vstatus) <= 256 < kept.nv
+    assert kept._at(0) is None and kept._in_reach(0, 0) is False
 
 
 def test_sar_results_converge_as_the_tick_shrinks():
