@@ -376,8 +376,8 @@ class SARWorld(World):
                 self._move(i, float(self.vx[r]), float(self.vy[r]))
             elif name == "inspect" and v is not None and self._in_reach(i, v):
                 self._begin(i, "inspect", v, self.sc.inspect_time)
-            elif (name == "rescue" and r is not None and self._in_reach(i, v) and i in self.inspected.get(v, ())
-                  and self.vcolor[r] == self.color[i]):
+            elif (name == "rescue" and v is not None and r is not None and self._in_reach(i, v)
+                  and i in self.inspected.get(v, ()) and self.vcolor[r] == self.color[i]):
                 self._begin(i, "rescue", v, self.sc.rescue_time)
             elif name == "abandon" and v is not None:
                 self.counts["abandons"] += 1

@@ -240,11 +240,11 @@ def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
         # figure per sweep where there are several (a failure level's trials are not pooled with another's)
         sweeps = sorted(df["sweep"].unique()) if "sweep" in df and df["sweep"].nunique() > 1 else [None]
         for sweep in sweeps:
-            rows = per if sweep is None else {g: per[g][per[g]["sweep"] == sweep] for g in strategies}
+            chosen = per if sweep is None else {g: per[g][per[g]["sweep"] == sweep] for g in strategies}
             fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
             for k, metric in enumerate(("rescued", "expired")):
-                means = np.array([rows[g][metric].mean() for g in strategies])
-                cis = [_ci(rows[g][metric]) for g in strategies]
+                means = np.array([chosen[g][metric].mean() for g in strategies])
+                cis = [_ci(chosen[g][metric]) for g in strategies]
                 err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
                 ax.bar(x + (k - 0.5) * 0.4, means, 0.4, yerr=np.nan_to_num(err), capsize=2, color=colors,
                        alpha=0.85 if k == 0 else 0.35, hatch=None if k == 0 else "///", edgecolor="0.2",
