@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from collections import defaultdict, deque
 from collections.abc import Iterable, Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -34,6 +35,24 @@ from swarmbed.wire.codec import BROADCAST, RadioMessage
 from swarmbed.wire.schema import NetworkSection
 
 _EPS = 1e-9
+
+
+def _per_segment(flags: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """How many of ``flags[bounds[i]:bounds[i + 1]]`` are set, for every i (empty segments too)."""
+    total = np.concatenate(([0], np.cumsum(flags, dtype=np.int64)))
+    return total[bounds[1:]] - total[bounds[:-1]]
+
+
+class _Send(NamedTuple):
+    """One message on its way through :meth:`Radio.route`."""
+
+    sender: int
+    sender_row: int
+    msg: RadioMessage
+    intended: int  # copies: one per intended receiver
+    drops: list[tuple[str, np.ndarray]]  # copies dropped before range and loss: (reason, receivers)
+    rows: np.ndarray  # the receivers (rows of the sorted alive ids) still in play
+    end: float  # end of its transmission, in seconds
 
 
 class Radio:
@@ -47,9 +66,9 @@ class Radio:
         self._busy_until: dict[int, float] = defaultdict(float)
         self._in_queue: dict[int, deque[float]] = defaultdict(deque)  # transmission end times
         # delivery tick -> [(receivers, sender, kind, payload, send_tick)]
-        self._pending: dict[int, list[tuple[list[int], int, str, bytes, int]]] = defaultdict(list)
+        self._pending: dict[int, list[tuple[np.ndarray, int, str, bytes, int]]] = defaultdict(list)
         # (tick, sender, kind, size, receivers delivered to, receivers found dead)
-        self._unconfirmed: list[tuple[int, int, str, int, list[int], list[int]]] = []
+        self._unconfirmed: list[tuple[int, int, str, int, np.ndarray, np.ndarray]] = []
 
     @property
     def pending_copies(self) -> int:
@@ -59,70 +78,99 @@ class Radio:
 
     def route(self, tick: int, ids: Sequence[int], xs: Sequence[float], ys: Sequence[float],
               outs: Mapping[int, Iterable[RadioMessage]]) -> None:
-        """Take every message sent at ``tick``. ``ids``/``xs``/``ys``: agents alive at ``tick``."""
+        """Take every message sent at ``tick``. ``ids``/``xs``/``ys``: agents alive at ``tick``.
+
+        Three passes: each message is addressed and queued (Python, per message); range and loss
+        are decided for every copy of the tick at once (arrays; the loss draws come from ``rng``
+        in message order, then receiver order, as one message at a time would draw them); then
+        each message is booked, in order, and what survives is scheduled."""
         order = np.argsort(np.asarray(ids, dtype=np.int64), kind="stable")
         alive = np.asarray(ids, dtype=np.int64)[order]
-        px = np.asarray(xs, dtype=float)[order]
-        py = np.asarray(ys, dtype=float)[order]
-        row_of = {int(a): i for i, a in enumerate(alive)}
-        near = None
-        if self.params.range is not None and len(alive):
-            near = np.hypot(px[:, None] - px[None, :], py[:, None] - py[None, :]) <= self.params.range + _EPS
+        every_row = np.arange(len(alive))
+        row_of = dict(zip(alive.tolist(), every_row.tolist()))
+        sends: list[_Send] = []
         for sender in sorted(outs):
+            sender_row = row_of.get(sender)
             for msg in outs[sender]:
-                self._route_one(tick, sender, msg, row_of, alive, near)
+                if sender_row is None:
+                    raise KeyError(f"agent {sender} sent at tick {tick} but is not alive then")
+                sends.append(self._address(tick, sender, sender_row, msg, alive, row_of, every_row))
+        if not sends:
+            return
+        counts = np.fromiter((len(s.rows) for s in sends), dtype=np.int64, count=len(sends))
+        rows = np.concatenate([s.rows for s in sends])
+        in_range = np.ones(len(rows), dtype=bool)
+        if self.params.range is not None and len(rows):
+            x = np.asarray(xs, dtype=float)[order]
+            y = np.asarray(ys, dtype=float)[order]
+            from_rows = np.repeat(np.fromiter((s.sender_row for s in sends), dtype=np.int64, count=len(sends)), counts)
+            reach = self.params.range + _EPS
+            in_range = np.hypot(x[from_rows] - x[rows], y[from_rows] - y[rows]) <= reach
+        kept = in_range.copy()
+        if self.params.loss > 0.0:
+            kept[in_range] = self.rng.random(int(np.count_nonzero(in_range))) >= self.params.loss
+        self._book_and_schedule(tick, sends, counts, alive, rows, in_range, kept)
 
-    def _route_one(self, tick: int, sender: int, msg: RadioMessage, row_of: dict[int, int],
-                   alive: np.ndarray, near: np.ndarray | None) -> None:
-        p, ledger, kind, size = self.params, self.ledger, msg.kind, len(msg.payload)
+    def _address(self, tick: int, sender: int, sender_row: int, msg: RadioMessage, alive: np.ndarray,
+                 row_of: dict[int, int], every_row: np.ndarray) -> _Send:
+        """A message's intended receivers (as rows of ``alive``, the sorted ids; ``row_of`` maps an
+        id to its row) that may still get a copy, the copies already dropped (addressing, the
+        sender's queue) and the end of its transmission."""
+        drops: list[tuple[str, np.ndarray]] = []
         if msg.dest == BROADCAST:
-            receivers = alive[alive != sender]
-            ledger.sent(tick, sender, kind, size, len(receivers))
+            rows = np.concatenate((every_row[:sender_row], every_row[sender_row + 1:]))
+            intended = len(rows)
         else:
             wanted = msg.dest if isinstance(msg.dest, tuple) else (msg.dest,)
-            ledger.sent(tick, sender, kind, size, len(wanted))
+            intended = len(wanted)
             ok = []
             for r in wanted:
                 if r == sender or not 0 <= r < self.n_agents:
-                    ledger.book(tick, sender, kind, size, "no_such_receiver", to=(r,))
-                elif r not in row_of:
-                    ledger.book(tick, sender, kind, size, "receiver_dead", to=(r,))
+                    drops.append(("no_such_receiver", np.array([r], dtype=np.int64)))
+                elif (row := row_of.get(r)) is None:
+                    drops.append(("receiver_dead", np.array([r], dtype=np.int64)))
                 else:
-                    ok.append(r)
-            receivers = np.asarray(ok, dtype=np.int64)
-
-        t_now = tick * self.dt
-        end = t_now
+                    ok.append(row)
+            rows = np.asarray(ok, dtype=np.int64)
+        p = self.params
+        end = t_now = tick * self.dt
         if p.rate is not None:
             queue = self._in_queue[sender]
             while queue and queue[0] <= t_now + _EPS:
                 queue.popleft()
             if p.limit is not None and len(queue) >= p.limit:
-                ledger.book(tick, sender, kind, size, "queue_full", len(receivers), receivers)
-                return
-            end = max(t_now, self._busy_until[sender]) + size / p.rate
+                drops.append(("queue_full", alive[rows]))
+                return _Send(sender, sender_row, msg, intended, drops, rows[:0], end)
+            end = max(t_now, self._busy_until[sender]) + len(msg.payload) / p.rate
             self._busy_until[sender] = end
             queue.append(end)
-        if not len(receivers):
-            return
+        return _Send(sender, sender_row, msg, intended, drops, rows, end)
 
-        if near is not None:
-            in_range = near[row_of[sender], [row_of[int(r)] for r in receivers]]
-            n_far = int(len(receivers) - in_range.sum())
-            if n_far:
-                ledger.book(tick, sender, kind, size, "out_of_range", n_far,
-                            receivers[~in_range] if ledger.per_receiver else None)
-                receivers = receivers[in_range]
-        if p.loss > 0.0 and len(receivers):
-            kept = self.rng.random(len(receivers)) >= p.loss
-            n_lost = int(len(receivers) - kept.sum())
-            if n_lost:
-                ledger.book(tick, sender, kind, size, "loss", n_lost, receivers[~kept] if ledger.per_receiver else None)
-                receivers = receivers[kept]
-        if not len(receivers):
-            return
-        deliver = max(tick + 1, math.ceil(end / self.dt - _EPS)) + p.latency
-        self._pending[deliver].append((receivers.tolist(), sender, kind, msg.payload, tick))
+    def _book_and_schedule(self, tick: int, sends: list[_Send], counts: np.ndarray, alive: np.ndarray,
+                           rows: np.ndarray, in_range: np.ndarray, kept: np.ndarray) -> None:
+        ledger, per_receiver = self.ledger, self.ledger.per_receiver
+        bounds = np.concatenate(([0], np.cumsum(counts)))
+        n_far, n_kept = _per_segment(~in_range, bounds), _per_segment(kept, bounds)
+        kept_ids = np.split(alive[rows[kept]], np.cumsum(n_kept)[:-1])
+        starts, copies, fars, keeps = bounds.tolist(), counts.tolist(), n_far.tolist(), n_kept.tolist()
+        for i, send in enumerate(sends):
+            kind, size = send.msg.kind, len(send.msg.payload)
+            ledger.sent(tick, send.sender, kind, size, send.intended)
+            for reason, to in send.drops:
+                ledger.book(tick, send.sender, kind, size, reason, len(to), to)
+            if not copies[i]:
+                continue
+            far, lost = fars[i], copies[i] - fars[i] - keeps[i]
+            a, b = starts[i], starts[i + 1]
+            if far:
+                ledger.book(tick, send.sender, kind, size, "out_of_range", far,
+                            alive[rows[a:b][~in_range[a:b]]] if per_receiver else None)
+            if lost:
+                ledger.book(tick, send.sender, kind, size, "loss", lost,
+                            alive[rows[a:b][in_range[a:b] & ~kept[a:b]]] if per_receiver else None)
+            if keeps[i]:
+                due = max(tick + 1, math.ceil(send.end / self.dt - _EPS)) + self.params.latency
+                self._pending[due].append((kept_ids[i], send.sender, kind, send.msg.payload, tick))
 
     def late(self, book_at: int, sender: int, messages: Iterable[RadioMessage], alive: Sequence[int]) -> None:
         """Messages of a sample that reached the proxy after its tick's deadline (real-time clock):
@@ -142,17 +190,18 @@ class Radio:
         """Inboxes for ``tick``: ``{receiver: [[sender, kind, payload], ...]}`` for agents in ``alive``.
 
         Their bookings stay tentative until :meth:`confirm` (the tick really happened) or
-        :meth:`finish` (the run ended first: ``run_ended``)."""
-        alive_set = set(alive)
+        :meth:`finish` (the run ended first: ``run_ended``). A message's ``[sender, kind, payload]``
+        is one list shared by every inbox it reaches."""
+        is_alive = np.zeros(self.n_agents, dtype=bool)
+        alive_ids = np.fromiter(alive, dtype=np.int64)
+        is_alive[alive_ids[(alive_ids >= 0) & (alive_ids < self.n_agents)]] = True
         inboxes: dict[int, list[list]] = {}
         for receivers, sender, kind, payload, _sent in self._pending.pop(tick, ()):
-            reached, dead = [], []
-            for r in receivers:
-                if r in alive_set:
-                    inboxes.setdefault(r, []).append([sender, kind, payload])
-                    reached.append(r)
-                else:
-                    dead.append(r)
+            there = is_alive[receivers]
+            reached, dead = receivers[there], receivers[~there]
+            item = [sender, kind, payload]
+            for r in reached.tolist():
+                inboxes.setdefault(r, []).append(item)
             self._unconfirmed.append((tick, sender, kind, len(payload), reached, dead))
         return inboxes
 
@@ -166,7 +215,8 @@ class Radio:
     def finish(self, last_tick: int) -> None:
         """The run is over after ``last_tick``: every copy not yet delivered is booked ``run_ended``."""
         for _tick, sender, kind, size, delivered, dead in self._unconfirmed:
-            self.ledger.book(last_tick, sender, kind, size, "run_ended", len(delivered) + len(dead), delivered + dead)
+            self.ledger.book(last_tick, sender, kind, size, "run_ended", len(delivered) + len(dead),
+                             np.concatenate([delivered, dead]))
         self._unconfirmed.clear()
         for due in sorted(self._pending):
             for receivers, sender, kind, payload, _sent in self._pending[due]:
