@@ -68,8 +68,11 @@ def load(sweep_dirs: list[Path]) -> pd.DataFrame:
     factors: list[str] = []
     for sweep_dir in sweep_dirs:
         spec = sweep_dir / SPEC
-        if not spec.exists() or not ((sweep_dir / TABLE).exists() or (sweep_dir / PARQUET).exists()):
-            raise AnalyzeError(f"{sweep_dir}: no {TABLE} / {SPEC}; run `swarmbed sweep` into it first")
+        if not spec.exists():
+            raise AnalyzeError(f"{sweep_dir}: no {SPEC}; run `swarmbed sweep` into it first")
+        if not ((sweep_dir / TABLE).exists() or (sweep_dir / PARQUET).exists()):
+            raise AnalyzeError(f"{sweep_dir}: no {TABLE} yet (a sweep writes it when it stops); run the same "
+                               f"`swarmbed sweep` again: it skips the runs that completed and writes the table")
         df = read_table(sweep_dir)
         meta = json.loads(spec.read_text())
         df["sweep"] = meta["name"]

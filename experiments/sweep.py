@@ -331,8 +331,9 @@ def status(out: Path, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame
 def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool = True,
               executor: Executor | None = None, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame:
     """Run every incomplete run of ``sweep`` into ``out`` through ``executor`` (default: the local
-    process pool with ``jobs`` workers), then write the tables. Runs another command holds are
-    left to it; runs that never started because a worker died are started again once."""
+    process pool with ``jobs`` workers), then write the tables (on Ctrl-C too, of what completed).
+    Runs another command holds are left to it; runs that never started because a worker died are
+    started again once."""
     from swarmbed.experiments import executors
 
     if jobs is not None and jobs < 1:
@@ -372,10 +373,11 @@ def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool =
                 for partial_file in Path(spec.out_dir).glob("*.part"):
                     partial_file.unlink(missing_ok=True)
         done = _complete(specs)
+        write_tables(collect(sweep, out, stale_after), out)  # what completed can be analyzed at once
         raise SweepInterrupted(
-            f"interrupted: {done} of {len(specs)} runs are complete ({done - done_before} finished in this session); "
-            f"the runs under way were stopped and nothing else was started. Run the same command again to do "
-            f"the other {len(specs) - done}.") from None
+            f"interrupted: {done} of {len(specs)} runs are complete ({done - done_before} finished in this session) "
+            f"and in {out / TABLE}; the runs under way were stopped and nothing else was started. Run the same "
+            f"command again to do the other {len(specs) - done}.") from None
     finally:
         bar.close()
         executor.close()

@@ -123,6 +123,8 @@ def test_ctrl_c_stops_a_sweep_at_once_and_the_same_command_resumes(tmp_path):
     assert not list(out.rglob("error.txt")) and not list(out.rglob("*.part"))
     assert len(_runs(out)) <= len(done) + 2  # only the two runs under way were cut short
     assert f"{len(done)} of 6 runs are complete" in stderr
+    table = pd.read_csv(out / "sweep.csv")  # what completed is in the table, ready for analyze
+    assert (table["status"] == "ok").sum() == len(done) and len(table) == 6, table
     first = {p: p.stat().st_mtime_ns for p in done}
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert again.returncode == 0, again.stderr

@@ -22,9 +22,21 @@ import psutil
 from swarmbed.experiments.executors import Executor, Outcome, Resources, RunFunction
 from swarmbed.wire.lifecycle import die_with_parent
 
+_stopping = False  # in a pool worker: SIGTERM came
+
 
 def _exit(signum: int, _frame: object) -> None:
+    global _stopping
+    _stopping = True
     raise SystemExit(128 + signum)
+
+
+def _unless_stopping(fn: RunFunction, item: Any) -> Outcome:
+    """A worker's SIGTERM ends the run in hand, but the pool catches that exit as the run's result
+    and hands the worker the run queued behind it: that one must not start."""
+    if _stopping:
+        return "lost", "the sweep was stopping before this run began"
+    return fn(item)
 
 
 def _leave_interrupts_to_the_sweep(sweep_pid: int) -> None:
@@ -76,7 +88,7 @@ class LocalExecutor(Executor):
     def map(self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]) -> Iterator[
             tuple[int, Outcome]]:
         pool = self._new_pool()
-        futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
+        futures = {pool.submit(_unless_stopping, fn, item): i for i, item in enumerate(items)}
         for fut in cf.as_completed(futures):
             try:
                 yield futures[fut], fut.result()
