@@ -83,7 +83,7 @@ class AgentRuntime:
         return out
 
     def step(self, tick: int, obs: Observation, inbox: bytes) -> tuple[list, list[RadioMessage], dict[str, int]]:
-        tasks = {t[0]: TaskInfo(*t) for t in obs.tasks.tolist()}
+        tasks = {t[0]: t for t in map(TaskInfo._make, obs.tasks.tolist())}
         a, sense, ctx = self.spec.agents, self.sensing, self.context
         ctx.view = LocalView(self.agent_id, self.n_agents, tick, obs.time, obs.x, obs.y, obs.heading, obs.speed,
                              a.work_rate, tasks, self._inbox(inbox), a.max_speed, sense.range, sense.angle, obs)

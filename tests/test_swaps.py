@@ -131,3 +131,15 @@ def test_the_snapshot_check_fails_for_an_allocator_that_forgets_its_state():
     globals()["Forgetful"] = Forgetful
     with pytest.raises(ConformanceError, match="after moving through a snapshot"):
         check_snapshot("forgetful-test", {"mode": "Random"}, "mtsr")
+
+
+def test_snapshots_restore_named_tuples_as_their_own_type():
+    """A TaskBook's tasks are named tuples (TaskInfo): a snapshot gives them back as TaskInfo, not
+    as plain tuples or lists."""
+    from swarmbed.agent_runtime.view import TaskInfo
+    from swarmbed.wire.state import pack_state, unpack_state
+
+    known = {7: TaskInfo(7, 1.5, -2.0, 30.0), 9: TaskInfo(9, 0.0, 0.0, 5.0, color=2)}
+    back = unpack_state(pack_state({"known": known, "pair": (1, 2)}))
+    assert back == {"known": known, "pair": (1, 2)}
+    assert all(type(v) is TaskInfo for v in back["known"].values())

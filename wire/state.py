@@ -1,7 +1,7 @@
 """Snapshots of Python state as msgpack, for moving a running agent to another process.
 
 Plain values travel as msgpack does; the rest as extension types that restore to the same type:
-tuples, sets, numpy arrays and scalars, integers past 64 bits, numpy random generators (their bit
+tuples (named ones too), sets, numpy arrays and scalars, integers past 64 bits, numpy random generators (their bit
 generator's state), enum members, and instances of dataclasses and plain classes defined in swarmbed or in the
 module of a plugin (by ``module:qualname``, restored without calling ``__init__``). Anything else
 raises :class:`StateError` naming the value's type and where it was, so that a plugin whose state
@@ -70,6 +70,8 @@ def pack_state(obj: Any, modules: tuple[str, ...] = ()) -> bytes:
                 return ext(EXT_ENUM, [f"{cls.__module__}:{cls.__qualname__}", value.value], where)
             if dataclasses.is_dataclass(value):
                 fields = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
+            elif isinstance(value, tuple) and hasattr(value, "_fields"):  # a named tuple
+                fields = value._asdict()
             elif hasattr(value, "__dict__"):
                 fields = dict(vars(value))
             else:
@@ -119,6 +121,8 @@ def unpack_state(data: bytes, modules: tuple[str, ...] = ()) -> Any:
         if code == EXT_OBJECT:
             ref, fields = value
             cls: Any = _class(ref, modules)
+            if issubclass(cls, tuple):  # a named tuple
+                return cls(**fields)
             obj = cls.__new__(cls)
             for name, v in fields.items():
                 object.__setattr__(obj, name, v)  # frozen dataclasses too
