@@ -71,7 +71,7 @@ def pack_state(obj: Any, modules: tuple[str, ...] = ()) -> bytes:
             if dataclasses.is_dataclass(value):
                 fields = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
             elif isinstance(value, tuple) and hasattr(value, "_fields"):  # a named tuple
-                fields = value._asdict()
+                fields = dict(zip(value._fields, value))
             elif hasattr(value, "__dict__"):
                 fields = dict(vars(value))
             else:
