@@ -178,12 +178,19 @@ def _save(fig, out: Path, stem: str) -> Path:
     return out / f"{stem}.png"
 
 
+SHOW_POINTS_UP_TO = 20  # runs per box: fewer, and each run is drawn too (a box of 1 to 3 runs says little)
+
+
 def _boxes(ax, data: list, positions, width: float, colors: list[str]) -> None:
     bp = ax.boxplot(data, positions=positions, widths=width, patch_artist=True, manage_ticks=False,
                     medianprops=MEDIAN, flierprops={"markersize": 2.5, "alpha": 0.6})
     for box, color in zip(bp["boxes"], colors):
         box.set_facecolor(color)
         box.set_alpha(0.75)
+    for values, x, color in zip(data, positions, colors):
+        if 0 < len(values) <= SHOW_POINTS_UP_TO:  # spread evenly across the box, the same in every figure
+            spread = np.linspace(-0.25, 0.25, len(values)) * width if len(values) > 1 else np.zeros(1)
+            ax.scatter(x + spread, values, s=9, color=color, edgecolors="black", linewidths=0.4, zorder=3)
 
 
 def _log_counts(ax, axis: str = "y") -> None:
