@@ -80,3 +80,16 @@ def test_the_proxy_process_loads_no_plugin_and_no_tree_engine():
     assert "swarmbed.netem.proxy" in loaded
     assert not [m for m in loaded if m.startswith(("swarmbed.plugins", "swarmbed.experiments", "swarmbed.agent_runtime",
                                                    "swarmbed.coordinator"))], loaded
+
+
+def test_agents_and_the_proxy_import_no_analysis_library():
+    """What the fork server preloads for every agent (the agent runtime and every shipped
+    allocator) and the proxy process stay lean: none of the launcher's and the reports'
+    libraries (each would be held by hundreds of agent processes)."""
+    heavy = ("pandas", "scipy", "matplotlib", "plotly", "pyarrow", "rich", "tqdm", "psutil", "yaml")
+    code = ("import sys; from swarmbed.experiments.forkserver import _preload; _preload(); "
+            "import swarmbed.netem.proxy; print('\\n'.join(sys.modules))")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    loaded = set(run.stdout.split())
+    assert "swarmbed.agent_runtime.process" in loaded and "swarmbed.plugins.cbba" in loaded
+    assert not [m for m in heavy if m in loaded], sorted(m for m in heavy if m in loaded)
