@@ -2,9 +2,10 @@
 
 - ``scenario_summary.csv`` / ``.md``: per scenario and metric, n, mean, sd, median and the 95 %
   confidence interval of the mean (Student t).
-- MT-SR sweeps: SPACE Fig. 3 panels, one PNG per metric (mission time, time to 99 %, distance per
-  agent, work per agent): boxplots by communication range, one group per algorithm, one panel per
-  agent count. Sweeps without those factors get one box per scenario instead.
+- MT-SR sweeps: SPACE Fig. 3 panels, one PNG per metric (mission time and time to 99 %: one value
+  per run; travel distance and workload per agent: one value per agent, pooled over the runs):
+  boxplots by communication range, one group per algorithm, one panel per agent count. Sweeps
+  without those factors get one box per scenario instead.
 - Search-and-rescue sweeps (CBBA-ETC Section 5.4): ``statistics.csv`` / ``.md`` (one-way ANOVA
   across strategies, Dunnett's test and Cohen's d against a control strategy, cbba-etc by
   default), mean rescued and expired per trial with 95 % CI bars, boxplots per trial, rescued
@@ -44,6 +45,10 @@ METRICS = {
     "network.messages_sent": "messages sent",
     "network.bytes_sent": "payload bytes sent",
 }
+# SPACE's per-agent panels: one value per agent, pooled over a scenario's runs (read from each run's
+# summary.json). A run's mean work per agent is its total work over N, the same for every allocator
+# that completes the mission; how the work is shared out is what tells allocators apart.
+PER_AGENT = {"distance_per_agent": "travel distance per agent", "work_per_agent": "workload per agent"}
 AGENTS, RANGE, ALLOCATOR = "agents.count", "network.range", "allocator"
 SAR_METRICS = {
     "rescued": "victims rescued per trial",
@@ -76,6 +81,7 @@ def load(sweep_dirs: list[Path]) -> pd.DataFrame:
         df = read_table(sweep_dir)
         meta = json.loads(spec.read_text())
         df["sweep"] = meta["name"]
+        df["run_dir"] = [str(sweep_dir / str(sc) / f"run_{int(r):03d}") for sc, r in zip(df["scenario"], df["run"])]
         _resolve_series_keys(df, sweep_dir)
         factors += [f for f in meta.get("factors", []) if f not in factors]
         frames.append(df)
@@ -182,13 +188,15 @@ SHOW_POINTS_UP_TO = 20  # runs per box: fewer, and each run is drawn too (a box 
 
 
 def _boxes(ax, data: list, positions, width: float, colors: list[str]) -> None:
+    points = [0 < len(values) <= SHOW_POINTS_UP_TO for values in data]
     bp = ax.boxplot(data, positions=positions, widths=width, patch_artist=True, manage_ticks=False,
-                    medianprops=MEDIAN, flierprops={"markersize": 2.5, "alpha": 0.6})
+                    medianprops=MEDIAN, flierprops={"markersize": 2.5, "alpha": 0.6},
+                    showfliers=not all(points))  # every run drawn: no second marker for outliers
     for box, color in zip(bp["boxes"], colors):
         box.set_facecolor(color)
         box.set_alpha(0.75)
-    for values, x, color in zip(data, positions, colors):
-        if 0 < len(values) <= SHOW_POINTS_UP_TO:  # spread evenly across the box, the same in every figure
+    for values, x, color, draw in zip(data, positions, colors, points):
+        if draw:  # spread evenly across the box, the same in every figure
             spread = np.linspace(-0.25, 0.25, len(values)) * width if len(values) > 1 else np.zeros(1)
             ax.scatter(x + spread, values, s=9, color=color, edgecolors="black", linewidths=0.4, zorder=3)
 
@@ -204,18 +212,29 @@ def _log_counts(ax, axis: str = "y") -> None:
         ax.set_xlim(-0.5, max(10.0, ax.get_xlim()[1]))
 
 
+def _values(rows: pd.DataFrame, metric: str) -> pd.Series:
+    """One value per run, or for a :data:`PER_AGENT` metric one per agent of every run."""
+    if metric not in PER_AGENT:
+        return rows[metric].dropna()
+    values: list[float] = []
+    for run_dir in rows["run_dir"]:
+        values += json.loads((Path(run_dir) / "summary.json").read_text()).get(metric, [])
+    return pd.Series(values, dtype=float)
+
+
 def fig3(df: pd.DataFrame, metric: str, out: Path) -> Path | None:
-    if metric not in df or df[metric].dropna().empty:
+    if metric not in PER_AGENT and (metric not in df or df[metric].dropna().empty):
         return None
+    label = PER_AGENT.get(metric) or METRICS[metric]
     have = all(c in df for c in (AGENTS, RANGE)) and df[ALLOCATOR].notna().all()
     with plt.rc_context(STYLE):
         if not have:
             groups = sorted(df["scenario"].unique())
             fig, ax = plt.subplots(figsize=(max(COLUMN_IN, 0.5 * len(groups)), 2.8))
-            _boxes(ax, [df.loc[df["scenario"] == g, metric].dropna() for g in groups], np.arange(len(groups)), 0.6,
+            _boxes(ax, [_values(df[df["scenario"] == g], metric) for g in groups], np.arange(len(groups)), 0.6,
                    ["0.75"] * len(groups))
             ax.set_xticks(range(len(groups)), groups)
-            ax.set_ylabel(METRICS[metric])
+            ax.set_ylabel(label)
             ax.tick_params(axis="x", rotation=30)
         else:
             algos = _ordered(df[ALLOCATOR].unique())
@@ -226,14 +245,14 @@ def fig3(df: pd.DataFrame, metric: str, out: Path) -> Path | None:
             for ax, n in zip(axes[0], counts):
                 sub = df[df[AGENTS] == n]
                 for a, algo in enumerate(algos):
-                    data = [sub.loc[(sub[RANGE] == r) & (sub[ALLOCATOR] == algo), metric].dropna() for r in ranges]
+                    data = [_values(sub[(sub[RANGE] == r) & (sub[ALLOCATOR] == algo)], metric) for r in ranges]
                     pos = np.arange(len(ranges)) + (a - (len(algos) - 1) / 2) * width
                     _boxes(ax, data, pos, width * 0.85, [strategy_color(algo)] * len(ranges))
                     ax.plot([], [], color=strategy_color(algo), lw=5, alpha=0.75, label=strategy_label(algo))
                 ax.set_xticks(range(len(ranges)), [str(r) for r in ranges])
                 ax.set_xlabel("communication range")
                 ax.set_title(f"{n} agents")
-            axes[0][0].set_ylabel(METRICS[metric])
+            axes[0][0].set_ylabel(label)
             axes[0][-1].legend(frameon=False)
         return _save(fig, out, f"fig_{metric.replace('.', '_')}")
 
@@ -382,7 +401,7 @@ def analyze(sweep_dirs: list[Path] | Path, control: str | None = None) -> list[P
             written += [out / "statistics.csv", out / "statistics.md"]
         written += _sar_figures(df, out)
         return written
-    for metric in ("mission_time", "time_99", "distance_per_agent_mean", "work_per_agent_mean"):
+    for metric in ("mission_time", "time_99", *PER_AGENT):
         path = fig3(df, metric, out)
         if path:
             written.append(path)

@@ -72,6 +72,18 @@ def test_analyze_writes_tables_and_figures(sweep_dir):
     summary = pd.read_csv(sweep_dir / "out" / "scenario_summary.csv")
     row = summary[(summary["scenario"] == "fast_range-30") & (summary["metric"] == "mission_time")].iloc[0]
     assert row["n"] == 2 and row["ci95_low"] <= row["mean"] <= row["ci95_high"]
+    assert {"fig_distance_per_agent.png", "fig_work_per_agent.png"} <= names
+
+
+def test_per_agent_panels_pool_every_agent_of_every_run(sweep_dir):
+    """SPACE's distance and workload panels: one value per agent, not one mean per run."""
+    from swarmbed.experiments.analyze import _values, load
+
+    df = load([sweep_dir / "out"])
+    for _, rows in df.groupby("scenario"):
+        work = _values(rows, "work_per_agent")
+        assert len(work) == rows["agents"].sum() and len(rows) == 2
+        assert work.sum() == pytest.approx(rows["work_total"].sum())
 
 
 def test_plain_experiment_sweeps_with_a_command_line_grid():
