@@ -6,6 +6,7 @@ import argparse
 import json
 import logging
 import os
+import signal
 import sys
 import textwrap
 import time
@@ -632,6 +633,13 @@ def main(argv: list[str] | None = None) -> int:
         return importlib.import_module(args.module).main(rest)
     if rest:
         ap.error(f"unrecognized arguments: {' '.join(rest)}")
+    stopped_by = [signal.SIGINT]
+
+    def on_sigterm(signum: int, _frame: object) -> None:  # `kill`: stop as Ctrl-C stops, cleaning up
+        stopped_by[0] = signal.SIGTERM
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_sigterm)
     try:
         return args.func(args)
     except (cfg.ConfigError, BTError, registry.PluginError) as exc:
@@ -642,7 +650,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt as exc:
         print(str(exc) or "interrupted: every process was stopped; no summary.json was written", file=sys.stderr)
-        return 130
+        return 128 + stopped_by[0]
     except BrokenPipeError:  # the reader of our output went away (e.g. `| head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
