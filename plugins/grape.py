@@ -19,7 +19,11 @@ wanders instead); ``hold_while_converging: false`` lets agents move toward their
 Utility (SPACE Eq. 1): ``u_i(t_j, |S_j|) = R_j / |S_j| - cost_weight * d_ij * |S_j| ** social_inhibition``
 with R_j the task's remaining workload and d_ij the distance to it. SPACE's additions: the initial
 partition puts the agent on its nearest task, and it does so again when its task completes;
-convergence is judged locally (satisfied and unchanged by the mutex).
+convergence is judged locally (satisfied and unchanged by the mutex). As in SPACE's plugin, an
+agent whose task completed is unsatisfied, and one that sees no task to decide on stays so
+until it does: otherwise an agent that finished its task out of sight of any other would wander
+satisfied with no task, and a task seen only by such agents (the last one of a mission, say)
+would never be taken.
 """
 
 from __future__ import annotations
@@ -80,18 +84,21 @@ class GRAPE(Allocator):
     def decide(self, view: LocalView) -> int | None:
         me = self.agent_id
         finished = set(self.book.update(view))
+        mine_done = self.partition.get(me, VOID) in finished
         if finished:
             for a, t in list(self.partition.items()):
                 if t in finished:
                     del self.partition[a]
-        if not self.started or (finished and self.partition.get(me, VOID) == VOID and self.params.nearest_start):
+        if mine_done:
+            self.satisfied = False  # SPACE: an agent whose task completed decides afresh
+        if not self.started or (mine_done and self.params.nearest_start):
             self.started = True
             if self.params.nearest_start and view.tasks:
                 nearest = min(view.tasks.values(), key=lambda t: (view.distance_to(t), t.id))
                 self._move(nearest.id)
         self.mutex(view)
         converging = not self.satisfied
-        if converging:
+        if converging and view.tasks:  # with no task in sight it stays unsatisfied and decides on the first it sees
             self.choose(view)
         view.broadcast(KIND, [self.evolution, self.stamp, sorted(self.partition.items())])
         task = self.partition.get(me, VOID)

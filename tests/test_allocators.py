@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.plugins.base import HOLD
+from swarmbed.plugins.base import HOLD, LocalView, TaskInfo
 from swarmbed.plugins.cbba import CBBA
 from swarmbed.plugins.conformance import random_instance, run_all, simulate
 from swarmbed.plugins.consensus import NONE, ConsensusState, table
 from swarmbed.plugins.grape import VOID
-from swarmbed.plugins.registry import entries
+from swarmbed.plugins.registry import entries, make
 
 
 @pytest.mark.parametrize("name, scenario", [(n, "mtsr" if k == "*" else k) for n, k in entries()])
@@ -169,3 +169,19 @@ def test_grape_holds_its_agents_still_while_the_partition_converges(hold):
     first, last = trace.decisions[0], trace.decisions[-1]
     assert all(d == HOLD for d in first.values()) if hold else all(d in inst.tasks for d in first.values())
     assert all(d in inst.tasks for d in last.values())  # converged: everyone on a task
+
+
+def test_grape_agent_whose_task_completed_takes_the_next_task_it_sees():
+    """SPACE's GRAPE: an agent whose task completed is unsatisfied until it has decided on a task
+    it sees. Here it finishes its task with nothing else in sight, explores (``None``) and must
+    take the task that comes into sight later, though no message ever reaches it."""
+    grape = make("grape", {}, 0, np.random.default_rng(0), 0)
+    far, near = TaskInfo(1, 500.0, 0.0, 30.0), TaskInfo(0, 10.0, 0.0, 30.0)
+
+    def decide(k, tasks):
+        return grape.decide(LocalView(0, 2, k, float(k), 0.0, 0.0, 0.0, 0.0, 1.0, tasks, [], 1.0, 300.0))
+
+    assert [decide(k, {0: near}) for k in range(3)][-1] == 0
+    assert [decide(k, {}) for k in range(3, 8)] == [None] * 5  # done while in sight; nothing else seen
+    seen = [decide(k, {1: far}) for k in range(8, 11)]
+    assert seen[-1] == 1, seen
