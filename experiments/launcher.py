@@ -27,12 +27,23 @@ class ChildExited(RuntimeError):
     pass
 
 
-def _peak_rss_mb(pid: int) -> float:
+def peak_rss_mb(pid: int) -> float:
+    """A process's peak resident set (Linux VmHWM), since it started or since :func:`reset_peak_rss`."""
     with open(f"/proc/{pid}/status") as f:
         for line in f:
             if line.startswith("VmHWM:"):
                 return int(line.split()[1]) / 1024
     raise ValueError("no VmHWM")
+
+
+def reset_peak_rss() -> None:
+    """Start this process's VmHWM afresh (a sweep's pool worker hosts one run after another, and a
+    run's peak is its own). Best effort: kernels before 4.0 keep the lifetime peak."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        pass
 
 
 class ForkedProcess:
@@ -210,7 +221,7 @@ class Children:
 
     def peak_rss_mb(self) -> dict[str, float]:
         """Each child's peak resident set so far (Linux VmHWM)."""
-        return self._each(_peak_rss_mb)
+        return self._each(peak_rss_mb)
 
     def wait(self, timeout: float) -> dict[str, int | None]:
         """Wait for every child to exit; terminate (then kill) whatever is left at ``timeout``."""
