@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from swarmbed.agent_runtime.nodes import SPACE_NODES
 from swarmbed.coordinator.kinematics import Limits, step
-from swarmbed.coordinator.scenario import Scenario, Sensing, World
+from swarmbed.coordinator.scenario import Scenario, Sensing, World, within
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
@@ -194,12 +194,17 @@ class MTSRWorld(World):
         table["remaining"] = self.remaining[open_idx]
         table["color"] = -1
         alive = np.flatnonzero(self.alive)
-        near = np.hypot(table["x"][None, :] - self.ax[alive, None],
-                        table["y"][None, :] - self.ay[alive, None]) <= self.awareness
+        near = within(self.tx[open_idx][None, :] - self.ax[alive, None],
+                      self.ty[open_idx][None, :] - self.ay[alive, None], self.awareness)
+        # every agent's visible tasks in one gather (of raw records: a structured gather is ~3x slower);
+        # each agent's table is a slice of it
+        rows, cols = np.nonzero(near)
+        seen = table.view(np.uint8).reshape(len(table), TASK_DTYPE.itemsize)[cols].view(TASK_DTYPE).reshape(-1)
+        bounds = np.searchsorted(rows, np.arange(len(alive) + 1)).tolist()
         t = self.time
         return {
             int(i): Observation(t, float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i]),
-                                table[near[row]])
+                                seen[bounds[row]:bounds[row + 1]])
             for row, i in enumerate(alive)
         }
 

@@ -38,6 +38,22 @@ class Sensing:
     angle: float = 2 * math.pi
 
 
+def within(dx: np.ndarray, dy: np.ndarray, reach: float) -> np.ndarray:
+    """``np.hypot(dx, dy) <= reach``, element for element, at a fraction of its cost: squared
+    distances settle every pair but those within a relative 1e-9 of ``reach``, for which hypot
+    decides (so a world's sensing agrees to the last bit with an agent's ``math.hypot``)."""
+    if not 1e-100 < reach < 1e100:  # squares would underflow or overflow
+        return np.hypot(dx, dy) <= reach
+    d2 = dx * dx
+    d2 += dy * dy
+    r2 = reach * reach
+    near = d2 < r2 * (1 - 1e-9)
+    edge = (d2 <= r2 * (1 + 1e-9)) & ~near
+    if edge.any():
+        near[edge] = np.hypot(dx[edge], dy[edge]) <= reach
+    return near
+
+
 class World(abc.ABC):
     """The ground truth of one run, advanced one tick at a time by the coordinator."""
 

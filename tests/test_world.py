@@ -9,6 +9,7 @@ import pytest
 from swarmbed.coordinator import sar
 from swarmbed.coordinator.kinematics import Limits, step
 from swarmbed.coordinator.sar import ALIVE
+from swarmbed.coordinator.scenario import within
 from swarmbed.experiments.config import resolve_experiment
 from tests.conftest import experiment
 
@@ -161,3 +162,15 @@ def test_sar_results_converge_as_the_tick_shrinks():
     assert abs(means[-1] - means[-2]) <= 0.05 * means[-1], means
     assert abs(means[-1] - means[-2]) < abs(means[0] - means[1]), means
     assert max(max(r) for r in runs.values()) <= 90, runs
+
+
+def test_within_agrees_with_hypot_to_the_last_bit():
+    """The worlds' fast range test settles points near the edge with hypot, as agents do."""
+    rng = np.random.default_rng(1)
+    for reach in (300.0, 5.0, 1e-5, 0.0, math.inf):
+        angle, scale = rng.uniform(0, 2 * math.pi, 5000), reach if math.isfinite(reach) else 1.0
+        on_x, on_y = np.cos(angle) * scale, np.sin(angle) * scale  # on the edge, give or take rounding
+        cases = [(rng.uniform(-500, 500, (50, 80)), rng.uniform(-500, 500, (50, 80))), (on_x, on_y),
+                 (np.nextafter(on_x, math.inf), on_y), (np.nextafter(on_x, -math.inf), np.nextafter(on_y, -math.inf))]
+        for dx, dy in cases:
+            assert np.array_equal(within(dx, dy, reach), np.hypot(dx, dy) <= reach), reach
