@@ -1,4 +1,5 @@
 import csv
+import signal
 from collections import defaultdict
 from pathlib import Path
 
@@ -12,6 +13,13 @@ pytest_plugins = ("tests.netns",)  # the `lab` fixture: stand-in hosts in networ
 
 ROOT = Path(__file__).resolve().parent.parent
 QUICKSTART = ROOT / "experiments" / "quickstart.yaml"
+
+
+# A shell starts a background job with SIGINT ignored, and an ignored signal stays ignored across
+# exec: the Ctrl-C tests would find every process they start deaf to it. Handle SIGINT here, so
+# the processes the tests start get it at its default, as from a terminal.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def experiment(*overrides: str, base: Path = QUICKSTART) -> cfg.Experiment:
