@@ -8,7 +8,6 @@ liveliness token, runs the lock-step loop, stops everyone and writes the results
 from __future__ import annotations
 
 import os
-import resource
 import secrets
 import time
 from collections.abc import Callable, Sequence
@@ -32,7 +31,7 @@ from swarmbed.experiments.host import (
     stop_agents,
     wait_for_hosts,
 )
-from swarmbed.experiments.launcher import ChildExited, Children, ForkServerError, peak_rss_mb, reset_peak_rss
+from swarmbed.experiments.launcher import ChildExited, Children, ForkServerError, own_cpu_s, peak_rss_mb, reset_peak_rss
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.lifecycle import tune_malloc
@@ -90,12 +89,6 @@ def open_hub(listen: Sequence[str] = (), attempts: int = 5,
     raise RunError(f"could not listen on a loopback port: {last}")
 
 
-def _own_cpu_s() -> float:
-    """CPU seconds (user + system) this process has used: the hub, its Zenoh router threads included."""
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
-
-
 def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                    on_ready: Callable[[Keys, str], None] | None = None, listen: Sequence[str] = (),
                    auth: bool = True, admit: Sequence[Identity] = (),
@@ -120,7 +113,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     results.write_atomic(out_dir / results.CONFIG, to_yaml(exp))
 
     t_start = time.perf_counter()
-    hub_cpu_before = _own_cpu_s()  # a sweep's pool worker hosts one run after another: count this one's
+    hub_cpu_before = own_cpu_s()  # a sweep's pool worker hosts one run after another: count this one's
     reset_peak_rss()
     keys = Keys(secrets.token_hex(6))
     where = hosts_of(exp.placement, exp.agents.count)
@@ -245,7 +238,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             "total_s": time.perf_counter() - t_start,
             "rss_mb": rss,
             "peak_rss_mb": peak,
-            "cpu_s": {"coordinator": _own_cpu_s() - hub_cpu_before, "netem": cpu.get("netem"),
+            "cpu_s": {"coordinator": own_cpu_s() - hub_cpu_before, "netem": cpu.get("netem"),
                       "agents_total": sum(agent_cpu), "agent_max": max(agent_cpu, default=None)},
             "agent_rss_mb_mean": sum(agent_rss) / len(agent_rss) if agent_rss else None,
             "agent_pss_mb_mean": sum(p for p, _ in shared.values()) / len(shared) if shared else None,

@@ -2,7 +2,6 @@
 their own command line, and gone with whatever dies above them."""
 
 import json
-import resource
 import shutil
 import signal
 import subprocess
@@ -13,22 +12,18 @@ from pathlib import Path
 
 import psutil
 
+from swarmbed.experiments.launcher import own_cpu_s
 from swarmbed.experiments.runner import run_experiment
 from tests.conftest import QUICKSTART, ROOT, experiment, same_results, under_way
-
-
-def _own_cpu_s() -> float:
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
 
 
 def test_forked_agents_give_the_results_of_fresh_interpreters(tmp_path):
     sets = ["allocator={name: cbba}", "run.duration=300", "run.stop_when_done=false"]
     forked = run_experiment(experiment(*sets), tmp_path / "forked", progress=False, fork_agents=True)
-    cpu_before = _own_cpu_s()
+    cpu_before = own_cpu_s()
     fresh = run_experiment(experiment(*sets), tmp_path / "fresh", progress=False, fork_agents=False)
     # a second run in one process, as in a sweep's pool worker: the hub's CPU is this run's alone
-    assert 0 < fresh.timings["cpu_s"]["coordinator"] <= _own_cpu_s() - cpu_before + 0.01
+    assert 0 < fresh.timings["cpu_s"]["coordinator"] <= own_cpu_s() - cpu_before + 0.01
     same_results(tmp_path / "fresh", tmp_path / "forked")
     assert forked.timings["startup"]["fork_server_s"] is not None and fresh.timings["startup"]["fork_server_s"] is None
     # forked agents share what the server imported: each holds less of its own
