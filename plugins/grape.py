@@ -24,6 +24,14 @@ agent whose task completed is unsatisfied, and one that sees no task to decide o
 until it does: otherwise an agent that finished its task out of sight of any other would wander
 satisfied with no task, and a task seen only by such agents (the last one of a mission, say)
 would never be taken.
+
+Messages carry the whole partition unless ``full_every`` > 1: then every ``full_every``-th message
+does, and those between carry only the agents whose task changed since the message before (an
+agent that left the partition as ``VOID``), or the whole partition where that is no larger. Each
+message is numbered; a receiver rebuilds a sender's partition from the whole one and the deltas
+that follow it, and a delta that does not follow what it holds of that sender (one was lost, or
+the sender just came into range) is not used until the next whole message makes it good. The
+whole messages of ``full_every = 1`` are SPACE's: (evolution number, timestamp, partition).
 """
 
 from __future__ import annotations
@@ -48,6 +56,9 @@ class GRAPEParams(BaseModel):
                             "MT-SR adaptation does not")
     hold_while_converging: bool = Field(True, description="stay still on a tick where the partition was not "
                                         "converged (SPACE's MT-SR behaviour)")
+    full_every: int = Field(1, ge=1, description="every n-th message carries the whole partition, those between "
+                                                 "only the agents whose task changed since the one before "
+                                                 "(1: always whole, as SPACE's)")
 
 
 class GRAPE(Allocator):
@@ -63,6 +74,9 @@ class GRAPE(Allocator):
         self.satisfied = False
         self.book = TaskBook()
         self.started = False
+        self.sent = 0  # messages made
+        self.told: dict[int, int] = {}  # the partition as the last message had it (full_every > 1)
+        self.heard: dict[int, tuple[int, dict[int, int]]] = {}  # sender -> (message number, its partition)
 
     # -- utility ----------------------------------------------------------------------------------
     def utility(self, view: LocalView, task: int, size: int) -> float:
@@ -100,7 +114,7 @@ class GRAPE(Allocator):
         converging = not self.satisfied
         if converging and view.tasks:  # with no task in sight it stays unsatisfied and decides on the first it sees
             self.choose(view)
-        view.broadcast(KIND, [self.evolution, self.stamp, sorted(self.partition.items())])
+        view.broadcast(KIND, self.message())
         task = self.partition.get(me, VOID)
         if task == VOID or task not in view.tasks:
             return None
@@ -114,19 +128,62 @@ class GRAPE(Allocator):
         self.evolution += 1
         self.stamp = float(self.rng.random())
 
+    # -- messages -------------------------------------------------------------------------------
+    def message(self) -> list:
+        """(evolution number, timestamp, partition as sorted pairs); with ``full_every`` > 1 also the
+        message's number, and between whole ones the changed pairs and a delta mark."""
+        pairs = sorted(self.partition.items())
+        if self.params.full_every == 1:
+            return [self.evolution, self.stamp, pairs]
+        number, told = self.sent, self.told
+        self.sent += 1
+        self.told = dict(self.partition)
+        if number % self.params.full_every:
+            changed = [[a, t] for a, t in pairs if told.get(a) != t]
+            changed += [[a, VOID] for a in told.keys() - self.partition.keys()]
+            if len(changed) < len(pairs):
+                return [self.evolution, self.stamp, sorted(changed), number, 1]
+        return [self.evolution, self.stamp, pairs, number]
+
+    def partition_of(self, sender: int, data: list) -> dict[int, int] | None:
+        """The sender's partition as its message gives it; None when a delta does not follow what
+        this agent holds of the sender (it is forgotten until the sender's next whole message)."""
+        if len(data) == 3:
+            return {int(a): int(t) for a, t in data[2]}
+        _, _, pairs, number, *delta = data
+        if not delta:
+            partition = {int(a): int(t) for a, t in pairs}
+        else:
+            held = self.heard.pop(sender, None)
+            if held is None or held[0] != number - 1:
+                return None
+            partition = held[1]
+            for a, t in pairs:
+                if t == VOID:
+                    partition.pop(int(a), None)
+                else:
+                    partition[int(a)] = int(t)
+        self.heard[sender] = (number, partition)
+        return partition
+
     def mutex(self, view: LocalView) -> None:
         """Algorithm 2: the partition with the highest (evolution number, timestamp) wins."""
-        best = (self.evolution, self.stamp)
-        chosen = None
+        best, chosen = (self.evolution, self.stamp), None
         for msg in view.inbox:
             if msg.kind != KIND:
                 continue
-            evolution, stamp, pairs = msg.data
-            if (evolution, stamp) > best:
-                best, chosen = (evolution, stamp), pairs
+            data = msg.data
+            if self.params.full_every > 1:  # every message updates what this agent holds of its sender
+                partition = self.partition_of(msg.sender, data)
+                if partition is None:
+                    continue
+                data = [data[0], data[1], partition]
+            if (data[0], data[1]) > best:
+                best, chosen = (data[0], data[1]), data[2]
         if chosen is None:
             return
-        adopted = {int(a): int(t) for a, t in chosen if int(t) not in self.book.done}
+        pairs = chosen.items() if isinstance(chosen, dict) else chosen  # whole messages: converted only when chosen
+        adopted = {int(a): int(t) for a, t in pairs if int(t) not in self.book.done}
         if adopted != self.partition:
             self.satisfied = False
         self.partition = adopted
