@@ -8,7 +8,11 @@ simulated seconds and at 200 and 500 over a shorter horizon (``--large-duration`
 
 Printed next to the public SPACE simulator's own figures, measured on this machine kind
 (single process, v1.2.12): 50 agents CBBA 130, GRAPE 230, FCG 640; 100 agents 19, 84, 264;
-200 agents CBBA 3.3, GRAPE 27 (as the speed issue quotes them).
+200 agents CBBA 3.3, GRAPE 27 (as the speed issue quotes them). Those were measured on another
+day, and this machine kind's speed varies by a quarter from day to day; so each N also gets the
+bare barrier measured in the same run (``lockstep.py``'s floor: one sample in and one out per
+process per tick, no message, no Python work). At 1 Hz its ticks per second are the most
+simulated seconds per wall second any design with a process per agent can reach here today.
 """
 
 from __future__ import annotations
@@ -16,6 +20,8 @@ from __future__ import annotations
 import argparse
 import tempfile
 from pathlib import Path
+
+from lockstep import raw_baseline
 
 from swarmbed.experiments import config as cfg
 from swarmbed.experiments.runner import run_experiment
@@ -47,18 +53,20 @@ def main() -> None:
     ap.add_argument("--allocators", nargs="+", default=["cbba", "grape", "fcg"])
     ap.add_argument("--duration", type=float, default=3000.0)
     ap.add_argument("--large-duration", type=float, default=300.0, help=f"horizon from {LARGE} agents on")
+    ap.add_argument("--floor-seconds", type=float, default=6.0, help="rough time measuring the barrier, per N")
     args = ap.parse_args()
-    print(f"{'N':>4} {'allocator':>9} {'sim s':>6} {'sim s/wall s':>13} {'SPACE':>6} {'ratio':>6} {'peak RSS MB':>12} "
-          f"{'agents USS GB':>13} {'start-up s':>10} {'payload MB':>10}")
+    print(f"{'N':>4} {'allocator':>9} {'sim s':>6} {'sim s/wall s':>13} {'SPACE':>6} {'ratio':>6} {'barrier':>8} "
+          f"{'/barrier':>8} {'peak RSS MB':>12} {'agents USS GB':>13} {'start-up s':>10} {'payload MB':>10}")
     for n in args.n:
         duration = args.large_duration if n >= LARGE else args.duration
+        floor = raw_baseline(n, max(50, int(max(20, 5000 // n) * args.floor_seconds)), fanout=0)
         for name in args.allocators:
             m = measure(n, name, duration)
             ref = SPACE_REFERENCE.get((n, name))
             ratio = f"{m['sim_per_wall'] / ref:6.2f}" if ref else f"{'-':>6}"
             print(f"{n:>4} {name:>9} {duration:>6.0f} {m['sim_per_wall']:>13.1f} {ref or '-':>6} {ratio} "
-                  f"{m['peak_rss_mb']:>12.0f} {m['agents_uss_gb']:>13.2f} {m['startup_s']:>10.1f} "
-                  f"{m['bytes'] / 1e6:>10.2f}", flush=True)
+                  f"{floor:>8.1f} {m['sim_per_wall'] / floor:>8.2f} {m['peak_rss_mb']:>12.0f} "
+                  f"{m['agents_uss_gb']:>13.2f} {m['startup_s']:>10.1f} {m['bytes'] / 1e6:>10.2f}", flush=True)
 
 
 if __name__ == "__main__":
