@@ -5,6 +5,7 @@ simulated seconds and at 200 and 500 over a shorter horizon (``--large-duration`
     python benchmarks/allocators.py                          # N = 10, 50, 100 (about 10 minutes)
     python benchmarks/allocators.py --n 200 500 --allocators fcg cbba
     python benchmarks/allocators.py --n 10 --duration 500
+    python benchmarks/allocators.py --n 200 --allocators grape --set allocator.full_every=10
 
 Printed next to the public SPACE simulator's own figures, measured on this machine kind
 (single process, v1.2.12): 50 agents CBBA 130, GRAPE 230, FCG 640; 100 agents 19, 84, 264;
@@ -34,10 +35,10 @@ SPACE_REFERENCE = {(50, "cbba"): 130, (50, "grape"): 230, (50, "fcg"): 640,
 LARGE = 200  # from this many agents on, the shorter horizon
 
 
-def measure(n: int, allocator: str, duration: float) -> dict:
+def measure(n: int, allocator: str, duration: float, sets: tuple[str, ...] = ()) -> dict:
     exp = cfg.load(ROOT / "experiments" / "space_mtsr.yaml",
                    [f"agents.count={n}", f"allocator.name={allocator}", f"run.duration={duration}",
-                    "run.stop_when_done=false", "run.join_timeout=600"])
+                    "run.stop_when_done=false", "run.join_timeout=600", *sets])
     with tempfile.TemporaryDirectory() as out:
         result = run_experiment(exp, Path(out), progress=False)
     t = result.timings
@@ -53,6 +54,8 @@ def main() -> None:
     ap.add_argument("--allocators", nargs="+", default=["cbba", "grape", "fcg"])
     ap.add_argument("--duration", type=float, default=3000.0)
     ap.add_argument("--large-duration", type=float, default=300.0, help=f"horizon from {LARGE} agents on")
+    ap.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a key of every run (repeatable), as `swarmbed run --set` does")
     ap.add_argument("--floor-seconds", type=float, default=6.0, help="rough time measuring the barrier, per N")
     args = ap.parse_args()
     print(f"{'N':>4} {'allocator':>9} {'sim s':>6} {'sim s/wall s':>13} {'SPACE':>6} {'ratio':>6} {'barrier':>8} "
@@ -61,7 +64,7 @@ def main() -> None:
         duration = args.large_duration if n >= LARGE else args.duration
         floor = raw_baseline(n, max(50, int(max(20, 5000 // n) * args.floor_seconds)), fanout=0)
         for name in args.allocators:
-            m = measure(n, name, duration)
+            m = measure(n, name, duration, tuple(args.sets))
             ref = SPACE_REFERENCE.get((n, name))
             ratio = f"{m['sim_per_wall'] / ref:6.2f}" if ref else f"{'-':>6}"
             print(f"{n:>4} {name:>9} {duration:>6.0f} {m['sim_per_wall']:>13.1f} {ref or '-':>6} {ratio} "
