@@ -25,13 +25,14 @@ until it does: otherwise an agent that finished its task out of sight of any oth
 satisfied with no task, and a task seen only by such agents (the last one of a mission, say)
 would never be taken.
 
-Messages carry the whole partition unless ``full_every`` > 1: then every ``full_every``-th message
-does, and those between carry only the agents whose task changed since the message before (an
-agent that left the partition as ``VOID``), or the whole partition where that is no larger. Each
-message is numbered; a receiver rebuilds a sender's partition from the whole one and the deltas
-that follow it, and a delta that does not follow what it holds of that sender (one was lost, or
-the sender just came into range) is not used until the next whole message makes it good. The
-whole messages of ``full_every = 1`` are SPACE's: (evolution number, timestamp, partition).
+Messages carry the whole partition unless ``full_every`` > 1: then the message of every
+``full_every``-th tick does, and those between carry only the agents whose task changed since the
+message before (an agent that left the partition as ``VOID``), or the whole partition where that is
+no larger; a tick with nothing changed sends nothing. Each message is numbered; a receiver
+rebuilds a sender's partition from the whole one and the deltas that follow it, and a delta that
+does not follow what it holds of that sender (one was lost, or the sender just came into range) is
+not used until the next whole message makes it good. The whole messages of ``full_every = 1`` are
+SPACE's: (evolution number, timestamp, partition).
 """
 
 from __future__ import annotations
@@ -75,7 +76,9 @@ class GRAPE(Allocator):
         self.book = TaskBook()
         self.started = False
         self.sent = 0  # messages made
+        self.rounds = 0  # ticks a message was due (full_every > 1: one with nothing to tell sends none)
         self.told: dict[int, int] = {}  # the partition as the last message had it (full_every > 1)
+        self.told_version: tuple[int, float] = (-1, 0.0)
         self.heard: dict[int, tuple[int, dict[int, int]]] = {}  # sender -> (message number, its partition)
 
     # -- utility ----------------------------------------------------------------------------------
@@ -114,7 +117,9 @@ class GRAPE(Allocator):
         converging = not self.satisfied
         if converging and view.tasks:  # with no task in sight it stays unsatisfied and decides on the first it sees
             self.choose(view)
-        view.broadcast(KIND, self.message())
+        message = self.message()
+        if message is not None:
+            view.broadcast(KIND, message)
         task = self.partition.get(me, VOID)
         if task == VOID or task not in view.tasks:
             return None
@@ -129,20 +134,29 @@ class GRAPE(Allocator):
         self.stamp = float(self.rng.random())
 
     # -- messages -------------------------------------------------------------------------------
-    def message(self) -> list:
+    def message(self) -> list | None:
         """(evolution number, timestamp, partition as sorted pairs); with ``full_every`` > 1 also the
-        message's number, and between whole ones the changed pairs and a delta mark."""
+        message's number, on every ``full_every``-th tick the whole partition and between them the
+        changed pairs and a delta mark, or no message at all when nothing changed (a neighbour
+        learns nothing from it: it holds the same or, having missed one, can use no delta)."""
         pairs = sorted(self.partition.items())
         if self.params.full_every == 1:
             return [self.evolution, self.stamp, pairs]
-        number, told = self.sent, self.told
-        self.sent += 1
-        self.told = dict(self.partition)
-        if number % self.params.full_every:
+        due_whole = self.rounds % self.params.full_every == 0
+        self.rounds += 1
+        told, told_version = self.told, self.told_version
+        version = (self.evolution, self.stamp)
+        self.told, self.told_version = dict(self.partition), version
+        number = self.sent
+        if not due_whole:
             changed = [[a, t] for a, t in pairs if told.get(a) != t]
             changed += [[a, VOID] for a in told.keys() - self.partition.keys()]
+            if not changed and version == told_version:
+                return None
             if len(changed) < len(pairs):
+                self.sent += 1
                 return [self.evolution, self.stamp, sorted(changed), number, 1]
+        self.sent += 1
         return [self.evolution, self.stamp, pairs, number]
 
     def partition_of(self, sender: int, data: list) -> dict[int, int] | None:

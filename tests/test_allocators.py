@@ -224,6 +224,9 @@ def test_grape_messages_between_whole_ones_carry_what_changed_and_a_missed_one_i
     a.partition[1] = 9
     after = sent()
     assert len(after) == 5 and b.partition_of(0, after) == a.partition
+    assert sent() is None  # nothing changed: no message
+    a.partition[3] = 9
+    assert sent()[2:] == [[[3, 9]], 6, 1]  # numbered after the last one sent
 
 
 def test_grape_agent_hears_a_partition_newer_than_its_own_only_through_what_it_can_rebuild():
@@ -236,9 +239,9 @@ def test_grape_agent_hears_a_partition_newer_than_its_own_only_through_what_it_c
 
     b.decide(view(0, []))
     a.partition, a.evolution = {0: 1, 1: 0}, 50
-    a.sent, a.told = 1, {0: 1}  # its first message, the whole one, never reached b
+    a.sent, a.rounds, a.told = 1, 1, {0: 1}  # its first message, the whole one, never reached b
     b.mutex(view(1, [Message(0, "grape", a.message())]))
     assert b.evolution < 50
-    a.sent = 10
+    a.rounds = 10
     b.mutex(view(2, [Message(0, "grape", a.message())]))
     assert (b.evolution, b.partition) == (50, {0: 1, 1: 0})
