@@ -4,6 +4,7 @@ a change in results shows next to the bytes saved.
 
     python benchmarks/messages.py                        # MT-SR (30 agents) and SAR (20 robots)
     python benchmarks/messages.py --agents 100 --duration 500 --scenarios mtsr
+    python benchmarks/messages.py --scenarios mtsr --allocators grape
 
 Rows: allocator, full_every, messages sent, payload bytes, bytes per message, the ratio of bytes
 to the whole-state row's, simulated seconds per wall second, and the outcome (MT-SR: tasks
@@ -45,6 +46,7 @@ def measure(scenario: str, allocator: str, full_every: int | None, agents: int, 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenarios", nargs="+", choices=sorted(EXPERIMENTS), default=["mtsr", "sar"])
+    ap.add_argument("--allocators", nargs="+", help="only these allocators' rows (default: all)")
     ap.add_argument("--agents", type=int, default=30, help="MT-SR agents (SAR keeps its 20 robots)")
     ap.add_argument("--duration", type=float, default=1000.0, help="simulated seconds per run")
     args = ap.parse_args()
@@ -53,6 +55,8 @@ def main() -> None:
     for scenario in args.scenarios:
         whole: dict[str, int] = {}
         for allocator, full_every in ROWS[scenario]:
+            if args.allocators and allocator not in args.allocators:
+                continue
             m = measure(scenario, allocator, full_every, args.agents, args.duration)
             if full_every == 1:
                 whole[allocator] = m["bytes"]
