@@ -57,9 +57,9 @@ class GRAPEParams(BaseModel):
                             "MT-SR adaptation does not")
     hold_while_converging: bool = Field(True, description="stay still on a tick where the partition was not "
                                         "converged (SPACE's MT-SR behaviour)")
-    full_every: int = Field(1, ge=1, description="every n-th message carries the whole partition, those between "
-                                                 "only the agents whose task changed since the one before "
-                                                 "(1: always whole, as SPACE's)")
+    full_every: int = Field(1, ge=1, description="every n-th tick's message carries the whole partition, those "
+                                                 "between only the agents whose task changed since the message "
+                                                 "before, and none when nothing did (1: always whole, as SPACE's)")
 
 
 class GRAPE(Allocator):
