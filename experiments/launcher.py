@@ -13,6 +13,7 @@ import os
 import queue
 import resource
 import signal
+import site
 import subprocess
 import sys
 import threading
@@ -26,6 +27,30 @@ AGENT_MODULE = "swarmbed.agent_runtime"
 
 class ChildExited(RuntimeError):
     pass
+
+
+def python_env() -> dict[str, str]:
+    """The environment of the Python processes a run starts (``python -m ...``): they import the
+    swarmbed this process runs, and the current directory only where this process has it on its
+    path too. ``-m`` alone would put the current directory first, so a run started beside a folder
+    named ``swarmbed`` (another checkout, say) would run its agents and proxy on that code while
+    the launcher ran this one."""
+    import swarmbed
+
+    env = dict(os.environ)
+    env["PYTHONSAFEPATH"] = "1"  # no current directory first on the path
+    front = []
+    root = os.path.dirname(os.path.dirname(os.path.abspath(swarmbed.__file__)))
+    if root not in {*site.getsitepackages(), site.getusersitepackages()}:  # a checkout, not an install
+        front.append(root)
+    cwd = os.getcwd()
+    if any(entry in ("", cwd) for entry in sys.path):
+        front.append(cwd)  # as for this process (``python -m swarmbed`` in a project with its own plugins)
+    if env.get("PYTHONPATH"):
+        front.append(env["PYTHONPATH"])
+    if front:
+        env["PYTHONPATH"] = os.pathsep.join(front)
+    return env
 
 
 def peak_rss_mb(pid: int) -> float:
@@ -101,7 +126,7 @@ class ForkServer:
         self.log = open(log_path, "wb")
         self.proc = subprocess.Popen([sys.executable, "-m", "swarmbed.experiments.forkserver", str(os.getpid())],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log,
-                                     start_new_session=True, close_fds=True)
+                                     start_new_session=True, close_fds=True, env=python_env())
         self.replies: queue.SimpleQueue = queue.SimpleQueue()
         self.exits: dict[int, int] = {}
         self.lock = threading.Lock()
@@ -180,7 +205,7 @@ class Children:
             with open(log_path, "wb") as log:
                 proc = subprocess.Popen([sys.executable, "-m", module, *args, "--parent-pid", str(os.getpid())],
                                         stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                        start_new_session=True, close_fds=True)
+                                        start_new_session=True, close_fds=True, env=python_env())
         self.procs[name] = proc
         self.started_at[name] = time.monotonic()
         return proc

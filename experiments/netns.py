@@ -23,6 +23,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from swarmbed.experiments.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
 
 
@@ -97,7 +98,8 @@ class Lab:
         cmd = ["ip", "netns", "exec", ns, sys.executable, "-m", "swarmbed", "host", "--name", name,
                "--connect", self.hub, "--listen", "tcp/127.0.0.1:7447", "--logs", str(self.logs / name),
                "--credentials", str(credentials)]
-        self.daemons[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        self.daemons[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                              env=python_env())
         log.close()
 
     def kill_host(self, name: str) -> None:

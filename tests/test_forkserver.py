@@ -67,3 +67,18 @@ def test_a_dead_fork_server_takes_its_agents_and_the_run_says_so(tmp_path):
     assert runner.returncode == 1 and "stopped at tick" in err and "agent" in err
     _, alive = psutil.wait_procs(everyone, timeout=15)
     assert not alive
+
+
+def test_a_run_started_beside_another_swarmbed_runs_every_process_on_the_launchers_own(tmp_path):
+    """``python -m`` puts the current directory first on a child's path: a run started in a folder
+    holding another ``swarmbed`` (a second checkout, say) must not start its fork server, agents
+    and proxy on that code. The launcher here has no current directory on its path (``-P``, as an
+    installed ``swarmbed`` command has not)."""
+    elsewhere = tmp_path / "elsewhere"
+    (elsewhere / "swarmbed").mkdir(parents=True)
+    (elsewhere / "swarmbed" / "__init__.py").write_text('raise ImportError("the other swarmbed was imported")\n')
+    cmd = [sys.executable, "-P", "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(tmp_path / "run"),
+           "--no-progress", "--set", "run.duration=20", "--set", "agents.count=2"]
+    done = subprocess.run(cmd, cwd=elsewhere, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["ticks"] == 20
