@@ -22,6 +22,8 @@ from pathlib import Path
 
 import psutil
 
+import swarmbed
+
 AGENT_MODULE = "swarmbed.agent_runtime"
 
 
@@ -35,8 +37,6 @@ def python_env() -> dict[str, str]:
     path too. ``-m`` alone would put the current directory first, so a run started beside a folder
     named ``swarmbed`` (another checkout, say) would run its agents and proxy on that code while
     the launcher ran this one."""
-    import swarmbed
-
     env = dict(os.environ)
     env["PYTHONSAFEPATH"] = "1"  # no current directory first on the path
     front = []

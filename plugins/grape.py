@@ -162,8 +162,6 @@ class GRAPE(Allocator):
     def partition_of(self, sender: int, data: list) -> dict[int, int] | None:
         """The sender's partition as its message gives it; None when a delta does not follow what
         this agent holds of the sender (it is forgotten until the sender's next whole message)."""
-        if len(data) == 3:
-            return {int(a): int(t) for a, t in data[2]}
         _, _, pairs, number, *delta = data
         if not delta:
             partition = {int(a): int(t) for a, t in pairs}
@@ -183,17 +181,13 @@ class GRAPE(Allocator):
     def mutex(self, view: LocalView) -> None:
         """Algorithm 2: the partition with the highest (evolution number, timestamp) wins."""
         best, chosen = (self.evolution, self.stamp), None
+        numbered = self.params.full_every > 1  # then every message updates what this agent holds of its sender
         for msg in view.inbox:
             if msg.kind != KIND:
                 continue
-            data = msg.data
-            if self.params.full_every > 1:  # every message updates what this agent holds of its sender
-                partition = self.partition_of(msg.sender, data)
-                if partition is None:
-                    continue
-                data = [data[0], data[1], partition]
-            if (data[0], data[1]) > best:
-                best, chosen = (data[0], data[1]), data[2]
+            held = self.partition_of(msg.sender, msg.data) if numbered else msg.data[2]
+            if held is not None and (msg.data[0], msg.data[1]) > best:
+                best, chosen = (msg.data[0], msg.data[1]), held
         if chosen is None:
             return
         pairs = chosen.items() if isinstance(chosen, dict) else chosen  # whole messages: converted only when chosen
