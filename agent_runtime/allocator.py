@@ -57,7 +57,9 @@ class Allocator(abc.ABC):
     def snapshot(self) -> dict[str, Any]:
         """This instance's state, to continue in another process: by default every attribute but
         those the constructor sets from the run (``CONSTRUCTED``). Override both this and
-        :meth:`restore` for state that is not plain data (see ``swarmbed.wire.state``)."""
+        :meth:`restore` for state that is not plain data (see ``swarmbed.wire.state``). Instances
+        of the plugin's own classes travel only when the class is declared with
+        ``@swarmbed.wire.state.state_type``."""
         return {k: v for k, v in vars(self).items() if k not in self.CONSTRUCTED}
 
     def restore(self, state: dict[str, Any]) -> None:

@@ -105,10 +105,6 @@ class AgentRuntime:
     #: node attributes the tree loader sets: not state
     STRUCTURE = frozenset({"name", "config", "_literals", "_children", "child"})
 
-    def _modules(self) -> tuple[str, ...]:
-        """Modules whose classes a snapshot may hold: the allocator's and the tree nodes'."""
-        return tuple({type(self.allocator).__module__, *(type(n).__module__ for n in self.tree.nodes)})
-
     def _blackboards(self) -> list[Blackboard]:
         seen: dict[int, Blackboard] = {}
         for node in self.tree.nodes:
@@ -128,11 +124,11 @@ class AgentRuntime:
             "nodes": [{k: v for k, v in vars(n).items() if k not in self.STRUCTURE} for n in self.tree.nodes],
             "blackboards": [bb._store for bb in self._blackboards()], "extra": extra or {},
         }
-        return pack_state(state, self._modules())
+        return pack_state(state)
 
     def restore(self, data: bytes) -> dict:
         """Continue from a snapshot taken by the same agent of the same run; returns its ``extra``."""
-        state = unpack_state(data, self._modules())
+        state = unpack_state(data)
         if state.get("version") != SNAPSHOT_VERSION or state.get("agent") != self.agent_id:
             raise StateError(f"snapshot of agent {state.get('agent')} (version {state.get('version')}) "
                              f"given to agent {self.agent_id}")

@@ -16,10 +16,12 @@ from typing import Any, Generic, NamedTuple, TypeVar
 
 from swarmbed.wire.codec import BROADCAST, RadioMessage, pack
 from swarmbed.wire.observation import Observation
+from swarmbed.wire.state import state_type
 
 ObsT = TypeVar("ObsT", bound=Observation)
 
 
+@state_type
 class TaskInfo(NamedTuple):
     """A task as an agent sees it. A named tuple, not a frozen dataclass: an agent builds one per
     visible task per tick, and a frozen dataclass's ``__init__`` took 4-5 times as long (at 200
@@ -32,6 +34,7 @@ class TaskInfo(NamedTuple):
     color: int = -1  # SAR: the victim's colour where known to this agent, else -1
 
 
+@state_type
 @dataclass(frozen=True, slots=True)
 class Message:
     sender: int
@@ -39,6 +42,7 @@ class Message:
     data: Any  # the decoded payload
 
 
+@state_type
 @dataclass(frozen=True, slots=True)
 class Outgoing:
     dest: int | tuple[int, ...]

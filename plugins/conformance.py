@@ -152,8 +152,7 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
 def _moved(allocator: Allocator, name: str, params: Mapping[str, Any], agent_id: int, seed: int,
            scenario: str | None) -> Allocator:
     """A fresh instance restored from ``allocator``'s snapshot through its bytes."""
-    modules = (type(allocator).__module__,)
-    state = unpack_state(pack_state(allocator.snapshot(), modules), modules)
+    state = unpack_state(pack_state(allocator.snapshot()))
     fresh = make(name, params, agent_id, np.random.default_rng(12345), seed, scenario)  # rng from the snapshot
     fresh.restore(state)
     return fresh
@@ -222,7 +221,7 @@ def check_snapshot(name: str, params: Mapping[str, Any], scenario: str = "mtsr",
         if a != b or plain.messages[k] != moved.messages[k]:
             raise ConformanceError(f"{name}: after moving through a snapshot, round {k} differs "
                                    f"(decisions {a} vs {b})")
-    size = max(len(pack_state(a.snapshot(), (type(a).__module__,))) for a in moved.allocators)
+    size = max(len(pack_state(a.snapshot())) for a in moved.allocators)
     return {"moves": 3, "snapshot_bytes_max": size}
 
 

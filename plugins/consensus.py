@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 
+from swarmbed.wire.state import state_type
+
 NONE = -1
 _NEVER = -math.inf
 
@@ -70,6 +72,7 @@ def table(i: int, k: int, zk: int, yk: float, zi: int, yi: float, compare: Calla
     return "leave"
 
 
+@state_type
 class ConsensusState:
     """One agent's CBBA knowledge and bundle."""
 

@@ -7,8 +7,10 @@ longer among the visible open tasks has been completed.
 from __future__ import annotations
 
 from swarmbed.plugins.base import LocalView, TaskInfo
+from swarmbed.wire.state import state_type
 
 
+@state_type
 class TaskBook:
     def __init__(self) -> None:
         self.known: dict[int, TaskInfo] = {}

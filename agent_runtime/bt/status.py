@@ -2,7 +2,10 @@
 
 import enum
 
+from swarmbed.wire.state import state_type
 
+
+@state_type
 class Status(enum.Enum):
     IDLE = "IDLE"
     RUNNING = "RUNNING"
