@@ -19,6 +19,7 @@ from swarmbed.wire.codec import (
     WireError,
     decode_agent_in,
     encode_agent_out,
+    encode_handover,
     encode_report,
     encode_stop,
 )
@@ -77,9 +78,9 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation
                 if msg.incarnation != incarnation:
                     continue  # an order for the other process of a swap
                 if msg.order == "snapshot":
-                    frozen = _hand_over_state(session, keys, runtime, incarnation, malformed, report)
+                    frozen = _hand_over_state(session, keys, runtime, incarnation, malformed, report, msg.ticket)
                 elif msg.order == "checkpoint" and not frozen:
-                    _checkpoint(runtime, incarnation, malformed, report)
+                    _checkpoint(runtime, incarnation, malformed, report, msg.ticket)
                 elif msg.order == "resume":
                     frozen = False
                     log.info("agent %d: swap cancelled; going on here", agent_id)
@@ -116,6 +117,9 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation
             answer = encode_agent_out(msg.tick, agent_id, action, messages, events)
             sample_bytes["out"] += len(answer)
             out.put(answer)
+    except Exception:  # ours, not the plugin's: logged before the token goes (the launcher then stops us)
+        log.exception("agent %d: failed", agent_id)
+        return EXIT_PLUGIN_ERROR
     finally:
         token.undeclare()
         for entity in (sub, watch, out):
@@ -123,7 +127,7 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation
 
 
 def _hand_over_state(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation: int, malformed: int,
-                     report) -> bool:
+                     report, ticket: bytes) -> bool:
     """Give the coordinator this agent's snapshot; whether it took it (and this process is frozen)."""
     agent_id = runtime.agent_id
     try:
@@ -132,14 +136,14 @@ def _hand_over_state(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, 
         log.error("agent %d: cannot snapshot its state: %s", agent_id, exc)
         report({"kind": "snapshot_failed", "agent": agent_id, "incarnation": incarnation, "error": str(exc)})
         return False
-    if not hand_over(session, keys.agent_snapshot(agent_id), state):
+    if not hand_over(session, keys.agent_snapshot(agent_id), encode_handover(ticket, state)):
         log.error("agent %d: the coordinator did not take the snapshot", agent_id)
         return False
     log.info("agent %d: state handed over (%d bytes); waiting to retire or resume", agent_id, len(state))
     return True
 
 
-def _checkpoint(runtime: AgentRuntime, incarnation: int, malformed: int, report) -> None:
+def _checkpoint(runtime: AgentRuntime, incarnation: int, malformed: int, report, ticket: bytes) -> None:
     """Report this agent's state and go on (the coordinator keeps the last to restart it from)."""
     try:
         state = runtime.snapshot({"malformed": malformed})
@@ -147,7 +151,7 @@ def _checkpoint(runtime: AgentRuntime, incarnation: int, malformed: int, report)
         log.warning("agent %d: no checkpoint: %s", runtime.agent_id, exc)
         return
     report({"kind": "checkpoint", "agent": runtime.agent_id, "incarnation": incarnation, "ticks": runtime.ticks,
-            "state": state})
+            "state": state, "ticket": ticket})
 
 
 def _add_args(ap) -> None:
@@ -160,24 +164,29 @@ def main(argv: list[str] | None = None) -> int:
     args = child_args("swarmbed agent", "run one swarmbed agent process", _add_args, argv)
     keys = Keys(args.run_id)
     with open_from_args(args) as session:
-        spec = fetch_spec(session, keys.agent_config, AgentSpec, f"agent config of run {args.run_id}")
-        if not 0 <= args.id < spec.agents.count:
-            log.error("agent id %d is outside 0..%d of run %s", args.id, spec.agents.count - 1, args.run_id)
-            return 2
-        if not args.restore and is_alive(session, keys.alive_agent_any(args.id)):
-            log.error("agent %d of run %s is already running (its liveliness token is held); "
-                      "refusing to start a second one", args.id, args.run_id)
-            return 2
-        runtime = AgentRuntime(spec, args.id)
-        malformed = 0
-        if args.restore:
-            try:
-                malformed = int(runtime.restore(fetch_bytes(session, keys.agent_snapshot(args.id)))["malformed"])
-            except (StateError, JoinError, KeyError, ValueError) as exc:
-                log.error("agent %d: cannot restore: %s", args.id, exc)
-                if not hand_over(session, keys.agent_report(args.id), encode_report(
-                        {"kind": "restore_failed", "agent": args.id, "incarnation": args.incarnation,
-                         "error": str(exc)})):
-                    log.error("agent %d: the coordinator did not take the restore_failed report", args.id)
-                return EXIT_PLUGIN_ERROR
-        return serve(session, keys, runtime, args.incarnation, restored=args.restore, malformed=malformed)
+        try:
+            spec = fetch_spec(session, keys.agent_config, AgentSpec, f"agent config of run {args.run_id}")
+            if not 0 <= args.id < spec.agents.count:
+                log.error("agent id %d is outside 0..%d of run %s", args.id, spec.agents.count - 1, args.run_id)
+                return 2
+            if not args.restore and is_alive(session, keys.alive_agent_any(args.id)):
+                log.error("agent %d of run %s is already running (its liveliness token is held); "
+                          "refusing to start a second one", args.id, args.run_id)
+                return 2
+            runtime = AgentRuntime(spec, args.id)
+            malformed = 0
+            if args.restore:
+                try:
+                    malformed = int(runtime.restore(fetch_bytes(session, keys.agent_snapshot(args.id)))["malformed"])
+                except (StateError, JoinError, KeyError, ValueError) as exc:
+                    log.error("agent %d: cannot restore: %s", args.id, exc)
+                    if not hand_over(session, keys.agent_report(args.id), encode_report(
+                            {"kind": "restore_failed", "agent": args.id, "incarnation": args.incarnation,
+                             "error": str(exc)})):
+                        log.error("agent %d: the coordinator did not take the restore_failed report", args.id)
+                    return EXIT_PLUGIN_ERROR
+            return serve(session, keys, runtime, args.incarnation, restored=args.restore, malformed=malformed)
+        except Exception:
+            # logged while the session, and with it the liveliness token, is still held (see netem)
+            log.exception("agent %d: failed", args.id)
+            return EXIT_PLUGIN_ERROR

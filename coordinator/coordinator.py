@@ -16,7 +16,7 @@ import queue
 import threading
 import time
 from array import array
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,7 @@ import zenoh
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.scenario import Scenario
+from swarmbed.coordinator.tickets import Tickets
 from swarmbed.wire.codec import (
     EMPTY_INBOX,
     TAG_CHECKPOINT,
@@ -34,16 +35,17 @@ from swarmbed.wire.codec import (
     NetemStep,
     WireError,
     World,
+    decode_handover,
     decode_netem_step,
     decode_report,
     encode_control,
+    encode_netem_stop,
     encode_status,
     encode_stop,
     encode_tick,
     encode_world,
-    pack,
 )
-from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
+from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of
 from swarmbed.wire.lifecycle import WORLD, component_rng
 from swarmbed.wire.membership import accept_handovers, serve_text
 from swarmbed.wire.rowfile import RowFile
@@ -68,7 +70,8 @@ class Coordinator:
     ``bids_with_colors``) and the targets agents load."""
 
     def __init__(self, exp: Experiment, scenario: Scenario, allocator: type, targets: Targets, keys: Keys,
-                 session: zenoh.Session, out_dir: Path, hosts: dict[int, str] | None = None) -> None:
+                 session: zenoh.Session, out_dir: Path, hosts: dict[int, str] | None = None,
+                 carriers: Mapping[str, frozenset[int]] | None = None) -> None:
         self.exp = exp
         self.scenario = scenario
         self.targets = targets
@@ -77,6 +80,8 @@ class Coordinator:
         self.out_dir = out_dir
         self.n = exp.agents.count
         self.hosts = hosts or {}  # agent -> host it runs on, where not on this machine
+        # host -> agents the hub lets it carry (wire.schema.carriers); None: no access control
+        self.carriers = carriers
         self.world = scenario.make_world(component_rng(exp.run.seed, WORLD), allocator)
         self.event_names = list(getattr(allocator, "event_names", ()))
         self.event_totals: dict[str, int] = {}
@@ -112,6 +117,7 @@ class Coordinator:
         # moving agents between processes (swaps)
         self.incarnation: dict[int, int] = {}  # agent -> its current process, where not the first (0)
         self.snapshots: dict[int, bytes] = {}  # agent -> the snapshot its old process handed over
+        self.tickets = Tickets()  # what state the coordinator asked for, and of whom
         self.swaps_due: dict[int, list[tuple[int, str]]] = {}  # tick -> (agent, host), scripted
         for entry in exp.swaps:
             self.swaps_due.setdefault(entry.tick, []).append((entry.agent, entry.to))
@@ -127,6 +133,8 @@ class Coordinator:
         # or fresh); unplace(...) stops one (the runner's)
         self.place: Callable[..., None] | None = None
         self.unplace: Callable[[int, str, int], None] | None = None
+        # exit_status(process name) says how a local child ended and how its log ends (the runner's)
+        self.exit_status: Callable[[str], str] | None = None
 
     # -- setup -----------------------------------------------------------------------------------
     def declare(self) -> None:
@@ -150,8 +158,14 @@ class Coordinator:
         self._entities.append(s.liveliness().declare_token(k.alive_coordinator))
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
-        what = "join" if sample.kind == zenoh.SampleKind.PUT else "leave"
-        self.events.put((what, str(sample.key_expr)))
+        key = str(sample.key_expr)
+        if key not in (self.keys.alive_netem, self.keys.alive_coordinator):
+            try:
+                alive_agent_of(key, self.keys.root, self.n)
+            except WireError as exc:  # a token no process of this run holds: never taken for one
+                self._malformed(key, exc)
+                return
+        self.events.put(("join" if sample.kind == zenoh.SampleKind.PUT else "leave", key))
 
     def _on_snapshot_query(self, query: zenoh.Query) -> None:
         """An old process hands its snapshot over (payload), or the new one fetches it (none)."""
@@ -161,7 +175,17 @@ class Coordinator:
             query.reply_err("no agent in the key")
             return
         if query.payload is not None:
-            self.snapshots[agent] = query.payload.to_bytes()
+            try:
+                ticket, state = decode_handover(query.payload.to_bytes())
+            except WireError as exc:
+                self._malformed(str(query.key_expr), exc)
+                query.reply_err(f"malformed snapshot handover: {exc}")
+                return
+            if not self.tickets.redeem("snapshot", agent, ticket):
+                log.warning("coordinator: refused a snapshot of agent %d that was not asked for", agent)
+                query.reply_err(f"no snapshot of agent {agent} was asked for")
+                return
+            self.snapshots[agent] = state
             query.reply(query.key_expr, b"ok")
             self.events.put(("snapshot", agent))
         elif agent in self.snapshots:
@@ -354,20 +378,62 @@ class Coordinator:
                 self._malformed(self.keys.netem_step, WireError(f"step for tick {step.tick} while at tick {k}"))
             elif what == "leave":
                 if data == self.keys.alive_netem:
-                    raise RunError(f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log")
+                    self._proxy_gone(k)
                 if not data.endswith("/coordinator"):
                     agent = agent_id_of(data)
                     if incarnation_of(data) != self.incarnation.get(agent, 0):
                         continue  # a process swapped out: its agent goes on elsewhere
                     self._await_fatal_report(agent)
-                    self._lose(agent, k, "its process exited")
+                    self._lose(agent, k, self._how_it_ended(agent))
             elif what == "report":
                 self._on_report(data, k)
+            elif what == "netem_report":  # mid-run, only a proxy that failed reports
+                self._proxy_failed(k, data)
 
     def _next_event(self, timeout: float) -> tuple[str, Any]:
         if self._pushback:
             return self._pushback.pop(0)
         return self.events.get(timeout=max(0.0, timeout))
+
+    def _proxy_failed(self, k: int, data: bytes) -> None:
+        """A report from the proxy while ticks go on: only a failing proxy sends one (its error)."""
+        try:
+            rep = decode_report(data)
+        except WireError as exc:
+            self._malformed(self.keys.netem_report, exc)
+            return
+        if rep["kind"] == "fatal":
+            raise RunError(f"tick {k}: the netem proxy failed: {rep.get('error')}; see logs/netem.log")
+
+    def _proxy_gone(self, k: int, grace: float = 0.5) -> None:
+        """The proxy's token went: raise with its own error if it reported one (it reports before it
+        lets go of the token, but the two travel apart), else with its exit status and log."""
+        deadline = time.monotonic() + grace
+        held: list[tuple[str, Any]] = []
+        try:
+            while True:
+                try:
+                    what, data = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
+                except queue.Empty:
+                    break
+                if what == "netem_report":
+                    self._proxy_failed(k, data)
+                held.append((what, data))
+        finally:
+            self._pushback.extend(held)
+        how = self.exit_status("netem") if self.exit_status else ""
+        raise RunError(f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log"
+                       + (f"\n{how}" if how else ""))
+
+    def _how_it_ended(self, agent: int) -> str:
+        """Why agent ``agent``'s process is gone, as precisely as this machine can tell (a process on
+        another host: only that it exited)."""
+        if agent in self.fatal or self.exit_status is None or self.hosts.get(agent, LOCAL) != LOCAL:
+            return "its process exited"
+        incarnation = self.incarnation.get(agent, 0)
+        name = f"agent_{agent}" if incarnation == 0 else f"agent_{agent}.{incarnation}"
+        how = self.exit_status(name).split(";", 1)[0]
+        return f"its process {how.split(' ', 1)[1]}" if how else "its process exited"
 
     def _await_fatal_report(self, agent: int, grace: float = 0.25) -> None:
         """An agent left. Its fatal report (if it failed) travels apart from its liveliness token and
@@ -395,7 +461,7 @@ class Coordinator:
                 raise WireError(f"report names no agent of this run: {agent!r}")
             if agent != agent_id_of(key):
                 raise WireError(f"report of agent {agent} on another agent's key")
-        except ValueError as exc:  # WireError, or a key without an agent id
+        except WireError as exc:
             self._malformed(key, exc)
             return None
         return rep
@@ -412,7 +478,10 @@ class Coordinator:
             self.reports[agent] = rep
         elif rep["kind"] == "checkpoint":
             state = rep.get("state")
-            if rep.get("incarnation") == self.incarnation.get(agent, 0) and isinstance(state, bytes):
+            if not self.tickets.redeem("checkpoint", agent, rep.get("ticket")):
+                # late (a newer checkpoint was asked since) or not asked for at all: never kept
+                log.warning("coordinator: refused a checkpoint of agent %d that was not asked for", agent)
+            elif rep.get("incarnation") == self.incarnation.get(agent, 0) and isinstance(state, bytes):
                 self.checkpoints[agent] = (self.checkpoint_tick, state)
 
     def _lose(self, agent: int, tick: int, why: str) -> None:
@@ -440,7 +509,9 @@ class Coordinator:
         self.checkpoint_tick = self.last_tick + 1
         for i in map(int, np.flatnonzero(self.world.alive)):
             if i not in self.lost and i not in self.down:
-                self.agent_pubs[i].put(encode_control(TAG_CHECKPOINT, self.incarnation.get(i, 0)))
+                incarnation = self.incarnation.get(i, 0)
+                ticket = self.tickets.issue("checkpoint", i, incarnation)
+                self.agent_pubs[i].put(encode_control(TAG_CHECKPOINT, incarnation, ticket))
 
     def _restart_due(self, k: int) -> None:
         """Try each agent that is down and due: a failed try is tried again after
@@ -537,10 +608,14 @@ class Coordinator:
 
         if agent in self.lost or self.place is None:
             return finish("the agent is not running" if agent in self.lost else "this run cannot start processes")
+        if to != LOCAL and self.carriers is not None and agent not in self.carriers.get(to, ()):
+            return finish(f"host {to} may not carry agent {agent}: the hub admits a host only to the agents placed on "
+                          f"it, moved to it by a scripted swap or listed for it in may_carry")
         self.snapshots.pop(agent, None)
-        self.agent_pubs[agent].put(encode_control(TAG_SNAPSHOT, old))
+        self.agent_pubs[agent].put(encode_control(TAG_SNAPSHOT, old, self.tickets.issue("snapshot", agent, old)))
         got = self._await_swap_event(agent, old, new, ("snapshot", "snapshot_failed"))
         if got != "snapshot":
+            self.tickets.cancel("snapshot", agent)
             return finish(got)
         record["snapshot_bytes"] = len(self.snapshots[agent])
         try:
@@ -610,7 +685,7 @@ class Coordinator:
     # -- shutdown and results ---------------------------------------------------------------------
     def stop_and_collect(self, timeout: float = 30.0) -> None:
         """Tell the proxy and every live agent that the run is over; collect their final reports."""
-        self.stop_pub.put(pack([self.last_tick]))
+        self.stop_pub.put(encode_netem_stop(self.last_tick))
         for agent, tick in sorted(self.down.items()):  # died in the last tick: never restarted
             self.lost[agent] = tick
         self.down.clear()

@@ -11,6 +11,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from swarmbed.wire.rowfile import write_error
+
 SUMMARY = "summary.json"
 TIMESERIES = "timeseries.csv"
 AGENTS = "agents.csv"
@@ -30,11 +32,15 @@ def temp_beside(path: Path) -> Path:
 
 def write_atomic(path: Path, text: str) -> None:
     tmp = temp_beside(path)
-    with open(tmp, "w", newline="") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", newline="") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:  # a full disk: no half-written temporary left behind, one line of why
+        tmp.unlink(missing_ok=True)
+        raise write_error(exc, path.parent) from None
 
 
 def write_json(path: Path, data: Any) -> None:
@@ -43,10 +49,14 @@ def write_json(path: Path, data: Any) -> None:
 
 def write_csv(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
     tmp = temp_beside(path)
-    with open(tmp, "w", newline="") as f:
-        w = csv.writer(f, lineterminator="\n")
-        w.writerow(columns)
-        w.writerows(rows)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", newline="") as f:
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(columns)
+            w.writerows(rows)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise write_error(exc, path.parent) from None

@@ -13,8 +13,12 @@ Identities of one run (users in the hub's dictionary):
                receives only ``agent/<i>/in``
 operators      files made by ``swarmbed credentials --role operator`` and admitted with
                ``swarmbed run --admit``: read everything (``swarmbed watch``), ask for swaps
-hosts          files made with ``--role host``: a host daemon's router, which carries its own
-               agents' traffic (so the hub can hold it only to agent keys) and serves start/stop
+hosts          files made with ``--role host``: a host daemon's router, bound to one host name
+               (its credentials' ``host``, else its user name). It carries the traffic of the
+               agents it may carry (placed on it, moved to it by a scripted swap, or listed in
+               ``may_carry``) and nothing of any other
+               agent, never an agent's input; it serves start/stop and holds a token only under
+               its own ``swarmbed/hosts/<name>``
 =============  =================================================================================
 
 The coordinator publishes the world, ticks and agent inputs from inside the hub, where no rule
@@ -28,7 +32,7 @@ import logging
 import os
 import shutil
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import psutil
@@ -52,8 +56,26 @@ def agent_user(agent_id: int) -> str:
     return f"agent-{agent_id}"
 
 
-def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str], hosts: Iterable[str]) -> dict:
-    """The hub's ``access_control`` section for one run (default deny)."""
+def _agent_rules(k: Keys, user: str, ids: Iterable[int]) -> list[dict]:
+    """What a subject that carries agents ``ids`` may send: their outputs and reports, their
+    inputs to subscribe to, their spec and snapshots to fetch, their tokens; nothing of any other agent."""
+    ids = sorted(ids)
+    if not ids:
+        return []
+    return [
+        _allow(f"{user}-put", ["put"], [k.agent_out(i) for i in ids]),
+        _allow(f"{user}-subscribe", ["declare_subscriber"], [k.agent_in(i) for i in ids]),
+        _allow(f"{user}-query", ["query"], [k.agent_config, *(key for i in ids
+                                                              for key in (k.agent_report(i), k.agent_snapshot(i)))]),
+        _allow(f"{user}-alive", ["liveliness_token"], [k.alive_agent_any(i) for i in ids]),
+    ]
+
+
+def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str],
+                 hosts: Mapping[str, tuple[str, Iterable[int]]]) -> dict:
+    """The hub's ``access_control`` section for one run (default deny). ``hosts``: each admitted
+    host's user name -> (the host name it is bound to, the agents it may carry, as
+    :func:`~swarmbed.wire.schema.carriers` gives them)."""
     k, root = keys, keys.root
     alive = f"{root}/alive/**"
     rules = [
@@ -67,33 +89,32 @@ def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str],
                [f"{root}/**", f"{HOSTS}/**"]),
         _allow("operator-ask", ["query"], [k.swap, f"{HOSTS}/*/info"]),
         _allow("operator-find", ["liveliness_query"], [f"{PREFIX}/*/alive/coordinator"]),
-        _allow("host-serve", ["declare_queryable", "reply", "liveliness_token"], [f"{HOSTS}/**"]),
-        _allow("host-carry", ["put", "declare_subscriber", "query"], [f"{root}/agent/**", k.agent_config]),
-        _allow("host-carry-alive", ["liveliness_token", "declare_liveliness_subscriber", "liveliness_query"],
-               [alive]),
+        _allow("host-watch", ["declare_liveliness_subscriber", "liveliness_query"], [alive, f"{HOSTS}/**"]),
     ]
     subjects: list[dict] = [{"id": "netem", "usernames": ["netem"]}]
     policies: list[dict] = [{"subjects": ["netem"], "rules": ["deliver", "netem", "netem-subscribe", "netem-query",
                                                                  "netem-alive", "watch-alive"]}]
     for i in agent_ids:
         user = agent_user(i)
-        rules += [
-            _allow(f"{user}-put", ["put"], [k.agent_out(i)]),
-            _allow(f"{user}-subscribe", ["declare_subscriber"], [k.agent_in(i)]),
-            _allow(f"{user}-query", ["query"], [k.agent_config, k.agent_report(i), k.agent_snapshot(i)]),
-            _allow(f"{user}-alive", ["liveliness_token"], [k.alive_agent_any(i)]),
-        ]
+        own = _agent_rules(k, user, [i])
+        rules += own
         subjects.append({"id": user, "usernames": [user]})
-        policies.append({"subjects": [user], "rules": ["deliver", "watch-alive", f"{user}-put", f"{user}-subscribe",
-                                                       f"{user}-query", f"{user}-alive"]})
-    operators, hosts = list(operators), list(hosts)
+        policies.append({"subjects": [user], "rules": ["deliver", "watch-alive", *(r["id"] for r in own)]})
+    operators = list(operators)
     if operators:
         subjects.append({"id": "operators", "usernames": operators})
         policies.append({"subjects": ["operators"], "rules": ["deliver", "operator-read", "operator-ask",
                                                                    "operator-find"]})
-    if hosts:
-        subjects.append({"id": "hosts", "usernames": hosts})
-        policies.append({"subjects": ["hosts"], "rules": ["deliver", "host-serve", "host-carry", "host-carry-alive"]})
+    for user, (host, ids) in sorted(hosts.items()):
+        subject = f"host-{user}"
+        own = _agent_rules(k, subject, ids)
+        rules += own + [
+            _allow(f"{subject}-serve", ["declare_queryable", "reply"], [f"{HOSTS}/{host}/*"]),
+            _allow(f"{subject}-announce", ["liveliness_token"], [f"{HOSTS}/{host}"]),
+        ]
+        subjects.append({"id": subject, "usernames": [user]})
+        policies.append({"subjects": [subject], "rules": ["deliver", "host-watch", f"{subject}-serve",
+                                                          f"{subject}-announce", *(r["id"] for r in own)]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
 
 
@@ -101,10 +122,12 @@ class RunAccess:
     """One run's identities: a private folder (mode 700, removed by :meth:`close`) holding the hub's
     dictionary and one credentials file per process the launcher spawns."""
 
-    def __init__(self, keys: Keys, agent_ids: Iterable[int], admitted: Iterable[Identity] = ()) -> None:
+    def __init__(self, keys: Keys, agent_ids: Iterable[int], admitted: Iterable[Identity] = (),
+                 carriers: Mapping[str, Iterable[int]] | None = None) -> None:
         self.keys = keys
         self.agent_ids = sorted(agent_ids)
         self.admitted = list(admitted)
+        self.carriers = {host: sorted(ids) for host, ids in (carriers or {}).items()}  # host -> agents it may carry
         taken = {"netem", *map(agent_user, self.agent_ids)}
         for identity in self.admitted:
             if identity.user in taken:
@@ -127,7 +150,8 @@ class RunAccess:
             "access_control": access_rules(
                 self.keys, self.agent_ids,
                 operators=[i.user for i in self.admitted if i.role != "host"],
-                hosts=[i.user for i in self.admitted if i.role == "host"]),
+                hosts={i.user: (i.host_name, self.carriers.get(i.host_name, [])) for i in self.admitted
+                       if i.role == "host"}),
         }
 
     def close(self) -> None:

@@ -55,12 +55,12 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from swarmbed.experiments import netns
 from swarmbed.experiments.host import process_name
 from swarmbed.experiments.runner import LiveRun
+from swarmbed.experiments.yamlfile import YamlFileError, read_yaml
 from swarmbed.wire.codec import NetemControl, encode_netem_control
 from swarmbed.wire.rowfile import RowFile
 
@@ -107,9 +107,9 @@ class ChaosPlan(BaseModel):
 
 def load_chaos(path: Path) -> ChaosPlan:
     try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ChaosError(f"{path}: {exc}") from None
+        data = read_yaml(path)
+    except YamlFileError as exc:
+        raise ChaosError(str(exc)) from None
     try:
         return ChaosPlan.model_validate(data or {})
     except ValidationError as exc:

@@ -112,7 +112,9 @@ def cmd_credentials(args: argparse.Namespace) -> int:
     from swarmbed.wire.credentials import CredentialsError, Identity, write_credentials
 
     try:
-        path = write_credentials(Path(args.file), Identity.new(args.user, args.role))
+        if args.host and args.role != "host":
+            raise CredentialsError("--host names the host of a host identity: give --role host too")
+        path = write_credentials(Path(args.file), Identity.new(args.user, args.role, args.host or ""))
     except (CredentialsError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -257,7 +259,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         return 2
     try:
         table = run_sweep(sweep, out, args.jobs, progress=not args.no_progress and not args.detach,
-                          executor=executor, stale_after=args.stale_after)
+                          executor=executor, stale_after=args.stale_after, redo_mismatched=args.redo_mismatched)
     except ExecutorError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -361,7 +363,7 @@ def cmd_check_scenario(args: argparse.Namespace) -> int:
 
 
 def cmd_host(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.host import serve
+    from swarmbed.experiments.host import HostError, serve
     from swarmbed.wire.credentials import CredentialsError
     from swarmbed.wire.lifecycle import LOG_FORMAT
     from swarmbed.wire.session import tls_from_args
@@ -370,8 +372,8 @@ def cmd_host(args: argparse.Namespace) -> int:
     logs = Path(args.logs) if args.logs else Path("runs") / "hosts" / args.name
     try:
         return serve(args.name, args.connect, args.listen, logs, args.zenoh_config, args.mode, args.credentials,
-                     tls_from_args(args))
-    except CredentialsError as exc:
+                     tls_from_args(args), insecure=args.insecure)
+    except (CredentialsError, HostError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
@@ -513,6 +515,8 @@ def main(argv: list[str] | None = None) -> int:
     cr.add_argument("--user", required=True, help="the user name (letters, digits, no ':' or spaces)")
     cr.add_argument("--role", choices=["operator", "host"], default="operator",
                     help="operator: watch a run and ask for swaps; host: a host daemon (default: operator)")
+    cr.add_argument("--host", help="role host: the host name the daemon runs as (swarmbed host --name); "
+                                   "the hub lets this identity act as that host only (default: the user name)")
     cr.set_defaults(func=cmd_credentials)
 
     ce = sub.add_parser("certs", help="a certificate authority and per-machine certificates for TLS between machines")
@@ -554,6 +558,9 @@ def main(argv: list[str] | None = None) -> int:
     sw.add_argument("--stale-after", type=float, default=120.0, metavar="S",
                     help="a run claimed by a process that has not shown life for S seconds is taken over "
                          "(default 120; a dead process on this host at once)")
+    sw.add_argument("--redo-mismatched", action="store_true",
+                    help="run again the completed runs in --out that were made under another configuration than "
+                         "this sweep plans (without it the sweep refuses to reuse or mix them)")
     sw.add_argument("--runs", "-n", type=_positive, help="runs per scenario (overrides the file)")
     sw.add_argument("--seed", type=int, help="sweep seed (overrides the file)")
     sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")
@@ -598,6 +605,9 @@ def main(argv: list[str] | None = None) -> int:
     host = sub.add_parser("host", help="run this machine's host daemon: a Zenoh router that starts agents for runs")
     host.add_argument("--name", required=True, help="this host's name in placements (letters, digits, _ . -)")
     host.add_argument("--logs", help="where its agents log (default: runs/hosts/<name>)")
+    host.add_argument("--insecure", action="store_true",
+                      help="run without --credentials: no authentication, anyone who reaches the router may start "
+                           "agents (their code included); allowed with loopback endpoints only")
     add_zenoh_args(host, default_mode="router")
     host.set_defaults(func=cmd_host)
 
@@ -654,6 +664,10 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader of our output went away (e.g. `| head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    except OSError as exc:  # a full disk, a folder that is not there: one line naming what and where
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

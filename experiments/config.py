@@ -23,6 +23,7 @@ from swarmbed.agent_runtime.allocator import Allocator
 from swarmbed.agent_runtime.bt import BTError, load_tree
 from swarmbed.agent_runtime.node_sets import node_registry, tree_path
 from swarmbed.coordinator.scenario import Scenario
+from swarmbed.experiments.yamlfile import YamlFileError, non_finite, parse_yaml, read_yaml
 from swarmbed.plugins.registry import (
     PluginError,
     allocator_target,
@@ -40,6 +41,7 @@ from swarmbed.wire.schema import (
     RunSection,
     ScenarioSection,
     Targets,
+    carriers,
     hosts_of,
 )
 
@@ -97,9 +99,9 @@ def parse_override(text: str) -> tuple[str, Any]:
     if not sep or not key.strip():
         raise ConfigError(f"--set {text!r}: expected dotted.key=value")
     try:
-        value = yaml.safe_load(raw) if raw.strip() else ""
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"--set {text!r}: value is not valid YAML: {exc}") from None
+        value = parse_yaml(raw, f"--set {text}") if raw.strip() else ""
+    except YamlFileError as exc:
+        raise ConfigError(str(exc)) from None
     return key.strip(), value
 
 
@@ -123,8 +125,13 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None) -
     def fail(lines: list[str]) -> ConfigError:
         return ConfigError("\n".join(_origin(line, where, overridden) for line in lines))
 
+    bad = non_finite(data)
+    if bad:
+        raise fail([f"{key}: infinite and NaN numbers are not accepted" for key in bad])
     try:
-        exp = Experiment.model_validate(data)
+        # strict: `seed: true` or `loss: "0.1"` is refused, not read as 1 and 0.1 (a plugin's own
+        # parameters are checked by its Params model below, which may convert YAML lists to tuples)
+        exp = Experiment.model_validate(data, strict=True)
     except ValidationError as exc:
         raise fail([f"{'.'.join(str(p) for p in e['loc'])}: "
                     f"{'unknown key' if e['type'] == 'extra_forbidden' else e['msg']}" for e in exc.errors()]) from None
@@ -143,10 +150,11 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None) -
         "allocator": AllocatorSection(name=exp.allocator.name, **allocator_params.model_dump(mode="json")),
     })
     problems = resolve_scenario(kind).check(exp, scenario_params)
-    try:
-        hosts_of(exp.placement, exp.agents.count)
-    except ValueError as exc:
-        problems.append(str(exc))
+    for check in (lambda: hosts_of(exp.placement, exp.agents.count), lambda: carriers(exp)):
+        try:
+            check()
+        except ValueError as exc:
+            problems.append(str(exc))
     problems += [f"swaps[{k}].agent: {s.agent} is outside 0..{exp.agents.count - 1}"
                  for k, s in enumerate(exp.swaps) if s.agent >= exp.agents.count]
     allocator = resolve(exp.allocator.name, kind)
@@ -211,11 +219,9 @@ def _get_dotted(data: dict, dotted: str) -> Any:
 def load(path: str | Path, overrides: list[str] | tuple[str, ...] = (), seed: int | None = None) -> Experiment:
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
+        data = read_yaml(path)
+    except YamlFileError as exc:
+        raise ConfigError(str(exc)) from None
     if data is None:
         raise ConfigError(f"{path}: the file is empty; an experiment names at least its scenario or allocator "
                           "(see experiments/quickstart.yaml)")
@@ -241,7 +247,13 @@ def to_yaml(exp: Experiment) -> str:
 
 
 def from_yaml(text: str, where: str = "<resolved config>") -> Experiment:
-    return validate(yaml.safe_load(text), where)
+    try:
+        data = parse_yaml(text, where)
+    except YamlFileError as exc:
+        raise ConfigError(str(exc)) from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: the top level must be a mapping of sections")
+    return validate(data, where)
 
 
 def _type_name(annotation: Any) -> str:

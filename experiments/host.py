@@ -16,6 +16,7 @@ run sees agent loss. Ctrl-C or SIGTERM stops its agents and leaves no orphan.
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import logging
 import os
@@ -32,8 +33,9 @@ import zenoh
 
 from swarmbed.experiments.launcher import AGENT_MODULE, Children, ForkServerError
 from swarmbed.wire.credentials import Identity, read_credentials, write_credentials, write_dictionary
-from swarmbed.wire.keys import HOSTS, HostKeys, host_name_of
+from swarmbed.wire.keys import HOSTS, HostKeys, Keys, host_name_of
 from swarmbed.wire.lifecycle import tune_malloc
+from swarmbed.wire.membership import is_alive
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 log = logging.getLogger("swarmbed.host")
@@ -75,10 +77,14 @@ class Host:
 
     def start_agents(self, request: dict[str, Any]) -> dict[str, Any]:
         run_id, ids = request.get("run_id"), request.get("agents")
-        if not isinstance(run_id, str) or not run_id.isalnum():
+        if not isinstance(run_id, str) or not (run_id.isascii() and run_id.isalnum() and len(run_id) <= 64):
             return {"error": f"start: run_id must be alphanumeric, got {run_id!r}"}
-        if not isinstance(ids, list) or not all(isinstance(i, int) and i >= 0 for i in ids):
-            return {"error": f"start: agents must be a list of ids, got {ids!r}"}
+        if not isinstance(ids, list) or not all(isinstance(i, int) and 0 <= i < 10**6 for i in ids) \
+                or not 0 < len(ids) <= 1000:
+            return {"error": f"start: agents must be a list of 1 to 1000 ids, got {str(ids)[:100]}"}
+        if not is_alive(self.session, Keys(run_id).alive_coordinator):
+            # the hub's access rules let only the hub ask; a run that is not there is not its run
+            return {"error": f"start: run {run_id} has no coordinator reachable from host {self.name}"}
         extra = request.get("args", [])
         allowed = ("--restore", "--incarnation", "--log-max-mb", "--log-backups")
         if not (isinstance(extra, list) and all(a in allowed or str(a).isdigit() for a in extra)):
@@ -131,22 +137,25 @@ class Host:
                 p.kill()
         return {"stopped": [_agent_of(n) for n in names]}
 
-    def _serve(self, handler):
+    def _serve(self, key: str, handler):
+        """Answer queries on ``key`` with ``handler(request)``, replying on ``key`` itself: a query
+        on ``swarmbed/hosts/*/info`` gets its answer under this host's own name, the only one the
+        hub lets this host reply on."""
         def on_query(query: zenoh.Query) -> None:
             try:
                 request = json.loads(query.payload.to_bytes()) if query.payload is not None else {}
                 answer = handler(request) if isinstance(request, dict) else {"error": "request must be a JSON object"}
             except (ValueError, UnicodeDecodeError) as exc:
                 answer = {"error": f"request is not JSON: {exc}"}
-            query.reply(query.key_expr, json.dumps(answer))
+            query.reply(key, json.dumps(answer))
         return on_query
 
     def declare(self) -> None:
         s, k = self.session, self.keys
         self._entities += [
-            s.declare_queryable(k.info, self._serve(lambda _req: self.info())),
-            s.declare_queryable(k.start, self._serve(self.start_agents)),
-            s.declare_queryable(k.stop, self._serve(self.stop_agents)),
+            s.declare_queryable(k.info, self._serve(k.info, lambda _req: self.info())),
+            s.declare_queryable(k.start, self._serve(k.start, self.start_agents)),
+            s.declare_queryable(k.stop, self._serve(k.stop, self.stop_agents)),
             s.liveliness().declare_token(k.alive),
         ]
 
@@ -168,15 +177,53 @@ class Host:
             children.kill_all()
 
 
+def _on_loopback(endpoint: str) -> bool:
+    """Whether a Zenoh endpoint (``tcp/127.0.0.1:7447``, ``tcp/[::1]:7447``, ``tcp/localhost:7447``)
+    names this machine's loopback only."""
+    address = endpoint.split("/", 1)[-1].split("#")[0]
+    hostname = address.rsplit(":", 1)[0].strip("[]")
+    if hostname == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(hostname).is_loopback
+    except ValueError:
+        return False
+
+
+def host_router_rules(agents_user: str) -> dict:
+    """The host router's own ``access_control``: the agents it starts (one local identity) may not
+    query, serve or announce anything under ``swarmbed/hosts`` (an agent must not ask its host to
+    start or stop agents); what else they send, the hub holds to the agents this host may carry."""
+    return {
+        "enabled": True, "default_permission": "allow",
+        "rules": [{"id": "no-host-orders", "permission": "deny", "flows": ["ingress"],
+                   "messages": ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
+                                "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"],
+                   "key_exprs": [HOSTS, f"{HOSTS}/**"]}],
+        "subjects": [{"id": "agents", "usernames": [agents_user]}],
+        "policies": [{"subjects": ["agents"], "rules": ["no-host-orders"]}],
+    }
+
+
 def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_config_file: str | None = None,
-          mode: str = "router", credentials: str | None = None, tls: dict[str, object] | None = None) -> int:
+          mode: str = "router", credentials: str | None = None, tls: dict[str, object] | None = None,
+          insecure: bool = False) -> int:
     """Run the host daemon until SIGINT or SIGTERM: a router (or peer) for this machine.
 
     ``credentials``: a host credentials file the hubs it connects to admit (``swarmbed run --admit``).
     With it, the router also requires credentials of whoever connects to it: the daemon makes one
     identity for the agents it starts (in a private folder, gone when it stops), so that a stray
     process on this machine cannot reach a hub through it. ``tls``: :func:`~swarmbed.wire.session.tls_settings`
-    for ``tls/`` endpoints."""
+    for ``tls/`` endpoints. Without credentials it refuses to start unless ``insecure`` and every
+    endpoint it listens on or connects to is on loopback: an unauthenticated host daemon runs
+    whatever anyone who reaches it names."""
+    if not credentials and not insecure:
+        raise HostError(f"host {name}: no --credentials: a host daemon without them lets anyone who reaches it start "
+                        "agents, which run code; make them with swarmbed credentials FILE --user NAME --role host "
+                        "(and admit the file with swarmbed run --admit), or pass --insecure on loopback")
+    if not credentials and not all(map(_on_loopback, [*connect, *listen])):
+        raise HostError(f"host {name}: --insecure is allowed with loopback endpoints only, got "
+                        f"{', '.join(e for e in [*connect, *listen] if not _on_loopback(e))}")
     listen = listen or [free_loopback_endpoint()]
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -187,11 +234,16 @@ def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_co
     agent_credentials = None
     if credentials:
         mine, local = read_credentials(credentials), Identity.new(f"{name}-agents", "agent")
+        if mine.role != "host" or mine.host_name != name:
+            raise HostError(f"host {name}: credentials file {credentials} is for {mine.role} "
+                            f"{mine.host_name if mine.role == 'host' else mine.user!r}, not for host {name!r} "
+                            f"(make one with swarmbed credentials FILE --user USER --role host --host {name})")
         private = Path(tempfile.mkdtemp(prefix=f"swarmbed-host-{name}-"))
         agent_credentials = str(write_credentials(private / "agents.json", local))
         dictionary = write_dictionary(private / "router.dictionary", [local])
         settings["transport/auth/usrpwd"] = {"user": mine.user, "password": mine.password,
                                              "dictionary_file": str(dictionary)}
+        settings["access_control"] = host_router_rules(local.user)
     tune_malloc()  # a daemon meant to stay up for days
     try:
         session = zenoh.open(zenoh_config(mode, connect, listen, zenoh_config_file, settings=settings))

@@ -188,6 +188,19 @@ class ForkServer:
         self.log.close()
 
 
+def describe_exit(returncode: int | None) -> str:
+    """A process's exit status in words: ``exited with code 1``, ``was killed by signal SIGKILL``."""
+    if returncode is None:
+        return "is still running"
+    if returncode < 0:
+        try:
+            name = signal.Signals(-returncode).name
+        except ValueError:
+            name = str(-returncode)
+        return f"was killed by signal {name}"
+    return f"exited with code {returncode}"
+
+
 class Children:
     def __init__(self, log_dir: Path, fork_agents: bool = False) -> None:
         self.log_dir = log_dir
@@ -217,12 +230,25 @@ class Children:
             return ""
         return "\n".join("    " + line for line in text[-lines:])
 
+    def exit_status(self, name: str, wait: float = 2.0) -> str:
+        """How child ``name`` ended, once it has (waiting up to ``wait`` s, since a process lets go
+        of its token a moment before it exits): "exited with code 1" or "was killed by signal
+        SIGKILL", then the end of its log; "" for a child this launcher did not start."""
+        proc = self.procs.get(name)
+        if proc is None:
+            return ""
+        try:
+            proc.wait(timeout=wait)
+        except subprocess.TimeoutExpired:
+            return f"{name} let go of its token but is still running; logs/{name}.log ends with:\n{self.log_tail(name)}"
+        return f"{name} {describe_exit(proc.returncode)}; logs/{name}.log ends with:\n{self.log_tail(name)}"
+
     def check(self) -> None:
         """Raise if a child has already exited (used while waiting for everyone to join)."""
         for name, proc in self.procs.items():
             rc = proc.poll()
             if rc is not None:
-                raise ChildExited(f"{name} exited with code {rc} before the run started; "
+                raise ChildExited(f"{name} {describe_exit(rc)} before the run started; "
                                   f"logs/{name}.log ends with:\n{self.log_tail(name)}")
 
     def _each(self, read) -> dict:

@@ -93,7 +93,7 @@ class Lab:
 
     def start_daemon(self, name: str, ns: str) -> None:
         log = open(self.logs / f"host_{name}.log", "wb")
-        identity = self.identities.setdefault(name, Identity.new(f"host-{name}", "host"))
+        identity = self.identities.setdefault(name, Identity.new(f"host-{name}", "host", host=name))
         credentials = write_credentials(self.logs / f"host_{name}.credentials", identity)
         cmd = ["ip", "netns", "exec", ns, sys.executable, "-m", "swarmbed", "host", "--name", name,
                "--connect", self.hub, "--listen", "tcp/127.0.0.1:7447", "--logs", str(self.logs / name),

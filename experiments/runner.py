@@ -35,8 +35,8 @@ from swarmbed.experiments.launcher import ChildExited, Children, ForkServerError
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.lifecycle import tune_malloc
-from swarmbed.wire.rowfile import PARTIAL_PREFIX, keep_partial
-from swarmbed.wire.schema import LOCAL, hosts_of
+from swarmbed.wire.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
+from swarmbed.wire.schema import LOCAL, carriers, hosts_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 DEPLOYMENT = "deployment.json"  # where each agent ran; not a result (the same everywhere)
@@ -119,7 +119,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     where = hosts_of(exp.placement, exp.agents.count)
     remote = sorted({h for h in where.values() if h != LOCAL})
     with ExitStack() as undo:  # what is set up before the run's own try: undone if a later step fails
-        access = RunAccess(keys, range(exp.agents.count), admit) if auth else None
+        access = RunAccess(keys, range(exp.agents.count), admit, carriers(exp)) if auth else None
         if access:
             undo.callback(access.close)
         # the fork server first: it is spawned, never forked, but it needs no session of ours
@@ -135,9 +135,10 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                     "transport/unicast/max_sessions": max(1000, exp.agents.count + 64)}
         session, endpoint = open_hub(listen, settings={**capacity, **(access.hub_settings() if access else {}),
                                                        **(tls or {})})
+        undo.callback(session.close)
+        coord = Coordinator(exp, resolved.scenario(), resolved.allocator_cls, resolved.targets, keys, session, out_dir,
+                            where, carriers(exp) if auth else None)
         undo.pop_all()
-    coord = Coordinator(exp, resolved.scenario(), resolved.allocator_cls, resolved.targets, keys, session, out_dir,
-                        where)
     started: list[str] = []
     try:
         coord.declare()
@@ -186,7 +187,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             else:
                 stop_agents(session, host, keys.run_id, [agent], incarnation)
 
-        coord.place, coord.unplace = place, unplace
+        coord.place, coord.unplace, coord.exit_status = place, unplace, children.exit_status
         t_spawned = time.perf_counter()
         results.write_json(out_dir / DEPLOYMENT, {"run_id": keys.run_id, "hub": [endpoint, *listen],
                                                   "placement": {str(i): h for i, h in where.items()}, "hosts": hosts})
@@ -249,6 +250,8 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         }
         summary = coord.write_results(timings)
         return RunResult(out_dir, summary, timings)
+    except TableWriteError as exc:  # a full disk: one line, the first error, not what clean-up meets next
+        raise RunError(str(exc)) from None
     finally:
         for host in started:  # agents still running there after a failure
             stop_agents(session, host, keys.run_id)
@@ -265,3 +268,7 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                 keep_partial(partial)
             else:
                 partial.unlink(missing_ok=True)
+        if not (out_dir / results.SUMMARY).exists():  # results written before a failure at the very end
+            for name in RESULT_FILES:
+                if name != DEPLOYMENT and (out_dir / name).exists():
+                    os.replace(out_dir / name, out_dir / (PARTIAL_PREFIX + name))

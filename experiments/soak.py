@@ -19,10 +19,11 @@ slope in % per hour (Theil-Sen, robust to the steps an allocator's arenas make) 
 per hour (a restarted agent's process over the second half of its own life; a process that lived
 less than a quarter of the soak is listed without a slope), reported per process kind as the worst
 process of that kind; the longest stall; the ledger's conservation; every fault and how it ended;
-ticks/s at the start and at the end. Each is held to a threshold the user can set. A short soak
-extrapolates its slopes to an hour: a one-off step of a few MB (allocators reaching their working
-size in the first minutes) reads as hundreds of % per hour over a minute and as a few % over
-hours. Give short soaks wider RSS thresholds (the test suite does).
+ticks/s at the start and at the end. Each is held to a threshold the user can set. RSS growth is a
+breach only where it is there: the slope over its limit, the slope's 95 % confidence interval
+above zero and at least ``min_rss_growth_mb`` of growth over the judged window. A window so short
+that growth at the limit would stay under that floor is reported "too short to judge" instead of
+extrapolating a wiggle of a few tenths of a MB to tens of % per hour.
 """
 
 from __future__ import annotations
@@ -63,6 +64,8 @@ def parse_duration(text: str) -> float:
     if not text.strip() or parts is None or not any(parts.groups()):
         raise ValueError(f"not a duration: {text!r} (e.g. 90s, 30m, 2h, 1h30m)")
     h, m, s = (float(g) if g else 0.0 for g in parts.groups())
+    if h * 3600 + m * 60 + s < 10:
+        raise ValueError(f"soak duration {text!r}: at least 10 s (a soak samples its processes every few seconds)")
     return h * 3600 + m * 60 + s
 
 
@@ -71,6 +74,9 @@ class Thresholds:
     max_rss_slope_pct_h: float = 10.0
     max_fd_growth_h: float = 10.0
     max_stall_s: float = 10.0
+    #: RSS growth over the judged window below which no slope is a breach: allocators' arenas and
+    #: Python's free lists move a process's RSS by a few tenths of a MB at random
+    min_rss_growth_mb: float = 5.0
 
 
 def kind_of(name: str) -> str:
@@ -183,12 +189,37 @@ def _host_processes(host: str, pid: int | None) -> dict[str, int]:
         return {}
 
 
-def _theil_sen(t: np.ndarray, y: np.ndarray) -> float:
+def _theil_sen(t: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """The Theil-Sen slope of ``y`` over ``t`` with its 95 % confidence interval (low, high)."""
     from scipy.stats import theilslopes
 
     if len(t) < 3 or np.ptp(t) <= 0:
-        return 0.0
-    return float(theilslopes(y, t)[0])
+        return 0.0, 0.0, 0.0
+    slope, _, low, high = theilslopes(y, t, alpha=0.95)
+    return float(slope), float(low), float(high)
+
+
+def rss_growth(t: np.ndarray, rss: np.ndarray, limits: Thresholds) -> dict[str, Any]:
+    """How a process's RSS moves over its judged window, and whether that is growth that is there:
+    a breach needs the slope over the limit, its 95 % confidence interval above zero, and growth
+    over the window of at least ``min_rss_growth_mb``. A window so short that even growth at the
+    limit would stay under that floor is "too short to judge" (a 0.3 MB wiggle over 30 s would
+    otherwise extrapolate to 80 %/h)."""
+    mean = float(rss.mean()) if len(rss) else 0.0
+    slope, low, _high = _theil_sen(t, rss)
+    window_h = float(np.ptp(t)) / 3600 if len(t) else 0.0
+    pct = slope * 3600 / mean * 100 if mean else 0.0
+    growth_mb = slope * window_h * 3600
+    at_limit_mb = limits.max_rss_slope_pct_h / 100 * mean * window_h
+    if pct > limits.max_rss_slope_pct_h and low > 0 and growth_mb >= limits.min_rss_growth_mb:
+        judged = "grows"
+    elif at_limit_mb < limits.min_rss_growth_mb:
+        judged = "too short to judge"
+    else:
+        judged = "steady"
+    return {"rss_mb_mean": round(mean, 2), "rss_slope_pct_h": round(pct, 2),
+            "rss_slope_low_pct_h": round(low * 3600 / mean * 100 if mean else 0.0, 2),
+            "rss_growth_mb": round(growth_mb, 2), "rss": judged}
 
 
 def fault_breaches(faults: list[dict[str, Any]]) -> list[str]:
@@ -214,21 +245,21 @@ def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summ
             continue
         rows = life[life["wall_s"] >= (first + last) / 2]  # the second half of this process's life
         t, rss, fds = rows["wall_s"].to_numpy(float), rows["rss_mb"].to_numpy(float), rows["fds"].to_numpy(float)
-        mean_rss = float(rss.mean()) if len(rss) else 0.0
-        slope = _theil_sen(t, rss) * 3600 / mean_rss * 100 if mean_rss else 0.0
         fd_slope = float(np.polyfit(t, fds, 1)[0]) * 3600 if len(t) >= 3 and np.ptp(t) > 0 else 0.0
         per_process.append({"process": name, "kind": rows["kind"].iloc[0], "samples": len(rows),
-                            "rss_mb_mean": round(mean_rss, 2), "rss_slope_pct_h": round(slope, 2),
+                            **rss_growth(t, rss, limits),
                             "fd_growth_h": round(fd_slope, 2), "fds_last": int(fds[-1]) if len(fds) else 0})
     by_kind: dict[str, dict[str, Any]] = {}
     for p in per_process:
         if p.get("short_lived"):
             continue
         worst = by_kind.setdefault(p["kind"], {"processes": 0, "rss_slope_pct_h": -math.inf, "fd_growth_h": -math.inf,
-                                              "rss_mb_peak": 0.0})
+                                              "rss_mb_peak": 0.0, "rss": "steady"})
         worst["processes"] += 1
-        if p["rss_slope_pct_h"] > worst["rss_slope_pct_h"]:
-            worst.update(rss_slope_pct_h=p["rss_slope_pct_h"], worst_rss=p["process"])
+        rank = ("steady", "too short to judge", "grows")
+        if (rank.index(p["rss"]), p["rss_slope_pct_h"]) > (rank.index(worst["rss"]), worst["rss_slope_pct_h"]):
+            worst.update(rss_slope_pct_h=p["rss_slope_pct_h"], worst_rss=p["process"], rss=p["rss"],
+                         rss_growth_mb=p["rss_growth_mb"])
         if p["fd_growth_h"] > worst["fd_growth_h"]:
             worst.update(fd_growth_h=p["fd_growth_h"], worst_fds=p["process"])
     for kind, rows in procs.groupby("kind"):
@@ -243,9 +274,10 @@ def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summ
     faults = [dict(zip(["wall_s", "tick", "action", "target", "detail", "outcome"], row)) for row in chaos_rows]
     breaches = []
     for _kind, worst in sorted(by_kind.items()):
-        if worst["rss_slope_pct_h"] > limits.max_rss_slope_pct_h:
-            breaches.append(f"RSS of {worst['worst_rss']} grows {worst['rss_slope_pct_h']:.1f} %/h "
-                            f"(limit {limits.max_rss_slope_pct_h:g})")
+        if worst["rss"] == "grows":
+            breaches.append(f"RSS of {worst['worst_rss']} grows {worst['rss_slope_pct_h']:.1f} %/h, "
+                            f"{worst['rss_growth_mb']:.1f} MB over the judged window "
+                            f"(limit {limits.max_rss_slope_pct_h:g} %/h)")
         if worst["fd_growth_h"] > limits.max_fd_growth_h:
             breaches.append(f"open files of {worst['worst_fds']} grow {worst['fd_growth_h']:.1f}/h "
                             f"(limit {limits.max_fd_growth_h:g})")
@@ -297,7 +329,8 @@ def format_verdict(v: dict[str, Any]) -> str:
     lines = [f"soak verdict: {'PASSED' if v['passed'] else 'FAILED'} after {v['wall_s']:.0f} s, {v['ticks']} ticks "
              f"({v['ticks_per_s']['start']:.1f} ticks/s at the start, {v['ticks_per_s']['end']:.1f} at the end)"]
     for kind, worst in sorted(v["by_kind"].items()):
-        lines.append(f"  {kind:<12} x{worst['processes']:<4} RSS slope {worst['rss_slope_pct_h']:+8.1f} %/h   "
+        judged = " (too short to judge)" if worst.get("rss") == "too short to judge" else ""
+        lines.append(f"  {kind:<12} x{worst['processes']:<4} RSS slope {worst['rss_slope_pct_h']:+8.1f} %/h{judged}   "
                      f"fds {worst['fd_growth_h']:+7.1f}/h   peak RSS {worst['rss_mb_peak']:.0f} MB")
     lines.append(f"  longest stall {v['longest_stall_s']:.2f} s (tick {v['longest_stall_tick']}); ledger "
                  f"{'balanced' if v['conserved'] else 'NOT balanced'}; restarts {v['restarts']}; "

@@ -34,6 +34,7 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import re
 import socket
 import sys
 import time
@@ -46,7 +47,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from tqdm import tqdm
 
@@ -54,6 +54,8 @@ from swarmbed.coordinator import results
 from swarmbed.experiments import claims
 from swarmbed.experiments import config as cfg
 from swarmbed.experiments.executors import Executor, Outcome, resources_for
+from swarmbed.experiments.yamlfile import YamlFileError, parse_yaml, read_yaml
+from swarmbed.wire.schema import SAFE_NAME
 
 TABLE = "sweep.csv"
 PARQUET = "sweep.parquet"
@@ -64,13 +66,13 @@ ERROR = "error.txt"
 
 class ScenarioEntry(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    name: str
+    name: str = Field(pattern=SAFE_NAME)
     set: dict[str, Any] = Field(default_factory=dict)
 
 
 class SweepFile(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    name: str = "sweep"
+    name: str = Field("sweep", pattern=SAFE_NAME)
     base: str
     seed: int = Field(0, ge=0)
     runs: int = Field(1, ge=1)
@@ -111,23 +113,26 @@ class Sweep:
 def _label(value: Any) -> str:
     if isinstance(value, dict):
         value = value.get("name", "-".join(f"{k}{v}" for k, v in value.items()))
-    return str(value).replace("/", "-").replace(" ", "")
+    return re.sub(r"[^A-Za-z0-9_.+=-]", "-", str(value).replace(" ", ""))
 
 
 def _parse_grid(text: str) -> tuple[str, list[Any]]:
     key, sep, raw = text.partition("=")
     if not sep:
         raise cfg.ConfigError(f"--grid {text!r}: expected dotted.key=v1,v2,...")
-    return key.strip(), [yaml.safe_load(v) for v in raw.split(",")]
+    try:
+        return key.strip(), [parse_yaml(v, f"--grid {text}") for v in raw.split(",")]
+    except YamlFileError as exc:
+        raise cfg.ConfigError(str(exc)) from None
 
 
 def load_sweep(path: str | Path, runs: int | None = None, grid: Sequence[str] = (), extra: Sequence[str] = (),
                seed: int | None = None) -> Sweep:
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise cfg.ConfigError(f"{path}: cannot read sweep: {exc}") from None
+        data = read_yaml(path) or {}
+    except YamlFileError as exc:
+        raise cfg.ConfigError(str(exc)) from None
     if not isinstance(data, dict):
         raise cfg.ConfigError(f"{path}: the top level must be a mapping")
     if "base" not in data:  # a plain experiment: sweep over it
@@ -328,12 +333,63 @@ def status(out: Path, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame
     return table
 
 
+def _dotted(data: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(data, dict):
+        return {k: v for key, value in data.items() for k, v in _dotted(value, f"{prefix}{key}.").items()}
+    return {prefix.rstrip("."): data}
+
+
+def config_differences(made: str, planned: str, limit: int = 3) -> str:
+    """What differs between two ``config.yaml`` texts, as ``key: made -> planned`` (at most ``limit``)."""
+    def read(text: str) -> dict[str, Any]:
+        try:
+            return _dotted(parse_yaml(text, "config.yaml") or {})
+        except YamlFileError:
+            return {}
+
+    a, b = read(made), read(planned)
+    keys = sorted(k for k in a.keys() | b.keys() if a.get(k) != b.get(k))
+    shown = [f"{k}: {a.get(k)!r} -> {b.get(k)!r}" for k in keys[:limit]]
+    return ", ".join(shown) + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
+
+
+def _check_completed(specs: list[RunSpec], out: Path, redo: bool) -> None:
+    """A completed run is reused only if it was made under the configuration planned for it now
+    (its ``config.yaml`` byte for byte). Runs made under another are refused with what differs,
+    or, with ``redo``, marked to be run again."""
+    mismatched = []
+    for spec in specs:
+        run_dir = Path(spec.out_dir)
+        if not (run_dir / results.SUMMARY).exists():
+            continue
+        planned = cfg.to_yaml(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra))
+        try:
+            made = (run_dir / results.CONFIG).read_text()
+        except OSError:
+            made = ""
+        if made != planned:
+            mismatched.append((spec, made, planned))
+    if not mismatched:
+        return
+    if redo:
+        for spec, _, _ in mismatched:
+            (Path(spec.out_dir) / results.SUMMARY).unlink(missing_ok=True)
+        return
+    spec, made, planned = mismatched[0]
+    raise cfg.ConfigError(
+        f"{out}: {len(mismatched)} completed run(s) were made under another configuration than this sweep plans "
+        f"(first: {Path(spec.out_dir).relative_to(out)}: {config_differences(made, planned) or 'no config.yaml'}); "
+        f"redo them with --redo-mismatched, or give --out a new folder")
+
+
 def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool = True,
-              executor: Executor | None = None, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame:
+              executor: Executor | None = None, stale_after: float = claims.STALE_AFTER_S,
+              redo_mismatched: bool = False) -> pd.DataFrame:
     """Run every incomplete run of ``sweep`` into ``out`` through ``executor`` (default: the local
     process pool with ``jobs`` workers), then write the tables (on Ctrl-C too, of what completed).
     Runs another command holds are left to it; runs that never started because a worker died are
-    started again once."""
+    started again once. A completed run made under another configuration than planned is refused
+    (or, with ``redo_mismatched``, run again)."""
     from swarmbed.experiments import executors
 
     if jobs is not None and jobs < 1:
@@ -344,6 +400,7 @@ def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool =
     for spec in specs:  # every scenario is valid before anything starts
         if spec.scenario.name not in agents:
             agents[spec.scenario.name] = experiment_for(spec.base, spec.scenario, spec.seed, spec.extra).agents.count
+    _check_completed(specs, out, redo_mismatched)
     write_spec(sweep, out)
     executor = executor or executors.get("local", jobs=jobs)
     todo = [s for s in specs if run_status(Path(s.out_dir), stale_after) != "ok"]

@@ -136,7 +136,7 @@ class RunView:
                      f"copies {net['delivered']:,} delivered / {net['copies']:,}")
         drops = ", ".join(f"{r} {n:,}" for r, n in sorted(s["drops"].items())) or "none"
         head.add_row("dropped", drops, f"late ticks {s.get('late_ticks', 0):,}")
-        agents_alive = sorted({agent_id_of(k) for k in alive if k.startswith("agent/")})
+        agents_alive = sorted({i for k in alive if k.startswith("agent/") and (i := _agent_or_none(k)) is not None})
         procs = [("coordinator", "coordinator" in alive), ("netem", "netem" in alive)]
         head.add_row("processes", "  ".join(f"{n} {'up' if ok else 'DOWN'}" for n, ok in procs),
                      f"agents {len(agents_alive)} up of {len(s['alive'])} in the world")
@@ -249,3 +249,11 @@ def watch(session: zenoh.Session, run_id: str | None, console: Console | None = 
 
 def _gave_up(view: RunView, started: float, wait: float) -> bool:
     return not view.coordinator_seen and time.monotonic() - started > wait
+
+
+def _agent_or_none(key: str) -> int | None:
+    """The agent a token names, or None for a token no agent of a run would hold."""
+    try:
+        return agent_id_of(key)
+    except WireError:
+        return None

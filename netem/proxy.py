@@ -27,16 +27,16 @@ from swarmbed.wire.codec import (
     World,
     decode_agent_out,
     decode_netem_control,
+    decode_netem_stop,
     decode_world,
     encode_inbox,
     encode_netem_step,
     encode_report,
-    unpack,
 )
-from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
+from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
 from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
 from swarmbed.wire.membership import fetch_spec, hand_over
-from swarmbed.wire.rowfile import RowFile
+from swarmbed.wire.rowfile import RowFile, TableWriteError
 from swarmbed.wire.schema import NetemSpec
 from swarmbed.wire.session import open_from_args
 from swarmbed.wire.transport import tcp_counters
@@ -81,7 +81,10 @@ class Proxy:
     def _on_agent_alive(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.DELETE:
             key = str(sample.key_expr)
-            self.events.put(("left", (agent_id_of(key), incarnation_of(key))))
+            try:
+                self.events.put(("left", alive_agent_of(key, self.keys.root, self.spec.agents)))
+            except WireError as exc:
+                self._malformed(key, exc)
 
     def _on_coordinator(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.DELETE:
@@ -122,7 +125,11 @@ class Proxy:
                 log.error("netem: the coordinator went away; exiting (ledger left as %s)", self.sink.part.name)
                 return 3
             if what == "stop":
-                last = int(unpack(data)[0])
+                try:
+                    last = decode_netem_stop(data)
+                except WireError as exc:
+                    self._malformed(self.keys.netem_stop, exc)
+                    continue
                 log.info("netem: run over after tick %d; closing the ledger", last)
                 if self.spec.answer_within is not None:
                     self._await_last_answers(last)
@@ -170,6 +177,8 @@ class Proxy:
         and the first for its tick. Anything else is malformed: dropped and counted."""
         try:
             out = decode_agent_out(data)
+            if not out.agent_id < self.spec.agents:
+                raise WireError(f"output of agent {out.agent_id}, outside 0..{self.spec.agents - 1}")
             if agent_id_of(key) != out.agent_id:
                 raise WireError(f"output of agent {out.agent_id} on another agent's key")
             if out.tick > self.routed + 1:
@@ -306,5 +315,13 @@ def main(argv: list[str] | None = None) -> int:
                       lambda ap: ap.add_argument("--out", required=True, help="run directory for the ledger"), argv)
     keys = Keys(args.run_id)
     with open_from_args(args) as session:
-        spec = fetch_spec(session, keys.netem_config, NetemSpec, f"netem config of run {args.run_id}")
-        return Proxy(spec, keys, session, Path(args.out)).run()
+        try:
+            spec = fetch_spec(session, keys.netem_config, NetemSpec, f"netem config of run {args.run_id}")
+            return Proxy(spec, keys, session, Path(args.out)).run()
+        except Exception as exc:
+            # logged and reported while the session, and with it the liveliness token, is still
+            # held: the launcher stops every child once the token goes, which could cut it off
+            log.exception("netem: failed")
+            why = str(exc) if isinstance(exc, TableWriteError) else f"{type(exc).__name__}: {exc}"
+            hand_over(session, keys.netem_report, encode_report({"kind": "fatal", "error": why}), timeout=5)
+            return 1

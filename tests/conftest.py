@@ -82,3 +82,15 @@ class Operator:
 @pytest.fixture
 def operator(tmp_path) -> Operator:
     return Operator(tmp_path)
+
+
+def whole_rows(path: Path) -> int:
+    """The data rows of CSV file ``path``, asserting that none is torn: the file ends at a line end
+    and every row has as many fields as the header (pandas would read a torn last row silently)."""
+    import csv
+
+    text = path.read_text()
+    assert text.endswith("\n"), f"{path.name} ends in the middle of a row: {text[-40:]!r}"
+    rows = list(csv.reader(text.splitlines()))
+    assert rows and all(len(r) == len(rows[0]) for r in rows), f"{path.name} holds a row of another width"
+    return len(rows) - 1

@@ -1,6 +1,7 @@
 """Admission and access control: the hub (a real Zenoh router) refuses sessions without the run's
 credentials, and holds every identity to its own keys; refused messages never reach our code."""
 
+import csv
 import json
 import os
 import subprocess
@@ -11,6 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import psutil
 import pytest
 import zenoh
 
@@ -61,7 +63,7 @@ def test_the_launcher_keeps_credentials_off_the_command_line_and_removes_them():
         RunAccess(Keys("abc123"), range(3), [Identity.new("agent-1", "operator")])
     access.close()
     assert not access.folder.exists()
-    rules = access_rules(Keys("abc123"), [0], operators=["me"], hosts=[])
+    rules = access_rules(Keys("abc123"), [0], operators=["me"], hosts={})
     assert rules["default_permission"] == "deny" and {p["subjects"][0] for p in rules["policies"]} == {
         "netem", "agent-0", "operators"}
 
@@ -200,5 +202,162 @@ def test_junk_at_every_key_is_refused_or_counted_and_changes_nothing(tmp_path, o
     for s in summaries:
         s["network"].pop("malformed")
     assert summaries[0] == summaries[1]
+    for name in ("timeseries.csv", "agents.csv", "network_ledger.csv"):
+        assert (tmp_path / "clean" / name).read_bytes() == (tmp_path / "attacked" / name).read_bytes(), name
+
+
+def _agent_process(keys: Keys, agent: int) -> psutil.Process:
+    """The local process of ``agent`` in run ``keys`` (the fork server titles each with its arguments)."""
+    for proc in psutil.process_iter(["cmdline"]):
+        cmd = proc.info["cmdline"] or []
+        if keys.run_id in " ".join(cmd) and "swarmbed.agent_runtime" in " ".join(cmd) and "--id" in cmd \
+                and cmd[cmd.index("--id") + 1] == str(agent):
+            return proc
+    raise AssertionError(f"no process of agent {agent}")
+
+
+def test_a_host_identity_may_carry_only_its_own_agents_and_act_only_as_its_own_host(tmp_path, operator):
+    """A host admitted as h1 that may carry agent 2 (and nothing placed on it): with its
+    credentials, processes try, while the run goes, everything an admitted host must not do. The
+    hub refuses all of it; what it may do (read agent 2's inputs, announce and serve h1) goes through."""
+    host = Identity.new("host-h1", "host", host="h1")
+    host_file = write_credentials(tmp_path / "h1.json", host)
+    seen: dict = {}
+    threads: list[threading.Thread] = []
+
+    def attack(keys: Keys, endpoint: str) -> None:
+        def session(path: Path) -> zenoh.Session:
+            return zenoh.open(zenoh_config("client", [endpoint], credentials=str(path)))
+
+        with session(host_file) as listener, session(host_file) as s, session(operator.path) as op:
+            heard: dict[int, list] = {0: [], 2: []}  # a session of its own: never its own puts
+            subs = [listener.declare_subscriber(keys.agent_in(i), lambda sample, i=i: heard[i].append(1))
+                    for i in heard]
+            for key in (keys.agent_out(0), keys.agent_in(2), keys.agent_in(0), keys.world, keys.netem_step):
+                for junk in (b"\xc1", pack([0, 1, {}, b""]), os.urandom(32)):
+                    s.put(key, junk, congestion_control=BLOCK)
+            seen["report of agent 0 taken"] = hand_over(s, keys.agent_report(0), b"\xc1", timeout=2)
+            tokens = [s.liveliness().declare_token(k) for k in ("swarmbed/hosts/h1", "swarmbed/hosts/fake",
+                                                                 keys.alive_agent(0, 7), keys.alive_agent(2, 7))]
+            serve = [s.declare_queryable(f"swarmbed/hosts/{h}/info",
+                                         lambda q, h=h: q.reply(f"swarmbed/hosts/{h}/info", h))
+                     for h in ("h1", "fake")]
+            time.sleep(1.5)
+            seen["tokens"] = sorted(str(r.ok.key_expr) for r in op.liveliness().get("swarmbed/hosts/**", timeout=2)
+                                    if r.ok is not None)
+            seen["agent tokens"] = sorted(str(r.ok.key_expr).split("/alive/agent/")[1]
+                                          for r in op.liveliness().get(keys.alive_agents, timeout=2)
+                                          if r.ok is not None and str(r.ok.key_expr).endswith("/7"))
+            seen["answers"] = sorted(r.ok.payload.to_string() for r in op.get("swarmbed/hosts/*/info", timeout=2)
+                                     if r.ok is not None)
+            for entity in subs + tokens + serve:
+                entity.undeclare()
+            seen["heard"] = {i: len(v) > 0 for i, v in heard.items()}
+
+    def in_the_background(keys: Keys, endpoint: str) -> None:
+        threads.append(threading.Thread(target=attack, args=(keys, endpoint)))
+        threads[-1].start()
+
+    sets = ["allocator={name: noop, peers: 3}", "scenario.initial_tasks=0", "run.stop_when_done=false",
+            "run.duration=6000"]
+    attacked = run_experiment(experiment(*sets, "may_carry={h1: 2}"), tmp_path / "attacked", progress=False,
+                              on_ready=in_the_background, admit=[host, operator.identity])
+    threads[0].join(timeout=30)
+    run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
+    assert seen == {"report of agent 0 taken": False, "heard": {0: False, 2: True},
+                    "tokens": ["swarmbed/hosts/h1"], "agent tokens": ["2/7"], "answers": ["h1"]}
+    assert attacked.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}
+    same_results(tmp_path / "clean", tmp_path / "attacked")
+
+
+def test_a_swap_to_a_host_that_may_not_carry_the_agent_is_refused_before_anything_moves(tmp_path, operator):
+    """An operator asks to move agent 1 to h9, an admitted host that may carry only agent 4: the
+    coordinator refuses it (the hub would refuse that host agent 1's keys) and nothing moves."""
+    host = Identity.new("host-h9", "host", host="h9")
+    asked = {}
+
+    def ask(keys: Keys, endpoint: str) -> None:
+        proc = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
+                               "--agent", "1", "--to", "h9", *operator.args], capture_output=True, text=True,
+                              timeout=120)
+        asked["rc"], asked["out"], asked["err"] = proc.returncode, proc.stdout, proc.stderr
+
+    threads: list[threading.Thread] = []
+
+    def from_another_terminal(keys: Keys, endpoint: str) -> None:
+        threads.append(threading.Thread(target=ask, args=(keys, endpoint)))
+        threads[-1].start()
+
+    sets = ["allocator.name=cbba", "run.duration=1000", "run.stop_when_done=false", "may_carry={h9: 4}"]
+    run_experiment(experiment(*sets), tmp_path / "run", progress=False, admit=[host, operator.identity],
+                   on_ready=from_another_terminal)
+    threads[0].join(timeout=60)
+    assert "host h9 may not carry agent 1" in asked["out"] + asked["err"], asked
+
+
+def test_state_nobody_asked_for_is_refused_even_from_the_agent_itself(tmp_path):
+    """Agent 3's own identity hands the coordinator a snapshot and a checkpoint it never asked for,
+    then its process is killed: the snapshot is refused, and the restart starts agent 3 fresh
+    instead of restoring the planted checkpoint."""
+    from swarmbed.wire.codec import encode_handover, encode_report
+
+    seen = {}
+
+    def plant(keys: Keys, endpoint: str) -> None:
+        with zenoh.open(zenoh_config("client", [endpoint], credentials=str(stolen(keys, "agent-3")))) as s:
+            for ticket in (b"", b"\x00" * 16, os.urandom(16)):
+                seen.setdefault("snapshots taken", []).append(
+                    hand_over(s, keys.agent_snapshot(3), encode_handover(ticket, b"\xc1"), timeout=2))
+            for ticket in (b"", b"\x00" * 16, None):
+                hand_over(s, keys.agent_report(3), encode_report(
+                    {"kind": "checkpoint", "agent": 3, "incarnation": 0, "ticks": 1, "state": b"\xc1",
+                     **({"ticket": ticket} if ticket is not None else {})}))
+        time.sleep(0.5)
+        _agent_process(keys, 3).kill()
+
+    sets = ["agents.count=5", "allocator={name: noop, peers: 3}", "scenario.initial_tasks=0",
+            "run.stop_when_done=false", "run.duration=3000", "run.on_agent_loss=restart"]
+    result = run_experiment(experiment(*sets), tmp_path / "run", progress=False, on_ready=plant)
+    assert seen["snapshots taken"] == [False, False, False]
+    with open(tmp_path / "run" / "restarts.csv") as f:
+        first = next(csv.DictReader(f))
+    assert first["agent"] == "3" and first["outcome"] == "ok" and first["checkpoint_tick"] == "", first
+    assert result.summary["agents_lost"] == {}
+
+
+def test_on_an_open_hub_malformed_keys_and_control_samples_are_counted_not_fatal(tmp_path):
+    """With --no-auth nothing stops a sample at the router: well-formed outputs on agent keys that
+    name no agent (not a number, negative, out of range), junk on the proxy's stop and control
+    keys, and liveliness tokens with such keys that come and go. Each is counted as malformed by
+    whoever parses it; the run completes with the results of a clean run."""
+    done = threading.Event()
+
+    def attack(keys: Keys, endpoint: str) -> None:
+        with zenoh.open(zenoh_config("client", [endpoint])) as s:
+            for chunk in ("abc", "-1", "+1", "1_0", "99999", "007", "٣"):
+                s.put(f"{keys.root}/agent/{chunk}/out", encode_agent_out(0, 1, ["stop"], []),
+                      congestion_control=BLOCK)
+            for key in (keys.netem_stop, keys.netem_control):
+                for junk in (b"\xc1", pack({"tick": "x"}), pack([]), os.urandom(64)):
+                    s.put(key, junk, congestion_control=BLOCK)
+            tokens = [s.liveliness().declare_token(f"{keys.root}/alive/agent/{chunk}") for chunk in
+                      ("abc/0", "1/x", "99999/0", "3/0/extra", "-2/0")]
+            time.sleep(0.5)
+            for token in tokens:
+                token.undeclare()
+            time.sleep(0.5)
+        done.set()
+
+    def in_the_background(keys: Keys, endpoint: str) -> None:
+        threading.Thread(target=attack, args=(keys, endpoint), daemon=True).start()
+
+    sets = ["agents.count=5", "allocator={name: noop, peers: 3}", "scenario.initial_tasks=0",
+            "run.stop_when_done=false", "run.duration=3000"]
+    attacked = run_experiment(experiment(*sets), tmp_path / "attacked", progress=False, auth=False,
+                              on_ready=in_the_background)
+    assert done.is_set(), "the run ended before all junk was sent"
+    run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
+    malformed = attacked.summary["network"]["malformed"]
+    assert malformed["netem"] >= 7 + 8 and malformed["coordinator"] >= 5, malformed
     for name in ("timeseries.csv", "agents.csv", "network_ledger.csv"):
         assert (tmp_path / "clean" / name).read_bytes() == (tmp_path / "attacked" / name).read_bytes(), name

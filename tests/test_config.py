@@ -121,3 +121,53 @@ def test_run_help_shows_no_python_internals(capsys):
     out = capsys.readouterr().out
     assert "allocator.theta_bid_change" in out and "float" in out
     assert main(["params", "nosuch"]) == 2
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("run:\n  dt: .inf\n", "run.dt: infinite and NaN numbers are not accepted"),
+    ("network:\n  range: .nan\n", "network.range: infinite and NaN numbers are not accepted"),
+    ("allocator:\n  name: cbba\n  epsilon: -.inf\n", "allocator.epsilon: infinite and NaN"),
+    ("run:\n  seed: true\n", "run.seed: Input should be a valid integer"),
+    ("network:\n  loss: '0.1'\n", "network.loss: Input should be a valid number"),
+    ("run:\n  duration: 1.0e+12\n  dt: 0.001\n", "more than the 100,000,000 a run may have"),
+    ("agents:\n  count: 5\nplacement:\n  h1: 0-1000000000\n", "placement.h1: agent 1000000000 is outside 0..4"),
+    ("agents:\n  count: 5\nmay_carry:\n  h1: '3-99'\n", "may_carry.h1: agent 99 is outside 0..4"),
+    ("name: ../../etc\n", "name: String should match pattern"),
+    ("name: /tmp/elsewhere\n", "name: String should match pattern"),
+    ("base: &b {count: 3}\nagents: *b\n", "anchors and aliases"),
+    ("a: " + "[" * 40 + "]" * 40 + "\n", "nested more than 32 levels deep"),
+])
+def test_input_that_must_never_reach_a_process_is_refused_in_one_line(tmp_path, text, needle):
+    with pytest.raises(cfg.ConfigError) as info:
+        load_text(tmp_path, text)
+    assert needle in str(info.value), str(info.value)
+    assert str(tmp_path / "exp.yaml") in str(info.value)
+
+
+def test_binary_huge_and_non_utf8_files_are_refused_before_they_are_parsed(tmp_path):
+    cases = {"binary.yaml": b"\x7fELF\x02\x01\x01\0\0\0", "latin1.yaml": "name: caf\xe9\n".encode("latin-1"),
+             "huge.yaml": b"# padding\n" * 200_000}
+    needles = {"binary.yaml": "a binary file", "latin1.yaml": "not UTF-8 text", "huge.yaml": "larger than the"}
+    for name, data in cases.items():
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(cfg.ConfigError) as info:
+            cfg.load(tmp_path / name)
+        assert needles[name] in str(info.value) and len(str(info.value).splitlines()) == 1, str(info.value)
+
+
+def test_a_billion_laughs_sweep_file_is_refused_at_once(tmp_path):
+    """A few hundred bytes of nested aliases expand tenfold per level: refused, not expanded."""
+    import time
+
+    from swarmbed.experiments.sweep import load_sweep
+
+    lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x, x]"]
+    lines += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]" for i in range(1, 9)]
+    (tmp_path / "laughs.yaml").write_text("\n".join(lines) + "\nbase: quickstart.yaml\nset: {x: *a8}\n")
+    t0 = time.perf_counter()
+    with pytest.raises(cfg.ConfigError, match="anchors and aliases"):
+        load_sweep(tmp_path / "laughs.yaml")
+    assert time.perf_counter() - t0 < 1.0
+    (tmp_path / "escape.yaml").write_text("name: ../../outside\nbase: quickstart.yaml\n")
+    with pytest.raises(cfg.ConfigError, match="name: String should match pattern"):
+        load_sweep(tmp_path / "escape.yaml")

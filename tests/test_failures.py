@@ -5,6 +5,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import psutil
 import pytest
@@ -54,6 +55,7 @@ def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
         noticed = time.monotonic() - killed_at
         assert runner.returncode == 1
         assert "agent 2 stopped at tick" in err and "logs/agent_2.log" in err
+        assert "its process was killed by signal SIGKILL" in err, err
         assert noticed < 10, f"took {noticed:.1f} s"
         assert not (tmp_path / "summary.json").exists()
     gone, alive = psutil.wait_procs(children, timeout=5)
@@ -95,6 +97,7 @@ def test_crashed_proxy_stops_the_run_with_a_clear_message(tmp_path):
     _, err = runner.communicate(timeout=60)
     assert runner.returncode == 1
     assert "netem proxy exited unexpectedly" in err and "logs/netem.log" in err
+    assert "netem was killed by signal SIGKILL" in err, err
     _, alive = psutil.wait_procs(children, timeout=5)
     assert not alive
 
@@ -178,3 +181,23 @@ def test_a_second_agent_with_a_taken_id_is_refused(tmp_path):
     result = run_experiment(exp, tmp_path, progress=False, on_ready=second, auth=False)  # with auth: test_access.py
     assert refused["rc"] == 2 and "agent 1 of run" in refused["err"] and "already running" in refused["err"]
     assert result.summary["ticks"] > 0 and not result.summary["agents_lost"]
+
+
+def test_a_coordinator_that_fails_while_being_built_leaves_no_process_or_credentials(tmp_path, monkeypatch):
+    """A run whose coordinator raises in its constructor (a scenario's world that cannot be built,
+    say) stops the fork server it had started and removes the run's private credentials folder."""
+    import tempfile
+
+    from swarmbed.experiments import runner
+
+    class Broken(runner.Coordinator):
+        def __init__(self, *args, **kwargs):
+            raise RuntimeError("the world cannot be built")
+
+    monkeypatch.setattr(runner, "Coordinator", Broken)
+    before = set(Path(tempfile.gettempdir()).glob("swarmbed-*-*"))
+    with pytest.raises(RuntimeError, match="cannot be built"):
+        run_experiment(experiment(), tmp_path / "run", progress=False)
+    assert set(Path(tempfile.gettempdir()).glob("swarmbed-*-*")) <= before
+    _, alive = psutil.wait_procs(psutil.Process().children(recursive=True), timeout=5)
+    assert not alive, [p.cmdline() for p in alive]

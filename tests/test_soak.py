@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -22,10 +23,19 @@ from swarmbed.experiments.access import OWNER, RunAccess, remove_orphaned_folder
 from swarmbed.experiments.chaos import CHAOS_COLUMNS, CUT_SHORT, Chaos, ChaosError, ChaosPlan, load_chaos
 from swarmbed.experiments.report import report
 from swarmbed.experiments.runner import run_experiment
-from swarmbed.experiments.soak import PROCESSES, RUN, VERDICT, Thresholds, fault_breaches, parse_duration, soak
+from swarmbed.experiments.soak import (
+    PROCESSES,
+    RUN,
+    VERDICT,
+    Thresholds,
+    fault_breaches,
+    parse_duration,
+    rss_growth,
+    soak,
+)
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.rowfile import RowFile
-from tests.conftest import ROOT, experiment
+from tests.conftest import ROOT, experiment, whole_rows
 from tests.test_report import CHROMIUM, NO_CHROMIUM, assert_renders
 
 SOAK = ROOT / "experiments" / "soak" / "sar_soak.yaml"
@@ -50,10 +60,30 @@ def test_a_streamed_table_is_the_table_written_at_once_and_parses_at_every_momen
     assert not (tmp_path / "cut.csv").exists() and not (tmp_path / "cut.csv.part").exists()
 
 
+def test_rss_growth_is_judged_only_where_it_is_there():
+    """The wiggle of the issue (71.6-72.1 MB over 30 s, which extrapolated to 81 %/h) is too short
+    to judge; the same wiggle over two hours is steady; a real leak over a minute grows."""
+    rng = np.random.default_rng(1)
+    limits = Thresholds()
+    t = np.arange(0.0, 31.0)
+    wiggle = 71.6 + np.linspace(0, 0.3, len(t)) + rng.uniform(0, 0.2, len(t))
+    assert rss_growth(t, wiggle, limits)["rss"] == "too short to judge"
+    hours = np.arange(0.0, 7200.0, 30.0)
+    assert rss_growth(hours, 72 + rng.uniform(-0.3, 0.3, len(hours)), limits)["rss"] == "steady"
+    leak = np.arange(0.0, 60.0)
+    judged = rss_growth(leak, 72 + 0.5 * leak + rng.uniform(-0.3, 0.3, len(leak)), limits)
+    assert judged["rss"] == "grows" and judged["rss_growth_mb"] > 25
+    slow = rss_growth(hours, 72 + hours / 7200 * 20 + rng.uniform(-0.3, 0.3, len(hours)), limits)  # 12 %/h
+    assert slow["rss"] == "grows" and slow["rss_slope_low_pct_h"] > 0
+
+
 def test_durations_and_chaos_files_are_checked_with_clear_errors(tmp_path):
     assert parse_duration("90") == 90 and parse_duration("2h") == 7200 and parse_duration("1h30m") == 5400
     with pytest.raises(ValueError, match="not a duration"):
         parse_duration("soon")
+    for short in ("0s", "0", "5s"):
+        with pytest.raises(ValueError, match="at least 10 s"):
+            parse_duration(short)
     bad = tmp_path / "chaos.yaml"
     bad.write_text("events:\n  - action: loss_burst\n    at: [3]\n    for: 2\n")
     with pytest.raises(ChaosError, match=r"chaos.yaml: events\.0.*needs `loss`"):
@@ -61,8 +91,8 @@ def test_durations_and_chaos_files_are_checked_with_clear_errors(tmp_path):
     bad.write_text("events:\n  - action: melt_cpu\n    at: [3]\n")
     with pytest.raises(ChaosError, match=r"events\.0\.action"):
         load_chaos(bad)
-    out = subprocess.run([sys.executable, "-m", "swarmbed", "soak", str(SOAK), "--duration", "5s", "--chaos", str(bad)],
-                         capture_output=True, text=True, cwd=tmp_path)
+    out = subprocess.run([sys.executable, "-m", "swarmbed", "soak", str(SOAK), "--duration", "15s", "--chaos",
+                          str(bad)], capture_output=True, text=True, cwd=tmp_path)
     assert out.returncode == 2 and "melt_cpu" not in out.stdout and "action" in out.stderr
 
 
@@ -162,7 +192,8 @@ def test_an_allocator_that_leaks_fails_the_verdict_on_its_rss(tmp_path):
     exp = experiment(f"allocator={{name: '{plugin}:Leaky'}}", "agents.count=3", "run.dt=0.1")
     v = soak(exp, tmp_path / "soak", 16, interval=1.0, limits=SHORT)
     assert not v["passed"]
-    assert v["by_kind"]["agent"]["rss_slope_pct_h"] > 5 * SHORT.max_rss_slope_pct_h
+    assert v["by_kind"]["agent"]["rss_slope_pct_h"] > SHORT.max_rss_slope_pct_h
+    assert v["by_kind"]["agent"]["rss"] == "grows"
     assert any(b.startswith("RSS of agent_") for b in v["breaches"])
     assert not any("coordinator" in b or "netem" in b for b in v["breaches"])
 
@@ -215,18 +246,18 @@ def test_a_killed_soak_leaves_files_that_parse(tmp_path):
     soak_proc.wait()
     time.sleep(1.0)
     for name in (RUN, PROCESSES, "timeseries.csv", "network_ledger.csv"):
-        table = pd.read_csv(out / (name + ".part"))  # a header and whole rows
-        assert len(table.columns) > 3, name
+        whole_rows(out / (name + ".part"))  # a header and whole rows, the last one too
+        assert len(pd.read_csv(out / (name + ".part")).columns) > 3, name
     assert len(pd.read_csv(out / ("timeseries.csv.part"))) > 0
     assert not (out / "summary.json").exists() and not (out / VERDICT).exists()
     assert "No verdict" in report(out, tmp_path / "killed.html").read_text()  # reported from its .part files
     # its private credentials folder outlived it; the next run's launcher removes it, and no live run's
     left = [f for f in Path(tempfile.gettempdir()).glob("swarmbed-*-*")
             if (f / OWNER).exists() and json.loads((f / OWNER).read_text())["pid"] == soak_proc.pid]
-    assert len(left) == 1
+    assert len(left) <= 1  # another launcher on this machine (a test beside this one) may have cleared it
     live = RunAccess(Keys("live"), [0])  # a new run's launcher clears what dead launchers left
     try:
-        assert not left[0].exists() and live.folder.exists()
+        assert not any(f.exists() for f in left) and live.folder.exists()
         assert live.folder not in remove_orphaned_folders()  # a live launcher's folder stays
     finally:
         live.close()

@@ -65,6 +65,25 @@ def test_rerunning_a_sweep_keeps_completed_runs_and_redoes_the_rest(sweep_dir):
     assert (table["status"] == "ok").sum() == 4
 
 
+def test_a_rerun_under_another_configuration_never_reuses_completed_runs(sweep_dir, tmp_path):
+    """The same sweep again with --set network.loss=0.3 into the same folder: the completed runs
+    were made without loss, so the sweep refuses to pass them off as this configuration's, naming
+    the first and what differs; with redo_mismatched it runs them again under the new one."""
+    import shutil
+
+    out = tmp_path / "out"
+    shutil.copytree(sweep_dir / "out", out)
+    changed = load_sweep(sweep_dir / "sweep.yaml", extra=["run.duration=150", "network.loss=0.3"])
+    with pytest.raises(cfg.ConfigError) as info:
+        run_sweep(changed, out, jobs=2, progress=False)
+    assert "4 completed run(s) were made under another configuration" in str(info.value)
+    assert "network.loss: 0.0 -> 0.3" in str(info.value) and "--redo-mismatched" in str(info.value)
+    table = run_sweep(changed, out, jobs=2, progress=False, redo_mismatched=True)
+    assert (table["status"] == "ok").sum() == 4
+    assert "loss: 0.3" in (out / "fast_range-30" / "run_000" / "config.yaml").read_text()
+    assert (table[table["status"] == "ok"]["network.dropped.loss"] > 0).all()
+
+
 def test_analyze_writes_tables_and_figures(sweep_dir):
     written = analyze(sweep_dir / "out")
     names = {p.name for p in written}

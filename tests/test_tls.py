@@ -47,18 +47,25 @@ def test_a_host_over_tls_gives_the_all_local_results_and_strangers_are_refused(t
     certs(lab, "hub=127.0.0.1", "h1")
     certs(elsewhere, "intruder")
     hub = free_loopback_endpoint().replace("tcp/", "tls/")
-    host_id = Identity.new("host-h1", "host")
+    host_id = Identity.new("host-h1", "host", host="h1")
     creds = write_credentials(tmp_path / "h1.credentials", host_id)
     daemon = subprocess.Popen([sys.executable, "-m", "swarmbed", "host", "--name", "h1", "--connect", hub,
                                "--tls", str(lab), "--credentials", str(creds), "--logs", str(tmp_path / "h1")],
                               stdout=subprocess.DEVNULL, stderr=open(tmp_path / "host.log", "wb"))
     refused = {}
+    # an admitted operator's valid credentials, the lab's CA trusted, but no certificate of its own:
+    # only mutual TLS refuses it (the other strangers would be refused by the password check alone)
+    insider = Identity.new("tester", "operator")
+    insider_file = write_credentials(tmp_path / "insider.json", insider)
+    no_cert = {"transport/link/tls": {"root_ca_certificate": str((lab / "ca.pem").resolve()),
+                                      "verify_name_on_connect": True}}
 
     def strangers(keys, endpoint):
-        for name, settings in (("foreign CA", tls_settings(elsewhere, "intruder")), ("plain", None)):
+        for name, settings, creds in (("foreign CA", tls_settings(elsewhere, "intruder"), None), ("plain", None, None),
+                                      ("credentials, no certificate", no_cert, str(insider_file))):
             target = hub if settings else hub.replace("tls/", "tcp/")
             try:
-                zenoh.open(zenoh_config("client", [target], settings=settings)).close()
+                zenoh.open(zenoh_config("client", [target], credentials=creds, settings=settings)).close()
                 refused[name] = False
             except zenoh.ZError:
                 refused[name] = True
@@ -66,11 +73,11 @@ def test_a_host_over_tls_gives_the_all_local_results_and_strangers_are_refused(t
     sets = ["agents.count=4", "allocator={name: cbba}", "run.duration=120", "run.stop_when_done=false"]
     try:
         run_experiment(experiment(*sets, "placement={h1: '1-2'}"), tmp_path / "tls", progress=False, listen=[hub],
-                       tls=tls_settings(lab, "hub"), admit=[host_id], on_ready=strangers)
+                       tls=tls_settings(lab, "hub"), admit=[host_id, insider], on_ready=strangers)
     finally:
         daemon.send_signal(signal.SIGTERM)
         daemon.wait(timeout=20)
     run_experiment(experiment(*sets), tmp_path / "local", progress=False)
     same_results(tmp_path / "local", tmp_path / "tls")
-    assert refused == {"foreign CA": True, "plain": True}
+    assert refused == {"foreign CA": True, "plain": True, "credentials, no certificate": True}
     assert '"1": "h1"' in (tmp_path / "tls" / "deployment.json").read_text()

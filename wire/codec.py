@@ -17,6 +17,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from swarmbed.wire.errors import WireError
+
 BROADCAST = -1
 
 TAG_TICK = 0
@@ -32,10 +34,6 @@ CONTROLS = {TAG_SNAPSHOT: "snapshot", TAG_RESUME: "resume", TAG_RETIRE: "retire"
 # larger one is malformed (dropped and counted) before it is unpacked, so that junk cannot make a
 # process allocate without bound.
 MAX_AGENT_SAMPLE_BYTES = 16 * 2**20
-
-
-class WireError(ValueError):
-    """A sample that does not follow the wire contract."""
 
 
 _packers = threading.local()
@@ -181,8 +179,9 @@ def encode_stop(reason: str) -> bytes:
     return pack([TAG_STOP, reason])
 
 
-def encode_control(tag: int, incarnation: int) -> bytes:
-    return pack([tag, incarnation])
+def encode_control(tag: int, incarnation: int, ticket: bytes = b"") -> bytes:
+    """An order for one incarnation; ``ticket``: what the answer must carry (snapshot, checkpoint)."""
+    return pack([tag, incarnation, ticket] if ticket else [tag, incarnation])
 
 
 @dataclass(frozen=True, slots=True)
@@ -203,6 +202,7 @@ class ControlIn:
 
     order: str
     incarnation: int
+    ticket: bytes = b""  # to send back with the state asked for (coordinator.tickets)
 
 
 def decode_agent_in(data: bytes) -> TickIn | StopIn | ControlIn:
@@ -219,8 +219,11 @@ def decode_agent_in(data: bytes) -> TickIn | StopIn | ControlIn:
         _expect(len(msg) == 2 and isinstance(msg[1], str), "stop must be [1, reason]")
         return StopIn(msg[1])
     if msg[0] in CONTROLS:
-        _expect(len(msg) == 2 and _is_int(msg[1]) and msg[1] >= 0, "a swap order must be [tag, incarnation]")
-        return ControlIn(CONTROLS[msg[0]], msg[1])
+        _expect(len(msg) in (2, 3) and _is_int(msg[1]) and msg[1] >= 0,
+                "a swap order must be [tag, incarnation] or [tag, incarnation, ticket]")
+        ticket = msg[2] if len(msg) == 3 else b""
+        _expect(isinstance(ticket, bytes) and len(ticket) <= 64, "a ticket must be at most 64 bytes")
+        return ControlIn(CONTROLS[msg[0]], msg[1], ticket)
     raise WireError(f"unknown agent input tag {msg[0]}")
 
 
@@ -334,6 +337,30 @@ def decode_status(data: bytes) -> dict:
 
 
 # --- reports (maps: rare, and read by people too) ---------------------------------------------
+
+def encode_netem_stop(last_tick: int) -> bytes:
+    """Coordinator -> proxy: the run is over after ``last_tick`` (-1: before any tick)."""
+    return pack([last_tick])
+
+
+def decode_netem_stop(data: bytes) -> int:
+    msg = unpack(data)
+    _expect(isinstance(msg, list) and len(msg) == 1 and _is_int(msg[0]) and msg[0] >= -1,
+            "a stop order must be [last tick]")
+    return msg[0]
+
+
+def encode_handover(ticket: bytes, state: bytes) -> bytes:
+    """A swap's snapshot as the old process hands it over: the order's ticket, then the state."""
+    return pack([ticket, state])
+
+
+def decode_handover(data: bytes) -> tuple[bytes, bytes]:
+    msg = unpack(data, MAX_AGENT_SAMPLE_BYTES)
+    _expect(isinstance(msg, list) and len(msg) == 2 and all(isinstance(m, bytes) for m in msg),
+            "a snapshot handover must be [ticket, state]")
+    return msg[0], msg[1]
+
 
 def encode_report(report: dict) -> bytes:
     return pack(report)

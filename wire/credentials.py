@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import secrets
 import stat
 from collections.abc import Iterable
@@ -31,12 +32,20 @@ class Identity:
     user: str
     password: str
     role: str
+    host: str = ""  # role host: the one host name this identity may act as (its user name if empty)
 
     @classmethod
-    def new(cls, user: str, role: str) -> Identity:
+    def new(cls, user: str, role: str, host: str = "") -> Identity:
         if not user or ":" in user or any(c.isspace() for c in user):
             raise CredentialsError(f"user name {user!r}: must be non-empty, without ':' or spaces")
-        return cls(user, secrets.token_urlsafe(24), role)
+        if host and not re.fullmatch(r"[A-Za-z0-9_.-]+", host):
+            raise CredentialsError(f"host name {host!r}: letters, digits, _ . - only")
+        return cls(user, secrets.token_urlsafe(24), role, host if role == "host" else "")
+
+    @property
+    def host_name(self) -> str:
+        """The host a host identity is bound to: its daemon must run under this ``--name``."""
+        return self.host or self.user
 
 
 def open_private(path: str | Path, mode: str = "w") -> IO:
@@ -68,7 +77,8 @@ def read_credentials(path: str | Path) -> Identity:
                                f"run chmod 600 {path}")
     try:
         data = json.loads(text)
-        identity = Identity(str(data["user"]), str(data["password"]), str(data.get("role", "operator")))
+        identity = Identity(str(data["user"]), str(data["password"]), str(data.get("role", "operator")),
+                            str(data.get("host", "")))
     except (ValueError, KeyError, TypeError):
         raise CredentialsError(f"credentials file {path}: not a JSON object with user and password") from None
     return identity

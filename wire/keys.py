@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from swarmbed.wire.errors import WireError
+
 PREFIX = "swarmbed"
 
 
@@ -114,21 +116,43 @@ class Keys:
         return f"{self.root}/alive/**"
 
 
+def _number(text: str) -> int:
+    """A key chunk that is a number as we write them (``0``, ``17``), else WireError; ``int()``
+    alone would take ``+1``, ``1_0`` or ``٣``."""
+    if not (text.isascii() and text.isdigit()) or len(text) > 9 or (len(text) > 1 and text[0] == "0"):
+        raise WireError(f"{text!r} is not a number")
+    return int(text)
+
+
 def incarnation_of(key: str) -> int:
-    """The incarnation in ``.../alive/agent/<id>/<incarnation>``."""
+    """The incarnation in ``.../alive/agent/<id>/<incarnation>``; a WireError if there is none."""
     try:
-        return int(str(key).rsplit("/", 1)[1])
-    except (ValueError, IndexError) as exc:
-        raise ValueError(f"no incarnation in key {key!r}") from exc
+        return _number(str(key).rsplit("/", 1)[1])
+    except (WireError, IndexError):
+        raise WireError(f"no incarnation in key {key!r}") from None
 
 
 def agent_id_of(key: str) -> int:
-    """The agent id in ``.../agent/<id>/...`` or ``.../alive/agent/<id>``."""
+    """The agent id in ``.../agent/<id>/...`` or ``.../alive/agent/<id>``; a WireError (which
+    receivers count as malformed) if there is none."""
     parts = str(key).split("/")
     try:
-        return int(parts[parts.index("agent") + 1])
-    except (ValueError, IndexError) as exc:
-        raise ValueError(f"no agent id in key {key!r}") from exc
+        return _number(parts[parts.index("agent") + 1])
+    except (WireError, ValueError, IndexError):
+        raise WireError(f"no agent id in key {key!r}") from None
+
+
+def alive_agent_of(key: str, root: str, n_agents: int) -> tuple[int, int]:
+    """(agent, incarnation) of a token key ``<root>/alive/agent/<id>/<incarnation>`` with
+    ``0 <= id < n_agents``; anything else is a WireError."""
+    parts = str(key).split("/")
+    head = f"{root}/alive/agent".split("/")
+    if len(parts) != len(head) + 2 or parts[:len(head)] != head:
+        raise WireError(f"not an agent's token: {key!r}")
+    agent, incarnation = agent_id_of(key), incarnation_of(key)
+    if agent >= n_agents:
+        raise WireError(f"token of agent {agent}, outside 0..{n_agents - 1}: {key!r}")
+    return agent, incarnation
 
 
 HOSTS = f"{PREFIX}/hosts"
@@ -163,5 +187,5 @@ def host_name_of(key: str) -> str:
     """The host name in ``swarmbed/hosts/<name>[/...]``."""
     parts = str(key).split("/")
     if parts[:2] != HOSTS.split("/") or len(parts) < 3:
-        raise ValueError(f"no host name in key {key!r}")
+        raise WireError(f"no host name in key {key!r}")
     return parts[2]

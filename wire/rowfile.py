@@ -9,11 +9,17 @@ moves the complete file to its name; :meth:`RowFile.abandon` keeps what was writ
 
 The bytes are those of :func:`csv.writer` with ``\\n`` line ends: a table streamed here equals
 the same table written in one go.
+
+A write that fails part way (a full disk) never leaves a torn row: the file is cut back to the
+end of the last whole row it held, and the error says what happened where in one line
+(:class:`TableWriteError`). Abandoning a table after such an error keeps the whole rows and does
+not raise again, so the first error is the one reported.
 """
 
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import os
 import time
@@ -22,6 +28,24 @@ from pathlib import Path
 from typing import Any
 
 PARTIAL_PREFIX = "partial_"
+
+
+class TableWriteError(OSError):
+    """A table could not be written (the file holds whole rows only); one line says why and where."""
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+def write_error(exc: OSError, where: Path) -> TableWriteError:
+    """``exc`` as a one-line error naming the folder: "no space left on device in runs/x"."""
+    if exc.errno == errno.ENOSPC:
+        text = f"no space left on device in {where}"
+    elif exc.errno == errno.EDQUOT:
+        text = f"disk quota exceeded in {where}"
+    else:
+        text = f"cannot write in {where}: {exc.strerror or exc}"
+    return TableWriteError(exc.errno or 0, text)
 
 
 class RowFile:
@@ -35,7 +59,9 @@ class RowFile:
         self._writer = csv.writer(self._buffer, lineterminator="\n")
         self._waiting = 0
         self._flushed_at = time.monotonic()
-        self._file: io.TextIOWrapper | None = open(self.part, "w", newline="")
+        self._fd: int | None = os.open(self.part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._size = 0  # bytes of whole rows in the file
+        self.failed = False
         self._writer.writerow(columns)
         self.flush()
 
@@ -56,13 +82,22 @@ class RowFile:
             self.flush()
 
     def flush(self) -> None:
-        """Hand every waiting row to the file in one write of whole rows."""
-        if self._file is None:
+        """Hand every waiting row to the file in one write of whole rows; on a failed write, cut
+        the file back to its last whole row and raise :class:`TableWriteError`."""
+        if self._fd is None:
             return
-        text = self._buffer.getvalue()
-        if text:
-            self._file.write(text)
-            self._file.flush()
+        data = self._buffer.getvalue().encode()
+        if data:
+            try:
+                view = memoryview(data)
+                while view:
+                    view = view[os.write(self._fd, view):]
+            except OSError as exc:
+                self.failed = True
+                os.ftruncate(self._fd, self._size)
+                os.lseek(self._fd, self._size, os.SEEK_SET)
+                raise write_error(exc, self.path.parent) from None
+            self._size += len(data)
             self._buffer.seek(0)
             self._buffer.truncate()
         self._waiting = 0
@@ -71,20 +106,28 @@ class RowFile:
     def finish(self) -> Path:
         """The table is complete: synced and renamed to its own name."""
         self.flush()
-        assert self._file is not None, f"{self.path.name} finished twice or after abandon()"
-        os.fsync(self._file.fileno())
-        self._file.close()
-        self._file = None
+        assert self._fd is not None, f"{self.path.name} finished twice or after abandon()"
+        try:
+            os.fsync(self._fd)
+        except OSError as exc:
+            raise write_error(exc, self.path.parent) from None
+        os.close(self._fd)
+        self._fd = None
         os.replace(self.part, self.path)
         return self.path
 
     def abandon(self) -> Path | None:
-        """The run did not complete: keep what was written as ``partial_<name>`` (None if finished)."""
-        if self._file is None:
+        """The run did not complete: keep what was written as ``partial_<name>`` (None if finished).
+        Never raises for a write that fails here: the run's first error is what counts."""
+        if self._fd is None:
             return None
-        self.flush()
-        self._file.close()
-        self._file = None
+        if not self.failed:
+            try:
+                self.flush()
+            except OSError:
+                pass  # cut back to whole rows already
+        os.close(self._fd)
+        self._fd = None
         return keep_partial(self.part)
 
 

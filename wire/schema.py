@@ -16,13 +16,19 @@ from __future__ import annotations
 import re
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+#: a name that becomes a folder (experiments, sweeps, their scenarios): no path separators, no ``..``
+SAFE_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.+=-]{0,99}$"
+
+#: the most ticks one run may have (duration / dt): checked before anything is built
+MAX_TICKS = 100_000_000
 
 
 class Strict(BaseModel):
-    """A section whose unknown keys are refused."""
+    """A section whose unknown keys, infinite and NaN numbers are refused."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class RunSection(Strict):
@@ -123,32 +129,60 @@ def hosts_of(placement: dict[str, str | int | list[int]], n_agents: int) -> dict
     for host, ids in placement.items():
         if not re.match(HOST_NAME, host):
             raise ValueError(f"placement: {host!r} is not a host name (letters, digits, _ . -)")
-        for i in parse_ids(ids):
-            if not 0 <= i < n_agents:
-                raise ValueError(f"placement.{host}: agent {i} is outside 0..{n_agents - 1}")
+        for i in parse_ids(ids, n_agents, f"placement.{host}"):
             if i in placed:
                 raise ValueError(f"placement: agent {i} is placed on both {placed[i]} and {host}")
             placed[i] = where[i] = host
     return where
 
 
-def parse_ids(ids: str | int | list[int]) -> list[int]:
-    """``"0-9,12"``, ``7`` or ``[1, 2]`` as a list of ids."""
+def carriers(exp: Experiment) -> dict[str, frozenset[int]]:
+    """Agent ids each host other than ``local`` may carry during the run: those placed on it, those
+    scripted swaps move to it and those in ``may_carry``. The hub's access rules hold each host's
+    identity to these, and a swap to a host that may not carry the agent is refused."""
+    out: dict[str, set[int]] = {}
+    for i, host in hosts_of(exp.placement, exp.agents.count).items():
+        out.setdefault(host, set()).add(i)
+    for entry in exp.swaps:
+        out.setdefault(entry.to, set()).add(entry.agent)
+    for host, ids in exp.may_carry.items():
+        if not re.match(HOST_NAME, host):
+            raise ValueError(f"may_carry: {host!r} is not a host name (letters, digits, _ . -)")
+        for i in parse_ids(ids, exp.agents.count, f"may_carry.{host}"):
+            out.setdefault(host, set()).add(i)
+    out.pop(LOCAL, None)
+    return {host: frozenset(ids) for host, ids in sorted(out.items())}
+
+
+def parse_ids(ids: str | int | list[int], n_agents: int, where: str = "placement") -> list[int]:
+    """``"0-9,12"``, ``7`` or ``[1, 2]`` as a list of ids, each checked to lie in ``0..n_agents-1``
+    before any range is built (``0-1000000000`` is refused, not materialised)."""
+    def bounded(i: int) -> int:
+        if not 0 <= i < n_agents:
+            raise ValueError(f"{where}: agent {i} is outside 0..{n_agents - 1}")
+        return i
+
+    if isinstance(ids, bool):
+        raise ValueError(f"{where}: {ids!r} is not a list of ids like '0-9,12'")
     if isinstance(ids, int):
-        return [ids]
+        return [bounded(ids)]
     if isinstance(ids, list):
-        return list(ids)
+        if not all(isinstance(i, int) and not isinstance(i, bool) for i in ids):
+            raise ValueError(f"{where}: {ids!r} is not a list of ids like '0-9,12'")
+        return [bounded(i) for i in ids]
     out: list[int] = []
     for part in str(ids).replace(" ", "").split(","):
         lo, dash, hi = part.partition("-")
-        if not lo.isdigit() or (dash and not hi.isdigit()):
-            raise ValueError(f"placement: {ids!r} is not a list of ids like '0-9,12'")
-        out += list(range(int(lo), int(hi) + 1)) if dash else [int(lo)]
+        if not lo.isdigit() or (dash and not hi.isdigit()) or len(part) > 20:
+            raise ValueError(f"{where}: {ids!r} is not a list of ids like '0-9,12'")
+        first, last = bounded(int(lo)), bounded(int(hi)) if dash else int(lo)
+        out += list(range(first, last + 1))
     return out
 
 
 class Experiment(Strict):
-    name: str = Field("experiment", description="names the run directory and the progress bar")
+    name: str = Field("experiment", pattern=SAFE_NAME,
+                      description="names the run directory and the progress bar (letters, digits, _ . + = -)")
     # Where agents run: not part of the results (config.yaml leaves these out, deployment.json
     # records them), so the same experiment gives the same files wherever its agents run.
     placement: dict[str, str | int | list[int]] = Field(
@@ -156,6 +190,10 @@ class Experiment(Strict):
         description="host name -> agent ids ('0-9,12', 7 or [1, 2]); the others run on the launching machine")
     swaps: list[SwapEntry] = Field(default_factory=list, exclude=True,
                                    description="scripted moves of agents between hosts before given ticks")
+    may_carry: dict[str, str | int | list[int]] = Field(
+        default_factory=dict, exclude=True,
+        description="host name -> more agent ids ('0-9,12') that a swap asked for during the run may move to it; "
+                    "a host identity may carry only these, the agents placed on it and those scripted swaps move to it")
     run: RunSection = RunSection()
     scenario: ScenarioSection = ScenarioSection()
     agents: AgentsSection = AgentsSection()
@@ -165,6 +203,13 @@ class Experiment(Strict):
     @property
     def ticks(self) -> int:
         return int(round(self.run.duration / self.run.dt))
+
+    @model_validator(mode="after")
+    def _bounded(self) -> Experiment:
+        if self.run.duration / self.run.dt > MAX_TICKS:
+            raise ValueError(f"run.duration / run.dt is {self.run.duration / self.run.dt:.3g} ticks, more than the "
+                             f"{MAX_TICKS:,} a run may have")
+        return self
 
 
 class Targets(Strict):

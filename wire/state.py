@@ -128,7 +128,7 @@ def pack_state(obj: Any) -> bytes:
         if dataclasses.is_dataclass(value):
             fields = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
         elif isinstance(value, tuple):  # a named tuple
-            fields = dict(zip(value._fields, value))
+            fields = dict(zip(value._fields, value))  # type: ignore[attr-defined]
         elif hasattr(value, "__dict__"):
             fields = dict(vars(value))
         else:
@@ -156,9 +156,9 @@ def _scalar(value: Any, where: str) -> np.generic:
 
 
 def _generator(value: Any, where: str) -> np.random.Generator:
-    if not isinstance(value, dict) or value.get("bit_generator") not in BIT_GENERATORS:
-        raise StateError(f"{where}: a random generator over {value.get('bit_generator') if isinstance(value, dict) else value!r}, "
-                         f"not one of numpy's {', '.join(BIT_GENERATORS)}")
+    name = value.get("bit_generator") if isinstance(value, dict) else value
+    if not isinstance(name, str) or name not in BIT_GENERATORS:
+        raise StateError(f"{where}: a random generator over {name!r}, not one of numpy's {', '.join(BIT_GENERATORS)}")
     bit_generator = BIT_GENERATORS[value["bit_generator"]]()
     bit_generator.state = value
     return np.random.Generator(bit_generator)
