@@ -40,6 +40,8 @@ class Allocator(abc.ABC):
     #: whether a running instance can move to another process (snapshot / restore); a plugin that
     #: holds what cannot move (open files, threads, sockets) sets False, and swaps are refused
     snapshottable: ClassVar[bool] = True
+    #: bump when a change makes the same configuration and seed give other results (provenance.json)
+    version: ClassVar[str] = "1"
 
     def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator, run_seed: int = 0) -> None:
         self.agent_id = agent_id

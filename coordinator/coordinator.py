@@ -56,6 +56,7 @@ log = logging.getLogger("swarmbed.coordinator")
 STATUS_EVERY = 0.25  # wall seconds between progress samples for watchers
 SWAPS = "swaps.csv"
 RESTARTS = "restarts.csv"
+CONSUMED = object()  # what an event filter of Coordinator._wait_for returns for an event it used
 RESTART_COLUMNS = ["tick", "agent", "lost_at_tick", "incarnation", "host", "checkpoint_tick", "outcome", "reason",
                    "wait_ms"]
 
@@ -408,19 +409,13 @@ class Coordinator:
     def _proxy_gone(self, k: int, grace: float = 0.5) -> None:
         """The proxy's token went: raise with its own error if it reported one (it reports before it
         lets go of the token, but the two travel apart), else with its exit status and log."""
-        deadline = time.monotonic() + grace
-        held: list[tuple[str, Any]] = []
-        try:
-            while True:
-                try:
-                    what, data = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
-                except queue.Empty:
-                    break
-                if what == "netem_report":
-                    self._proxy_failed(k, data)
-                held.append((what, data))
-        finally:
-            self._pushback.extend(held)
+        def take(what: str, data: Any) -> object:
+            if what != "netem_report":
+                return None
+            self._proxy_failed(k, data)  # raises on the proxy's error
+            return CONSUMED
+
+        self._wait_for(grace, take)
         how = self.exit_status("netem") if self.exit_status else ""
         raise RunError(f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log"
                        + (f"\n{how}" if how else ""))
@@ -438,18 +433,34 @@ class Coordinator:
     def _await_fatal_report(self, agent: int, grace: float = 0.25) -> None:
         """An agent left. Its fatal report (if it failed) travels apart from its liveliness token and
         may come a little later: wait briefly for it, keeping every other event in order."""
-        deadline = time.monotonic() + grace
-        held = []
-        while agent not in self.fatal:
-            try:
-                event = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
-            except queue.Empty:
-                break
-            if event[0] == "report":
-                self._on_report(event[1], -1)
-            else:
-                held.append(event)
-        self._pushback.extend(held)
+        def take(what: str, data: Any) -> object:
+            if what != "report":
+                return None
+            self._on_report(data, -1)
+            return True if agent in self.fatal else CONSUMED
+
+        if agent not in self.fatal:
+            self._wait_for(grace, take)
+
+    def _wait_for(self, seconds: float, take: Callable[[str, Any], object], timeout: object = None) -> object:
+        """Events for up to ``seconds``: ``take(what, data)`` returns None to keep an event for the
+        tick loop (in order), :data:`CONSUMED` for one it used, anything else to end the wait with
+        that value; ``timeout`` when the time is up."""
+        deadline = time.monotonic() + seconds
+        held: list[tuple[str, Any]] = []
+        try:
+            while True:
+                try:
+                    what, data = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
+                except queue.Empty:
+                    return timeout
+                got = take(what, data)
+                if got is None:
+                    held.append((what, data))
+                elif got is not CONSUMED:
+                    return got
+        finally:
+            self._pushback.extend(held)
 
     def _decode_report(self, key: str, data: bytes) -> dict | None:
         """An agent's report, if it is well formed and names the agent whose key it came on
@@ -638,31 +649,25 @@ class Coordinator:
 
     def _await_swap_event(self, agent: int, old: int, new: int, wanted: tuple[str, str]) -> str:
         """``wanted[0]`` when it comes; otherwise why not (the failure's reason). Other events wait."""
-        deadline = time.monotonic() + self.exp.run.tick_timeout
-        held: list[tuple[str, Any]] = []
-        try:
-            while True:
-                try:
-                    what, data = self.events.get(timeout=max(0.0, deadline - time.monotonic()))
-                except queue.Empty:
-                    return f"no {wanted[0]} within {self.exp.run.tick_timeout:.0f} s"
-                if what == "snapshot" and data == agent and wanted[0] == "snapshot":
-                    return "snapshot"
-                if what == "join" and wanted[0] == "join" and data == self.keys.alive_agent(agent, new):
-                    return "join"
-                if what == "report":
-                    rep = self._decode_report(*data)
-                    if rep is None:
-                        continue
-                    if rep["agent"] == agent and rep.get("kind") in wanted:
-                        return "restored" if rep["kind"] == "restored" else f"{rep['kind']}: {rep.get('error')}"
-                if what == "leave" and not data.endswith(("/coordinator", "/netem")) and agent_id_of(data) == agent:
-                    gone = incarnation_of(data)
-                    if gone in (old, new):
-                        return f"the {'old' if gone == old else 'new'} process of agent {agent} exited"
-                held.append((what, data))
-        finally:
-            self._pushback.extend(held)
+        def take(what: str, data: Any) -> object:
+            if what == "snapshot" and data == agent and wanted[0] == "snapshot":
+                return "snapshot"
+            if what == "join" and wanted[0] == "join" and data == self.keys.alive_agent(agent, new):
+                return "join"
+            if what == "report":
+                rep = self._decode_report(*data)
+                if rep is None:
+                    return CONSUMED
+                if rep["agent"] == agent and rep.get("kind") in wanted:
+                    return "restored" if rep["kind"] == "restored" else f"{rep['kind']}: {rep.get('error')}"
+            if what == "leave" and not data.endswith(("/coordinator", "/netem")) and agent_id_of(data) == agent:
+                gone = incarnation_of(data)
+                if gone in (old, new):
+                    return f"the {'old' if gone == old else 'new'} process of agent {agent} exited"
+            return None
+
+        timeout = self.exp.run.tick_timeout
+        return str(self._wait_for(timeout, take, f"no {wanted[0]} within {timeout:.0f} s"))
 
     def _log_of(self, agent: int) -> str:
         host = self.hosts.get(agent, "local")

@@ -130,6 +130,7 @@ class MTSRWorld(World):
         self.spawned_at = np.zeros(0)
         self.done_at = np.full(0, np.nan)
         self.tick = 0
+        self.finished_tick: int | None = None  # the tick at whose start every task was done
         self._generations_done = 0
         self._spawn(self.sc.initial_tasks)
         if self.sc.task_positions is not None and self.sc.initial_tasks:
@@ -248,6 +249,8 @@ class MTSRWorld(World):
                 self.done_at[task] = self.time + dt
         self.tick += 1
         self._maybe_generate()
+        if self.finished_tick is None and self.finished:
+            self.finished_tick = self.tick
 
     # -- metrics -------------------------------------------------------------------------------
     def row(self) -> dict:
@@ -265,7 +268,9 @@ class MTSRWorld(World):
         times = np.sort(self.done_at[~np.isnan(self.done_at)])
         need = math.ceil(0.99 * self.tasks_total_planned)
         return {
-            "mission_time": self.time,
+            # the time every task was done; the run's length where it went on (stop_when_done: false)
+            # or never got there (then all_tasks_completed is false)
+            "mission_time": (self.finished_tick if self.finished_tick is not None else self.tick) * self.dt,
             "all_tasks_completed": bool(self.finished),
             "time_99": float(times[need - 1]) if need and len(times) >= need else None,
             "tasks_total": self.tasks_total_planned,

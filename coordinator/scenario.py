@@ -131,6 +131,9 @@ class Scenario(abc.ABC):
     benefit_metric: ClassVar[str | None] = None
     #: every key ``World.summary()`` returns (checked by the scenario checker)
     summary_keys: ClassVar[tuple[str, ...]] = ()
+    #: bump when a change makes the same configuration and seed give other results: every run records
+    #: it (provenance.json) and ``swarmbed analyze`` refuses to pool runs of two versions
+    version: ClassVar[str] = "1"
 
     def __init__(self, params: BaseModel, agents: AgentsSection, dt: float) -> None:
         self.params = params

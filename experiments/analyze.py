@@ -34,7 +34,14 @@ from scipy import stats  # noqa: E402
 
 from swarmbed.experiments.palette import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
 from swarmbed.experiments.stats import compare  # noqa: E402
-from swarmbed.experiments.sweep import PARQUET, SPEC, TABLE, read_table  # noqa: E402
+from swarmbed.experiments.sweep import (  # noqa: E402
+    PARQUET,
+    SPEC,
+    TABLE,
+    mixed_configurations,
+    mixed_versions,
+    read_table,
+)
 
 METRICS = {
     "mission_time": "mission completion time (s)",
@@ -67,7 +74,7 @@ class AnalyzeError(ValueError):
     pass
 
 
-def load(sweep_dirs: list[Path]) -> pd.DataFrame:
+def load(sweep_dirs: list[Path], mixed_versions_ok: bool = False) -> pd.DataFrame:
     """Completed runs of the sweeps, one row each; ``attrs["factors"]``: the keys they vary."""
     frames: list[pd.DataFrame] = []
     factors: list[str] = []
@@ -79,6 +86,10 @@ def load(sweep_dirs: list[Path]) -> pd.DataFrame:
             raise AnalyzeError(f"{sweep_dir}: no {TABLE} yet (a sweep writes it when it stops); run the same "
                                f"`swarmbed sweep` again: it skips the runs that completed and writes the table")
         df = read_table(sweep_dir)
+        mixed = mixed_configurations(sweep_dir, df)
+        if mixed:
+            raise AnalyzeError(f"{sweep_dir}: {mixed}; a scenario's runs may differ only in their seed "
+                               "(redo them with swarmbed sweep ... --redo-mismatched)")
         meta = json.loads(spec.read_text())
         df["sweep"] = meta["name"]
         df["run_dir"] = [str(sweep_dir / str(sc) / f"run_{int(r):03d}") for sc, r in zip(df["scenario"], df["run"])]
@@ -86,6 +97,10 @@ def load(sweep_dirs: list[Path]) -> pd.DataFrame:
         factors += [f for f in meta.get("factors", []) if f not in factors]
         frames.append(df)
     df = pd.concat(frames, ignore_index=True)
+    versions = mixed_versions(df)
+    if versions and not mixed_versions_ok:
+        raise AnalyzeError(f"{', '.join(map(str, sweep_dirs))}: runs made by {versions}: their results may not be "
+                           "comparable (provenance.json of each run says which); pass --mixed-versions to pool them")
     df = df[df["status"] == "ok"].copy()
     if df.empty:
         raise AnalyzeError(f"{', '.join(map(str, sweep_dirs))}: no completed run to analyze")
@@ -366,13 +381,15 @@ def _factor_figures(df: pd.DataFrame, out: Path, strategies: list[str]) -> list[
     return written
 
 
-def analyze(sweep_dirs: list[Path] | Path, control: str | None = None) -> list[Path]:
+def analyze(sweep_dirs: list[Path] | Path, control: str | None = None,
+            mixed_versions_ok: bool = False) -> list[Path]:
     """Tables and figures from sweep directories, written to the first. ``control``: the strategy
     the others are compared with (default: cbba-etc where the sweeps have it); one the sweeps do
-    not have is refused before anything is written."""
+    not have is refused before anything is written. Runs of one scenario or allocator made in two
+    versions are refused unless ``mixed_versions_ok``."""
     dirs = [sweep_dirs] if isinstance(sweep_dirs, Path) else list(sweep_dirs)
     out = dirs[0]
-    df = load(dirs)
+    df = load(dirs, mixed_versions_ok)
     sar = "rescued" in df
     if control is not None and control not in set(df[ALLOCATOR]):
         raise AnalyzeError(f"--control {control}: no such strategy in these sweeps "

@@ -176,7 +176,10 @@ def _positive(text: str) -> int:
 
 
 def _first_line(cls: type) -> str:
-    return (cls.__doc__ or cls.__name__).strip().splitlines()[0]
+    """The first sentence of a class's docstring, on one line, without reST markup."""
+    text = " ".join((cls.__doc__ or cls.__name__).split()).replace("``", "")
+    end = text.find(". ")
+    return text if end < 0 else text[:end + 1]
 
 
 def _param_groups(name: str) -> list[tuple[str, list[tuple[str, str, str, str]]]]:
@@ -278,6 +281,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         metrics += [m for m in registry.resolve_scenario(kind).outcome_metrics if m not in metrics]
     shown = [c for c in (*metrics, "network.messages_sent") if c in ok]
     if shown:
+        print("means over each scenario's completed runs (swarmbed analyze for intervals and tests):")
         print(ok.groupby("scenario")[shown].mean(numeric_only=True).round(1).to_string())
     return 0 if len(ok) == len(table) else 1
 
@@ -286,7 +290,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     from swarmbed.experiments.analyze import AnalyzeError, analyze
 
     try:
-        written = analyze([Path(d) for d in args.sweep_dir], control=args.control)
+        written = analyze([Path(d) for d in args.sweep_dir], control=args.control,
+                          mixed_versions_ok=args.mixed_versions)
     except (AnalyzeError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -297,8 +302,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 def cmd_check_allocator(args: argparse.Namespace) -> int:
     from swarmbed.plugins.conformance import GENERIC_CHECKS, ConformanceError
-    from swarmbed.plugins.registry import PluginError, validate_params
+    from swarmbed.plugins.registry import PluginError, only_scenario, validate_params
 
+    args.scenario = args.scenario or only_scenario(args.allocator) or "mtsr"
     params = dict(cfg.parse_override(text) for text in args.set)
     try:
         validate_params(args.allocator, params, args.scenario)
@@ -543,7 +549,8 @@ def main(argv: list[str] | None = None) -> int:
 
     sw = sub.add_parser("sweep", help="Monte Carlo runs over scenarios, in parallel and resumable")
     sw.add_argument("sweep", nargs="?", help="sweep YAML (base + scenarios/grid + runs) or a plain experiment")
-    sw.add_argument("--status", metavar="DIR", help="print done / running / failed / missing runs per scenario")
+    sw.add_argument("--status", metavar="DIR",
+                    help="print ok / running / failed / interrupted / missing runs per scenario")
     sw.add_argument("--out", help="sweep directory (default: runs/<name>)")
     sw.add_argument("--jobs", "-j", type=_positive,
                     help="runs at once (local: default one per core; slurm: the array's parallelism)")
@@ -571,6 +578,8 @@ def main(argv: list[str] | None = None) -> int:
     an = sub.add_parser("analyze", help="tables and figures from a sweep directory")
     an.add_argument("sweep_dir", nargs="+", help="sweep directories (outputs go to the first)")
     an.add_argument("--control", help="control strategy for Dunnett and Cohen's d (default: cbba-etc where present)")
+    an.add_argument("--mixed-versions", action="store_true",
+                    help="pool runs of a scenario or allocator made in different versions (provenance.json)")
     an.set_defaults(func=cmd_analyze)
 
     rep = sub.add_parser("report", help="a run's or a sweep's bandwidth accounting as one self-contained HTML page")
@@ -583,14 +592,15 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("-o", "--output", help="run.gif or run.mp4 (mp4 needs ffmpeg; default: replay.gif in RUN_DIR)")
     rp.add_argument("--from", type=float, help="simulated second to start at")
     rp.add_argument("--to", type=float, help="simulated second to end at")
-    rp.add_argument("--fps", type=int, default=10, help="frames per second of the movie (default 10)")
-    rp.add_argument("--every", type=int, help="ticks per frame (default: at most 600 frames)")
+    rp.add_argument("--fps", type=_positive, default=10, help="frames per second of the movie (default 10)")
+    rp.add_argument("--every", type=_positive, help="ticks per frame (default: at most 600 frames)")
     rp.set_defaults(func=cmd_replay)
 
     chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
     chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")
     chk.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="an allocator parameter")
-    chk.add_argument("--scenario", default="mtsr", help="the scenario it is for (a registered name)")
+    chk.add_argument("--scenario", help="the scenario it is for (a registered name; default: the one it is "
+                                        "registered for, else mtsr)")
     chk.set_defaults(func=cmd_check_allocator)
 
     chs = sub.add_parser("check-scenario", help="run the scenario checker (determinism, observations, results, "

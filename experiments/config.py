@@ -70,6 +70,21 @@ class Resolved:
         return sc(sc.Params.model_validate(self.exp.scenario.params()), self.exp.agents, self.exp.run.dt)
 
 
+#: the key that says which plugin a section is for: a section naming another replaces the old one
+IDENTITY = {"allocator": "name", "scenario": "kind"}
+
+
+def _merged(old: Any, new: Any, key: str) -> Any:
+    """``new`` set over ``old``: a mapping over a mapping is merged key by key (``agents={count: 3}``
+    keeps the section's other keys), except a plugin's section that names another plugin."""
+    if not (isinstance(old, dict) and isinstance(new, dict)):
+        return new
+    ident = IDENTITY.get(key)
+    if ident and ident in new and new[ident] != old.get(ident):
+        return new
+    return {**old, **{k: _merged(old.get(k), v, k) for k, v in new.items()}}
+
+
 def _set_dotted(data: dict, dotted: str, value: Any, where: str) -> None:
     keys = dotted.split(".")
     node = data
@@ -78,7 +93,7 @@ def _set_dotted(data: dict, dotted: str, value: Any, where: str) -> None:
         if not isinstance(nxt, dict):
             raise ConfigError(f"{where}: --set {dotted}: '{k}' is not a section")
         node = nxt
-    node[keys[-1]] = value
+    node[keys[-1]] = _merged(node.get(keys[-1]), value, keys[-1])
 
 
 def apply_overrides(data: dict, pairs: list[tuple[str, Any]], where: str) -> None:
@@ -105,25 +120,34 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key.strip(), value
 
 
-def _origin(line: str, where: str, overridden: dict[str, Any]) -> str:
+def _origin(line: str, where: str, overridden: dict[str, Any], origin: str = "--set") -> str:
     """``line`` (``dotted.key: message``) prefixed by where that key came from: ``--set`` or the file."""
     key, _, message = line.partition(": ")
     for set_key, value in overridden.items():
         if key == set_key:
-            return f"--set {set_key}={value}: {message}"
+            return f"{origin} {set_key}={value}: {message}"
         if key.startswith(set_key + ".") or set_key.startswith(key + "."):
-            return f"--set {set_key}={value}: {line}"
+            return f"{origin} {set_key}={value}: {line}"
     return f"{where}: {line}"
 
 
-def validate(data: dict, where: str, overridden: dict[str, Any] | None = None) -> Experiment:
+def _message(error: Any) -> str:
+    """A validation error in words a user of the YAML reads: never an internal class name."""
+    if error["type"] == "extra_forbidden":
+        return "unknown key"
+    if error["type"] in ("model_type", "dict_type", "model_attributes_type"):
+        return f"must be a section (a mapping of keys), not {error['input']!r}"
+    return str(error["msg"])
+
+
+def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, origin: str = "--set") -> Experiment:
     """Check ``data`` in full (sections, plugin parameters, the behavior tree) and return the
     experiment with its scenario and allocator sections fully resolved. ``overridden``: the keys
     that ``--set`` gave, so that an error about one of them names ``--set``, not the file."""
     overridden = overridden or {}
 
     def fail(lines: list[str]) -> ConfigError:
-        return ConfigError("\n".join(_origin(line, where, overridden) for line in lines))
+        return ConfigError("\n".join(_origin(line, where, overridden, origin) for line in lines))
 
     bad = non_finite(data)
     if bad:
@@ -133,15 +157,15 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None) -
         # parameters are checked by its Params model below, which may convert YAML lists to tuples)
         exp = Experiment.model_validate(data, strict=True)
     except ValidationError as exc:
-        raise fail([f"{'.'.join(str(p) for p in e['loc'])}: "
-                    f"{'unknown key' if e['type'] == 'extra_forbidden' else e['msg']}" for e in exc.errors()]) from None
+        raise fail([f"{'.'.join(str(p) for p in e['loc'])}: {_message(e)}" for e in exc.errors()]) from None
     try:
         kind = exp.scenario.kind
         scenario_params = validate_scenario_params(kind, exp.scenario.params())
         allocator_params = validate_params(exp.allocator.name, exp.allocator.params(), kind)
     except PluginError as exc:
         lines = str(exc).splitlines()
-        if not lines[0].startswith(("scenario.", "allocator.")):  # a name that does not resolve
+        # a name that does not resolve (a line naming its key already is the parameters' own error)
+        if not lines[0].startswith(("scenario.", "allocator.", "scenario:", "allocator:")):
             lines = [f"{'scenario.kind' if lines[0].startswith(('scenario', 'unknown scenario')) else 'allocator.name'}"
                      f": {line}" for line in lines]
         raise fail(lines) from None
@@ -216,7 +240,10 @@ def _get_dotted(data: dict, dotted: str) -> Any:
     return node
 
 
-def load(path: str | Path, overrides: list[str] | tuple[str, ...] = (), seed: int | None = None) -> Experiment:
+def load(path: str | Path, overrides: list[str] | tuple[str, ...] = (), seed: int | None = None,
+         origin: str = "--set") -> Experiment:
+    """The experiment in ``path`` with ``overrides`` (``dotted.key=value``) applied and checked; an
+    error about an overridden key names it as ``<origin> key=value`` (a sweep names its scenario)."""
     path = Path(path)
     try:
         data = read_yaml(path)
@@ -239,7 +266,7 @@ def load(path: str | Path, overrides: list[str] | tuple[str, ...] = (), seed: in
     apply_overrides(data, pairs, str(path))
     if seed is not None:
         _set_dotted(data, "run.seed", seed, str(path))
-    return validate(data, str(path), dict(pairs))
+    return validate(data, str(path), dict(pairs), origin)
 
 
 def to_yaml(exp: Experiment) -> str:

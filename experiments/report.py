@@ -27,7 +27,7 @@ from scipy import stats
 
 import swarmbed
 from swarmbed.experiments.palette import DROP_COLORS
-from swarmbed.experiments.sweep import PARQUET, TABLE, read_table
+from swarmbed.experiments.sweep import PARQUET, TABLE, mixed_configurations, read_table
 from swarmbed.plugins.registry import PluginError, resolve_scenario
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
@@ -42,6 +42,15 @@ def _benefit(kind: str) -> str | None:
         return resolve_scenario(kind).benefit_metric
     except PluginError:
         return None
+
+
+def _outcomes(kind: str) -> list[str]:
+    """A scenario's benefit metric, then its other outcome metrics ([] for a kind not known here)."""
+    try:
+        cls = resolve_scenario(kind)
+    except PluginError:
+        return []
+    return [m for m in (cls.benefit_metric, *cls.outcome_metrics) if m]
 
 
 class Page:
@@ -151,8 +160,10 @@ def run_report(run: Path) -> tuple[str, int]:
                     ("overhead: TCP bytes agents sent / radio payload bytes", t["overhead_ratio"], "transport.json"),
                     ("TCP bytes all processes sent / received",
                      f"{_fmt(t['tcp_bytes_sent'])} / {_fmt(t['tcp_bytes_received'])}", "transport.json")])
-        procs = {n: p for n, p in wire["processes"].items() if n.startswith("agent_")}
-        names = [n.removeprefix("agent_") for n in procs]
+        procs = {n: wire["processes"][n] for n in sorted(
+            (n for n in wire["processes"] if n.startswith("agent_")),
+            key=lambda n: tuple(int(x) for x in n.removeprefix("agent_").split(".") if x.isdigit()))}
+        names = [n.removeprefix("agent_") for n in procs]  # agent 2 before agent 10, as every other chart
         sent_by = agents.set_index("agent")["bytes_sent"]
         fig = go.Figure([
             go.Bar(x=names, y=[sent_by.get(int(n), 0) for n in names], name="radio payload"),
@@ -160,24 +171,23 @@ def run_report(run: Path) -> tuple[str, int]:
                    name="per-tick samples published"),
             go.Bar(x=names, y=[(p.get("tcp") or {}).get("sent") for p in procs.values()], name="TCP bytes sent")])
         fig.update_layout(title="What each agent sent, layer by layer", xaxis_title="agent", yaxis_title="bytes",
-                          barmode="group")
+                          barmode="group", xaxis={"type": "category", "categoryorder": "array", "categoryarray": names})
         page.figure(fig, "transport.json, agents.csv")
 
     page.heading("Per agent")
-    fig = go.Figure([go.Bar(x=agents["agent"], y=agents["bytes_sent"], name="payload bytes sent"),
-                     go.Bar(x=agents["agent"], y=agents["messages_sent"], name="messages sent", yaxis="y2",
-                            opacity=0.6)])
+    fig = go.Figure(_side_by_side(agents["agent"], agents["bytes_sent"], "payload bytes sent",
+                                  agents["messages_sent"], "messages sent"))
     fig.update_layout(title="Bytes and messages each agent sent", xaxis_title="agent", yaxis_title="bytes",
-                      yaxis2={"title": "messages", "overlaying": "y", "side": "right"}, barmode="group")
+                      yaxis2=_count_axis("messages", agents["messages_sent"]), barmode="group",
+                      xaxis={"type": "category"}, legend=LEGEND_BELOW)
     page.figure(fig, "agents.csv")
 
     page.heading("Per message kind")
     kinds = pd.DataFrame(net["per_kind"]).T.reset_index(names="kind") if net["per_kind"] else pd.DataFrame()
     if len(kinds):
-        fig = go.Figure([go.Bar(x=kinds["kind"], y=kinds["bytes"], name="payload bytes"),
-                         go.Bar(x=kinds["kind"], y=kinds["messages"], name="messages", yaxis="y2", opacity=0.6)])
+        fig = go.Figure(_side_by_side(kinds["kind"], kinds["bytes"], "payload bytes", kinds["messages"], "messages"))
         fig.update_layout(title="Bytes and messages per kind", yaxis_title="bytes", barmode="group",
-                          yaxis2={"title": "messages", "overlaying": "y", "side": "right"})
+                          yaxis2=_count_axis("messages", kinds["messages"]), legend=LEGEND_BELOW)
         page.figure(fig, "summary.json (network.per_kind)")
         sizes = sent.assign(size=sent["bytes"] / sent["messages"])
         fig = go.Figure([go.Histogram(x=g["size"], name=k, opacity=0.7) for k, g in sizes.groupby("kind")])
@@ -238,11 +248,31 @@ def run_report(run: Path) -> tuple[str, int]:
                                         yaxis="y2")])
             fig.update_layout(title="Outcome beside traffic", xaxis_title="simulated time (s)",
                               yaxis_title=benefit.replace("_", " "),
-                              yaxis2={"title": "kB sent", "overlaying": "y", "side": "right"})
+                              yaxis2={"title": "kB sent", "overlaying": "y", "side": "right"}, legend=LEGEND_BELOW)
             page.figure(fig, "timeseries.csv")
     subtitle = (f"run {run} · seed {summary['seed']} · swarmbed {swarmbed.__version__} · "
                 f"report made {time.strftime('%Y-%m-%d %H:%M')}")
     return page.render(subtitle), page.figures
+
+
+#: a legend under the plot: at the right it covers the title of a second y axis
+LEGEND_BELOW = {"orientation": "h", "yanchor": "top", "y": -0.2, "xanchor": "left", "x": 0}
+
+
+def _side_by_side(x, left, left_name: str, right, right_name: str) -> list:
+    """Two bar series on two y axes, drawn beside each other: plotly groups bars only within an
+    axis, so each series gets its own offset group (else the second is drawn over the first)."""
+    return [go.Bar(x=x, y=left, name=left_name, offsetgroup="left"),
+            go.Bar(x=x, y=right, name=right_name, yaxis="y2", offsetgroup="right", opacity=0.7)]
+
+
+def _count_axis(title: str, counts) -> dict:
+    """A right-hand axis of counts: whole-number ticks from zero (never 0.136, 0.272, ...)."""
+    top = max(float(pd.Series(counts).max() or 0), 1.0)
+    magnitude = 10 ** int(np.floor(np.log10(top / 5))) if top >= 5 else 1
+    step = next(m * magnitude for m in (1, 2, 5, 10) if m * magnitude * 5 >= top)  # about five ticks
+    return {"title": title, "overlaying": "y", "side": "right", "rangemode": "tozero", "tick0": 0,
+            "dtick": step, "showgrid": False}
 
 
 def _ci(values: pd.Series) -> float:
@@ -256,8 +286,15 @@ def sweep_report(sweep: Path) -> tuple[str, int]:
     ok = table[table["status"] == "ok"]
     if ok.empty:
         raise ReportError(f"{sweep}: no completed run in sweep.csv")
+    mixed = mixed_configurations(sweep, table)
+    if mixed:
+        raise ReportError(f"{sweep}: {mixed}; a scenario's runs may differ only in their seed")
     kinds = ok["scenario_kind"].dropna().unique() if "scenario_kind" in ok else []
-    benefit = next((b for b in map(_benefit, kinds) if b and b in ok), None)
+    # the outcome to set against the cost: the scenario's benefit metric, or where that is the same in
+    # every run (MT-SR's tasks completed, when every run completes its mission) the first outcome that varies
+    outcomes = [m for kind in kinds for m in _outcomes(kind)
+                if m in ok and pd.api.types.is_numeric_dtype(ok[m]) and not pd.api.types.is_bool_dtype(ok[m])]
+    benefit = next((m for m in outcomes if ok[m].nunique() > 1), outcomes[0] if outcomes else None)
     page = Page(f"{sweep.name}: bandwidth accounting of a sweep")
     page.heading("Per scenario", "Means over the completed runs with 95 % confidence intervals (t).")
     metrics = [m for m in ("network.messages_sent", "network.bytes_sent", "wire.agent_tcp_bytes_sent",

@@ -32,6 +32,8 @@ from swarmbed.experiments.host import (
     wait_for_hosts,
 )
 from swarmbed.experiments.launcher import ChildExited, Children, ForkServerError, own_cpu_s, peak_rss_mb, reset_peak_rss
+from swarmbed.experiments.provenance import FILE as PROVENANCE
+from swarmbed.experiments.provenance import provenance
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.lifecycle import tune_malloc
@@ -111,6 +113,8 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     log_dir.mkdir(exist_ok=True)
     resolved = resolve_experiment(exp)
     results.write_atomic(out_dir / results.CONFIG, to_yaml(exp))
+    results.write_json(out_dir / PROVENANCE, provenance(resolved.scenario_cls, resolved.targets.scenario,
+                                                        resolved.allocator_cls, resolved.targets.allocator))
 
     t_start = time.perf_counter()
     hub_cpu_before = own_cpu_s()  # a sweep's pool worker hosts one run after another: count this one's
@@ -189,8 +193,9 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
 
         coord.place, coord.unplace, coord.exit_status = place, unplace, children.exit_status
         t_spawned = time.perf_counter()
-        results.write_json(out_dir / DEPLOYMENT, {"run_id": keys.run_id, "hub": [endpoint, *listen],
-                                                  "placement": {str(i): h for i, h in where.items()}, "hosts": hosts})
+        deployment = {"run_id": keys.run_id, "hub": [endpoint, *listen],
+                      "placement": {str(i): h for i, h in where.items()}, "hosts": hosts}
+        results.write_json(out_dir / DEPLOYMENT, deployment)
         try:
             coord.wait_for_members(children.check)
         except ChildExited as exc:
@@ -215,6 +220,12 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
                 observer.start(live)
                 running.append(observer)
             coord.run(on_tick)
+            if coord.swap_log:  # where agents ran at the end, and what each host ran then
+                for host in sorted({h for h in coord.hosts.values() if h != LOCAL}):
+                    hosts[host] = host_info(session, host) or hosts.get(host)
+                results.write_json(out_dir / DEPLOYMENT, {
+                    **deployment, "hosts": hosts,
+                    "placement_at_end": {str(i): coord.hosts.get(i, LOCAL) for i in range(exp.agents.count)}})
         finally:
             bar.close()
             for observer in reversed(running):

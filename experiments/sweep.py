@@ -54,6 +54,7 @@ from swarmbed.coordinator import results
 from swarmbed.experiments import claims
 from swarmbed.experiments import config as cfg
 from swarmbed.experiments.executors import Executor, Outcome, resources_for
+from swarmbed.experiments.provenance import FILE as PROVENANCE
 from swarmbed.experiments.yamlfile import YamlFileError, parse_yaml, read_yaml
 from swarmbed.wire.schema import SAFE_NAME
 
@@ -110,6 +111,13 @@ class Sweep:
     extra: list[str]
 
 
+def _axis(key: str) -> str:
+    """A grid key's part of a scenario name: its last part (``range``), or its section's where that
+    says more (``allocator.name`` -> ``allocator``, ``scenario.kind`` -> ``scenario``)."""
+    parts = key.split(".")
+    return parts[-2] if len(parts) > 1 and parts[-1] in ("name", "kind") else parts[-1]
+
+
 def _label(value: Any) -> str:
     if isinstance(value, dict):
         value = value.get("name", "-".join(f"{k}{v}" for k, v in value.items()))
@@ -151,7 +159,7 @@ def load_sweep(path: str | Path, runs: int | None = None, grid: Sequence[str] = 
     for entry in entries:
         for combo in itertools.product(*(grid_spec[k] for k in keys)):
             parts = [entry.name] if entry.name else []
-            parts += [f"{k.split('.')[-1]}-{_label(v)}" for k, v in zip(keys, combo)]
+            parts += [f"{_axis(k)}-{_label(v)}" for k, v in zip(keys, combo)]
             overrides = common + entry.overrides + tuple(zip(keys, combo))
             scenarios.append(SweepScenario("_".join(parts) or "base", overrides))
     names = [s.name for s in scenarios]
@@ -173,7 +181,7 @@ def run_seeds(sweep_seed: int, runs: int) -> list[int]:
 def experiment_for(base: str | Path, scenario: SweepScenario, seed: int,
                    extra: list[str] | tuple[str, ...]) -> cfg.Experiment:
     pairs = list(scenario.overrides) + [cfg.parse_override(t) for t in extra] + [("run.seed", seed)]
-    return cfg.load(base, [f"{k}={json.dumps(v)}" for k, v in pairs])
+    return cfg.load(base, [f"{k}={json.dumps(v)}" for k, v in pairs], origin=f"sweep scenario {scenario.name}:")
 
 
 def plan(sweep: Sweep, out: Path) -> list[RunSpec]:
@@ -212,6 +220,10 @@ def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S) -> Outcome
             detail = f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}"
             results.write_atomic(out / ERROR, detail)
             outcome = ("failed", f"{type(exc).__name__}: {exc}")
+        except BaseException:  # Ctrl-C, or the sweep's SIGTERM to its pool worker: say so, then stop
+            _record_attempt(out, event="end", time=time.time(), outcome="interrupted",
+                            wall_s=round(time.time() - started, 3))
+            raise
         _record_attempt(out, event="end", time=time.time(), outcome=outcome[0], wall_s=round(time.time() - started, 3))
         return outcome
 
@@ -241,7 +253,19 @@ def run_status(run_dir: Path, stale_after: float = claims.STALE_AFTER_S) -> str:
     holder = claims.holder(run_dir)
     if holder is not None:
         return "running" if holder.alive(stale_after) else "interrupted"
-    return "failed" if (run_dir / ERROR).exists() else "missing"
+    if (run_dir / ERROR).exists():
+        return "failed"
+    return "interrupted" if _last_attempt(run_dir).get("outcome") == "interrupted" else "missing"
+
+
+def _last_attempt(run_dir: Path) -> dict[str, Any]:
+    """The last line of a run's ``attempts.jsonl`` ({} if none can be read)."""
+    try:
+        lines = (run_dir / ATTEMPTS).read_text().splitlines()
+        last = json.loads(lines[-1]) if lines else {}
+    except (OSError, ValueError):
+        return {}
+    return last if isinstance(last, dict) else {}
 
 
 def collect(sweep: Sweep, out: Path, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame:
@@ -256,6 +280,9 @@ def collect(sweep: Sweep, out: Path, stale_after: float = claims.STALE_AFTER_S) 
             transport = run_dir / results.TRANSPORT  # measured, not reproducible: in its own columns
             if transport.exists():
                 row.update(flatten(json.loads(transport.read_text())["totals"], "wire."))
+            made_by = run_dir / PROVENANCE  # which code made it (runs of older versions have none)
+            if made_by.exists():
+                row.update(flatten(json.loads(made_by.read_text()), "provenance."))
         elif row["status"] == "failed":
             lines = [ln for ln in (run_dir / ERROR).read_text().split("\n\n", 1)[0].splitlines() if ln.strip()]
             row["error"] = " | ".join(dict.fromkeys([lines[0], lines[-1]])) if lines else "unknown error"
@@ -351,6 +378,46 @@ def config_differences(made: str, planned: str, limit: int = 3) -> str:
     keys = sorted(k for k in a.keys() | b.keys() if a.get(k) != b.get(k))
     shown = [f"{k}: {a.get(k)!r} -> {b.get(k)!r}" for k in keys[:limit]]
     return ", ".join(shown) + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
+
+
+VERSIONED = ("provenance.scenario.version", "provenance.allocator.version")
+
+
+def mixed_versions(table: pd.DataFrame) -> str | None:
+    """Why the completed runs of ``table`` were made by code that must not be pooled, or None: one
+    scenario kind (or allocator) in two versions. Runs that predate provenance records are not counted."""
+    ok = table[table["status"] == "ok"]
+    for column, by in zip(VERSIONED, ("scenario_kind", "allocator")):
+        if column not in ok or by not in ok:
+            continue
+        seen = ok.dropna(subset=[column]).groupby(by)[column].unique()
+        for name, versions in seen.items():
+            if len(versions) > 1:
+                what = column.split(".")[1]
+                return f"{what} {name} in versions {', '.join(sorted(map(str, versions)))}"
+    return None
+
+
+def mixed_configurations(sweep_dir: Path, table: pd.DataFrame) -> str | None:
+    """Why the completed runs of ``table`` cannot be pooled per scenario, or None: within a
+    scenario every run's ``config.yaml`` must be the same but for ``run.seed``."""
+    ok = table[table["status"] == "ok"]
+    for scenario, group in ok.groupby("scenario"):
+        first: tuple[str, dict[str, Any]] | None = None
+        for run in group["run"]:
+            name = f"{scenario}/run_{int(run):03d}"
+            try:
+                config = _dotted(parse_yaml((sweep_dir / name / results.CONFIG).read_text(), name) or {})
+            except (OSError, YamlFileError) as exc:
+                return f"{name}: no readable {results.CONFIG} ({exc})"
+            config.pop("run.seed", None)
+            if first is None:
+                first = (name, config)
+            elif config != first[1]:
+                keys = sorted(k for k in config.keys() | first[1].keys() if config.get(k) != first[1].get(k))
+                return (f"{first[0]} and {name} were made under different configurations "
+                        f"({', '.join(f'{k}: {first[1].get(k)!r} / {config.get(k)!r}' for k in keys[:3])})")
+    return None
 
 
 def _check_completed(specs: list[RunSpec], out: Path, redo: bool) -> None:

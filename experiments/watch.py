@@ -140,7 +140,8 @@ class RunView:
         procs = [("coordinator", "coordinator" in alive), ("netem", "netem" in alive)]
         head.add_row("processes", "  ".join(f"{n} {'up' if ok else 'DOWN'}" for n, ok in procs),
                      f"agents {len(agents_alive)} up of {len(s['alive'])} in the world")
-        table = Table(title="payload each agent sent (rates: per wall second, last 2 s)", title_justify="left")
+        table = Table(title="payload each agent sent since this view attached (the run totals are above; "
+                      "rates: per wall second, last 2 s)", title_justify="left")
         for col in ("agent", "process", "msgs/s", "B/s", "messages", "bytes"):
             table.add_column(col, justify="right")
         for a in sorted(set(s["alive"]) | set(totals)):

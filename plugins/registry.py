@@ -96,6 +96,14 @@ def scenario_target(kind: str) -> str:
                       "or give 'module:Class' / 'path/to/file.py:Class'")
 
 
+def only_scenario(name: str) -> str | None:
+    """The one scenario a registered allocator is implemented for, if it is for one only (``cbba-etc``:
+    ``sar``); None for an allocator of any scenario, of several, or not registered."""
+    _read_entry_points()
+    kinds = _ALLOCATORS.get(name, {})
+    return next(iter(kinds)) if len(kinds) == 1 and ANY not in kinds else None
+
+
 def allocator_target(name: str, scenario: str | None = None) -> str:
     """The target of allocator ``name`` for ``scenario`` (a registered name or already a target)."""
     _read_entry_points()

@@ -94,3 +94,18 @@ def whole_rows(path: Path) -> int:
     rows = list(csv.reader(text.splitlines()))
     assert rows and all(len(r) == len(rows[0]) for r in rows), f"{path.name} holds a row of another width"
     return len(rows) - 1
+
+
+#: modules whose tests start real processes (runs, host daemons, browsers) and take seconds each:
+#: marked ``slow``. ``pytest -m "not slow"`` is the fast lane for day-to-day work; CI runs everything.
+SLOW_MODULES = frozenset({
+    "test_access", "test_disk_full", "test_e2e", "test_examples", "test_failures", "test_forkserver", "test_hosts",
+    "test_netem_e2e", "test_realtime", "test_report", "test_sar_e2e", "test_soak", "test_swaps", "test_sweep",
+    "test_sweep_executors", "test_tls", "test_watch",
+})
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.module is not None and item.module.__name__.rsplit(".", 1)[-1] in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)

@@ -171,3 +171,55 @@ def test_a_billion_laughs_sweep_file_is_refused_at_once(tmp_path):
     (tmp_path / "escape.yaml").write_text("name: ../../outside\nbase: quickstart.yaml\n")
     with pytest.raises(cfg.ConfigError, match="name: String should match pattern"):
         load_sweep(tmp_path / "escape.yaml")
+
+
+def test_a_section_set_as_a_mapping_keeps_its_other_keys(tmp_path):
+    exp = load_text(tmp_path, "agents:\n  count: 5\n  max_speed: 3.0\n", "agents={count: 3}")
+    assert (exp.agents.count, exp.agents.max_speed) == (3, 3.0)
+    swapped = load_text(tmp_path, "allocator:\n  name: fcg\n  mode: Random\n", "allocator={name: cbba}")
+    assert swapped.allocator.name == "cbba" and "mode" not in swapped.allocator.params()
+
+
+def test_errors_name_what_the_user_wrote_not_our_classes(tmp_path, capsys):
+    from swarmbed.experiments.cli import main
+
+    with pytest.raises(cfg.ConfigError, match=r"^--set run=5: must be a section \(a mapping of keys\), not 5$"):
+        cfg.load(QUICKSTART, ["run=5"])
+    with pytest.raises(cfg.ConfigError) as info:
+        load_text(tmp_path, "scenario:\n  workload: [60, 6]\n")
+    assert "scenario.kind" not in str(info.value) and "workload must be" in str(info.value)
+    (tmp_path / "broken.py").write_text("from swarmbed.plugins.base import Allocator\nclass A(Allocator)\n")
+    assert main(["run", str(QUICKSTART), "--set", f"allocator.name={tmp_path / 'broken.py'}:A"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "SyntaxError" in err and "broken.py, line 2" in err and len(err.splitlines()) == 1, err
+    (tmp_path / "other.py").write_text("class A:\n    pass\n")
+    with pytest.raises(cfg.ConfigError, match="is not a subclass of Allocator"):
+        cfg.load(QUICKSTART, [f"allocator.name={tmp_path / 'other.py'}:A"])
+
+
+def test_a_sweep_names_the_scenario_whose_value_is_bad(tmp_path):
+    from swarmbed.experiments.sweep import experiment_for, load_sweep
+
+    sweep = load_sweep(QUICKSTART, grid=["network.loss=0.1,7"])
+    bad = sweep.scenarios[1]
+    with pytest.raises(cfg.ConfigError, match=r"sweep scenario loss-7: network.loss=7: Input should be less"):
+        experiment_for(QUICKSTART, bad, 0, [])
+
+
+def test_params_describe_every_strategy_parameter_in_whole_sentences(capsys):
+    from swarmbed.experiments.cli import main
+
+    assert main(["params", "cbba-etc"]) == 0
+    out = capsys.readouterr().out
+    head, *rows = out.splitlines()
+    assert "``" not in out and head.endswith("(cbba-etc: consensus only on events (Algorithm 4).)"), head
+    for name in ("rho_base", "theta_high", "theta_low", "kappa", "gamma", "phi_min", "phi_max"):
+        row = next(r for r in rows if f"allocator.{name} " in r)
+        assert len(row.split(None, 3)) == 4, row  # key, type, default and a meaning
+
+
+def test_check_allocator_finds_the_scenario_an_allocator_is_for(capsys):
+    from swarmbed.experiments.cli import main
+
+    assert main(["check-allocator", "comm"]) == 0
+    assert "PASS check_snapshot" in capsys.readouterr().out

@@ -105,6 +105,16 @@ def test_ten_swaps_between_hosts_give_the_all_local_results(lab, tmp_path):
         records = list(csv.DictReader(f))
     assert len(records) == 10 and all(r["outcome"] == "ok" for r in records), records
     assert {r["to"] for r in records} >= {"h1", "h2"}
+    import json
+
+    deployment = json.loads((tmp_path / "moved" / "deployment.json").read_text())
+    last = {}  # where each agent is after the last swap that moved it
+    for r in records:
+        last[r["agent"]] = r["to"]
+    for agent, host in last.items():
+        assert deployment["placement_at_end"][agent] == host
+        if host != "local":
+            assert int(agent) in deployment["hosts"][host]["agents"][deployment["run_id"]]
 
 
 def test_a_swap_to_a_dead_host_fails_and_the_agent_goes_on_where_it_was(lab, tmp_path):

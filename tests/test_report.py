@@ -177,3 +177,42 @@ def test_replay_is_a_movie_with_one_frame_per_chosen_tick(recorded, tmp_path):
 def test_replay_says_what_is_missing(runs, capsys):
     assert cli(["replay", str(runs["a"])]) == 2
     assert "run.record_trajectories=true" in capsys.readouterr().err
+
+
+# After load: for every plot, its title, its x tick labels left to right, and each bar trace's
+# horizontal extents (screen coordinates), written into the page for --dump-dom.
+GEOMETRY_PROBE = ("<script>addEventListener('load',()=>setTimeout(()=>{const out=[];"
+                  "document.querySelectorAll('.plotly-graph-div').forEach(d=>{"
+                  "const ticks=[...d.querySelectorAll('.xtick text')].map(t=>[t.getBoundingClientRect().x,"
+                  "t.textContent]).sort((a,b)=>a[0]-b[0]).map(t=>t[1]);"
+                  "const bars=[...d.querySelectorAll('.trace.bars')].map(tr=>[...tr.querySelectorAll('.point path')]"
+                  ".map(p=>{const r=p.getBoundingClientRect();return [r.left,r.right]}));"
+                  "const title=(d.querySelector('.gtitle')||{}).textContent||'';out.push({title,ticks,bars})});"
+                  "const p=document.createElement('pre');p.id='geometry';p.textContent=JSON.stringify(out);"
+                  "document.body.appendChild(p)},500));</script>")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason=NO_CHROMIUM)
+def test_charts_order_agents_by_number_and_draw_paired_bars_side_by_side(tmp_path):
+    """Twelve agents (so that string order, 0 1 10 11 2 ..., would show): every per-agent chart lists
+    them by number, and the bars of a chart with two y axes stand beside each other, not on top."""
+    assert CHROMIUM is not None
+    run = run_experiment(experiment("agents.count=12", "run.duration=120", *LOSSY), tmp_path / "run",
+                         progress=False).out_dir
+    page = report(run, tmp_path / "page.html").read_text()
+    probed = tmp_path / "geometry.html"
+    probed.write_text(page.replace("<head>", "<head>" + GEOMETRY_PROBE, 1))
+    dom = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000",
+                          "--user-data-dir=" + str(tmp_path / "profile"), "--virtual-time-budget=20000",
+                          "--dump-dom", probed.as_uri()], capture_output=True, text=True, timeout=120).stdout
+    found = re.search(r'<pre id="geometry">(.*?)</pre>', dom, re.S)
+    assert found, "the page never finished loading"
+    plots = {p["title"]: p for p in json.loads(found.group(1).replace("&quot;", '"'))}
+    numbers = [str(i) for i in range(12)]
+    for title in ("What each agent sent, layer by layer", "Bytes and messages each agent sent"):
+        assert plots[title]["ticks"] == numbers, (title, plots[title]["ticks"])
+    for title in ("Bytes and messages each agent sent", "Bytes and messages per kind"):
+        left, right = plots[title]["bars"]
+        assert len(left) == len(right) > 0
+        for (l0, l1), (r0, r1) in zip(left, right):
+            assert l1 <= r0 + 0.5 or r1 <= l0 + 0.5, f"{title}: bars overlap ({l0}-{l1} and {r0}-{r1})"

@@ -73,6 +73,19 @@ def test_a_rerun_under_another_configuration_never_reuses_completed_runs(sweep_d
 
     out = tmp_path / "out"
     shutil.copytree(sweep_dir / "out", out)
+    # a folder whose runs of one scenario were made under two configurations (an older swarmbed made
+    # such folders) is refused by analyze and report rather than pooled
+    mixed = tmp_path / "mixed"
+    shutil.copytree(sweep_dir / "out", mixed)
+    config = mixed / "fast_range-30" / "run_001" / "config.yaml"
+    config.write_text(config.read_text().replace("loss: 0.0", "loss: 0.3"))
+    from swarmbed.experiments.analyze import AnalyzeError
+    from swarmbed.experiments.report import ReportError, report
+
+    with pytest.raises(AnalyzeError, match="run_000 and fast_range-30/run_001 were made under different"):
+        analyze([mixed])
+    with pytest.raises(ReportError, match="network.loss: 0.0 / 0.3"):
+        report(mixed)
     changed = load_sweep(sweep_dir / "sweep.yaml", extra=["run.duration=150", "network.loss=0.3"])
     with pytest.raises(cfg.ConfigError) as info:
         run_sweep(changed, out, jobs=2, progress=False)
@@ -82,6 +95,34 @@ def test_a_rerun_under_another_configuration_never_reuses_completed_runs(sweep_d
     assert (table["status"] == "ok").sum() == 4
     assert "loss: 0.3" in (out / "fast_range-30" / "run_000" / "config.yaml").read_text()
     assert (table[table["status"] == "ok"]["network.dropped.loss"] > 0).all()
+
+
+def test_every_run_records_the_code_that_made_it_and_analyze_will_not_pool_two_versions(sweep_dir, tmp_path):
+    import json
+    import shutil
+
+    from swarmbed.experiments.analyze import AnalyzeError
+    from swarmbed.experiments.sweep import collect, read_spec, write_tables
+
+    runs = sorted((sweep_dir / "out").glob("fast_*/run_*/provenance.json"))
+    made = [json.loads(p.read_text()) for p in runs]
+    assert len(runs) == 4 and all(m == made[0] for m in made)  # nothing of the machine or the moment
+    assert made[0]["scenario"] == {"target": "swarmbed.coordinator.mtsr:MTSR", "version": "1"}, made[0]["scenario"]
+    assert set(made[0]["libraries"]) == {"numpy", "eclipse-zenoh", "msgpack", "pydantic"}
+    assert made[0]["git"] is None or len(made[0]["git"]["commit"]) == 40
+    table = pd.read_csv(sweep_dir / "out" / "sweep.csv")
+    assert (table[table["status"] == "ok"]["provenance.scenario.version"] == 1).all()
+
+    out = tmp_path / "out"
+    shutil.copytree(sweep_dir / "out", out)
+    bumped = out / "fast_range-60" / "run_001" / "provenance.json"
+    record = json.loads(bumped.read_text())
+    record["scenario"]["version"] = "2"
+    bumped.write_text(json.dumps(record))
+    write_tables(collect(read_spec(out), out), out)
+    with pytest.raises(AnalyzeError, match="runs made by scenario mtsr in versions 1, 2"):
+        analyze([out])
+    assert analyze([out], mixed_versions_ok=True)
 
 
 def test_analyze_writes_tables_and_figures(sweep_dir):
@@ -107,7 +148,7 @@ def test_per_agent_panels_pool_every_agent_of_every_run(sweep_dir):
 
 def test_plain_experiment_sweeps_with_a_command_line_grid():
     sweep = load_sweep(QUICKSTART, runs=5, grid=["allocator.name=cbba,grape"])
-    assert [s.name for s in sweep.scenarios] == ["name-cbba", "name-grape"]
+    assert [s.name for s in sweep.scenarios] == ["allocator-cbba", "allocator-grape"]
     assert sweep.runs == 5 and sweep.factors == ["allocator.name"]
 
 
@@ -156,6 +197,10 @@ def test_ctrl_c_stops_a_sweep_at_once_and_the_same_command_resumes(tmp_path):
     assert f"{len(done)} of 6 runs are complete" in stderr
     table = pd.read_csv(out / "sweep.csv")  # what completed is in the table, ready for analyze
     assert (table["status"] == "ok").sum() == len(done) and len(table) == 6, table
+    cut = [d for d in _runs(out) if not (d / "summary.json").exists()]
+    for run_dir in cut:  # attempts.jsonl says how each run cut short ended, and --status agrees
+        assert '"outcome": "interrupted"' in (run_dir / "attempts.jsonl").read_text().splitlines()[-1]
+    assert (table["status"] == "interrupted").sum() == len(cut)
     first = {p: p.stat().st_mtime_ns for p in done}
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert again.returncode == 0, again.stderr

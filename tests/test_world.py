@@ -56,6 +56,19 @@ def test_collaborative_work_adds_rates_and_never_overcounts():
     assert w.done_at[0] == 2.0
 
 
+def test_mission_time_is_when_the_last_task_was_done_even_if_the_run_goes_on():
+    """stop_when_done: false keeps ticking after the last task; mission_time still says when every
+    task was done (here at 2 s), not how long the run went on."""
+    exp = experiment("agents.count=3", "scenario.initial_tasks=1", "scenario.workload=[5, 5]",
+                     "scenario.task_positions=[[50, 50]]", "scenario.agent_positions=[[50, 50], [51, 50], [50, 51]]",
+                     "run.stop_when_done=false")
+    w = MTSRWorld(exp, np.random.default_rng(0))
+    for _ in range(10):
+        w.apply({i: ["goto_task", 0] for i in range(3)})
+    summary = w.summary()
+    assert summary["all_tasks_completed"] and summary["mission_time"] == 2.0 and w.time == 10.0
+
+
 def test_generations_add_tasks_on_schedule():
     exp = experiment("scenario.initial_tasks=4", "scenario.generations={interval: 10, count: 2, tasks: 3}")
     w = MTSRWorld(exp, np.random.default_rng(0))

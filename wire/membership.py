@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import TypeVar
 
 import zenoh
@@ -43,7 +44,7 @@ def fetch_bytes(session: zenoh.Session, key: str, timeout: float = 30.0) -> byte
     raise JoinError(f"nothing answered on {key} within {timeout:.0f} s")
 
 
-def serve_text(session: zenoh.Session, key: str, text: str):
+def serve_text(session: zenoh.Session, key: str, text: str) -> zenoh.Queryable:
     """Answer every query on ``key`` with ``text``; keep the returned queryable alive."""
     return session.declare_queryable(key, lambda query: query.reply(key, text))
 
@@ -68,7 +69,7 @@ def hand_over(session: zenoh.Session, key: str, payload: bytes, timeout: float =
     return False
 
 
-def accept_handovers(session: zenoh.Session, key: str, deliver):
+def accept_handovers(session: zenoh.Session, key: str, deliver: Callable[[str, bytes], object]) -> zenoh.Queryable:
     """The receiving side of :func:`hand_over`: ``deliver(key, payload)``, then acknowledge."""
 
     def on_query(query: zenoh.Query) -> None:

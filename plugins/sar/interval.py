@@ -20,16 +20,19 @@ from pydantic import BaseModel, ConfigDict, Field
 
 class IntervalParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    base_interval: float = Field(10.0, gt=0, description="I_base, seconds")
-    rho_base: float = 1.0
-    theta_high: float = 3.0
-    theta_low: float = 1.0
+    base_interval: float = Field(10.0, gt=0, description="I_base, seconds: the adaptive interval lies in "
+                                 "[I_base x phi_min, I_base x phi_max] (Eq. 2)")
+    rho_base: float = Field(1.0, description="rho_base, Eq. 3: the interval's factor per round in the dead zone")
+    theta_high: float = Field(3.0, description="theta_high, Eq. 4: tasks lost in a round at or above which the "
+                              "interval shortens")
+    theta_low: float = Field(1.0, description="theta_low, Eq. 4: tasks lost in a round at or below which the "
+                             "interval lengthens")
     mu: float = Field(10.0, description="sigmoid steepness")
-    kappa: float = 0.1
-    lam: float = Field(6.0, description="lambda")
-    gamma: float = 0.001
-    phi_min: float = 3.0
-    phi_max: float = 8.0
+    kappa: float = Field(0.1, description="kappa, Eq. 4: how fast high conflict shortens the interval")
+    lam: float = Field(6.0, description="lambda, Eq. 4: how fast low conflict lengthens the interval")
+    gamma: float = Field(0.001, description="gamma, Eq. 4: weight of the conflict's trend (sign of dLc)")
+    phi_min: float = Field(3.0, description="phi_min, Eq. 2: the shortest interval is I_base x phi_min")
+    phi_max: float = Field(8.0, description="phi_max, Eq. 2: the longest interval is I_base x phi_max")
 
 
 def sigmoid(x: float, mu: float) -> float:
