@@ -24,8 +24,8 @@ from pathlib import Path
 
 from lockstep import raw_baseline
 
-from swarmbed.experiments import config as cfg
-from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 

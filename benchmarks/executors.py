@@ -22,8 +22,8 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-from swarmbed.experiments import executors
-from swarmbed.experiments.sweep import ATTEMPTS, load_sweep, run_sweep
+from swarmbed.experiments.campaigns import executors
+from swarmbed.experiments.campaigns.sweep import ATTEMPTS, load_sweep, run_sweep
 
 SAR = Path(__file__).resolve().parent.parent / "experiments" / "sar" / "base_R20_V100.yaml"
 

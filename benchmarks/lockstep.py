@@ -23,8 +23,8 @@ from pathlib import Path
 
 import zenoh
 
-from swarmbed.experiments import config as cfg
-from swarmbed.experiments.runner import open_hub, run_experiment
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.runner import open_hub, run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 

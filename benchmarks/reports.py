@@ -24,10 +24,10 @@ import threading
 import time
 from pathlib import Path
 
-from swarmbed.experiments import config as cfg
-from swarmbed.experiments.report import report
-from swarmbed.experiments.runner import run_experiment
-from swarmbed.experiments.sweep import load_sweep, run_sweep
+from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.experiments.views.report import report
 from swarmbed.wire.session import free_loopback_endpoint
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -49,13 +49,12 @@ from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of
 from swarmbed.wire.lifecycle import WORLD, component_rng
 from swarmbed.wire.membership import accept_handovers, serve_text
 from swarmbed.wire.rowfile import RowFile
+from swarmbed.wire.rundir import RESTARTS, SWAPS
 from swarmbed.wire.schema import LOCAL, Experiment, Targets, agent_spec, netem_spec
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
 STATUS_EVERY = 0.25  # wall seconds between progress samples for watchers
-SWAPS = "swaps.csv"
-RESTARTS = "restarts.csv"
 CONSUMED = object()  # what an event filter of Coordinator._wait_for returns for an event it used
 RESTART_COLUMNS = ["tick", "agent", "lost_at_tick", "incarnation", "host", "checkpoint_tick", "outcome", "reason",
                    "wait_ms"]

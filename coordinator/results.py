@@ -12,15 +12,16 @@ from pathlib import Path
 from typing import Any
 
 from swarmbed.wire.rowfile import write_error
-
-SUMMARY = "summary.json"
-TIMESERIES = "timeseries.csv"
-AGENTS = "agents.csv"
-TIMINGS = "timings.json"
-TRANSPORT = "transport.json"  # measured bytes on the wire: of this machine and moment, not reproducible
-CONFIG = "config.yaml"
-TRAJECTORIES = "trajectories.csv"
-MARKERS = "markers.csv"  # tasks or victims as they appear and vanish (with trajectories)
+from swarmbed.wire.rundir import (  # noqa: F401 - the run directory's names, read as results.<NAME>
+    AGENTS,
+    CONFIG,
+    MARKERS,
+    SUMMARY,
+    TIMESERIES,
+    TIMINGS,
+    TRAJECTORIES,
+    TRANSPORT,
+)
 
 
 def temp_beside(path: Path) -> Path:

@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING
 from swarmbed.agent_runtime.bt import BTError, load_tree, palette_xml
 from swarmbed.agent_runtime.node_sets import node_registry
 from swarmbed.coordinator.coordinator import RunError
-from swarmbed.experiments import config as cfg
+from swarmbed.experiments.launch import config as cfg
 from swarmbed.plugins import registry
 from swarmbed.wire.session import add_zenoh_args
 
 if TYPE_CHECKING:
-    from swarmbed.experiments.executors import Executor
+    from swarmbed.experiments.campaigns.executors import Executor
 
 
 def _keys_epilog() -> str:
@@ -68,7 +68,7 @@ def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> 
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.runner import run_experiment
+    from swarmbed.experiments.launch.runner import run_experiment
     from swarmbed.wire.credentials import CredentialsError, read_credentials
     from swarmbed.wire.session import tls_from_args
 
@@ -88,8 +88,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_soak(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.chaos import ChaosError, load_chaos
-    from swarmbed.experiments.soak import Thresholds, format_verdict, parse_duration, soak
+    from swarmbed.experiments.campaigns.chaos import ChaosError, load_chaos
+    from swarmbed.experiments.campaigns.soak import Thresholds, format_verdict, parse_duration, soak
 
     try:
         duration = parse_duration(args.duration)
@@ -123,7 +123,7 @@ def cmd_credentials(args: argparse.Namespace) -> int:
 
 
 def cmd_certs(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.certs import CertError, make_certs
+    from swarmbed.experiments.launch.certs import CertError, make_certs
 
     try:
         written = make_certs(Path(args.folder), args.machines, args.days)
@@ -226,7 +226,7 @@ def cmd_params(args: argparse.Namespace) -> int:
 
 
 def _sweep_executor(args: argparse.Namespace, out: Path) -> Executor:
-    from swarmbed.experiments import executors
+    from swarmbed.experiments.campaigns import executors
 
     if args.executor != "slurm" and (args.slurm_partition or args.slurm_cluster or args.detach):
         raise executors.ExecutorError("--slurm-*, --detach: only with --executor slurm")
@@ -238,8 +238,8 @@ def _sweep_executor(args: argparse.Namespace, out: Path) -> Executor:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.executors import ExecutorError
-    from swarmbed.experiments.sweep import load_sweep, run_sweep, status
+    from swarmbed.experiments.campaigns.executors import ExecutorError
+    from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep, status
 
     if args.status:
         try:
@@ -287,7 +287,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.analyze import AnalyzeError, analyze
+    from swarmbed.experiments.views.analyze import AnalyzeError, analyze
 
     try:
         written = analyze([Path(d) for d in args.sweep_dir], control=args.control,
@@ -323,7 +323,7 @@ def cmd_check_allocator(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.report import ReportError, report
+    from swarmbed.experiments.views.report import ReportError, report
 
     if args.output and len(args.folders) > 1:
         print("error: -o names one file: give one folder with it", file=sys.stderr)
@@ -340,7 +340,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.replay import ReplayError, replay
+    from swarmbed.experiments.views.replay import ReplayError, replay
 
     try:
         t0 = time.perf_counter()
@@ -369,7 +369,7 @@ def cmd_check_scenario(args: argparse.Namespace) -> int:
 
 
 def cmd_host(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.host import HostError, serve
+    from swarmbed.experiments.hosts.daemon import HostError, serve
     from swarmbed.wire.credentials import CredentialsError
     from swarmbed.wire.lifecycle import LOG_FORMAT
     from swarmbed.wire.session import tls_from_args
@@ -406,7 +406,7 @@ def _client_session(args: argparse.Namespace, connect_timeout_s: float | None = 
 
 
 def cmd_hosts(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.host import host_info, visible_hosts
+    from swarmbed.experiments.hosts.daemon import host_info, visible_hosts
 
     session = _client_session(args)
     if session is None:
@@ -426,7 +426,7 @@ def cmd_hosts(args: argparse.Namespace) -> int:
 
 def cmd_watch(args: argparse.Namespace) -> int:
 
-    from swarmbed.experiments.watch import WatchError, watch
+    from swarmbed.experiments.views.watch import WatchError, watch
 
     session = _client_session(args, connect_timeout_s=args.wait)  # the run may not be up yet
     if session is None:

@@ -37,14 +37,14 @@ from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
 from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
 from swarmbed.wire.membership import fetch_spec, hand_over
 from swarmbed.wire.rowfile import RowFile, TableWriteError
+from swarmbed.wire.rundir import LEDGER, RECEIVER_LEDGER
 from swarmbed.wire.schema import NetemSpec
 from swarmbed.wire.session import open_from_args
 from swarmbed.wire.transport import tcp_counters
 
 log = logging.getLogger("swarmbed.netem")
 
-LEDGER_FILE = "network_ledger.csv"
-RECEIVER_LEDGER_FILE = "network_ledger_receivers.parquet"  # network.ledger: per_receiver
+LEDGER_FILE, RECEIVER_LEDGER_FILE = LEDGER, RECEIVER_LEDGER
 
 
 class Proxy:

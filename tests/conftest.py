@@ -6,7 +6,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from swarmbed.experiments import config as cfg
+from swarmbed.experiments.launch import config as cfg
 from swarmbed.wire.credentials import Identity, write_credentials
 
 pytest_plugins = ("tests.netns",)  # the `lab` fixture: stand-in hosts in network namespaces

@@ -16,8 +16,8 @@ import psutil
 import pytest
 import zenoh
 
-from swarmbed.experiments.access import RunAccess, access_rules
-from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.launch.access import RunAccess, access_rules
+from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.codec import encode_agent_out, pack
 from swarmbed.wire.credentials import CredentialsError, Identity, read_credentials, write_credentials
 from swarmbed.wire.keys import Keys

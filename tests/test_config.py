@@ -2,8 +2,8 @@
 
 import pytest
 
-from swarmbed.experiments import config as cfg
-from swarmbed.experiments.config import resolve_experiment
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.config import resolve_experiment
 from tests.conftest import QUICKSTART, ROOT
 
 
@@ -159,7 +159,7 @@ def test_a_billion_laughs_sweep_file_is_refused_at_once(tmp_path):
     """A few hundred bytes of nested aliases expand tenfold per level: refused, not expanded."""
     import time
 
-    from swarmbed.experiments.sweep import load_sweep
+    from swarmbed.experiments.campaigns.sweep import load_sweep
 
     lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x, x]"]
     lines += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]" for i in range(1, 9)]
@@ -198,7 +198,7 @@ def test_errors_name_what_the_user_wrote_not_our_classes(tmp_path, capsys):
 
 
 def test_a_sweep_names_the_scenario_whose_value_is_bad(tmp_path):
-    from swarmbed.experiments.sweep import experiment_for, load_sweep
+    from swarmbed.experiments.campaigns.sweep import experiment_for, load_sweep
 
     sweep = load_sweep(QUICKSTART, grid=["network.loss=0.1,7"])
     bad = sweep.scenarios[1]

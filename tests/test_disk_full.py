@@ -11,7 +11,7 @@ import pytest
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import RunError
-from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.rowfile import RowFile, TableWriteError
 from tests.conftest import experiment, whole_rows
 

@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 import yaml
 
-from swarmbed.experiments import config as cfg
-from swarmbed.experiments.chaos import load_chaos
+from swarmbed.experiments.campaigns.chaos import load_chaos
+from swarmbed.experiments.campaigns.sweep import experiment_for, load_sweep
 from swarmbed.experiments.cli import main
-from swarmbed.experiments.runner import run_experiment
-from swarmbed.experiments.sweep import experiment_for, load_sweep
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 TREES = sorted([*(ROOT / "agent_runtime" / "trees").glob("*.xml"), *(ROOT / "plugins").rglob("*.xml")])

@@ -12,7 +12,7 @@ import pytest
 import zenoh
 
 from swarmbed.coordinator.coordinator import RunError
-from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.codec import EMPTY_INBOX, MAX_AGENT_SAMPLE_BYTES, encode_tick, pack
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
@@ -188,7 +188,7 @@ def test_a_coordinator_that_fails_while_being_built_leaves_no_process_or_credent
     say) stops the fork server it had started and removes the run's private credentials folder."""
     import tempfile
 
-    from swarmbed.experiments import runner
+    from swarmbed.experiments.launch import runner
 
     class Broken(runner.Coordinator):
         def __init__(self, *args, **kwargs):

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import psutil
 
-from swarmbed.experiments.launcher import own_cpu_s
-from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.launch.launcher import own_cpu_s
+from swarmbed.experiments.launch.runner import run_experiment
 from tests.conftest import QUICKSTART, ROOT, experiment, same_results, under_way
 
 
@@ -47,7 +47,7 @@ def test_forked_agents_show_their_command_line_and_die_with_the_launcher(tmp_pat
     everyone = proc.children(recursive=True)
     agents = [p for p in everyone if "-m swarmbed.agent_runtime" in " ".join(p.cmdline())]
     assert sorted(int(" ".join(p.cmdline()).split("--id ")[1].split()[0]) for p in agents) == [0, 1, 2, 3, 4]
-    server = next(p for p in everyone if "swarmbed.experiments.forkserver" in " ".join(p.cmdline()))
+    server = next(p for p in everyone if "swarmbed.experiments.launch.forkserver" in " ".join(p.cmdline()))
     assert all(a.ppid() == server.pid for a in agents)
     runner.send_signal(signal.SIGKILL)  # no clean-up code runs: the kernel's death signals must do it
     runner.communicate(timeout=30)
@@ -61,7 +61,7 @@ def test_forked_agents_show_their_command_line_and_die_with_the_launcher(tmp_pat
 def test_a_dead_fork_server_takes_its_agents_and_the_run_says_so(tmp_path):
     runner, proc = _run_until_under_way(tmp_path)
     everyone = proc.children(recursive=True)
-    server = next(p for p in everyone if "swarmbed.experiments.forkserver" in " ".join(p.cmdline()))
+    server = next(p for p in everyone if "swarmbed.experiments.launch.forkserver" in " ".join(p.cmdline()))
     server.send_signal(signal.SIGKILL)
     _, err = runner.communicate(timeout=60)
     assert runner.returncode == 1 and "stopped at tick" in err and "agent" in err

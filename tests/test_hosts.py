@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from swarmbed.coordinator.coordinator import RunError
-from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.launch.runner import run_experiment
 from tests.conftest import QUICKSTART, experiment, same_results
 
 SAR = QUICKSTART.parent / "sar" / "_base.yaml"

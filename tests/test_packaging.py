@@ -87,7 +87,7 @@ def test_agents_and_the_proxy_import_no_analysis_library():
     allocator) and the proxy process stay lean: none of the launcher's and the reports'
     libraries (each would be held by hundreds of agent processes)."""
     heavy = ("pandas", "scipy", "matplotlib", "plotly", "pyarrow", "rich", "tqdm", "psutil", "yaml")
-    code = ("import sys; from swarmbed.experiments.forkserver import _preload; _preload(); "
+    code = ("import sys; from swarmbed.experiments.launch.forkserver import _preload; _preload(); "
             "import swarmbed.netem.proxy; print('\\n'.join(sys.modules))")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     loaded = set(run.stdout.split())

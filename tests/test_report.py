@@ -10,10 +10,10 @@ import textwrap
 import pandas as pd
 import pytest
 
+from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
 from swarmbed.experiments.cli import main as cli
-from swarmbed.experiments.report import report, run_report, sweep_report
-from swarmbed.experiments.runner import run_experiment
-from swarmbed.experiments.sweep import load_sweep, run_sweep
+from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.experiments.views.report import report, run_report, sweep_report
 from tests.conftest import QUICKSTART, experiment
 
 LOSSY = ("network.loss=0.2", "network.ledger=per_receiver")
@@ -157,7 +157,7 @@ def test_recording_for_a_replay_changes_no_result(recorded, runs):
 def test_replay_is_a_movie_with_one_frame_per_chosen_tick(recorded, tmp_path):
     from PIL import Image
 
-    from swarmbed.experiments.replay import replay
+    from swarmbed.experiments.views.replay import replay
 
     run = recorded[True]
     markers = pd.read_csv(run / "markers.csv")

@@ -4,9 +4,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.analyze import analyze, load
-from swarmbed.experiments.stats import cohens_d, compare
-from swarmbed.experiments.sweep import load_sweep, run_sweep
+from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
+from swarmbed.experiments.views.analyze import analyze, load
+from swarmbed.experiments.views.stats import cohens_d, compare
 from tests.conftest import ROOT
 
 

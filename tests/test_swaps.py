@@ -11,8 +11,8 @@ import threading
 import numpy as np
 import pytest
 
-from swarmbed.experiments import config as cfg
-from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.plugins.conformance import ConformanceError, check_snapshot
 from swarmbed.plugins.registry import register
 from tests.conftest import QUICKSTART, experiment, same_results

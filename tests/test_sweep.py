@@ -5,9 +5,9 @@ import textwrap
 import pandas as pd
 import pytest
 
-from swarmbed.experiments import config as cfg
-from swarmbed.experiments.analyze import analyze
-from swarmbed.experiments.sweep import load_sweep, run_seeds, run_sweep
+from swarmbed.experiments.campaigns.sweep import load_sweep, run_seeds, run_sweep
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.views.analyze import analyze
 from tests.conftest import QUICKSTART
 
 BOOM = textwrap.dedent('''
@@ -79,8 +79,8 @@ def test_a_rerun_under_another_configuration_never_reuses_completed_runs(sweep_d
     shutil.copytree(sweep_dir / "out", mixed)
     config = mixed / "fast_range-30" / "run_001" / "config.yaml"
     config.write_text(config.read_text().replace("loss: 0.0", "loss: 0.3"))
-    from swarmbed.experiments.analyze import AnalyzeError
-    from swarmbed.experiments.report import ReportError, report
+    from swarmbed.experiments.views.analyze import AnalyzeError
+    from swarmbed.experiments.views.report import ReportError, report
 
     with pytest.raises(AnalyzeError, match="run_000 and fast_range-30/run_001 were made under different"):
         analyze([mixed])
@@ -101,8 +101,8 @@ def test_every_run_records_the_code_that_made_it_and_analyze_will_not_pool_two_v
     import json
     import shutil
 
-    from swarmbed.experiments.analyze import AnalyzeError
-    from swarmbed.experiments.sweep import collect, read_spec, write_tables
+    from swarmbed.experiments.campaigns.sweep import collect, read_spec, write_tables
+    from swarmbed.experiments.views.analyze import AnalyzeError
 
     runs = sorted((sweep_dir / "out").glob("fast_*/run_*/provenance.json"))
     made = [json.loads(p.read_text()) for p in runs]
@@ -137,7 +137,7 @@ def test_analyze_writes_tables_and_figures(sweep_dir):
 
 def test_per_agent_panels_pool_every_agent_of_every_run(sweep_dir):
     """SPACE's distance and workload panels: one value per agent, not one mean per run."""
-    from swarmbed.experiments.analyze import _values, load
+    from swarmbed.experiments.views.analyze import _values, load
 
     df = load([sweep_dir / "out"])
     for _, rows in df.groupby("scenario"):

@@ -15,8 +15,8 @@ import pandas as pd
 import psutil
 import pytest
 
-from swarmbed.experiments import claims, executors
-from swarmbed.experiments.sweep import ATTEMPTS, load_sweep, read_table, run_sweep, status
+from swarmbed.experiments.campaigns import claims, executors
+from swarmbed.experiments.campaigns.sweep import ATTEMPTS, load_sweep, read_table, run_sweep, status
 from tests.conftest import QUICKSTART, same_results, under_way
 
 SWEEP = textwrap.dedent(f"""

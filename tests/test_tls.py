@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import CredentialsError, Identity, write_credentials
 from swarmbed.wire.session import free_loopback_endpoint, tls_settings, zenoh_config
 from tests.conftest import experiment, same_results

@@ -12,7 +12,7 @@ import termios
 import threading
 import time
 
-from swarmbed.experiments.runner import run_experiment
+from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.session import free_loopback_endpoint
 from tests.conftest import experiment
 

@@ -10,7 +10,7 @@ from swarmbed.coordinator import sar
 from swarmbed.coordinator.kinematics import Limits, step
 from swarmbed.coordinator.sar import ALIVE
 from swarmbed.coordinator.scenario import within
-from swarmbed.experiments.config import resolve_experiment
+from swarmbed.experiments.launch.config import resolve_experiment
 from tests.conftest import experiment
 
 

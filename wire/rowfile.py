@@ -27,7 +27,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-PARTIAL_PREFIX = "partial_"
+from swarmbed.wire.rundir import PART_SUFFIX, PARTIAL_PREFIX
 
 
 class TableWriteError(OSError):
@@ -51,7 +51,7 @@ def write_error(exc: OSError, where: Path) -> TableWriteError:
 class RowFile:
     def __init__(self, path: Path, columns: Sequence[str], chunk_rows: int = 4096, chunk_s: float = 5.0) -> None:
         self.path = path
-        self.part = path.with_name(path.name + ".part")
+        self.part = path.with_name(path.name + PART_SUFFIX)
         self.chunk_rows = chunk_rows
         self.chunk_s = chunk_s
         self.rows = 0
@@ -135,7 +135,7 @@ def keep_partial(part: Path) -> Path | None:
     """Rename ``<name>.part`` left by an unfinished run to ``partial_<name>`` (if it exists)."""
     if not part.exists():
         return None
-    name = part.name.removesuffix(".part")
+    name = part.name.removesuffix(PART_SUFFIX)
     target = part.with_name(PARTIAL_PREFIX + name)
     os.replace(part, target)
     return target

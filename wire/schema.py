@@ -2,7 +2,7 @@
 
 An experiment has five sections. ``run``, ``agents`` and ``network`` are checked here in full.
 ``scenario`` and ``allocator`` are a name (``kind`` / ``name``) plus the parameters of the code
-that name resolves to; only the launcher (``swarmbed.experiments.config``) resolves names and
+that name resolves to; only the launcher (``swarmbed.experiments.launch.config``) resolves names and
 checks those parameters against the plugin's own ``Params`` model, and it writes them back fully
 resolved, so that every process reads complete sections.
 

@@ -57,10 +57,10 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from swarmbed.experiments import netns
-from swarmbed.experiments.host import process_name
-from swarmbed.experiments.runner import LiveRun
-from swarmbed.experiments.yamlfile import YamlFileError, read_yaml
+from swarmbed.experiments.hosts import netns
+from swarmbed.experiments.hosts.daemon import process_name
+from swarmbed.experiments.launch.runner import LiveRun
+from swarmbed.experiments.launch.yamlfile import YamlFileError, read_yaml
 from swarmbed.wire.codec import NetemControl, encode_netem_control
 from swarmbed.wire.rowfile import RowFile
 
@@ -127,7 +127,7 @@ class _Due:
 
 
 class Chaos:
-    """Runs a :class:`ChaosPlan` against a live run (a :class:`~swarmbed.experiments.runner.RunObserver`)."""
+    """Runs a :class:`ChaosPlan` against a live run (a :class:`~swarmbed.experiments.launch.runner.RunObserver`)."""
 
     def __init__(self, plan: ChaosPlan, horizon_s: float, seed: int) -> None:
         self.plan = plan

@@ -18,8 +18,9 @@ from pathlib import Path
 from typing import Any
 
 import swarmbed
+from swarmbed.wire.rundir import PROVENANCE
 
-FILE = "provenance.json"
+FILE = PROVENANCE
 LIBRARIES = ("numpy", "eclipse-zenoh", "msgpack", "pydantic")
 
 

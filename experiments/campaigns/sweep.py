@@ -51,11 +51,11 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from tqdm import tqdm
 
 from swarmbed.coordinator import results
-from swarmbed.experiments import claims
-from swarmbed.experiments import config as cfg
-from swarmbed.experiments.executors import Executor, Outcome, resources_for
-from swarmbed.experiments.provenance import FILE as PROVENANCE
-from swarmbed.experiments.yamlfile import YamlFileError, parse_yaml, read_yaml
+from swarmbed.experiments.campaigns import claims
+from swarmbed.experiments.campaigns.executors import Executor, Outcome, resources_for
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
+from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml, read_yaml
 from swarmbed.wire.schema import SAFE_NAME
 
 TABLE = "sweep.csv"
@@ -201,7 +201,7 @@ def _record_attempt(run_dir: Path, **fields: Any) -> None:
 def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S) -> Outcome:
     """One run, wherever an executor placed it: claim its directory, run it, release the claim.
     Returns (status, detail); a run another process holds is left to it ("claimed")."""
-    from swarmbed.experiments.runner import run_experiment
+    from swarmbed.experiments.launch.runner import run_experiment
 
     out = Path(spec.out_dir)
     claim = claims.take(out, stale_after)
@@ -457,7 +457,7 @@ def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool =
     Runs another command holds are left to it; runs that never started because a worker died are
     started again once. A completed run made under another configuration than planned is refused
     (or, with ``redo_mismatched``, run again)."""
-    from swarmbed.experiments import executors
+    from swarmbed.experiments.campaigns import executors
 
     if jobs is not None and jobs < 1:
         raise cfg.ConfigError(f"--jobs {jobs}: at least one run must be able to go at once")

@@ -23,7 +23,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from swarmbed.experiments.launcher import python_env
+from swarmbed.experiments.launch.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
 
 

@@ -1,7 +1,7 @@
 """``--executor dask --scheduler tcp://HOST:PORT``: each run a task on a Dask cluster.
 
 A run's task asks for the abstract resources ``cores`` and ``mem_gb`` sized to its agents
-(:func:`~swarmbed.experiments.executors.resources_for`), so a worker started with
+(:func:`~swarmbed.experiments.campaigns.executors.resources_for`), so a worker started with
 ``--resources "cores=16,mem_gb=64"`` takes as many runs at once as fit. Resources that no worker
 declares are not asked for (a task asking for one would wait forever); each worker then runs as many
 runs at once as it has threads. Dask runs a task again elsewhere when its worker dies (up to its
@@ -15,7 +15,7 @@ from typing import Any
 
 import distributed
 
-from swarmbed.experiments.executors import Executor, ExecutorError, Outcome, Resources, RunFunction
+from swarmbed.experiments.campaigns.executors import Executor, ExecutorError, Outcome, Resources, RunFunction
 
 
 class DaskExecutor(Executor):

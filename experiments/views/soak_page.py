@@ -12,10 +12,10 @@ import pandas as pd
 import plotly.graph_objects as go
 
 import swarmbed
-from swarmbed.experiments.chaos import CHAOS_FILE
-from swarmbed.experiments.palette import DROP_COLORS
-from swarmbed.experiments.report import Page
-from swarmbed.experiments.soak import PROCESSES, RUN, VERDICT
+from swarmbed.experiments.campaigns.chaos import CHAOS_FILE
+from swarmbed.experiments.campaigns.soak import PROCESSES, RUN, VERDICT
+from swarmbed.experiments.views.colours import DROP_COLORS
+from swarmbed.experiments.views.report import Page
 
 CHAOS_COLORS = {"kill_agent": "#D55E00", "stop_agent": "#E69F00", "loss_burst": "#0072B2", "rate_cap": "#009E73"}
 

@@ -26,8 +26,8 @@ import yaml
 from scipy import stats
 
 import swarmbed
-from swarmbed.experiments.palette import DROP_COLORS
-from swarmbed.experiments.sweep import PARQUET, TABLE, mixed_configurations, read_table
+from swarmbed.experiments.campaigns.sweep import PARQUET, TABLE, mixed_configurations, read_table
+from swarmbed.experiments.views.colours import DROP_COLORS
 from swarmbed.plugins.registry import PluginError, resolve_scenario
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
@@ -328,7 +328,7 @@ def sweep_report(sweep: Path) -> tuple[str, int]:
 
 def report(folder: Path, out: Path | None = None) -> Path:
     """Write the report of a soak, a run or a sweep folder; returns the file."""
-    from swarmbed.experiments.soak_page import is_soak, soak_report
+    from swarmbed.experiments.views.soak_page import is_soak, soak_report
 
     if is_soak(folder):
         text, _ = soak_report(folder)

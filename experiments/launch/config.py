@@ -23,7 +23,7 @@ from swarmbed.agent_runtime.allocator import Allocator
 from swarmbed.agent_runtime.bt import BTError, load_tree
 from swarmbed.agent_runtime.node_sets import node_registry, tree_path
 from swarmbed.coordinator.scenario import Scenario
-from swarmbed.experiments.yamlfile import YamlFileError, non_finite, parse_yaml, read_yaml
+from swarmbed.experiments.launch.yamlfile import YamlFileError, non_finite, parse_yaml, read_yaml
 from swarmbed.plugins.registry import (
     PluginError,
     allocator_target,

@@ -31,7 +31,7 @@ from typing import Any
 import psutil
 import zenoh
 
-from swarmbed.experiments.launcher import AGENT_MODULE, Children, ForkServerError
+from swarmbed.experiments.launch.launcher import AGENT_MODULE, Children, ForkServerError
 from swarmbed.wire.credentials import Identity, read_credentials, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, HostKeys, Keys, host_name_of
 from swarmbed.wire.lifecycle import tune_malloc

@@ -124,7 +124,7 @@ class ForkServer:
 
     def __init__(self, log_path: Path, timeout: float = 60.0) -> None:
         self.log = open(log_path, "wb")
-        self.proc = subprocess.Popen([sys.executable, "-m", "swarmbed.experiments.forkserver", str(os.getpid())],
+        self.proc = subprocess.Popen([sys.executable, "-m", "swarmbed.experiments.launch.forkserver", str(os.getpid())],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log,
                                      start_new_session=True, close_fds=True, env=python_env())
         self.replies: queue.SimpleQueue = queue.SimpleQueue()

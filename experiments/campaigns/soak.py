@@ -41,9 +41,9 @@ import numpy as np
 import psutil
 
 from swarmbed.coordinator import results
-from swarmbed.experiments.chaos import Chaos, ChaosPlan
-from swarmbed.experiments.host import process_name
-from swarmbed.experiments.runner import LiveRun, RunObserver, run_experiment
+from swarmbed.experiments.campaigns.chaos import Chaos, ChaosPlan
+from swarmbed.experiments.hosts.daemon import process_name
+from swarmbed.experiments.launch.runner import LiveRun, RunObserver, run_experiment
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.schema import Experiment
 
@@ -87,7 +87,7 @@ def kind_of(name: str) -> str:
 
 class Monitor:
     """Samples the run's processes and counters every ``interval`` wall seconds; stops the run
-    when ``duration_s`` is up (a :class:`~swarmbed.experiments.runner.RunObserver`)."""
+    when ``duration_s`` is up (a :class:`~swarmbed.experiments.launch.runner.RunObserver`)."""
 
     def __init__(self, duration_s: float, interval: float = 5.0) -> None:
         self.duration_s = duration_s

@@ -21,9 +21,7 @@ from tqdm import tqdm
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import Coordinator, RunError
-from swarmbed.experiments.access import RunAccess, agent_user
-from swarmbed.experiments.config import Experiment, resolve_experiment, to_yaml
-from swarmbed.experiments.host import (
+from swarmbed.experiments.hosts.daemon import (
     HostError,
     host_info,
     process_name,
@@ -31,20 +29,25 @@ from swarmbed.experiments.host import (
     stop_agents,
     wait_for_hosts,
 )
-from swarmbed.experiments.launcher import ChildExited, Children, ForkServerError, own_cpu_s, peak_rss_mb, reset_peak_rss
-from swarmbed.experiments.provenance import FILE as PROVENANCE
-from swarmbed.experiments.provenance import provenance
+from swarmbed.experiments.launch.access import RunAccess, agent_user
+from swarmbed.experiments.launch.config import Experiment, resolve_experiment, to_yaml
+from swarmbed.experiments.launch.launcher import (
+    ChildExited,
+    Children,
+    ForkServerError,
+    own_cpu_s,
+    peak_rss_mb,
+    reset_peak_rss,
+)
+from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
+from swarmbed.experiments.launch.provenance import provenance
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.lifecycle import tune_malloc
 from swarmbed.wire.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
+from swarmbed.wire.rundir import DEPLOYMENT, RESULT_FILES
 from swarmbed.wire.schema import LOCAL, carriers, hosts_of
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
-
-DEPLOYMENT = "deployment.json"  # where each agent ran; not a result (the same everywhere)
-RESULT_FILES = (results.SUMMARY, results.TIMESERIES, results.AGENTS, results.TIMINGS, results.TRANSPORT,
-                results.TRAJECTORIES, results.MARKERS,
-                "network_ledger.csv", "network_ledger_receivers.parquet", DEPLOYMENT)
 
 
 @dataclass

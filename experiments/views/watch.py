@@ -25,7 +25,7 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from swarmbed.experiments.palette import LABEL_COLORS
+from swarmbed.experiments.views.colours import LABEL_COLORS
 from swarmbed.wire.codec import WireError, decode_agent_out, decode_status
 from swarmbed.wire.keys import PREFIX, Keys, agent_id_of
 

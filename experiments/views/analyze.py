@@ -32,9 +32,7 @@ from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import NullLocator  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from swarmbed.experiments.palette import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
-from swarmbed.experiments.stats import compare  # noqa: E402
-from swarmbed.experiments.sweep import (  # noqa: E402
+from swarmbed.experiments.campaigns.sweep import (  # noqa: E402
     PARQUET,
     SPEC,
     TABLE,
@@ -42,6 +40,8 @@ from swarmbed.experiments.sweep import (  # noqa: E402
     mixed_versions,
     read_table,
 )
+from swarmbed.experiments.views.colours import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
+from swarmbed.experiments.views.stats import compare  # noqa: E402
 
 METRICS = {
     "mission_time": "mission completion time (s)",

@@ -2,7 +2,7 @@
 
 Each task unpickles the run function and its run and calls it in a fresh Python on the node, the
 same function the local pool calls. An array job asks one size of node for every task, so the
-request is the largest run's (:func:`~swarmbed.experiments.executors.resources_for`). submitit keeps
+request is the largest run's (:func:`~swarmbed.experiments.campaigns.executors.resources_for`). submitit keeps
 its scripts and each task's log in ``<sweep>/.submitit/``. ``cluster="local"`` is submitit's own
 stand-in (a subprocess per task on this machine): the tests use it, no Slurm needed.
 """
@@ -16,7 +16,7 @@ from typing import Any
 import submitit
 from submitit.core.utils import UncompletedJobError
 
-from swarmbed.experiments.executors import Executor, ExecutorError, Outcome, Resources, RunFunction
+from swarmbed.experiments.campaigns.executors import Executor, ExecutorError, Outcome, Resources, RunFunction
 
 
 def parse_time_min(text: str | int) -> int:

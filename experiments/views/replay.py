@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from swarmbed.experiments.palette import DROP_COLORS, LABEL_COLORS
+from swarmbed.experiments.views.colours import DROP_COLORS, LABEL_COLORS
 
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
 
