@@ -34,7 +34,7 @@ from swarmbed.wire.codec import (
     TAG_SNAPSHOT,
     NetemStep,
     WireError,
-    World,
+    WorldSample,
     decode_handover,
     decode_netem_step,
     decode_report,
@@ -307,7 +307,8 @@ class Coordinator:
                     self._ask_checkpoints()
             doomed = w.draw_losses()  # lost at tick k+1: the proxy must not deliver to them then
             incarnations = {a: i for a, i in self.incarnation.items() if i}
-            self.world_pub.put(encode_world(World(k, ids, xs, ys, [i for i in ids if i not in doomed], incarnations)))
+            alive_next = [i for i in ids if i not in doomed]
+            self.world_pub.put(encode_world(WorldSample(k, ids, xs, ys, alive_next, incarnations)))
             for i, obs in w.observations().items():
                 self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX)))
             step = self._await_step(k)

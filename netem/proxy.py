@@ -24,7 +24,7 @@ from swarmbed.wire.codec import (
     NetemControl,
     NetemStep,
     WireError,
-    World,
+    WorldSample,
     decode_agent_out,
     decode_netem_control,
     decode_netem_stop,
@@ -64,7 +64,7 @@ class Proxy:
         self.gone: set[tuple[int, int]] = set()  # (agent, incarnation) whose process left
         self.lost: set[int] = set()  # agents whose current process left
         self.lost_unreported: list[int] = []
-        self.world: World | None = None
+        self.world: WorldSample | None = None
         self.malformed = 0
         self._last = [0, 0, 0, 0, 0]
         self._last_drops: dict[str, int] = dict(self.ledger.dropped)
@@ -222,7 +222,7 @@ class Proxy:
         if self.malformed <= 20:
             log.warning("netem: malformed sample on %s dropped: %s", key, exc)
 
-    def _note_losses(self, w: World | None) -> None:
+    def _note_losses(self, w: WorldSample | None) -> None:
         """Agents whose current process (as tick ``w`` names it) has left are lost (until a new
         process of theirs is current)."""
         if w is None:
@@ -234,7 +234,7 @@ class Proxy:
                 self.lost.add(agent)
                 self.lost_unreported.append(agent)
 
-    def _complete(self, w: World) -> bool:
+    def _complete(self, w: WorldSample) -> bool:
         got = self.outs.get(w.tick, {})
         return all(a in got or a in self.lost for a in w.ids)
 
@@ -262,7 +262,7 @@ class Proxy:
             elif what == "left":
                 left.add(data[0])
 
-    def _route(self, w: World) -> None:
+    def _route(self, w: WorldSample) -> None:
         self.answer_by = None
         self.routed = w.tick
         if w.tick == 0:

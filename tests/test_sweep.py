@@ -133,6 +133,10 @@ def test_analyze_writes_tables_and_figures(sweep_dir):
     row = summary[(summary["scenario"] == "fast_range-30") & (summary["metric"] == "mission_time")].iloc[0]
     assert row["n"] == 2 and row["ci95_low"] <= row["mean"] <= row["ci95_high"]
     assert {"fig_distance_per_agent.png", "fig_work_per_agent.png"} <= names
+    # the same sweep again rewrites the table: what analyze made of the old one goes with it
+    run_sweep(load_sweep(sweep_dir / "sweep.yaml", extra=["run.duration=150"]), sweep_dir / "out", jobs=2,
+              progress=False)
+    assert not list((sweep_dir / "out").glob("fig_*")) and not list((sweep_dir / "out").glob("scenario_summary.*"))
 
 
 def test_per_agent_panels_pool_every_agent_of_every_run(sweep_dir):

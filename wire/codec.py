@@ -259,7 +259,7 @@ def decode_agent_out(data: bytes) -> AgentOut:
 # --- coordinator -> netem proxy -------------------------------------------------------------
 
 @dataclass(frozen=True, slots=True)
-class World:
+class WorldSample:
     """Positions of the agents alive at ``tick``; ``alive_next``: those still alive at tick+1."""
 
     tick: int
@@ -273,11 +273,11 @@ class World:
         return self.incarnations.get(agent, 0)
 
 
-def encode_world(w: World) -> bytes:
+def encode_world(w: WorldSample) -> bytes:
     return pack([w.tick, w.ids, w.xs, w.ys, w.alive_next, w.incarnations])
 
 
-def decode_world(data: bytes) -> World:
+def decode_world(data: bytes) -> WorldSample:
     msg = unpack(data)
     _expect(isinstance(msg, list) and len(msg) == 6, "world must be [tick, ids, xs, ys, alive_next, incarnations]")
     tick, ids, xs, ys, alive_next, incarnations = msg
@@ -286,7 +286,7 @@ def decode_world(data: bytes) -> World:
     _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
     _expect(all(isinstance(v, list) for v in (ids, xs, ys, alive_next)), "world fields must be lists")
     _expect(len(ids) == len(xs) == len(ys), "ids, xs and ys must have one entry per agent")
-    return World(tick, ids, [float(x) for x in xs], [float(y) for y in ys], alive_next, incarnations)
+    return WorldSample(tick, ids, [float(x) for x in xs], [float(y) for y in ys], alive_next, incarnations)
 
 
 # --- netem proxy -> coordinator -------------------------------------------------------------

@@ -302,9 +302,17 @@ def _parquet_ready(table: pd.DataFrame) -> pd.DataFrame:
     return table
 
 
+#: what ``analyze`` and ``report`` made from a sweep's table: stale once the table is written anew
+DERIVED = ("fig_*", "scenario_summary.*", "statistics.*", "report.html")
+
+
 def write_tables(table: pd.DataFrame, out: Path) -> None:
     """``sweep.csv`` and ``sweep.parquet`` (every run's summary flattened, one file to read for
-    thousands of runs), each written whole or not at all."""
+    thousands of runs), each written whole or not at all. Figures, summaries and reports made from
+    an earlier table are removed: they may show another sweep's scenarios."""
+    for pattern in DERIVED:
+        for stale in out.glob(pattern):
+            stale.unlink(missing_ok=True)
     tmp = results.temp_beside(out / TABLE)
     table.to_csv(tmp, index=False)
     os.replace(tmp, out / TABLE)

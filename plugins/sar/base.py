@@ -21,14 +21,14 @@ from swarmbed.plugins.base import Allocator, LocalView, TaskInfo
 TREES = Path(__file__).resolve().parent / "trees"
 
 
-class SARParams(BaseModel):
+class StrategyParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
     incompatible_for: float = Field(60.0, ge=0, description="seconds a mismatched victim is not retried")
 
 
 class SARStrategy(Allocator):
-    Params = SARParams
-    params: SARParams
+    Params = StrategyParams
+    params: StrategyParams
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)

@@ -25,7 +25,7 @@ from pydantic import Field
 from swarmbed.agent_runtime.nodes import ExplorationNode
 from swarmbed.plugins.base import LocalView
 from swarmbed.plugins.consensus import ConsensusState
-from swarmbed.plugins.sar.base import TREES, SARParams, SARStrategy
+from swarmbed.plugins.sar.base import TREES, SARStrategy, StrategyParams
 from swarmbed.plugins.sar.interval import IntervalParams, next_interval
 from swarmbed.plugins.sar.nodes import SAR_NODES
 
@@ -33,7 +33,7 @@ BIDS = "bids"
 log = logging.getLogger("swarmbed.agent.cbba_etc")
 
 
-class ConsensusParams(SARParams):
+class ConsensusParams(StrategyParams):
     max_tasks: int = Field(3, ge=1, description="L_i: victims per bundle")
     epsilon: float = Field(1e-3, gt=0, description="the utility's epsilon")
     mismatch_factor: float = Field(0.1, ge=0, description="utility factor for a known colour mismatch")

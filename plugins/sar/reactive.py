@@ -15,7 +15,7 @@ from pydantic import Field
 
 from swarmbed.agent_runtime.nodes import ExplorationNode
 from swarmbed.plugins.base import LocalView
-from swarmbed.plugins.sar.base import TREES, SARParams, SARStrategy
+from swarmbed.plugins.sar.base import TREES, SARStrategy, StrategyParams
 from swarmbed.plugins.sar.nodes import SAR_NODES
 
 CLAIM, COLOR = "claim", "color"
@@ -40,7 +40,7 @@ class TreeStrategy(SARStrategy):
         """Hook: a new target was chosen."""
 
 
-class CommParams(SARParams):
+class CommParams(StrategyParams):
     claim_ttl: float = Field(30.0, gt=0, description="seconds a claim holds without a refresh")
     claim_refresh: float = Field(10.0, gt=0, description="seconds between repeats of a held claim")
 
