@@ -103,7 +103,7 @@ def _check_robustness(scenario: Scenario, seed: int) -> None:
     ids = world.positions()[0]
     for action in GARBAGE_ACTIONS:
         try:
-            world.apply({i: action for i in ids})
+            world.apply(dict.fromkeys(ids, action))
         except Exception as exc:
             raise ScenarioCheckError(f"apply() raised {type(exc).__name__} on the malformed action {action!r}; "
                                      "it must refuse (count) it instead") from None

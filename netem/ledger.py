@@ -85,7 +85,7 @@ class Ledger:
         self.copies = 0
         self.delivered = 0
         self.delivered_bytes = 0
-        self.dropped: dict[str, int] = {r: 0 for r in DROP_REASONS}
+        self.dropped: dict[str, int] = dict.fromkeys(DROP_REASONS, 0)
         self.by_sender: dict[int, dict[str, int]] = defaultdict(lambda: defaultdict(int))
         self.by_kind: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
 

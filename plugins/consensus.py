@@ -42,7 +42,7 @@ def table(i: int, k: int, zk: int, yk: float, zi: int, yi: float, compare: Calla
     if zk == k:  # sender thinks it wins
         if zi == i:
             return "update" if better(yk, k, yi, i) else "leave"  # 1
-        if zi == k or zi == NONE:
+        if zi in (k, NONE):
             return "update"  # 2, 4
         return "update" if newer(zi) or better(yk, k, yi, zi) else "leave"  # 3
     if zk == i:  # sender thinks the receiver wins
@@ -62,7 +62,7 @@ def table(i: int, k: int, zk: int, yk: float, zi: int, yi: float, compare: Calla
         return "update" if newer(m) and better(yk, m, yi, i) else "leave"  # 9
     if zi == k:
         return "update" if newer(m) else "reset"  # 10
-    if zi == m or zi == NONE:
+    if zi in (m, NONE):
         return "update" if newer(m) else "leave"  # 11, 13
     n = zi  # 12: receiver thinks a fourth agent n wins
     if newer(m) and (newer(n) or better(yk, m, yi, n)):

@@ -35,7 +35,7 @@ def sequential_greedy(inst, max_tasks, discount, speed):
     """Centralized SGA with a path-independent score: repeatedly give the best (agent, task) pair."""
     score = {(i, j): discount ** (math.hypot(tx - ax, ty - ay) / speed) * w
              for i, (ax, ay) in enumerate(inst.agents) for j, (tx, ty, w) in inst.tasks.items()}
-    load = {i: 0 for i in range(len(inst.agents))}
+    load = dict.fromkeys(range(len(inst.agents)), 0)
     assigned = {}
     while True:
         free = [(s, -i, -j) for (i, j), s in score.items() if j not in assigned and load[i] < max_tasks and s > 0]
@@ -68,7 +68,7 @@ def test_cbba_converges_conflict_free_within_the_bound(score):
                 owners[t] = a.agent_id
         for a in agents:
             assert a.z == agents[0].z, f"case {case}: agents disagree on winners"
-        assert {t: w for t, w in agents[0].z.items()} == owners
+        assert dict(agents[0].z.items()) == owners
         # every task is taken unless every bundle is full
         if len(owners) < n_t:
             assert all(len(a.bundle) == l_t for a in agents), f"case {case}: tasks left while bundles had room"

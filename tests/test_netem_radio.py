@@ -218,8 +218,8 @@ def _one_copy_at_a_time(params: NetemParams, n: int, dt: float, rng, ticks):
     return booked, inboxes
 
 
-@pytest.mark.parametrize("params", [dict(range=300.0, loss=0.2), dict(loss=0.0),
-                                    dict(range=200.0, loss=0.3, rate=2000.0, limit=3, latency=1)])
+@pytest.mark.parametrize("params", [{"range": 300.0, "loss": 0.2}, {"loss": 0.0},
+                                    {"range": 200.0, "loss": 0.3, "rate": 2000.0, "limit": 3, "latency": 1}])
 def test_batched_routing_books_and_delivers_what_one_copy_at_a_time_would(params, tmp_path):
     """Broadcast, unicast and multicast (repeated and unknown receivers too) among agents that come
     and go: every copy's outcome and every inbox equal the per-copy rules of the module docstring,

@@ -124,7 +124,7 @@ class SwapEntry(Strict):
 
 def hosts_of(placement: dict[str, str | int | list[int]], n_agents: int) -> dict[int, str]:
     """Host of every agent id (``local`` unless placed); raises ValueError on a bad placement."""
-    where = {i: LOCAL for i in range(n_agents)}
+    where = dict.fromkeys(range(n_agents), LOCAL)
     placed: dict[int, str] = {}
     for host, ids in placement.items():
         if not re.match(HOST_NAME, host):

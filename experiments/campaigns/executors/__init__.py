@@ -58,11 +58,11 @@ class Executor(ABC):
 
     def cancel(self) -> None:
         """Ctrl-C: start nothing new and stop what is running (its claims are then stale)."""
-        return None
+        return
 
     def close(self) -> None:
         """Release the executor's own resources (pools, clients)."""
-        return None
+        return
 
     def describe(self) -> str:
         return self.name
