@@ -37,8 +37,14 @@ EXIT_OK, EXIT_PLUGIN_ERROR, EXIT_COORDINATOR_GONE = 0, 1, 3
 COORDINATOR_GONE = "coordinator gone"
 
 
-def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation: int = 0,
-          restored: bool = False, malformed: int = 0) -> int:
+def serve(
+    session: zenoh.Session,
+    keys: Keys,
+    runtime: AgentRuntime,
+    incarnation: int = 0,
+    restored: bool = False,
+    malformed: int = 0,
+) -> int:
     """Answer tick samples until the run stops this agent. Swap orders name an incarnation: on
     ``snapshot`` this process hands its state to the coordinator and freezes (answers no tick),
     then either ``retire``s (its successor goes on) or ``resume``s (the swap failed)."""
@@ -111,8 +117,15 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation
             except Exception as exc:  # a plugin or node raised: stop this agent, loudly
                 tb = traceback.format_exc()
                 log.error("agent %d: failed at tick %d:\n%s", agent_id, msg.tick, tb)
-                report({"kind": "fatal", "agent": agent_id, "tick": msg.tick,
-                        "error": f"{type(exc).__name__}: {exc}", "traceback": tb})
+                report(
+                    {
+                        "kind": "fatal",
+                        "agent": agent_id,
+                        "tick": msg.tick,
+                        "error": f"{type(exc).__name__}: {exc}",
+                        "traceback": tb,
+                    }
+                )
                 return EXIT_PLUGIN_ERROR
             answer = encode_agent_out(msg.tick, agent_id, action, messages, events)
             sample_bytes["out"] += len(answer)
@@ -126,8 +139,9 @@ def serve(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation
             entity.undeclare()
 
 
-def _hand_over_state(session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation: int, malformed: int,
-                     report, ticket: bytes) -> bool:
+def _hand_over_state(
+    session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation: int, malformed: int, report, ticket: bytes
+) -> bool:
     """Give the coordinator this agent's snapshot; whether it took it (and this process is frozen)."""
     agent_id = runtime.agent_id
     try:
@@ -150,8 +164,16 @@ def _checkpoint(runtime: AgentRuntime, incarnation: int, malformed: int, report,
     except StateError as exc:  # nothing to restart from: the agent would start fresh
         log.warning("agent %d: no checkpoint: %s", runtime.agent_id, exc)
         return
-    report({"kind": "checkpoint", "agent": runtime.agent_id, "incarnation": incarnation, "ticks": runtime.ticks,
-            "state": state, "ticket": ticket})
+    report(
+        {
+            "kind": "checkpoint",
+            "agent": runtime.agent_id,
+            "incarnation": incarnation,
+            "ticks": runtime.ticks,
+            "state": state,
+            "ticket": ticket,
+        }
+    )
 
 
 def _add_args(ap) -> None:
@@ -170,8 +192,12 @@ def main(argv: list[str] | None = None) -> int:
                 log.error("agent id %d is outside 0..%d of run %s", args.id, spec.agents.count - 1, args.run_id)
                 return 2
             if not args.restore and is_alive(session, keys.alive_agent_any(args.id)):
-                log.error("agent %d of run %s is already running (its liveliness token is held); "
-                          "refusing to start a second one", args.id, args.run_id)
+                log.error(
+                    "agent %d of run %s is already running (its liveliness token is held); "
+                    "refusing to start a second one",
+                    args.id,
+                    args.run_id,
+                )
                 return 2
             runtime = AgentRuntime(spec, args.id)
             malformed = 0
@@ -180,9 +206,18 @@ def main(argv: list[str] | None = None) -> int:
                     malformed = int(runtime.restore(fetch_bytes(session, keys.agent_snapshot(args.id)))["malformed"])
                 except (StateError, JoinError, KeyError, ValueError) as exc:
                     log.error("agent %d: cannot restore: %s", args.id, exc)
-                    if not hand_over(session, keys.agent_report(args.id), encode_report(
-                            {"kind": "restore_failed", "agent": args.id, "incarnation": args.incarnation,
-                             "error": str(exc)})):
+                    if not hand_over(
+                        session,
+                        keys.agent_report(args.id),
+                        encode_report(
+                            {
+                                "kind": "restore_failed",
+                                "agent": args.id,
+                                "incarnation": args.incarnation,
+                                "error": str(exc),
+                            }
+                        ),
+                    ):
                         log.error("agent %d: the coordinator did not take the restore_failed report", args.id)
                     return EXIT_PLUGIN_ERROR
             return serve(session, keys, runtime, args.incarnation, restored=args.restore, malformed=malformed)

@@ -44,16 +44,24 @@ class AgentRuntime:
         runtime_seed, allocator_seed = agent_seeds(spec.seed, agent_id, self.n_agents, 2)
         self.scenario = build_scenario(spec)
         allocator_cls = load_target(spec.targets.allocator, Allocator)
-        self.allocator = allocator_cls(agent_id, allocator_cls.Params.model_validate(spec.allocator.params()),
-                                       np.random.default_rng(allocator_seed), spec.seed)
+        self.allocator = allocator_cls(
+            agent_id,
+            allocator_cls.Params.model_validate(spec.allocator.params()),
+            np.random.default_rng(allocator_seed),
+            spec.seed,
+        )
         self.sensing = self.scenario.sensing()
         self.context = NodeContext(agent_id, np.random.default_rng(runtime_seed), self.scenario, self.allocator)
         bb = Blackboard()
         for key, value in self.scenario.blackboard().items():
             bb.set(key, value)
         registry = node_registry([type(self.scenario), allocator_cls])
-        self.tree = load_tree(tree_path(spec.agents.behavior_tree, type(self.scenario), allocator_cls), registry,
-                              blackboard=bb, context=self.context)
+        self.tree = load_tree(
+            tree_path(spec.agents.behavior_tree, type(self.scenario), allocator_cls),
+            registry,
+            blackboard=bb,
+            context=self.context,
+        )
         self.sent: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # kind -> [messages, payload bytes]
         self.malformed = 0
         self.ticks = 0
@@ -85,8 +93,23 @@ class AgentRuntime:
     def step(self, tick: int, obs: Observation, inbox: bytes) -> tuple[list, list[RadioMessage], dict[str, int]]:
         tasks = {t[0]: t for t in map(TaskInfo._make, obs.tasks.tolist())}
         a, sense, ctx = self.spec.agents, self.sensing, self.context
-        ctx.view = LocalView(self.agent_id, self.n_agents, tick, obs.time, obs.x, obs.y, obs.heading, obs.speed,
-                             a.work_rate, tasks, self._inbox(inbox), a.max_speed, sense.range, sense.angle, obs)
+        ctx.view = LocalView(
+            self.agent_id,
+            self.n_agents,
+            tick,
+            obs.time,
+            obs.x,
+            obs.y,
+            obs.heading,
+            obs.speed,
+            a.work_rate,
+            tasks,
+            self._inbox(inbox),
+            a.max_speed,
+            sense.range,
+            sense.angle,
+            obs,
+        )
         ctx.action = ["stop"]
         self.allocator.observe(ctx.view)
         self.tree.tick_once()
@@ -116,13 +139,20 @@ class AgentRuntime:
         tree node's state, the blackboards, the agent's random generator and its counters. Taken
         between ticks; raises StateError (naming what) when something cannot move."""
         if not self.allocator.snapshottable:
-            raise StateError(f"allocator {type(self.allocator).__name__} says its state cannot move "
-                             "(snapshottable = False)")
+            raise StateError(
+                f"allocator {type(self.allocator).__name__} says its state cannot move (snapshottable = False)"
+            )
         state = {
-            "version": SNAPSHOT_VERSION, "agent": self.agent_id, "ticks": self.ticks, "sent": dict(self.sent),
-            "malformed": self.malformed, "rng": self.context.rng, "allocator": self.allocator.snapshot(),
+            "version": SNAPSHOT_VERSION,
+            "agent": self.agent_id,
+            "ticks": self.ticks,
+            "sent": dict(self.sent),
+            "malformed": self.malformed,
+            "rng": self.context.rng,
+            "allocator": self.allocator.snapshot(),
             "nodes": [{k: v for k, v in vars(n).items() if k not in self.STRUCTURE} for n in self.tree.nodes],
-            "blackboards": [bb._store for bb in self._blackboards()], "extra": extra or {},
+            "blackboards": [bb._store for bb in self._blackboards()],
+            "extra": extra or {},
         }
         return pack_state(state)
 
@@ -130,8 +160,10 @@ class AgentRuntime:
         """Continue from a snapshot taken by the same agent of the same run; returns its ``extra``."""
         state = unpack_state(data)
         if state.get("version") != SNAPSHOT_VERSION or state.get("agent") != self.agent_id:
-            raise StateError(f"snapshot of agent {state.get('agent')} (version {state.get('version')}) "
-                             f"given to agent {self.agent_id}")
+            raise StateError(
+                f"snapshot of agent {state.get('agent')} (version {state.get('version')}) "
+                f"given to agent {self.agent_id}"
+            )
         if len(state["nodes"]) != len(self.tree.nodes) or len(state["blackboards"]) != len(self._blackboards()):
             raise StateError("the snapshot's behavior tree has another shape than this agent's")
         self.ticks, self.malformed, self.context.rng = state["ticks"], state["malformed"], state["rng"]

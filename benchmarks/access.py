@@ -29,12 +29,16 @@ def main() -> None:
             r = swarmbed_run(args.n, args.ticks, auth=auth)
             rates[auth].append(r["ticks_per_s"])
             startup[auth].append(r["startup_s"])
-            print(f"  auth {'on ' if auth else 'off'}: {r['ticks_per_s']:.1f} ticks/s, start-up {r['startup_s']:.1f} s",
-                  flush=True)
+            print(
+                f"  auth {'on ' if auth else 'off'}: {r['ticks_per_s']:.1f} ticks/s, start-up {r['startup_s']:.1f} s",
+                flush=True,
+            )
     on, off = statistics.median(rates[True]), statistics.median(rates[False])
-    print(f"N={args.n}: open hub {off:.1f} ticks/s, authenticated with access control {on:.1f} ticks/s "
-          f"(ratio {on / off:.3f}); start-up {statistics.median(startup[False]):.1f} s vs "
-          f"{statistics.median(startup[True]):.1f} s (medians of {args.pairs})")
+    print(
+        f"N={args.n}: open hub {off:.1f} ticks/s, authenticated with access control {on:.1f} ticks/s "
+        f"(ratio {on / off:.3f}); start-up {statistics.median(startup[False]):.1f} s vs "
+        f"{statistics.median(startup[True]):.1f} s (medians of {args.pairs})"
+    )
 
 
 if __name__ == "__main__":

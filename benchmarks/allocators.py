@@ -29,23 +29,41 @@ from swarmbed.experiments.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 
-SPACE_REFERENCE = {(50, "cbba"): 130, (50, "grape"): 230, (50, "fcg"): 640,
-                   (100, "cbba"): 19, (100, "grape"): 84, (100, "fcg"): 264,
-                   (200, "cbba"): 3.3, (200, "grape"): 27}
+SPACE_REFERENCE = {
+    (50, "cbba"): 130,
+    (50, "grape"): 230,
+    (50, "fcg"): 640,
+    (100, "cbba"): 19,
+    (100, "grape"): 84,
+    (100, "fcg"): 264,
+    (200, "cbba"): 3.3,
+    (200, "grape"): 27,
+}
 LARGE = 200  # from this many agents on, the shorter horizon
 
 
 def measure(n: int, allocator: str, duration: float, sets: tuple[str, ...] = ()) -> dict:
-    exp = cfg.load(ROOT / "experiments" / "space_mtsr.yaml",
-                   [f"agents.count={n}", f"allocator.name={allocator}", f"run.duration={duration}",
-                    "run.stop_when_done=false", "run.join_timeout=600", *sets])
+    exp = cfg.load(
+        ROOT / "experiments" / "space_mtsr.yaml",
+        [
+            f"agents.count={n}",
+            f"allocator.name={allocator}",
+            f"run.duration={duration}",
+            "run.stop_when_done=false",
+            "run.join_timeout=600",
+            *sets,
+        ],
+    )
     with tempfile.TemporaryDirectory() as out:
         result = run_experiment(exp, Path(out), progress=False)
     t = result.timings
-    return {"sim_per_wall": exp.run.dt * (result.summary["ticks"]) / t["run_s"],
-            "peak_rss_mb": max(t["peak_rss_mb"].values()), "startup_s": t["startup_s"],
-            "agents_uss_gb": t["agent_uss_mb_mean"] * n / 1024,
-            "bytes": result.summary["network"]["bytes_sent"]}
+    return {
+        "sim_per_wall": exp.run.dt * (result.summary["ticks"]) / t["run_s"],
+        "peak_rss_mb": max(t["peak_rss_mb"].values()),
+        "startup_s": t["startup_s"],
+        "agents_uss_gb": t["agent_uss_mb_mean"] * n / 1024,
+        "bytes": result.summary["network"]["bytes_sent"],
+    }
 
 
 def main() -> None:
@@ -54,12 +72,20 @@ def main() -> None:
     ap.add_argument("--allocators", nargs="+", default=["cbba", "grape", "fcg"])
     ap.add_argument("--duration", type=float, default=3000.0)
     ap.add_argument("--large-duration", type=float, default=300.0, help=f"horizon from {LARGE} agents on")
-    ap.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
-                    help="override a key of every run (repeatable), as `swarmbed run --set` does")
+    ap.add_argument(
+        "--set",
+        dest="sets",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a key of every run (repeatable), as `swarmbed run --set` does",
+    )
     ap.add_argument("--floor-seconds", type=float, default=6.0, help="rough time measuring the barrier, per N")
     args = ap.parse_args()
-    print(f"{'N':>4} {'allocator':>9} {'sim s':>6} {'sim s/wall s':>13} {'SPACE':>6} {'ratio':>6} {'barrier':>8} "
-          f"{'/barrier':>8} {'peak RSS MB':>12} {'agents USS GB':>13} {'start-up s':>10} {'payload MB':>10}")
+    print(
+        f"{'N':>4} {'allocator':>9} {'sim s':>6} {'sim s/wall s':>13} {'SPACE':>6} {'ratio':>6} {'barrier':>8} "
+        f"{'/barrier':>8} {'peak RSS MB':>12} {'agents USS GB':>13} {'start-up s':>10} {'payload MB':>10}"
+    )
     for n in args.n:
         duration = args.large_duration if n >= LARGE else args.duration
         floor = raw_baseline(n, max(50, int(max(20, 5000 // n) * args.floor_seconds)), fanout=0)
@@ -67,9 +93,12 @@ def main() -> None:
             m = measure(n, name, duration, tuple(args.sets))
             ref = SPACE_REFERENCE.get((n, name))
             ratio = f"{m['sim_per_wall'] / ref:6.2f}" if ref else f"{'-':>6}"
-            print(f"{n:>4} {name:>9} {duration:>6.0f} {m['sim_per_wall']:>13.1f} {ref or '-':>6} {ratio} "
-                  f"{floor:>8.1f} {m['sim_per_wall'] / floor:>8.2f} {m['peak_rss_mb']:>12.0f} "
-                  f"{m['agents_uss_gb']:>13.2f} {m['startup_s']:>10.1f} {m['bytes'] / 1e6:>10.2f}", flush=True)
+            print(
+                f"{n:>4} {name:>9} {duration:>6.0f} {m['sim_per_wall']:>13.1f} {ref or '-':>6} {ratio} "
+                f"{floor:>8.1f} {m['sim_per_wall'] / floor:>8.2f} {m['peak_rss_mb']:>12.0f} "
+                f"{m['agents_uss_gb']:>13.2f} {m['startup_s']:>10.1f} {m['bytes'] / 1e6:>10.2f}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

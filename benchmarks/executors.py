@@ -70,18 +70,22 @@ def main() -> None:
         wall, gaps = timed("local", executors.get("local", jobs=args.parallel), args.runs, args.duration, work)
         rows.append(("local pool", wall, gaps))
         print(f"  local: {wall:.1f} s", flush=True)
-        with distributed.LocalCluster(n_workers=args.parallel, threads_per_worker=1, processes=True,
-                                      dashboard_address=None) as cluster:
-            wall, gaps = timed("dask", executors.get("dask", scheduler=cluster.scheduler_address), args.runs,
-                               args.duration, work)
+        with distributed.LocalCluster(
+            n_workers=args.parallel, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster:
+            wall, gaps = timed(
+                "dask", executors.get("dask", scheduler=cluster.scheduler_address), args.runs, args.duration, work
+            )
         rows.append(("dask LocalCluster", wall, gaps))
         print(f"  dask: {wall:.1f} s", flush=True)
         slurm = executors.get("slurm", folder=work / "slurm" / ".submitit", cluster="local", time="30")
         _, gaps = timed("slurm", slurm, 1, args.duration, work)  # 6 x 1 runs, all at once
         rows.append(("submitit local (6 runs at once)", None, gaps))
     n = 6 * args.runs
-    print(f"\nSAR base_R20_V100, 6 strategies x {args.runs} runs of {args.duration} simulated s, "
-          f"{args.parallel} runs at once")
+    print(
+        f"\nSAR base_R20_V100, 6 strategies x {args.runs} runs of {args.duration} simulated s, "
+        f"{args.parallel} runs at once"
+    )
     print(f"{'executor':<34}{'wall s':>9}{'vs local':>10}{'overhead/run s: median':>24}{'max':>8}")
     local_wall = rows[0][1]
     for name, wall, gaps in rows:

@@ -62,39 +62,65 @@ def main() -> None:
             lab.add_host("a")
             lab.add_host("b")
             n = args.agents
-            noop = [f"agents.count={n}", "allocator={name: noop, peers: 5}", "scenario.initial_tasks=0",
-                    "run.stop_when_done=false", f"run.duration={args.ticks}", "network.range=null",
-                    "run.record_every=1000000"]
+            noop = [
+                f"agents.count={n}",
+                "allocator={name: noop, peers: 5}",
+                "scenario.initial_tasks=0",
+                "run.stop_when_done=false",
+                f"run.duration={args.ticks}",
+                "network.range=null",
+                "run.record_every=1000000",
+            ]
             local, spread = _pair(lab, out / "throughput", noop, [split(n)])
             ratio = spread["ticks_per_s"] / local["ticks_per_s"]
-            print(f"lock-step, {n} agents, no-op + 5 messages each per tick: all local {local['ticks_per_s']:.1f} "
-                  f"ticks/s, over 2 hosts {spread['ticks_per_s']:.1f} ({ratio:.2f}x); identical files: {local['same']}",
-                  flush=True)
+            print(
+                f"lock-step, {n} agents, no-op + 5 messages each per tick: all local {local['ticks_per_s']:.1f} "
+                f"ticks/s, over 2 hosts {spread['ticks_per_s']:.1f} ({ratio:.2f}x); identical files: {local['same']}",
+                flush=True,
+            )
 
             rng = np.random.default_rng(1)
             ticks = sorted(int(t) for t in rng.choice(np.arange(1, 10 * args.swaps), args.swaps, replace=False))
-            swaps = ", ".join(f"{{agent: {int(rng.integers(n))}, tick: {t}, to: {'ab'[k % 2]}}}"
-                              for k, t in enumerate(ticks))
-            cbba = [f"agents.count={n}", "allocator={name: cbba}", "run.stop_when_done=false",
-                    f"run.duration={10 * args.swaps + 10}", "scenario.initial_tasks=60", "scenario.width=600",
-                    "scenario.height=400", "run.record_every=1000000"]
+            swaps = ", ".join(
+                f"{{agent: {int(rng.integers(n))}, tick: {t}, to: {'ab'[k % 2]}}}" for k, t in enumerate(ticks)
+            )
+            cbba = [
+                f"agents.count={n}",
+                "allocator={name: cbba}",
+                "run.stop_when_done=false",
+                f"run.duration={10 * args.swaps + 10}",
+                "scenario.initial_tasks=60",
+                "scenario.width=600",
+                "scenario.height=400",
+                "run.record_every=1000000",
+            ]
             local, spread = _pair(lab, out / "swaps", cbba, [split(n), f"swaps=[{swaps}]"])
             with open(out / "swaps" / "spread" / "swaps.csv") as f:
                 records = list(csv.DictReader(f))
             ok = [r for r in records if r["outcome"] == "ok"]
             pauses = [float(r["pause_ms"]) for r in ok]
             sizes = [int(r["snapshot_bytes"]) for r in ok]
-            print(f"swaps of CBBA agents between 2 hosts, {n} agents: {len(ok)} of {len(records)} ok; pause median "
-                  f"{statistics.median(pauses):.0f} ms, max {max(pauses):.0f} ms; snapshot median "
-                  f"{statistics.median(sizes):,.0f} B, max {max(sizes):,} B; identical files: {spread['same']}",
-                  flush=True)
+            print(
+                f"swaps of CBBA agents between 2 hosts, {n} agents: {len(ok)} of {len(records)} ok; pause median "
+                f"{statistics.median(pauses):.0f} ms, max {max(pauses):.0f} ms; snapshot median "
+                f"{statistics.median(sizes):,.0f} B, max {max(sizes):,} B; identical files: {spread['same']}",
+                flush=True,
+            )
 
             m = args.placed
-            start = [f"agents.count={m}", "allocator={name: noop}", "scenario.initial_tasks=0",
-                     "run.stop_when_done=false", "run.duration=20"]
+            start = [
+                f"agents.count={m}",
+                "allocator={name: noop}",
+                "scenario.initial_tasks=0",
+                "run.stop_when_done=false",
+                "run.duration=20",
+            ]
             local, spread = _pair(lab, out / "startup", start, [split(m)])
-            print(f"start-up, {m} agents: all local {local['startup_s']:.1f} s, placed on 2 hosts "
-                  f"{spread['startup_s']:.1f} s; identical files: {local['same']}", flush=True)
+            print(
+                f"start-up, {m} agents: all local {local['startup_s']:.1f} s, placed on 2 hosts "
+                f"{spread['startup_s']:.1f} s; identical files: {local['same']}",
+                flush=True,
+            )
         finally:
             lab.close()
 

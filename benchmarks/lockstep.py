@@ -43,10 +43,17 @@ def raw_baseline(n: int, ticks: int, fanout: int = 5) -> float:
     relay_pub = session.declare_publisher(f"{ns}/relay", congestion_control=BLOCK)
     script = str(ROOT / "benchmarks" / "raw_zenoh.py")
     env_cmd = [sys.executable, script]
-    procs = [subprocess.Popen([*env_cmd, "relay", "--ns", ns, "--connect", endpoint, "--n", str(n)], cwd=ROOT)
-             ] if fanout else []
-    procs += [subprocess.Popen([*env_cmd, "client", "--ns", ns, "--connect", endpoint, "--id", str(i),
-                                "--fanout", str(fanout)], cwd=ROOT) for i in range(n)]
+    procs = (
+        [subprocess.Popen([*env_cmd, "relay", "--ns", ns, "--connect", endpoint, "--n", str(n)], cwd=ROOT)]
+        if fanout
+        else []
+    )
+    procs += [
+        subprocess.Popen(
+            [*env_cmd, "client", "--ns", ns, "--connect", endpoint, "--id", str(i), "--fanout", str(fanout)], cwd=ROOT
+        )
+        for i in range(n)
+    ]
     try:
         for _ in range(len(procs)):
             alive.get(timeout=120)
@@ -74,15 +81,27 @@ def raw_baseline(n: int, ticks: int, fanout: int = 5) -> float:
 
 
 def swarmbed_run(n: int, ticks: int, auth: bool = True) -> dict:
-    exp = cfg.load(ROOT / "experiments" / "quickstart.yaml", [
-        f"agents.count={n}", "allocator={name: noop, peers: 5}", "scenario.initial_tasks=0",
-        "run.stop_when_done=false", f"run.duration={ticks}", "network.range=null", "run.record_every=1000000",
-    ])
+    exp = cfg.load(
+        ROOT / "experiments" / "quickstart.yaml",
+        [
+            f"agents.count={n}",
+            "allocator={name: noop, peers: 5}",
+            "scenario.initial_tasks=0",
+            "run.stop_when_done=false",
+            f"run.duration={ticks}",
+            "network.range=null",
+            "run.record_every=1000000",
+        ],
+    )
     with tempfile.TemporaryDirectory() as out:
         result = run_experiment(exp, Path(out), progress=False, auth=auth)
     t = result.timings
-    return {"ticks_per_s": t["ticks_per_s"], "startup_s": t["startup_s"], "uss_mb": t["agent_uss_mb_mean"],
-            "copies": result.summary["network"]["copies"]}
+    return {
+        "ticks_per_s": t["ticks_per_s"],
+        "startup_s": t["startup_s"],
+        "uss_mb": t["agent_uss_mb_mean"],
+        "copies": result.summary["network"]["copies"],
+    }
 
 
 def main() -> None:
@@ -90,16 +109,21 @@ def main() -> None:
     ap.add_argument("--n", type=int, nargs="+", default=[10, 50, 100])
     ap.add_argument("--seconds", type=float, default=6.0, help="rough measuring time per case")
     args = ap.parse_args()
-    print(f"{'N':>4} {'barrier ticks/s':>15} {'relay ticks/s':>13} {'swarmbed ticks/s':>17} {'/barrier':>8} "
-          f"{'/relay':>6} {'startup s':>10} {'USS/agent MB':>13}")
+    print(
+        f"{'N':>4} {'barrier ticks/s':>15} {'relay ticks/s':>13} {'swarmbed ticks/s':>17} {'/barrier':>8} "
+        f"{'/relay':>6} {'startup s':>10} {'USS/agent MB':>13}"
+    )
     for n in args.n:
         guess = {10: 800, 50: 120, 100: 40}.get(n, max(20, 4000 // n))
         ticks = max(50, int(guess * args.seconds))
         floor = raw_baseline(n, 2 * ticks, fanout=0)
         raw = raw_baseline(n, ticks)
         ours = swarmbed_run(n, ticks)
-        print(f"{n:>4} {floor:>15.1f} {raw:>13.1f} {ours['ticks_per_s']:>17.1f} {ours['ticks_per_s'] / floor:>8.2f} "
-              f"{ours['ticks_per_s'] / raw:>6.2f} {ours['startup_s']:>10.1f} {ours['uss_mb']:>13.1f}", flush=True)
+        print(
+            f"{n:>4} {floor:>15.1f} {raw:>13.1f} {ours['ticks_per_s']:>17.1f} {ours['ticks_per_s'] / floor:>8.2f} "
+            f"{ours['ticks_per_s'] / raw:>6.2f} {ours['startup_s']:>10.1f} {ours['uss_mb']:>13.1f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

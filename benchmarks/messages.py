@@ -23,9 +23,19 @@ from swarmbed.experiments.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 EXPERIMENTS = {"mtsr": ROOT / "experiments" / "space_mtsr.yaml", "sar": ROOT / "experiments" / "sar" / "_base.yaml"}
-ROWS = {"mtsr": [("cbba", 1), ("cbba", 10), ("grape", 1), ("grape", 10), ("fcg", None)],
-        "sar": [("cbba", 1), ("cbba", 10), ("cbba-tree", 1), ("cbba-tree", 10), ("cbba-etc", 1), ("cbba-etc", 10),
-                ("c-cbba", 1), ("c-cbba", 10)]}
+ROWS = {
+    "mtsr": [("cbba", 1), ("cbba", 10), ("grape", 1), ("grape", 10), ("fcg", None)],
+    "sar": [
+        ("cbba", 1),
+        ("cbba", 10),
+        ("cbba-tree", 1),
+        ("cbba-tree", 10),
+        ("cbba-etc", 1),
+        ("cbba-etc", 10),
+        ("c-cbba", 1),
+        ("c-cbba", 10),
+    ],
+}
 
 
 def measure(scenario: str, allocator: str, full_every: int | None, agents: int, duration: float) -> dict:
@@ -39,8 +49,12 @@ def measure(scenario: str, allocator: str, full_every: int | None, agents: int, 
         result = run_experiment(exp, Path(out), progress=False)
     s, net = result.summary, result.summary["network"]
     outcome = s["tasks_completed"] if scenario == "mtsr" else s["rescued"]
-    return {"messages": net["messages_sent"], "bytes": net["bytes_sent"], "outcome": outcome,
-            "sim_per_wall": exp.run.dt * s["ticks"] / result.timings["run_s"]}
+    return {
+        "messages": net["messages_sent"],
+        "bytes": net["bytes_sent"],
+        "outcome": outcome,
+        "sim_per_wall": exp.run.dt * s["ticks"] / result.timings["run_s"],
+    }
 
 
 def main() -> None:
@@ -50,8 +64,10 @@ def main() -> None:
     ap.add_argument("--agents", type=int, default=30, help="MT-SR agents (SAR keeps its 20 robots)")
     ap.add_argument("--duration", type=float, default=1000.0, help="simulated seconds per run")
     args = ap.parse_args()
-    print(f"{'scenario':>8} {'allocator':>9} {'full_every':>10} {'messages':>9} {'payload MB':>10} {'B/message':>9} "
-          f"{'bytes x':>7} {'sim s/wall s':>12} {'outcome':>8}")
+    print(
+        f"{'scenario':>8} {'allocator':>9} {'full_every':>10} {'messages':>9} {'payload MB':>10} {'B/message':>9} "
+        f"{'bytes x':>7} {'sim s/wall s':>12} {'outcome':>8}"
+    )
     for scenario in args.scenarios:
         whole: dict[str, int] = {}
         for allocator, full_every in ROWS[scenario]:
@@ -61,9 +77,12 @@ def main() -> None:
             if full_every == 1:
                 whole[allocator] = m["bytes"]
             ratio = f"{m['bytes'] / whole[allocator]:7.3f}" if allocator in whole else f"{'-':>7}"
-            print(f"{scenario:>8} {allocator:>9} {full_every or '-':>10} {m['messages']:>9} {m['bytes'] / 1e6:>10.2f} "
-                  f"{m['bytes'] / max(m['messages'], 1):>9.1f} {ratio} {m['sim_per_wall']:>12.1f} "
-                  f"{m['outcome']!s:>8}", flush=True)
+            print(
+                f"{scenario:>8} {allocator:>9} {full_every or '-':>10} {m['messages']:>9} {m['bytes'] / 1e6:>10.2f} "
+                f"{m['bytes'] / max(m['messages'], 1):>9.1f} {ratio} {m['sim_per_wall']:>12.1f} "
+                f"{m['outcome']!s:>8}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -22,8 +22,9 @@ from swarmbed.wire.schema import NetworkSection
 
 def ms_per_tick(n: int, comm_range: float | None, ticks: int) -> tuple[float, int]:
     place = np.random.default_rng(1)
-    radio = Radio(NetworkSection.model_validate({"range": comm_range, "loss": 0.1}), n, 1.0,
-                  np.random.default_rng(2), Ledger())
+    radio = Radio(
+        NetworkSection.model_validate({"range": comm_range, "loss": 0.1}), n, 1.0, np.random.default_rng(2), Ledger()
+    )
     ids = list(range(n))
     xs, ys = place.uniform(0, 1400, n).tolist(), place.uniform(0, 1000, n).tolist()
     outs = {a: [RadioMessage(BROADCAST, "bench", bytes(200))] for a in ids}

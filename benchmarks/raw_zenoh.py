@@ -15,8 +15,10 @@ BLOCK = zenoh.CongestionControl.BLOCK
 
 def client(s: zenoh.Session, ns: str, i: int, fanout: int) -> None:
     events: queue.SimpleQueue = queue.SimpleQueue()
-    subs = [s.declare_subscriber(f"{ns}/c/{i}/tick", lambda x: events.put(("tick", x.payload.to_bytes()))),
-            s.declare_subscriber(f"{ns}/c/{i}/relay", lambda x: events.put(("relay", x.payload.to_bytes())))]
+    subs = [
+        s.declare_subscriber(f"{ns}/c/{i}/tick", lambda x: events.put(("tick", x.payload.to_bytes()))),
+        s.declare_subscriber(f"{ns}/c/{i}/relay", lambda x: events.put(("relay", x.payload.to_bytes()))),
+    ]
     to_relay = s.declare_publisher(f"{ns}/relay", congestion_control=BLOCK)
     done = s.declare_publisher(f"{ns}/done", congestion_control=BLOCK)
     token = s.liveliness().declare_token(f"{ns}/alive/{i}")

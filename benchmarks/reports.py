@@ -39,9 +39,12 @@ RESULTS = ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv")
 def overhead(out: Path, name: str, base: Path, sets: list[str]) -> None:
     run = run_experiment(cfg.load(base, sets), out / name, progress=False)
     t = json.loads((run.out_dir / "transport.json").read_text())["totals"]
-    print(f"{name}: payload {t['radio_payload_bytes']:,} B, agents' samples {t['agent_sample_bytes_out']:,} B, "
-          f"agents' TCP {t['agent_tcp_bytes_sent']:,} B: overhead {t['overhead_ratio']:.2f}x "
-          f"({run.summary['ticks']:,} ticks, {run.summary['agents']} agents)", flush=True)
+    print(
+        f"{name}: payload {t['radio_payload_bytes']:,} B, agents' samples {t['agent_sample_bytes_out']:,} B, "
+        f"agents' TCP {t['agent_tcp_bytes_sent']:,} B: overhead {t['overhead_ratio']:.2f}x "
+        f"({run.summary['ticks']:,} ticks, {run.summary['agents']} agents)",
+        flush=True,
+    )
 
 
 def timed_report(folder: Path, what: str) -> None:
@@ -56,8 +59,13 @@ def watched(out: Path, sets: list[str], watch: bool) -> dict:
     watcher: list[subprocess.Popen] = []
 
     def attach() -> None:  # the watcher waits for the run to appear, as a user's would
-        watcher.append(subprocess.Popen([sys.executable, "-m", "swarmbed", "watch", "--connect", endpoint,
-                                         "--wait", "60"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        watcher.append(
+            subprocess.Popen(
+                [sys.executable, "-m", "swarmbed", "watch", "--connect", endpoint, "--wait", "60"],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+        )
         stop.wait()
 
     thread = threading.Thread(target=attach)
@@ -91,28 +99,55 @@ def main() -> None:
         overhead(out, "cbba-etc, SAR base (600 s)", SAR_BASE, ["allocator.name=cbba-etc", "run.duration=600"])
 
         n = args.watch_agents
-        sets = [f"agents.count={n}", "allocator={name: noop, peers: 5}", "scenario.initial_tasks=0",
-                "run.stop_when_done=false", f"run.duration={args.watch_ticks}", "network.range=null",
-                "run.record_every=1000000"]
+        sets = [
+            f"agents.count={n}",
+            "allocator={name: noop, peers: 5}",
+            "scenario.initial_tasks=0",
+            "run.stop_when_done=false",
+            f"run.duration={args.watch_ticks}",
+            "network.range=null",
+            "run.record_every=1000000",
+        ]
         plain, seen = [], []
         for i in range(args.repeats):
             plain.append(watched(out / f"plain{i}", sets, watch=False))
             seen.append(watched(out / f"watched{i}", sets, watch=True))
-        same = all((out / "plain0" / f).read_bytes() == (out / f"watched{i}" / f).read_bytes()
-                   for i in range(args.repeats) for f in RESULTS)
+        same = all(
+            (out / "plain0" / f).read_bytes() == (out / f"watched{i}" / f).read_bytes()
+            for i in range(args.repeats)
+            for f in RESULTS
+        )
         a = sum(t["ticks_per_s"] for t in plain) / len(plain)
         b = sum(t["ticks_per_s"] for t in seen) / len(seen)
-        print(f"lock-step, {n} agents, no-op + 5 messages each per tick: {a:.1f} ticks/s unwatched, {b:.1f} "
-              f"watched ({b / a:.2f}x; {args.repeats} pairs alternated); identical files: {same}", flush=True)
+        print(
+            f"lock-step, {n} agents, no-op + 5 messages each per tick: {a:.1f} ticks/s unwatched, {b:.1f} "
+            f"watched ({b / a:.2f}x; {args.repeats} pairs alternated); identical files: {same}",
+            flush=True,
+        )
 
-        run = run_experiment(cfg.load(QUICKSTART, [
-            f"agents.count={args.agents}", "allocator={name: cbba}", f"run.duration={args.duration}",
-            "run.stop_when_done=false", "scenario.initial_tasks=200", "scenario.width=600", "scenario.height=400",
-            "network.ledger=per_receiver"]), out / "big", progress=False)
-        timed_report(run.out_dir, f"a CBBA run, {args.agents} agents, {run.summary['ticks']:,} ticks, "
-                                  "receiver-level ledger")
+        run = run_experiment(
+            cfg.load(
+                QUICKSTART,
+                [
+                    f"agents.count={args.agents}",
+                    "allocator={name: cbba}",
+                    f"run.duration={args.duration}",
+                    "run.stop_when_done=false",
+                    "scenario.initial_tasks=200",
+                    "scenario.width=600",
+                    "scenario.height=400",
+                    "network.ledger=per_receiver",
+                ],
+            ),
+            out / "big",
+            progress=False,
+        )
+        timed_report(
+            run.out_dir, f"a CBBA run, {args.agents} agents, {run.summary['ticks']:,} ticks, receiver-level ledger"
+        )
 
-        (out / "sweep.yaml").write_text(textwrap.dedent(f"""
+        (out / "sweep.yaml").write_text(
+            textwrap.dedent(f"""
             name: sar_costs
             base: {SAR_BASE}
             seed: 1
@@ -120,9 +155,14 @@ def main() -> None:
             scenarios:
               - {{name: tree, set: {{allocator.name: tree}}}}
               - {{name: cbba-etc, set: {{allocator.name: cbba-etc}}}}
-        """))
-        run_sweep(load_sweep(out / "sweep.yaml", extra=[f"run.duration={args.sweep_duration}"]), out / "sweep",
-                  jobs=2, progress=False)
+        """)
+        )
+        run_sweep(
+            load_sweep(out / "sweep.yaml", extra=[f"run.duration={args.sweep_duration}"]),
+            out / "sweep",
+            jobs=2,
+            progress=False,
+        )
         timed_report(out / "sweep", f"a SAR sweep, 2 strategies x {args.sweep_runs} runs")
 
 

@@ -23,11 +23,19 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def case(n: int, fork: bool, ticks: int) -> dict:
-    exp = cfg.load(ROOT / "experiments" / "quickstart.yaml", [
-        f"agents.count={n}", "allocator={name: noop, peers: 5}", "scenario.initial_tasks=0",
-        "run.stop_when_done=false", f"run.duration={ticks}", "network.range=null", "run.record_every=1000000",
-        "run.join_timeout=600",
-    ])
+    exp = cfg.load(
+        ROOT / "experiments" / "quickstart.yaml",
+        [
+            f"agents.count={n}",
+            "allocator={name: noop, peers: 5}",
+            "scenario.initial_tasks=0",
+            "run.stop_when_done=false",
+            f"run.duration={ticks}",
+            "network.range=null",
+            "run.record_every=1000000",
+            "run.join_timeout=600",
+        ],
+    )
     with tempfile.TemporaryDirectory() as out:
         return run_experiment(exp, Path(out), progress=False, fork_agents=fork).timings
 
@@ -39,16 +47,21 @@ def main() -> None:
     ap.add_argument("--ticks", type=int, default=100)
     args = ap.parse_args()
     ways = [args.only == "fork"] if args.only else [False, True]
-    print(f"{'N':>4} {'start':>5} {'start-up s':>10} {'server s':>8} {'spawn s':>8} {'join s':>7} "
-          f"{'RSS MB':>7} {'PSS MB':>7} {'USS MB':>7} {'ticks/s':>8}")
+    print(
+        f"{'N':>4} {'start':>5} {'start-up s':>10} {'server s':>8} {'spawn s':>8} {'join s':>7} "
+        f"{'RSS MB':>7} {'PSS MB':>7} {'USS MB':>7} {'ticks/s':>8}"
+    )
     for n in args.n:
         for fork in ways:
             t = case(n, fork, args.ticks)
             s = t["startup"]
             server = f"{s['fork_server_s']:.2f}" if s["fork_server_s"] is not None else "-"
-            print(f"{n:>4} {'fork' if fork else 'exec':>5} {t['startup_s']:>10.2f} {server:>8} {s['spawn_s']:>8.2f} "
-                  f"{s['join_s']:>7.2f} {t['agent_rss_mb_mean']:>7.1f} {t['agent_pss_mb_mean']:>7.1f} "
-                  f"{t['agent_uss_mb_mean']:>7.1f} {t['ticks_per_s']:>8.1f}", flush=True)
+            print(
+                f"{n:>4} {'fork' if fork else 'exec':>5} {t['startup_s']:>10.2f} {server:>8} {s['spawn_s']:>8.2f} "
+                f"{s['join_s']:>7.2f} {t['agent_rss_mb_mean']:>7.1f} {t['agent_pss_mb_mean']:>7.1f} "
+                f"{t['agent_uss_mb_mean']:>7.1f} {t['ticks_per_s']:>8.1f}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

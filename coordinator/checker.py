@@ -29,8 +29,18 @@ from swarmbed.coordinator.scenario import Scenario, World
 from swarmbed.wire.codec import pack, unpack
 from swarmbed.wire.schema import AgentsSection
 
-GARBAGE_ACTIONS: tuple[Any, ...] = ([], ["fly"], ["goto_task"], ["goto_task", "x"], ["goto", 1], ["goto", "a", "b"],
-                                    ["stop", 1], [7], ["inspect", -5], ["goto_task", 10**9])
+GARBAGE_ACTIONS: tuple[Any, ...] = (
+    [],
+    ["fly"],
+    ["goto_task"],
+    ["goto_task", "x"],
+    ["goto", 1],
+    ["goto", "a", "b"],
+    ["stop", 1],
+    [7],
+    ["inspect", -5],
+    ["goto_task", 10**9],
+)
 
 
 class ScenarioCheckError(AssertionError):
@@ -58,8 +68,10 @@ def _trace(scenario: Scenario, seed: int, ticks: int) -> tuple[list[bytes], dict
         actions = {}
         for i, obs in sorted(observations.items()):
             if not isinstance(obs, cls.Observation):
-                raise ScenarioCheckError(f"tick {k}: agent {i}'s observation is a {type(obs).__name__}, "
-                                         f"not the scenario's {cls.Observation.__name__}")
+                raise ScenarioCheckError(
+                    f"tick {k}: agent {i}'s observation is a {type(obs).__name__}, "
+                    f"not the scenario's {cls.Observation.__name__}"
+                )
             wire = pack(obs.to_wire())
             back = cls.Observation.from_wire(unpack(wire))
             if pack(back.to_wire()) != wire:
@@ -69,8 +81,9 @@ def _trace(scenario: Scenario, seed: int, ticks: int) -> tuple[list[bytes], dict
         try:
             world.apply(actions)
         except Exception as exc:
-            raise ScenarioCheckError(f"tick {k}: apply() raised {type(exc).__name__}: {exc} "
-                                     f"on the scenario's own actions {actions}") from exc
+            raise ScenarioCheckError(
+                f"tick {k}: apply() raised {type(exc).__name__}: {exc} on the scenario's own actions {actions}"
+            ) from exc
         row = world.row()
         if columns is None:
             columns = list(row)
@@ -105,8 +118,10 @@ def _check_robustness(scenario: Scenario, seed: int) -> None:
         try:
             world.apply(dict.fromkeys(ids, action))
         except Exception as exc:
-            raise ScenarioCheckError(f"apply() raised {type(exc).__name__} on the malformed action {action!r}; "
-                                     "it must refuse (count) it instead") from None
+            raise ScenarioCheckError(
+                f"apply() raised {type(exc).__name__} on the malformed action {action!r}; "
+                "it must refuse (count) it instead"
+            ) from None
     world.kill(ids[0])
     if ids[0] in world.positions()[0] or ids[0] in world.observations():
         raise ScenarioCheckError(f"agent {ids[0]} was killed but is still positioned or observed")
@@ -115,9 +130,14 @@ def _check_robustness(scenario: Scenario, seed: int) -> None:
         raise ScenarioCheckError(f"conservation broken after malformed actions: {'; '.join(world.invariants())}")
 
 
-def check_scenario(cls: type[Scenario], params: Mapping[str, Any] | None = None,
-                   agents: Mapping[str, Any] | None = None, ticks: int = 60, seeds: tuple[int, ...] = (0, 1),
-                   dt: float = 1.0) -> dict[str, Any]:
+def check_scenario(
+    cls: type[Scenario],
+    params: Mapping[str, Any] | None = None,
+    agents: Mapping[str, Any] | None = None,
+    ticks: int = 60,
+    seeds: tuple[int, ...] = (0, 1),
+    dt: float = 1.0,
+) -> dict[str, Any]:
     """Run every check on scenario ``cls`` with ``params`` (its defaults where not given) and the
     ``agents`` section (4 agents unless given; give a speed at which things happen within
     ``ticks``); raise :class:`ScenarioCheckError` at the first broken rule, else return what was
@@ -130,8 +150,9 @@ def check_scenario(cls: type[Scenario], params: Mapping[str, Any] | None = None,
         first, results = _trace(scenario, seed, ticks)
         again, results_again = _trace(_build(cls, params or {}, agents, dt), seed, ticks)
         if first != again or msgpack.packb(results, default=str) != msgpack.packb(results_again, default=str):
-            raise ScenarioCheckError(f"two runs with seed {seed} differ (a random source not drawn from the "
-                                     "world's generator?)")
+            raise ScenarioCheckError(
+                f"two runs with seed {seed} differ (a random source not drawn from the world's generator?)"
+            )
         _check_results(cls, results, n)
         observations += len(first)
         _check_robustness(scenario, seed)

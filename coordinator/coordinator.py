@@ -56,8 +56,17 @@ BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
 STATUS_EVERY = 0.25  # wall seconds between progress samples for watchers
 CONSUMED = object()  # what an event filter of Coordinator._wait_for returns for an event it used
-RESTART_COLUMNS = ["tick", "agent", "lost_at_tick", "incarnation", "host", "checkpoint_tick", "outcome", "reason",
-                   "wait_ms"]
+RESTART_COLUMNS = [
+    "tick",
+    "agent",
+    "lost_at_tick",
+    "incarnation",
+    "host",
+    "checkpoint_tick",
+    "outcome",
+    "reason",
+    "wait_ms",
+]
 
 
 class RunError(RuntimeError):
@@ -69,9 +78,18 @@ class Coordinator:
     allocator class (for the traits the world and the results read: ``event_names``,
     ``bids_with_colors``) and the targets agents load."""
 
-    def __init__(self, exp: Experiment, scenario: Scenario, allocator: type, targets: Targets, keys: Keys,
-                 session: zenoh.Session, out_dir: Path, hosts: dict[int, str] | None = None,
-                 carriers: Mapping[str, frozenset[int]] | None = None) -> None:
+    def __init__(
+        self,
+        exp: Experiment,
+        scenario: Scenario,
+        allocator: type,
+        targets: Targets,
+        keys: Keys,
+        session: zenoh.Session,
+        out_dir: Path,
+        hosts: dict[int, str] | None = None,
+        carriers: Mapping[str, frozenset[int]] | None = None,
+    ) -> None:
         self.exp = exp
         self.scenario = scenario
         self.targets = targets
@@ -97,8 +115,12 @@ class Coordinator:
         self.tables: dict[str, RowFile] = {}
         self._markers: dict[int, tuple[float, float, str]] = {}
         self.realtime = exp.run.clock == "realtime"
-        self._row_columns = (list(self.world.row()) + ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
-                             + self.event_names + (["late_agents", "start_lag_ms"] if self.realtime else []))
+        self._row_columns = (
+            list(self.world.row())
+            + ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
+            + self.event_names
+            + (["late_agents", "start_lag_ms"] if self.realtime else [])
+        )
         self.net_cum = [0, 0, 0, 0, 0]
         self.drops_cum: dict[str, int] = {}
         # the real-time clock's own accounting (wall-clock facts: never part of a lock-step run's files)
@@ -201,14 +223,19 @@ class Coordinator:
             if isinstance(req, dict) and isinstance(req.get("swap"), int):
                 record = self.requested_swaps.get(req["swap"])
                 answer: dict[str, Any] = record if record is not None else {"pending": True}
-            elif (isinstance(req, dict) and isinstance(req.get("agent"), int) and 0 <= req["agent"] < self.n
-                  and isinstance(req.get("to"), str) and req["to"]):
+            elif (
+                isinstance(req, dict)
+                and isinstance(req.get("agent"), int)
+                and 0 <= req["agent"] < self.n
+                and isinstance(req.get("to"), str)
+                and req["to"]
+            ):
                 number = len(self.requested_swaps)
                 self.requested_swaps[number] = None
                 self.swap_requests.put((req["agent"], req["to"], number))
                 answer = {"queued": number}
             else:
-                answer = {"error": f"a swap request is {{\"agent\": 0..{self.n - 1}, \"to\": HOST}}"}
+                answer = {"error": f'a swap request is {{"agent": 0..{self.n - 1}, "to": HOST}}'}
         except ValueError as exc:
             answer = {"error": f"not JSON: {exc}"}
         query.reply(query.key_expr, json.dumps(answer))
@@ -233,8 +260,10 @@ class Coordinator:
             check_children()
             if time.monotonic() > deadline:
                 missing = sorted(wanted - self.joined)
-                raise RunError(f"not joined after {self.exp.run.join_timeout:.0f} s: {', '.join(missing[:10])}"
-                               f"{' ...' if len(missing) > 10 else ''}")
+                raise RunError(
+                    f"not joined after {self.exp.run.join_timeout:.0f} s: {', '.join(missing[:10])}"
+                    f"{' ...' if len(missing) > 10 else ''}"
+                )
             try:
                 what, data = self.events.get(timeout=0.1)
             except queue.Empty:
@@ -298,7 +327,8 @@ class Coordinator:
             if self.exp.run.record_trajectories:
                 labels = w.agent_labels()
                 self.tables[results.TRAJECTORIES].write_many(
-                    (k, i, x, y, labels.get(i, "")) for i, x, y in zip(ids, xs, ys))
+                    (k, i, x, y, labels.get(i, "")) for i, x, y in zip(ids, xs, ys)
+                )
                 self._record_markers(k)
             if k > 0:
                 self._swap_due(k)
@@ -350,14 +380,29 @@ class Coordinator:
     def _publish_status(self, wall_s: float) -> None:
         """Where the run is, for ``swarmbed watch`` (wall-clock paced: never part of the results)."""
         w = self.world
-        self.status_pub.put(encode_status({
-            "name": self.exp.name, "scenario": self.exp.scenario.kind, "allocator": self.exp.allocator.name,
-            "tick": self.last_tick, "time": w.time, "ticks": self.exp.ticks, "wall_s": wall_s, "row": w.row(),
-            "network": dict(zip(("messages_sent", "bytes_sent", "copies", "delivered", "dropped"), self.net_cum)),
-            "drops": self.drops_cum, "alive": [int(a) for a in np.flatnonzero(w.alive)],
-            "late_ticks": sum(self.late_ticks.values()),
-            "positions": [list(p) for p in zip(*w.positions())], "labels": w.agent_labels(),
-            "markers": [[x, y, label] for x, y, label in w.markers().values()]}))
+        self.status_pub.put(
+            encode_status(
+                {
+                    "name": self.exp.name,
+                    "scenario": self.exp.scenario.kind,
+                    "allocator": self.exp.allocator.name,
+                    "tick": self.last_tick,
+                    "time": w.time,
+                    "ticks": self.exp.ticks,
+                    "wall_s": wall_s,
+                    "row": w.row(),
+                    "network": dict(
+                        zip(("messages_sent", "bytes_sent", "copies", "delivered", "dropped"), self.net_cum)
+                    ),
+                    "drops": self.drops_cum,
+                    "alive": [int(a) for a in np.flatnonzero(w.alive)],
+                    "late_ticks": sum(self.late_ticks.values()),
+                    "positions": [list(p) for p in zip(*w.positions())],
+                    "labels": w.agent_labels(),
+                    "markers": [[x, y, label] for x, y, label in w.markers().values()],
+                }
+            )
+        )
 
     def _await_step(self, k: int) -> NetemStep:
         timeout = self.exp.run.tick_timeout
@@ -366,8 +411,10 @@ class Coordinator:
             try:
                 what, data = self._next_event(deadline - time.monotonic())
             except queue.Empty:
-                raise RunError(f"tick {k}: no step from the netem proxy within {timeout:.0f} s "
-                               "(an agent or the proxy is stuck; see the logs)") from None
+                raise RunError(
+                    f"tick {k}: no step from the netem proxy within {timeout:.0f} s "
+                    "(an agent or the proxy is stuck; see the logs)"
+                ) from None
             if what == "step":
                 try:
                     step = decode_netem_step(data)
@@ -409,6 +456,7 @@ class Coordinator:
     def _proxy_gone(self, k: int, grace: float = 0.5) -> None:
         """The proxy's token went: raise with its own error if it reported one (it reports before it
         lets go of the token, but the two travel apart), else with its exit status and log."""
+
         def take(what: str, data: Any) -> object:
             if what != "netem_report":
                 return None
@@ -417,8 +465,9 @@ class Coordinator:
 
         self._wait_for(grace, take)
         how = self.exit_status("netem") if self.exit_status else ""
-        raise RunError(f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log"
-                       + (f"\n{how}" if how else ""))
+        raise RunError(
+            f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log" + (f"\n{how}" if how else "")
+        )
 
     def _how_it_ended(self, agent: int) -> str:
         """Why agent ``agent``'s process is gone, as precisely as this machine can tell (a process on
@@ -433,6 +482,7 @@ class Coordinator:
     def _await_fatal_report(self, agent: int, grace: float = 0.25) -> None:
         """An agent left. Its fatal report (if it failed) travels apart from its liveliness token and
         may come a little later: wait briefly for it, keeping every other event in order."""
+
         def take(what: str, data: Any) -> object:
             if what != "report":
                 return None
@@ -502,8 +552,10 @@ class Coordinator:
         detail = f"\n{fatal['error']}\n{fatal.get('traceback', '')}" if fatal else ""
         policy = self.exp.run.agent_loss
         if policy == "fail":
-            raise RunError(f"agent {agent} stopped at tick {tick} because {why}; see {self._log_of(agent)}"
-                           f" (set run.on_agent_loss to continue or restart to go on){detail}")
+            raise RunError(
+                f"agent {agent} stopped at tick {tick} because {why}; see {self._log_of(agent)}"
+                f" (set run.on_agent_loss to continue or restart to go on){detail}"
+            )
         if policy == "restart" and fatal is None and self.place is not None:
             # a crashed process is started again at the next tick; a plugin that raised would raise again
             log.warning("coordinator: agent %d lost at tick %d (%s); restarting it", agent, tick, why)
@@ -556,16 +608,25 @@ class Coordinator:
         new = self.incarnation.get(agent, 0) + 1 + failed_tries
         host = self.hosts.get(agent, LOCAL)
         checkpoint = self.checkpoints.get(agent)
-        record: dict[str, Any] = {"tick": k, "agent": agent, "lost_at_tick": self.down[agent], "incarnation": new,
-                                  "host": host, "checkpoint_tick": checkpoint[0] if checkpoint else "",
-                                  "outcome": "failed", "reason": "", "wait_ms": 0.0}
+        record: dict[str, Any] = {
+            "tick": k,
+            "agent": agent,
+            "lost_at_tick": self.down[agent],
+            "incarnation": new,
+            "host": host,
+            "checkpoint_tick": checkpoint[0] if checkpoint else "",
+            "outcome": "failed",
+            "reason": "",
+            "wait_ms": 0.0,
+        }
         assert self.place is not None
         if checkpoint:
             self.snapshots[agent] = checkpoint[1]
         try:
             self.place(agent, host, new, restore=checkpoint is not None)
-            got = self._await_swap_event(agent, -1, new, ("restored", "restore_failed") if checkpoint else
-                                         ("join", "join"))
+            got = self._await_swap_event(
+                agent, -1, new, ("restored", "restore_failed") if checkpoint else ("join", "join")
+            )
         except Exception as exc:
             got = f"cannot start it on {host}: {exc}"
         finally:
@@ -607,8 +668,16 @@ class Coordinator:
         t0 = time.perf_counter()
         old = self.incarnation.get(agent, 0)
         new = old + 1
-        record: dict[str, Any] = {"tick": k, "agent": agent, "from": self.hosts.get(agent, "local"), "to": to,
-                                  "outcome": "failed", "reason": "", "snapshot_bytes": 0, "pause_ms": 0.0}
+        record: dict[str, Any] = {
+            "tick": k,
+            "agent": agent,
+            "from": self.hosts.get(agent, "local"),
+            "to": to,
+            "outcome": "failed",
+            "reason": "",
+            "snapshot_bytes": 0,
+            "pause_ms": 0.0,
+        }
 
         def finish(reason: str = "") -> dict[str, Any]:
             record["pause_ms"] = round((time.perf_counter() - t0) * 1000, 3)
@@ -620,8 +689,10 @@ class Coordinator:
         if agent in self.lost or self.place is None:
             return finish("the agent is not running" if agent in self.lost else "this run cannot start processes")
         if to != LOCAL and self.carriers is not None and agent not in self.carriers.get(to, ()):
-            return finish(f"host {to} may not carry agent {agent}: the hub admits a host only to the agents placed on "
-                          f"it, moved to it by a scripted swap or listed for it in may_carry")
+            return finish(
+                f"host {to} may not carry agent {agent}: the hub admits a host only to the agents placed on "
+                f"it, moved to it by a scripted swap or listed for it in may_carry"
+            )
         self.snapshots.pop(agent, None)
         self.agent_pubs[agent].put(encode_control(TAG_SNAPSHOT, old, self.tickets.issue("snapshot", agent, old)))
         got = self._await_swap_event(agent, old, new, ("snapshot", "snapshot_failed"))
@@ -649,6 +720,7 @@ class Coordinator:
 
     def _await_swap_event(self, agent: int, old: int, new: int, wanted: tuple[str, str]) -> str:
         """``wanted[0]`` when it comes; otherwise why not (the failure's reason). Other events wait."""
+
         def take(what: str, data: Any) -> object:
             if what == "snapshot" and data == agent and wanted[0] == "snapshot":
                 return "snapshot"
@@ -755,9 +827,11 @@ class Coordinator:
         r = self.exp.run
         lags = np.asarray(self.start_lags) * 1000
         tolerance_ms = 100 * r.dt / r.speed
-        spread = ([float(v) for v in np.percentile(lags, [50, 99, 100])] if len(lags) else [None] * 3)
+        spread = [float(v) for v in np.percentile(lags, [50, 99, 100])] if len(lags) else [None] * 3
         return {
-            "speed": r.speed, "deadline": r.deadline, "on_late": r.on_late,
+            "speed": r.speed,
+            "deadline": r.deadline,
+            "on_late": r.on_late,
             "late_ticks_total": sum(self.late_ticks.values()),
             "late_ticks": {str(a): n for a, n in sorted(self.late_ticks.items())},
             "ticks_started_late": int((lags > tolerance_ms).sum()),
@@ -811,17 +885,24 @@ class Coordinator:
         rows = []
         for i in range(self.n):
             s = per_sender.get(str(i), {})
-            rows.append([i, int(i not in self.lost), self.lost.get(i, "")] + [col[i] for col in columns.values()]
-                        + [s.get(c, 0) for c in net_cols])
-        results.write_csv(out / results.AGENTS, ["agent", "alive", "lost_at_tick", *columns,
-                                                 "messages_sent", "bytes_sent", "copies", "delivered"], rows)
+            rows.append(
+                [i, int(i not in self.lost), self.lost.get(i, "")]
+                + [col[i] for col in columns.values()]
+                + [s.get(c, 0) for c in net_cols]
+            )
+        results.write_csv(
+            out / results.AGENTS,
+            ["agent", "alive", "lost_at_tick", *columns, "messages_sent", "bytes_sent", "copies", "delivered"],
+            rows,
+        )
         results.write_json(out / results.TIMINGS, timings)
         results.write_json(out / results.TRANSPORT, self.transport(summary))
         if self.swap_log:  # wall-clock pauses: not among the files that repeat byte for byte
             cols = ["tick", "agent", "from", "to", "outcome", "reason", "snapshot_bytes", "pause_ms"]
             results.write_csv(out / SWAPS, cols, [[r[c] for c in cols] for r in self.swap_log])
         if self.restart_log:
-            results.write_csv(out / RESTARTS, RESTART_COLUMNS, [[r[c] for c in RESTART_COLUMNS]
-                                                                for r in self.restart_log])
+            results.write_csv(
+                out / RESTARTS, RESTART_COLUMNS, [[r[c] for c in RESTART_COLUMNS] for r in self.restart_log]
+            )
         results.write_json(out / results.SUMMARY, summary)
         return summary

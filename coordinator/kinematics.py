@@ -23,8 +23,9 @@ def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
-def step(x: float, y: float, heading: float, speed: float, target: tuple[float, float] | None,
-         lim: Limits, dt: float) -> tuple[float, float, float, float]:
+def step(
+    x: float, y: float, heading: float, speed: float, target: tuple[float, float] | None, lim: Limits, dt: float
+) -> tuple[float, float, float, float]:
     """One step toward ``target`` (None: brake). Returns the new x, y, heading, speed."""
     dv = lim.max_accel * dt
     if target is None:

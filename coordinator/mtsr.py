@@ -62,9 +62,19 @@ class MTSR(Scenario):
     bt_nodes = SPACE_NODES
     outcome_metrics = ("mission_time", "time_99", "tasks_completed", "all_tasks_completed")
     benefit_metric = "tasks_completed"
-    summary_keys = ("mission_time", "all_tasks_completed", "time_99", "tasks_total", "tasks_spawned",
-                    "tasks_completed", "distance_total", "distance_per_agent", "work_total", "work_per_agent",
-                    "invalid_actions")
+    summary_keys = (
+        "mission_time",
+        "all_tasks_completed",
+        "time_99",
+        "tasks_total",
+        "tasks_spawned",
+        "tasks_completed",
+        "distance_total",
+        "distance_per_agent",
+        "work_total",
+        "work_per_agent",
+        "invalid_actions",
+    )
     params: MTSRParams
 
     @classmethod
@@ -195,8 +205,11 @@ class MTSRWorld(World):
         table["remaining"] = self.remaining[open_idx]
         table["color"] = -1
         alive = np.flatnonzero(self.alive)
-        near = within(self.tx[open_idx][None, :] - self.ax[alive, None],
-                      self.ty[open_idx][None, :] - self.ay[alive, None], self.awareness)
+        near = within(
+            self.tx[open_idx][None, :] - self.ax[alive, None],
+            self.ty[open_idx][None, :] - self.ay[alive, None],
+            self.awareness,
+        )
         # every agent's visible tasks in one gather (of raw records: a structured gather is ~3x slower);
         # each agent's table is a slice of it
         rows, cols = np.nonzero(near)
@@ -204,8 +217,14 @@ class MTSRWorld(World):
         bounds = np.searchsorted(rows, np.arange(len(alive) + 1)).tolist()
         t = self.time
         return {
-            int(i): Observation(t, float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i]),
-                                seen[bounds[row]:bounds[row + 1]])
+            int(i): Observation(
+                t,
+                float(self.ax[i]),
+                float(self.ay[i]),
+                float(self.heading[i]),
+                float(self.speed[i]),
+                seen[bounds[row] : bounds[row + 1]],
+            )
             for row, i in enumerate(alive)
         }
 
@@ -229,12 +248,21 @@ class MTSRWorld(World):
         working: dict[int, list[int]] = {}
         for i in map(int, np.flatnonzero(self.alive)):
             target, task = self._target(i, actions.get(i, ["stop"]))
-            if (task is not None and
-                    math.hypot(self.tx[task] - self.ax[i], self.ty[task] - self.ay[i]) <= self.sc.arrival_radius):
+            if (
+                task is not None
+                and math.hypot(self.tx[task] - self.ax[i], self.ty[task] - self.ay[i]) <= self.sc.arrival_radius
+            ):
                 working.setdefault(task, []).append(i)
                 target = None  # brake while working
-            x, y, h, v = step(float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed[i]),
-                              target, self.limits, dt)
+            x, y, h, v = step(
+                float(self.ax[i]),
+                float(self.ay[i]),
+                float(self.heading[i]),
+                float(self.speed[i]),
+                target,
+                self.limits,
+                dt,
+            )
             self.distance[i] += math.hypot(x - self.ax[i], y - self.ay[i])
             self.ax[i], self.ay[i], self.heading[i], self.speed[i] = x, y, h, v
         for task in sorted(working):
@@ -284,8 +312,11 @@ class MTSRWorld(World):
         }
 
     def per_agent(self) -> dict[str, list]:
-        return {"distance": [float(d) for d in self.distance], "work": [float(x) for x in self.work],
-                "invalid_actions": [int(v) for v in self.invalid_actions]}
+        return {
+            "distance": [float(d) for d in self.distance],
+            "work": [float(x) for x in self.work],
+            "invalid_actions": [int(v) for v in self.invalid_actions],
+        }
 
     def invariants(self) -> list[str]:
         problems = []

@@ -61,14 +61,22 @@ class SARParams(BaseModel):
     inspect_fail: float = Field(0.0, ge=0, le=1, description="probability that an inspection fails")
     rescue_fail: float = Field(0.0, ge=0, le=1, description="probability that a rescue fails")
     move_penalty: float = Field(0.5, ge=0, description="seconds a robot is stuck after a failed move")
-    inspect_time: float = Field(INSPECT_TIME, ge=0, description="seconds an inspection takes; its result comes at "
-                                "the end (calibrated on tree: docs/reproduction.md)")
-    rescue_time: float = Field(RESCUE_TIME, ge=0, description="seconds a rescue takes; the victim is saved at the end"
-                               " (calibrated on tree: docs/reproduction.md)")
+    inspect_time: float = Field(
+        INSPECT_TIME,
+        ge=0,
+        description="seconds an inspection takes; its result comes at "
+        "the end (calibrated on tree: docs/reproduction.md)",
+    )
+    rescue_time: float = Field(
+        RESCUE_TIME,
+        ge=0,
+        description="seconds a rescue takes; the victim is saved at the end (calibrated on tree: docs/reproduction.md)",
+    )
     agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
     agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
     colors_for_bidding: Literal["auto", "always", "never"] = Field(
-        "auto", description="show victims' colours to bidders (auto: when the allocator bids with colours)")
+        "auto", description="show victims' colours to bidders (auto: when the allocator bids with colours)"
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,9 +100,24 @@ class SAR(Scenario):
     bt_nodes = SPACE_NODES
     outcome_metrics = ("rescued", "expired", "failed_rescues")
     benefit_metric = "rescued"
-    summary_keys = ("rescued", "expired", "failed_rescues", "inspections", "inspect_failures", "rescue_failures",
-                    "move_failures", "abandons", "spawned", "victims_alive", "victims_accounted", "distance_total",
-                    "distance_per_agent", "rescues_per_agent", "invalid_actions", "stale_actions")
+    summary_keys = (
+        "rescued",
+        "expired",
+        "failed_rescues",
+        "inspections",
+        "inspect_failures",
+        "rescue_failures",
+        "move_failures",
+        "abandons",
+        "spawned",
+        "victims_alive",
+        "victims_accounted",
+        "distance_total",
+        "distance_per_agent",
+        "rescues_per_agent",
+        "invalid_actions",
+        "stale_actions",
+    )
     params: SARParams
 
     def make_world(self, rng: np.random.Generator, allocator: type | None = None) -> SARWorld:
@@ -149,8 +172,16 @@ class SARWorld(World):
         self.rescues = np.zeros(self.n, dtype=np.int64)
         self.invalid_actions = np.zeros(self.n, dtype=np.int64)
         self.stale_actions = np.zeros(self.n, dtype=np.int64)  # aimed at a victim already gone
-        self.counts = {"rescued": 0, "expired": 0, "failed_rescues": 0, "inspections": 0, "inspect_failures": 0,
-                       "rescue_failures": 0, "move_failures": 0, "abandons": 0}
+        self.counts = {
+            "rescued": 0,
+            "expired": 0,
+            "failed_rescues": 0,
+            "inspections": 0,
+            "inspect_failures": 0,
+            "rescue_failures": 0,
+            "move_failures": 0,
+            "abandons": 0,
+        }
         # victims base .. nv-1, in arrays that double when full. A steady-state run spawns tens of
         # thousands; those gone for longer than FORGET_AFTER lifetimes leave the arrays (see _at)
         self.nv = 0
@@ -182,12 +213,12 @@ class SARWorld(World):
     def _forget_old(self) -> None:
         """Drop the rows of the victims that may leave (a prefix: ids are spawned in time order)."""
         keep_after = self.time - FORGET_AFTER * self.sc.lifetime
-        first = int(np.searchsorted(self.vspawn[:self.nv - self.base], keep_after, side="left"))
+        first = int(np.searchsorted(self.vspawn[: self.nv - self.base], keep_after, side="left"))
         if first:
             for name in ("vx", "vy", "vspawn", "vcolor", "vstatus"):
                 arr = getattr(self, name)
-                arr[:len(arr) - first] = arr[first:]
-                arr[len(arr) - first:] = UNUSED if name == "vstatus" else 0
+                arr[: len(arr) - first] = arr[first:]
+                arr[len(arr) - first :] = UNUSED if name == "vstatus" else 0
             self.base += first
 
     def _grow(self, grow: int) -> None:
@@ -225,8 +256,10 @@ class SARWorld(World):
 
     def markers(self) -> dict[int, tuple[float, float, str]]:
         """Victims alive, labelled with their (hidden) wall colour."""
-        return {int(v) + self.base: (float(self.vx[v]), float(self.vy[v]), COLOR_NAMES[int(self.vcolor[v])])
-                for v in np.flatnonzero(self.vstatus == ALIVE)}
+        return {
+            int(v) + self.base: (float(self.vx[v]), float(self.vy[v]), COLOR_NAMES[int(self.vcolor[v])])
+            for v in np.flatnonzero(self.vstatus == ALIVE)
+        }
 
     def agent_labels(self) -> dict[int, str]:
         return {int(i): COLOR_NAMES[int(self.color[i])] for i in np.flatnonzero(self.alive)}
@@ -265,13 +298,20 @@ class SARWorld(World):
             rows = live[seen]
             ids = rows + self.base
             table["id"], table["x"], table["y"], table["remaining"] = ids, lx[seen], ly[seen], left[seen]
-            known = [int(self.vcolor[r]) if (self.show_colors or i in self.inspected.get(int(v), ())) else -1
-                     for r, v in zip(rows, ids)]
+            known = [
+                int(self.vcolor[r]) if (self.show_colors or i in self.inspected.get(int(v), ())) else -1
+                for r, v in zip(rows, ids)
+            ]
             table["color"] = known
             others = [int(j) for j in robots if j != i]
             visible = self._in_cone(i, self.ax[others], self.ay[others]) if others else np.zeros(0, dtype=bool)
             out[i] = SARObservation(
-                self.time, float(self.ax[i]), float(self.ay[i]), float(self.heading[i]), float(self.speed), table,
+                self.time,
+                float(self.ax[i]),
+                float(self.ay[i]),
+                float(self.heading[i]),
+                float(self.speed),
+                table,
                 color=int(self.color[i]),
                 reach=self.sc.inspect_range,
                 robots=[(j, float(self.ax[j]), float(self.ay[j])) for j, v in zip(others, visible) if v],
@@ -354,8 +394,11 @@ class SARWorld(World):
 
     def _in_reach(self, i: int, v: int) -> bool:
         r = self._at(v)
-        return (r is not None and self.vstatus[r] == ALIVE and
-                math.hypot(self.vx[r] - self.ax[i], self.vy[r] - self.ay[i]) <= self.sc.inspect_range + 1e-9)
+        return (
+            r is not None
+            and self.vstatus[r] == ALIVE
+            and math.hypot(self.vx[r] - self.ax[i], self.vy[r] - self.ay[i]) <= self.sc.inspect_range + 1e-9
+        )
 
     def apply(self, actions: dict[int, list]) -> None:
         """Advance one tick; robots act in id order on the state of this tick."""
@@ -376,13 +419,20 @@ class SARWorld(World):
                 self._move(i, float(self.vx[r]), float(self.vy[r]))
             elif name == "inspect" and v is not None and self._in_reach(i, v):
                 self._begin(i, "inspect", v, self.sc.inspect_time)
-            elif (name == "rescue" and v is not None and r is not None and self._in_reach(i, v)
-                  and i in self.inspected.get(v, ()) and self.vcolor[r] == self.color[i]):
+            elif (
+                name == "rescue"
+                and v is not None
+                and r is not None
+                and self._in_reach(i, v)
+                and i in self.inspected.get(v, ())
+                and self.vcolor[r] == self.color[i]
+            ):
                 self._begin(i, "rescue", v, self.sc.rescue_time)
             elif name == "abandon" and v is not None:
                 self.counts["abandons"] += 1
-            elif name in ("inspect", "rescue", "goto_task") and v is not None and (
-                    r is None or self.vstatus[r] != ALIVE):
+            elif (
+                name in ("inspect", "rescue", "goto_task") and v is not None and (r is None or self.vstatus[r] != ALIVE)
+            ):
                 self.stale_actions[i] += 1  # someone was faster, or it expired: not the robot's fault
             elif name != "stop":
                 self.invalid_actions[i] += 1
@@ -393,16 +443,24 @@ class SARWorld(World):
 
     # -- metrics -----------------------------------------------------------------------------------
     def row(self) -> dict:
-        return {"tick": self.tick, "time": round(self.time, 9), "spawned": self.nv,
-                "rescued": self.counts["rescued"], "expired": self.counts["expired"],
-                "failed_rescues": self.counts["failed_rescues"], "victims_alive": self.victims_alive,
-                "agents_alive": int(self.alive.sum())}
+        return {
+            "tick": self.tick,
+            "time": round(self.time, 9),
+            "spawned": self.nv,
+            "rescued": self.counts["rescued"],
+            "expired": self.counts["expired"],
+            "failed_rescues": self.counts["failed_rescues"],
+            "victims_alive": self.victims_alive,
+            "agents_alive": int(self.alive.sum()),
+        }
 
     def invariants(self) -> list[str]:
         c, spawned, alive = self.counts, self.nv, self.victims_alive
         if c["rescued"] + c["expired"] + alive != spawned:
-            return [f"victims unaccounted: rescued {c['rescued']} + expired {c['expired']} + alive {alive} "
-                    f"!= spawned {spawned}"]
+            return [
+                f"victims unaccounted: rescued {c['rescued']} + expired {c['expired']} + alive {alive} "
+                f"!= spawned {spawned}"
+            ]
         return []
 
     def summary(self) -> dict:
@@ -411,14 +469,23 @@ class SARWorld(World):
         problems = self.invariants()
         if problems:
             raise AssertionError(problems[0])
-        return {**c, "spawned": spawned, "victims_alive": alive, "victims_accounted": True,
-                "distance_total": float(self.distance.sum()),
-                "distance_per_agent": [float(d) for d in self.distance],
-                "rescues_per_agent": [int(r) for r in self.rescues],
-                "invalid_actions": int(self.invalid_actions.sum()),
-                "stale_actions": int(self.stale_actions.sum())}
+        return {
+            **c,
+            "spawned": spawned,
+            "victims_alive": alive,
+            "victims_accounted": True,
+            "distance_total": float(self.distance.sum()),
+            "distance_per_agent": [float(d) for d in self.distance],
+            "rescues_per_agent": [int(r) for r in self.rescues],
+            "invalid_actions": int(self.invalid_actions.sum()),
+            "stale_actions": int(self.stale_actions.sum()),
+        }
 
     def per_agent(self) -> dict[str, list]:
-        return {"color": [int(c) for c in self.color], "distance": [float(d) for d in self.distance],
-                "rescues": [int(r) for r in self.rescues], "invalid_actions": [int(v) for v in self.invalid_actions],
-                "stale_actions": [int(v) for v in self.stale_actions]}
+        return {
+            "color": [int(c) for c in self.color],
+            "distance": [float(d) for d in self.distance],
+            "rescues": [int(r) for r in self.rescues],
+            "invalid_actions": [int(v) for v in self.invalid_actions],
+            "stale_actions": [int(v) for v in self.stale_actions],
+        }

@@ -25,10 +25,12 @@ if TYPE_CHECKING:
 
 
 def _keys_epilog() -> str:
-    return ("Any key of the experiment can be overridden with --set KEY=VALUE (read as YAML).\n"
-            "`swarmbed params` lists the run, agents and network keys; `swarmbed params NAME` the keys of a\n"
-            f"scenario ({', '.join(registry.scenario_names())}) or an allocator "
-            f"({', '.join(registry.names())}).")
+    return (
+        "Any key of the experiment can be overridden with --set KEY=VALUE (read as YAML).\n"
+        "`swarmbed params` lists the run, agents and network keys; `swarmbed params NAME` the keys of a\n"
+        f"scenario ({', '.join(registry.scenario_names())}) or an allocator "
+        f"({', '.join(registry.names())})."
+    )
 
 
 def _fmt(v) -> str:
@@ -63,8 +65,15 @@ def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> 
     lost = summary["agents_lost"]
     if lost:
         text = ", ".join(f"{a} at tick {t}" for a, t in sorted(lost.items(), key=lambda kv: int(kv[0])))
-        print(textwrap.fill(f"agents lost: {text} (their logs: logs/agent_<id>.log)", width=100,
-                            initial_indent="  ", subsequent_indent="    "), file=stream)
+        print(
+            textwrap.fill(
+                f"agents lost: {text} (their logs: logs/agent_<id>.log)",
+                width=100,
+                initial_indent="  ",
+                subsequent_indent="    ",
+            ),
+            file=stream,
+        )
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -81,8 +90,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 2
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
-    result = run_experiment(exp, out, progress=not args.no_progress, listen=args.listen, auth=not args.no_auth,
-                            admit=admitted, tls=tls)
+    result = run_experiment(
+        exp, out, progress=not args.no_progress, listen=args.listen, auth=not args.no_auth, admit=admitted, tls=tls
+    )
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
 
@@ -101,8 +111,11 @@ def cmd_soak(args: argparse.Namespace) -> int:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / f"soak-{exp.name}" / f"seed{exp.run.seed}-{stamp}"
     limits = Thresholds(args.max_rss_slope, args.max_fd_growth, args.max_stall)
-    print(f"soak: {exp.name}, {exp.agents.count} agents, {duration:.0f} s of wall time"
-          f"{f', chaos from {args.chaos}' if plan else ''}; files in {out}", flush=True)
+    print(
+        f"soak: {exp.name}, {exp.agents.count} agents, {duration:.0f} s of wall time"
+        f"{f', chaos from {args.chaos}' if plan else ''}; files in {out}",
+        flush=True,
+    )
     result = soak(exp, out, duration, plan, args.interval, limits, auth=not args.no_auth)
     print(format_verdict(result))
     return 0 if result["passed"] else 1
@@ -144,8 +157,11 @@ def _node_owners(allocator: str | None, scenario: str | None) -> list[type]:
     if allocator:
         owners.append(registry.resolve(allocator, scenario))
     else:
-        owners += [registry.resolve(name, kind) for name, kind in registry.entries()
-                   if kind == registry.ANY or kind in scenarios]
+        owners += [
+            registry.resolve(name, kind)
+            for name, kind in registry.entries()
+            if kind == registry.ANY or kind in scenarios
+        ]
     return owners
 
 
@@ -179,7 +195,7 @@ def _first_line(cls: type) -> str:
     """The first sentence of a class's docstring, on one line, without reST markup."""
     text = " ".join((cls.__doc__ or cls.__name__).split()).replace("``", "")
     end = text.find(". ")
-    return text if end < 0 else text[:end + 1]
+    return text if end < 0 else text[: end + 1]
 
 
 def _param_groups(name: str) -> list[tuple[str, list[tuple[str, str, str, str]]]]:
@@ -196,8 +212,12 @@ def _param_groups(name: str) -> list[tuple[str, list[tuple[str, str, str, str]]]
     for kind in kinds:
         allocator = registry.resolve(name, None if kind == registry.ANY else kind)
         where = "any scenario" if kind == registry.ANY else f"scenario {kind}"
-        groups.append((f"allocator.name: {name} for {where} ({_first_line(allocator)})",
-                       cfg.describe(allocator.Params, "allocator.") or [("(no parameters)", "", "", "")]))
+        groups.append(
+            (
+                f"allocator.name: {name} for {where} ({_first_line(allocator)})",
+                cfg.describe(allocator.Params, "allocator.") or [("(no parameters)", "", "", "")],
+            )
+        )
     return groups
 
 
@@ -205,16 +225,30 @@ def cmd_params(args: argparse.Namespace) -> int:
     """Every key of the generic sections, or of a scenario or an allocator: type, default, meaning."""
     if args.name is None:
         groups = [(f"{name}:", cfg.describe(model, f"{name}.")) for name, model in cfg.SECTIONS.items()]
-        groups.append(("scenarios (swarmbed params NAME):",
-                       [(n, "", "", registry.scenario_target(n)) for n in registry.scenario_names()]))
-        allocators = [(n if k == registry.ANY else f"{n} ({k})", "", "",
-                       registry.allocator_target(n, None if k == registry.ANY else k)) for n, k in registry.entries()]
+        groups.append(
+            (
+                "scenarios (swarmbed params NAME):",
+                [(n, "", "", registry.scenario_target(n)) for n in registry.scenario_names()],
+            )
+        )
+        allocators = [
+            (
+                n if k == registry.ANY else f"{n} ({k})",
+                "",
+                "",
+                registry.allocator_target(n, None if k == registry.ANY else k),
+            )
+            for n, k in registry.entries()
+        ]
         groups.append(("allocators (swarmbed params NAME):", allocators))
     else:
         groups = _param_groups(args.name)
         if not groups:
-            print(f"error: {args.name!r} is neither a scenario ({', '.join(registry.scenario_names())}) nor an "
-                  f"allocator ({', '.join(registry.names())})", file=sys.stderr)
+            print(
+                f"error: {args.name!r} is neither a scenario ({', '.join(registry.scenario_names())}) nor an "
+                f"allocator ({', '.join(registry.names())})",
+                file=sys.stderr,
+            )
             return 2
     for title, rows in groups:
         print(title)
@@ -232,9 +266,17 @@ def _sweep_executor(args: argparse.Namespace, out: Path) -> Executor:
         raise executors.ExecutorError("--slurm-*, --detach: only with --executor slurm")
     if args.executor != "dask" and args.scheduler:
         raise executors.ExecutorError("--scheduler: only with --executor dask")
-    return executors.get(args.executor, jobs=args.jobs, folder=out / ".submitit", partition=args.slurm_partition,
-                         time=args.slurm_time, parallel=args.jobs, cluster=args.slurm_cluster, detach=args.detach,
-                         scheduler=args.scheduler)
+    return executors.get(
+        args.executor,
+        jobs=args.jobs,
+        folder=out / ".submitit",
+        partition=args.slurm_partition,
+        time=args.slurm_time,
+        parallel=args.jobs,
+        cluster=args.slurm_cluster,
+        detach=args.detach,
+        scheduler=args.scheduler,
+    )
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -261,18 +303,29 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     try:
-        table = run_sweep(sweep, out, args.jobs, progress=not args.no_progress and not args.detach,
-                          executor=executor, stale_after=args.stale_after, redo_mismatched=args.redo_mismatched)
+        table = run_sweep(
+            sweep,
+            out,
+            args.jobs,
+            progress=not args.no_progress and not args.detach,
+            executor=executor,
+            stale_after=args.stale_after,
+            redo_mismatched=args.redo_mismatched,
+        )
     except ExecutorError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.detach:
-        print(f"submitted: {executor.describe()}\nprogress: swarmbed sweep --status {out}\n"
-              f"when they are done, the same command again writes {out}/sweep.csv and sweep.parquet")
+        print(
+            f"submitted: {executor.describe()}\nprogress: swarmbed sweep --status {out}\n"
+            f"when they are done, the same command again writes {out}/sweep.csv and sweep.parquet"
+        )
         return 0
     ok = table[table["status"] == "ok"]
-    print(f"sweep: {out}/sweep.csv  ({len(ok)} of {len(table)} runs complete, "
-          f"{len(sweep.scenarios)} scenarios x {sweep.runs} runs; {executor.describe()})")
+    print(
+        f"sweep: {out}/sweep.csv  ({len(ok)} of {len(table)} runs complete, "
+        f"{len(sweep.scenarios)} scenarios x {sweep.runs} runs; {executor.describe()})"
+    )
     held = int((table["status"] == "running").sum())
     if held:
         print(f"{held} runs are held by another sweep command on {out}: swarmbed sweep --status {out}")
@@ -290,8 +343,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     from swarmbed.experiments.views.analyze import AnalyzeError, analyze
 
     try:
-        written = analyze([Path(d) for d in args.sweep_dir], control=args.control,
-                          mixed_versions_ok=args.mixed_versions)
+        written = analyze(
+            [Path(d) for d in args.sweep_dir], control=args.control, mixed_versions_ok=args.mixed_versions
+        )
     except (AnalyzeError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -344,8 +398,14 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     try:
         t0 = time.perf_counter()
-        path, frames = replay(Path(args.run_dir), Path(args.output) if args.output else None,
-                              getattr(args, "from"), args.to, args.fps, args.every)
+        path, frames = replay(
+            Path(args.run_dir),
+            Path(args.output) if args.output else None,
+            getattr(args, "from"),
+            args.to,
+            args.fps,
+            args.every,
+        )
     except ReplayError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -377,8 +437,17 @@ def cmd_host(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format=LOG_FORMAT)
     logs = Path(args.logs) if args.logs else Path("runs") / "hosts" / args.name
     try:
-        return serve(args.name, args.connect, args.listen, logs, args.zenoh_config, args.mode, args.credentials,
-                     tls_from_args(args), insecure=args.insecure)
+        return serve(
+            args.name,
+            args.connect,
+            args.listen,
+            logs,
+            args.zenoh_config,
+            args.mode,
+            args.credentials,
+            tls_from_args(args),
+            insecure=args.insecure,
+        )
     except (CredentialsError, HostError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -394,14 +463,25 @@ def _client_session(args: argparse.Namespace, connect_timeout_s: float | None = 
     from swarmbed.wire.session import tls_from_args, zenoh_config
 
     try:
-        return zenoh.open(zenoh_config("client", args.connect, [], args.zenoh_config, args.credentials,
-                                       tls_from_args(args), connect_timeout_s=connect_timeout_s))
+        return zenoh.open(
+            zenoh_config(
+                "client",
+                args.connect,
+                [],
+                args.zenoh_config,
+                args.credentials,
+                tls_from_args(args),
+                connect_timeout_s=connect_timeout_s,
+            )
+        )
     except CredentialsError as exc:
         print(f"error: {exc}", file=sys.stderr)
     except zenoh.ZError as exc:
         hint = "" if args.credentials else " (a run's hub admits only processes with credentials: give --credentials)"
-        print(f"error: cannot reach {', '.join(args.connect) or 'any endpoint (give --connect)'}: {exc}{hint}",
-              file=sys.stderr)
+        print(
+            f"error: cannot reach {', '.join(args.connect) or 'any endpoint (give --connect)'}: {exc}{hint}",
+            file=sys.stderr,
+        )
     return None
 
 
@@ -419,8 +499,10 @@ def cmd_hosts(args: argparse.Namespace) -> int:
         for name in names:
             info = host_info(session, name) or {}
             agents = ", ".join(f"{run}: {len(ids)}" for run, ids in info.get("agents", {}).items()) or "none"
-            print(f"{name}  cores {info.get('cores', '?')}  free {info.get('mem_free_mb', '?')} MB  "
-                  f"router {info.get('endpoint', '?')}  agents {agents}")
+            print(
+                f"{name}  cores {info.get('cores', '?')}  free {info.get('mem_free_mb', '?')} MB  "
+                f"router {info.get('endpoint', '?')}  agents {agents}"
+            )
     return 0
 
 
@@ -465,10 +547,15 @@ def cmd_swap(args: argparse.Namespace) -> int:
         while time.monotonic() < deadline:
             record = ask({"swap": answer["queued"]})
             if record is not None and not record.get("pending"):
-                print(f"swap of agent {record['agent']} from {record['from']} to {record['to']} before tick "
-                      f"{record['tick']}: {record['outcome']}"
-                      + (f" ({record['reason']})" if record["reason"] else
-                         f", {record['snapshot_bytes']} bytes, paused {record['pause_ms']:.0f} ms"))
+                print(
+                    f"swap of agent {record['agent']} from {record['from']} to {record['to']} before tick "
+                    f"{record['tick']}: {record['outcome']}"
+                    + (
+                        f" ({record['reason']})"
+                        if record["reason"]
+                        else f", {record['snapshot_bytes']} bytes, paused {record['pause_ms']:.0f} ms"
+                    )
+                )
                 return 0 if record["outcome"] == "ok" else 1
             time.sleep(0.1)
     print(f"error: the swap was queued but not done within {args.wait:.0f} s", file=sys.stderr)
@@ -479,27 +566,46 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
     sub = ap.add_subparsers(dest="command", required=True)
 
-    run = sub.add_parser("run", help="run one experiment", epilog=_keys_epilog(),
-                         formatter_class=argparse.RawDescriptionHelpFormatter)
+    run = sub.add_parser(
+        "run", help="run one experiment", epilog=_keys_epilog(), formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     run.add_argument("experiment", help="experiment YAML file")
     run.add_argument("--seed", type=int, help="run seed (overrides run.seed)")
     run.add_argument("--out", help="run directory (default: runs/<name>/seed<seed>-<time>)")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
-    run.add_argument("--listen", "-l", action="append", default=[], metavar="ENDPOINT",
-                     help="also listen here, for the routers of hosts in the placement (e.g. tcp/0.0.0.0:7447)")
-    run.add_argument("--admit", action="append", default=[], metavar="CREDENTIALS",
-                     help="a credentials file (swarmbed credentials) of a host or an operator the hub admits "
-                          "besides the run's own processes (repeatable)")
-    run.add_argument("--no-auth", action="store_true",
-                     help="no authentication or access control: anyone who reaches the hub may join and publish")
+    run.add_argument(
+        "--listen",
+        "-l",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="also listen here, for the routers of hosts in the placement (e.g. tcp/0.0.0.0:7447)",
+    )
+    run.add_argument(
+        "--admit",
+        action="append",
+        default=[],
+        metavar="CREDENTIALS",
+        help="a credentials file (swarmbed credentials) of a host or an operator the hub admits "
+        "besides the run's own processes (repeatable)",
+    )
+    run.add_argument(
+        "--no-auth",
+        action="store_true",
+        help="no authentication or access control: anyone who reaches the hub may join and publish",
+    )
     run.add_argument("--tls", metavar="DIR", help="certificates (swarmbed certs) for --listen tls/HOST:PORT endpoints")
-    run.add_argument("--tls-name", metavar="NAME", default="hub",
-                     help="the certificate in --tls DIR the hub presents (default: hub)")
+    run.add_argument(
+        "--tls-name", metavar="NAME", default="hub", help="the certificate in --tls DIR the hub presents (default: hub)"
+    )
     run.set_defaults(func=cmd_run)
 
-    so = sub.add_parser("soak", help="run an experiment for a wall-clock duration under faults; every process "
-                                      "watched; a verdict at the end (exit 1 on a breach)")
+    so = sub.add_parser(
+        "soak",
+        help="run an experiment for a wall-clock duration under faults; every process "
+        "watched; a verdict at the end (exit 1 on a breach)",
+    )
     so.add_argument("experiment", help="experiment YAML file")
     so.add_argument("--duration", required=True, help="wall time: 90s, 30m, 2h, 1h30m")
     so.add_argument("--chaos", metavar="CHAOS.yaml", help="faults to inject (see docs/soak.md)")
@@ -507,28 +613,50 @@ def main(argv: list[str] | None = None) -> int:
     so.add_argument("--seed", type=int, help="run seed (overrides run.seed; also seeds the chaos)")
     so.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
     so.add_argument("--interval", type=float, default=5.0, help="wall seconds between samples (default 5)")
-    so.add_argument("--max-rss-slope", type=float, default=10.0, metavar="PCT_PER_H",
-                    help="largest RSS growth of any process over the second half, %% per hour (default 10)")
-    so.add_argument("--max-fd-growth", type=float, default=10.0, metavar="PER_H",
-                    help="largest growth of open file descriptors of any process, per hour (default 10)")
-    so.add_argument("--max-stall", type=float, default=10.0, metavar="S",
-                    help="longest a tick may take, wall seconds (default 10)")
+    so.add_argument(
+        "--max-rss-slope",
+        type=float,
+        default=10.0,
+        metavar="PCT_PER_H",
+        help="largest RSS growth of any process over the second half, %% per hour (default 10)",
+    )
+    so.add_argument(
+        "--max-fd-growth",
+        type=float,
+        default=10.0,
+        metavar="PER_H",
+        help="largest growth of open file descriptors of any process, per hour (default 10)",
+    )
+    so.add_argument(
+        "--max-stall", type=float, default=10.0, metavar="S", help="longest a tick may take, wall seconds (default 10)"
+    )
     so.add_argument("--no-auth", action="store_true", help="no authentication or access control on the hub")
     so.set_defaults(func=cmd_soak)
 
     cr = sub.add_parser("credentials", help="make a credentials file for a host daemon or an operator (watch, swap)")
     cr.add_argument("file", help="the file to write (created with mode 600)")
     cr.add_argument("--user", required=True, help="the user name (letters, digits, no ':' or spaces)")
-    cr.add_argument("--role", choices=["operator", "host"], default="operator",
-                    help="operator: watch a run and ask for swaps; host: a host daemon (default: operator)")
-    cr.add_argument("--host", help="role host: the host name the daemon runs as (swarmbed host --name); "
-                                   "the hub lets this identity act as that host only (default: the user name)")
+    cr.add_argument(
+        "--role",
+        choices=["operator", "host"],
+        default="operator",
+        help="operator: watch a run and ask for swaps; host: a host daemon (default: operator)",
+    )
+    cr.add_argument(
+        "--host",
+        help="role host: the host name the daemon runs as (swarmbed host --name); "
+        "the hub lets this identity act as that host only (default: the user name)",
+    )
     cr.set_defaults(func=cmd_credentials)
 
     ce = sub.add_parser("certs", help="a certificate authority and per-machine certificates for TLS between machines")
     ce.add_argument("folder", help="where the CA (ca.pem, ca.key) and the certificates go; the CA is reused")
-    ce.add_argument("machines", nargs="+", metavar="NAME[=ADDR,...]",
-                    help="a machine and the addresses others reach it by, e.g. hub=192.0.2.10 labpc2=labpc2.lab")
+    ce.add_argument(
+        "machines",
+        nargs="+",
+        metavar="NAME[=ADDR,...]",
+        help="a machine and the addresses others reach it by, e.g. hub=192.0.2.10 labpc2=labpc2.lab",
+    )
     ce.add_argument("--days", type=_positive, default=365, help="validity (default 365 days)")
     ce.set_defaults(func=cmd_certs)
 
@@ -542,32 +670,53 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--scenario", help="only the nodes of this scenario (default: every one)")
     bt.set_defaults(func=cmd_bt)
 
-    par = sub.add_parser("params", help="every key of an experiment, a scenario or an allocator: type, default, "
-                                        "meaning")
+    par = sub.add_parser(
+        "params", help="every key of an experiment, a scenario or an allocator: type, default, meaning"
+    )
     par.add_argument("name", nargs="?", help="a scenario or allocator name (or module:Class); none: the sections")
     par.set_defaults(func=cmd_params)
 
     sw = sub.add_parser("sweep", help="Monte Carlo runs over scenarios, in parallel and resumable")
     sw.add_argument("sweep", nargs="?", help="sweep YAML (base + scenarios/grid + runs) or a plain experiment")
-    sw.add_argument("--status", metavar="DIR",
-                    help="print ok / running / failed / interrupted / missing runs per scenario")
+    sw.add_argument(
+        "--status", metavar="DIR", help="print ok / running / failed / interrupted / missing runs per scenario"
+    )
     sw.add_argument("--out", help="sweep directory (default: runs/<name>)")
-    sw.add_argument("--jobs", "-j", type=_positive,
-                    help="runs at once (local: default one per core; slurm: the array's parallelism)")
-    sw.add_argument("--executor", choices=["local", "slurm", "dask"], default="local",
-                    help="where runs execute (default local; slurm needs swarmbed[slurm], dask swarmbed[dask])")
+    sw.add_argument(
+        "--jobs",
+        "-j",
+        type=_positive,
+        help="runs at once (local: default one per core; slurm: the array's parallelism)",
+    )
+    sw.add_argument(
+        "--executor",
+        choices=["local", "slurm", "dask"],
+        default="local",
+        help="where runs execute (default local; slurm needs swarmbed[slurm], dask swarmbed[dask])",
+    )
     sw.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="the Dask scheduler (--executor dask)")
     sw.add_argument("--slurm-partition", help="Slurm partition (--executor slurm)")
     sw.add_argument("--slurm-time", default="120", help="time limit per run: minutes or H:MM:SS (default 120)")
-    sw.add_argument("--slurm-cluster", choices=["slurm", "local"],
-                    help="'local': submitit's stand-in, one process per array task on this machine (a dry run)")
+    sw.add_argument(
+        "--slurm-cluster",
+        choices=["slurm", "local"],
+        help="'local': submitit's stand-in, one process per array task on this machine (a dry run)",
+    )
     sw.add_argument("--detach", action="store_true", help="submit the array job and return (--executor slurm)")
-    sw.add_argument("--stale-after", type=float, default=120.0, metavar="S",
-                    help="a run claimed by a process that has not shown life for S seconds is taken over "
-                         "(default 120; a dead process on this host at once)")
-    sw.add_argument("--redo-mismatched", action="store_true",
-                    help="run again the completed runs in --out that were made under another configuration than "
-                         "this sweep plans (without it the sweep refuses to reuse or mix them)")
+    sw.add_argument(
+        "--stale-after",
+        type=float,
+        default=120.0,
+        metavar="S",
+        help="a run claimed by a process that has not shown life for S seconds is taken over "
+        "(default 120; a dead process on this host at once)",
+    )
+    sw.add_argument(
+        "--redo-mismatched",
+        action="store_true",
+        help="run again the completed runs in --out that were made under another configuration than "
+        "this sweep plans (without it the sweep refuses to reuse or mix them)",
+    )
     sw.add_argument("--runs", "-n", type=_positive, help="runs per scenario (overrides the file)")
     sw.add_argument("--seed", type=int, help="sweep seed (overrides the file)")
     sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")
@@ -578,8 +727,11 @@ def main(argv: list[str] | None = None) -> int:
     an = sub.add_parser("analyze", help="tables and figures from a sweep directory")
     an.add_argument("sweep_dir", nargs="+", help="sweep directories (outputs go to the first)")
     an.add_argument("--control", help="control strategy for Dunnett and Cohen's d (default: cbba-etc where present)")
-    an.add_argument("--mixed-versions", action="store_true",
-                    help="pool runs of a scenario or allocator made in different versions (provenance.json)")
+    an.add_argument(
+        "--mixed-versions",
+        action="store_true",
+        help="pool runs of a scenario or allocator made in different versions (provenance.json)",
+    )
     an.set_defaults(func=cmd_analyze)
 
     rep = sub.add_parser("report", help="a run's or a sweep's bandwidth accounting as one self-contained HTML page")
@@ -599,25 +751,36 @@ def main(argv: list[str] | None = None) -> int:
     chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
     chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")
     chk.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="an allocator parameter")
-    chk.add_argument("--scenario", help="the scenario it is for (a registered name; default: the one it is "
-                                        "registered for, else mtsr)")
+    chk.add_argument(
+        "--scenario",
+        help="the scenario it is for (a registered name; default: the one it is registered for, else mtsr)",
+    )
     chk.set_defaults(func=cmd_check_allocator)
 
-    chs = sub.add_parser("check-scenario", help="run the scenario checker (determinism, observations, results, "
-                                              "conservation, robustness)")
+    chs = sub.add_parser(
+        "check-scenario", help="run the scenario checker (determinism, observations, results, conservation, robustness)"
+    )
     chs.add_argument("scenario", help="registered name, module:Class or path/to/file.py:Class")
     chs.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="a scenario parameter")
-    chs.add_argument("--agents", action="append", default=[], metavar="KEY=VALUE",
-                     help="an agents-section key for the check (e.g. max_speed=5)")
+    chs.add_argument(
+        "--agents",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an agents-section key for the check (e.g. max_speed=5)",
+    )
     chs.add_argument("--ticks", type=int, default=60, help="ticks per checked run (default 60)")
     chs.set_defaults(func=cmd_check_scenario)
 
     host = sub.add_parser("host", help="run this machine's host daemon: a Zenoh router that starts agents for runs")
     host.add_argument("--name", required=True, help="this host's name in placements (letters, digits, _ . -)")
     host.add_argument("--logs", help="where its agents log (default: runs/hosts/<name>)")
-    host.add_argument("--insecure", action="store_true",
-                      help="run without --credentials: no authentication, anyone who reaches the router may start "
-                           "agents (their code included); allowed with loopback endpoints only")
+    host.add_argument(
+        "--insecure",
+        action="store_true",
+        help="run without --credentials: no authentication, anyone who reaches the router may start "
+        "agents (their code included); allowed with loopback endpoints only",
+    )
     add_zenoh_args(host, default_mode="router")
     host.set_defaults(func=cmd_host)
 
@@ -628,8 +791,9 @@ def main(argv: list[str] | None = None) -> int:
 
     wat = sub.add_parser("watch", help="a live view of a running experiment (read-only)")
     wat.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
-    wat.add_argument("--wait", type=float, default=10.0,
-                     help="seconds to wait for the hub to listen and the run to answer")
+    wat.add_argument(
+        "--wait", type=float, default=10.0, help="seconds to wait for the hub to listen and the run to answer"
+    )
     wat.add_argument("--map", metavar="FILE.html", help="also keep a map of the run in FILE.html (reloads itself)")
     add_zenoh_args(wat)
     wat.set_defaults(func=cmd_watch)

@@ -105,8 +105,16 @@ class Ledger:
     def per_receiver(self) -> bool:
         return self.receivers is not None
 
-    def book(self, tick: int, sender: int, kind: str, size: int, outcome: str, copies: int = 1,
-             to: Iterable[int] | None = None) -> None:
+    def book(
+        self,
+        tick: int,
+        sender: int,
+        kind: str,
+        size: int,
+        outcome: str,
+        copies: int = 1,
+        to: Iterable[int] | None = None,
+    ) -> None:
         """Book ``copies`` copies of one message (``size`` payload bytes each) with ``outcome``.
 
         ``to``: the receivers of those copies, needed when the ledger is kept per receiver."""

@@ -214,8 +214,9 @@ class Proxy:
         self.controls = [c for c in self.controls if c.from_tick > tick]
         for control in due:
             self.radio.params = self.spec.network.model_copy(update=control.overrides)
-            log.info("netem: from tick %d the radio is %s (%s)", tick, control.overrides or "as configured",
-                     control.label)
+            log.info(
+                "netem: from tick %d the radio is %s (%s)", tick, control.overrides or "as configured", control.label
+            )
 
     def _malformed(self, key: str, exc: Exception) -> None:
         self.malformed += 1
@@ -248,8 +249,9 @@ class Proxy:
         """Book every answer still on its way for the last ticks (each agent answers in order)."""
         until = time.monotonic() + timeout
         left: set[int] = set()
-        while any(self.answered.get(a, -1) < last for a in self.members.get(last, [])
-                  if a not in self.lost and a not in left):
+        while any(
+            self.answered.get(a, -1) < last for a in self.members.get(last, []) if a not in self.lost and a not in left
+        ):
             try:
                 what, data = self.events.get(timeout=max(0.0, until - time.monotonic()))
             except queue.Empty:
@@ -286,9 +288,16 @@ class Proxy:
                 events[name] = events.get(name, 0) + n
         drops = {r: n - self._last_drops[r] for r, n in led.dropped.items() if n != self._last_drops[r]}
         self._last_drops = dict(led.dropped)
-        step = NetemStep(w.tick, {a: o.action for a, o in outs.items() if a in members},
-                         {a: encode_inbox(v) for a, v in inboxes.items()}, counters, self.lost_unreported, events,
-                         drops, late)
+        step = NetemStep(
+            w.tick,
+            {a: o.action for a, o in outs.items() if a in members},
+            {a: encode_inbox(v) for a, v in inboxes.items()},
+            counters,
+            self.lost_unreported,
+            events,
+            drops,
+            late,
+        )
         self.lost_unreported = []
         self.step_pub.put(encode_netem_step(step))
 
@@ -302,17 +311,26 @@ class Proxy:
             self.receivers.close()
             os.replace(self.out_dir / (RECEIVER_LEDGER_FILE + ".part"), self.out_dir / RECEIVER_LEDGER_FILE)
             files.append(RECEIVER_LEDGER_FILE)
-        report = {"kind": "netem", "totals": self.ledger.totals(),
-                  "per_sender": {str(k): v for k, v in self.ledger.per_sender().items()},
-                  "per_kind": self.ledger.per_kind(), "malformed": self.malformed, "ledger": files,
-                  "transport": {"tcp": tcp_counters()}}
+        report = {
+            "kind": "netem",
+            "totals": self.ledger.totals(),
+            "per_sender": {str(k): v for k, v in self.ledger.per_sender().items()},
+            "per_kind": self.ledger.per_kind(),
+            "malformed": self.malformed,
+            "ledger": files,
+            "transport": {"tcp": tcp_counters()},
+        }
         if not hand_over(self.session, self.keys.netem_report, encode_report(report)):
             log.error("netem: the coordinator did not take the final report")
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = child_args("swarmbed netem", "run the netem proxy of one swarmbed run",
-                      lambda ap: ap.add_argument("--out", required=True, help="run directory for the ledger"), argv)
+    args = child_args(
+        "swarmbed netem",
+        "run the netem proxy of one swarmbed run",
+        lambda ap: ap.add_argument("--out", required=True, help="run directory for the ledger"),
+        argv,
+    )
     keys = Keys(args.run_id)
     with open_from_args(args) as session:
         try:

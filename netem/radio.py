@@ -56,8 +56,9 @@ class _Send(NamedTuple):
 
 
 class Radio:
-    def __init__(self, params: NetworkSection, n_agents: int, dt: float, rng: np.random.Generator,
-                 ledger: Ledger | None = None) -> None:
+    def __init__(
+        self, params: NetworkSection, n_agents: int, dt: float, rng: np.random.Generator, ledger: Ledger | None = None
+    ) -> None:
         self.params = params
         self.n_agents = n_agents
         self.dt = dt
@@ -76,8 +77,14 @@ class Radio:
         scheduled = sum(len(r) for entries in self._pending.values() for r, *_ in entries)
         return scheduled + sum(len(d) + len(x) for *_, d, x in self._unconfirmed)
 
-    def route(self, tick: int, ids: Sequence[int], xs: Sequence[float], ys: Sequence[float],
-              outs: Mapping[int, Iterable[RadioMessage]]) -> None:
+    def route(
+        self,
+        tick: int,
+        ids: Sequence[int],
+        xs: Sequence[float],
+        ys: Sequence[float],
+        outs: Mapping[int, Iterable[RadioMessage]],
+    ) -> None:
         """Take every message sent at ``tick``. ``ids``/``xs``/``ys``: agents alive at ``tick``.
 
         Three passes: each message is addressed and queued (Python, per message); range and loss
@@ -111,14 +118,22 @@ class Radio:
             kept[in_range] = self.rng.random(int(np.count_nonzero(in_range))) >= self.params.loss
         self._book_and_schedule(tick, sends, counts, alive, rows, in_range, kept)
 
-    def _address(self, tick: int, sender: int, sender_row: int, msg: RadioMessage, alive: np.ndarray,
-                 row_of: dict[int, int], every_row: np.ndarray) -> _Send:
+    def _address(
+        self,
+        tick: int,
+        sender: int,
+        sender_row: int,
+        msg: RadioMessage,
+        alive: np.ndarray,
+        row_of: dict[int, int],
+        every_row: np.ndarray,
+    ) -> _Send:
         """A message's intended receivers (as rows of ``alive``, the sorted ids; ``row_of`` maps an
         id to its row) that may still get a copy, the copies already dropped (addressing, the
         sender's queue) and the end of its transmission."""
         drops: list[tuple[str, np.ndarray]] = []
         if msg.dest == BROADCAST:
-            rows = np.concatenate((every_row[:sender_row], every_row[sender_row + 1:]))
+            rows = np.concatenate((every_row[:sender_row], every_row[sender_row + 1 :]))
             intended = len(rows)
         else:
             wanted = msg.dest if isinstance(msg.dest, tuple) else (msg.dest,)
@@ -146,8 +161,16 @@ class Radio:
             queue.append(end)
         return _Send(sender, sender_row, msg, intended, drops, rows, end)
 
-    def _book_and_schedule(self, tick: int, sends: list[_Send], counts: np.ndarray, alive: np.ndarray,
-                           rows: np.ndarray, in_range: np.ndarray, kept: np.ndarray) -> None:
+    def _book_and_schedule(
+        self,
+        tick: int,
+        sends: list[_Send],
+        counts: np.ndarray,
+        alive: np.ndarray,
+        rows: np.ndarray,
+        in_range: np.ndarray,
+        kept: np.ndarray,
+    ) -> None:
         ledger, per_receiver = self.ledger, self.ledger.per_receiver
         bounds = np.concatenate(([0], np.cumsum(counts)))
         n_far, n_kept = _per_segment(~in_range, bounds), _per_segment(kept, bounds)
@@ -163,11 +186,25 @@ class Radio:
             far, lost = fars[i], copies[i] - fars[i] - keeps[i]
             a, b = starts[i], starts[i + 1]
             if far:
-                ledger.book(tick, send.sender, kind, size, "out_of_range", far,
-                            alive[rows[a:b][~in_range[a:b]]] if per_receiver else None)
+                ledger.book(
+                    tick,
+                    send.sender,
+                    kind,
+                    size,
+                    "out_of_range",
+                    far,
+                    alive[rows[a:b][~in_range[a:b]]] if per_receiver else None,
+                )
             if lost:
-                ledger.book(tick, send.sender, kind, size, "loss", lost,
-                            alive[rows[a:b][in_range[a:b] & ~kept[a:b]]] if per_receiver else None)
+                ledger.book(
+                    tick,
+                    send.sender,
+                    kind,
+                    size,
+                    "loss",
+                    lost,
+                    alive[rows[a:b][in_range[a:b] & ~kept[a:b]]] if per_receiver else None,
+                )
             if keeps[i]:
                 due = max(tick + 1, math.ceil(send.end / self.dt - _EPS)) + self.params.latency
                 self._pending[due].append((kept_ids[i], send.sender, kind, send.msg.payload, tick))
@@ -215,8 +252,15 @@ class Radio:
     def finish(self, last_tick: int) -> None:
         """The run is over after ``last_tick``: every copy not yet delivered is booked ``run_ended``."""
         for _tick, sender, kind, size, delivered, dead in self._unconfirmed:
-            self.ledger.book(last_tick, sender, kind, size, "run_ended", len(delivered) + len(dead),
-                             np.concatenate([delivered, dead]))
+            self.ledger.book(
+                last_tick,
+                sender,
+                kind,
+                size,
+                "run_ended",
+                len(delivered) + len(dead),
+                np.concatenate([delivered, dead]),
+            )
         self._unconfirmed.clear()
         for due in sorted(self._pending):
             for receivers, sender, kind, payload, _sent in self._pending[due]:

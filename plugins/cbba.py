@@ -39,8 +39,12 @@ class CBBAParams(BaseModel):
     discount: float = Field(0.999, gt=0, le=1, description="lambda of the time-discounted reward")
     score: Literal["time_discounted", "distance_discounted"] = "time_discounted"
     reset_after: float | None = Field(500.0, gt=0, description="seconds of empty bundle before resetting bids")
-    full_every: int = Field(10, ge=1, description="every n-th message carries the whole consensus state, those "
-                                                  "between only what changed since the one before (1: always whole)")
+    full_every: int = Field(
+        10,
+        ge=1,
+        description="every n-th message carries the whole consensus state, those "
+        "between only what changed since the one before (1: always whole)",
+    )
 
 
 class CBBA(Allocator):

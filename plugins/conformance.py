@@ -50,17 +50,30 @@ class Instance:
     task_colors: dict[int, int] | None = None  # and victims' colours, shown as when bidding
 
 
-def random_instance(seed: int, n_agents: int, n_tasks: int, size: float = 100.0,
-                    workload: tuple[float, float] = (6.0, 60.0), scenario: str = "mtsr") -> Instance:
+def random_instance(
+    seed: int,
+    n_agents: int,
+    n_tasks: int,
+    size: float = 100.0,
+    workload: tuple[float, float] = (6.0, 60.0),
+    scenario: str = "mtsr",
+) -> Instance:
     rng = np.random.default_rng(seed)
     agents = [(float(x), float(y)) for x, y in rng.uniform(0, size, (n_agents, 2))]
-    tasks = {j: (float(x), float(y), float(w)) for j, (x, y, w) in
-             enumerate(zip(rng.uniform(0, size, n_tasks), rng.uniform(0, size, n_tasks),
-                           rng.uniform(*workload, n_tasks)))}
+    tasks = {
+        j: (float(x), float(y), float(w))
+        for j, (x, y, w) in enumerate(
+            zip(rng.uniform(0, size, n_tasks), rng.uniform(0, size, n_tasks), rng.uniform(*workload, n_tasks))
+        )
+    }
     if scenario != "sar":
         return Instance(agents, tasks)
-    return Instance(agents, tasks, agent_colors=[i % 3 for i in range(n_agents)],
-                    task_colors={j: int(rng.integers(3)) for j in tasks})
+    return Instance(
+        agents,
+        tasks,
+        agent_colors=[i % 3 for i in range(n_agents)],
+        task_colors={j: int(rng.integers(3)) for j in tasks},
+    )
 
 
 @dataclass
@@ -71,8 +84,9 @@ class Trace:
     radio: Radio | None = None
 
 
-def _observation(cls: type[Observation], k: int, x: float, y: float, visible: dict[int, TaskInfo],
-                 known: dict[str, Any]) -> Observation:
+def _observation(
+    cls: type[Observation], k: int, x: float, y: float, visible: dict[int, TaskInfo], known: dict[str, Any]
+) -> Observation:
     """The scenario's observation of a standing agent; extra fields from ``known``, those the
     scenario leaves optional as None."""
     table = np.array([(t.id, t.x, t.y, t.remaining, t.color) for t in visible.values()], dtype=TASK_DTYPE)
@@ -87,10 +101,18 @@ def _observation(cls: type[Observation], k: int, x: float, y: float, visible: di
     return cls(float(k), x, y, 0.0, 0.0, table, **extras)
 
 
-def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, seed: int = 0,
-             network: NetworkSection = CLEAN_NETWORK, remove_at: Mapping[int, list[int]] | None = None,
-             max_bytes: int = DEFAULT_MAX_BYTES, scenario: str | None = None,
-             move_at: Sequence[int] = ()) -> Trace:
+def simulate(
+    name: str,
+    params: Mapping[str, Any],
+    inst: Instance,
+    rounds: int,
+    seed: int = 0,
+    network: NetworkSection = CLEAN_NETWORK,
+    remove_at: Mapping[int, list[int]] | None = None,
+    max_bytes: int = DEFAULT_MAX_BYTES,
+    scenario: str | None = None,
+    move_at: Sequence[int] = (),
+) -> Trace:
     """Run ``rounds`` rounds. ``remove_at[k]``: tasks that disappear (are done) before round k.
     Each round every agent is shown its view (``observe``, then ``decide``), as in a run; the first
     view lists the team's starting positions (``obs.team``, where the scenario's observation has
@@ -116,15 +138,45 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
         outs, decisions, sent = {}, {}, []
         for i, (x, y) in enumerate(inst.agents):
             colors = inst.task_colors or {}
-            visible = {t: TaskInfo(t, tx, ty, w, colors.get(t, -1)) for t, (tx, ty, w) in tasks.items()
-                       if math.hypot(tx - x, ty - y) <= inst.awareness_range}
+            visible = {
+                t: TaskInfo(t, tx, ty, w, colors.get(t, -1))
+                for t, (tx, ty, w) in tasks.items()
+                if math.hypot(tx - x, ty - y) <= inst.awareness_range
+            }
             inbox = [Message(s, kind, unpack(payload)) for s, kind, payload in inboxes.get(i, [])]
             color = inst.agent_colors[i] if inst.agent_colors else -1
-            obs = _observation(obs_cls, k, x, y, visible, {
-                "color": color, "reach": 5.0, "robots": [], "inspected": [], "rescued": [], "busy": 0,
-                "team": team if k == 0 else None})
-            view = LocalView(i, n, k, float(k), x, y, 0.0, 0.0, inst.work_rate, visible, inbox,
-                             inst.max_speed, inst.awareness_range, obs=obs)
+            obs = _observation(
+                obs_cls,
+                k,
+                x,
+                y,
+                visible,
+                {
+                    "color": color,
+                    "reach": 5.0,
+                    "robots": [],
+                    "inspected": [],
+                    "rescued": [],
+                    "busy": 0,
+                    "team": team if k == 0 else None,
+                },
+            )
+            view = LocalView(
+                i,
+                n,
+                k,
+                float(k),
+                x,
+                y,
+                0.0,
+                0.0,
+                inst.work_rate,
+                visible,
+                inbox,
+                inst.max_speed,
+                inst.awareness_range,
+                obs=obs,
+            )
             trace.allocators[i].observe(view)
             decision = trace.allocators[i].decide(view)
             if decision is not None and decision != HOLD and decision not in tasks:
@@ -133,8 +185,10 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
             encoded = [o.encode() for o in view.outbox]
             for m in encoded:
                 if len(m.payload) > max_bytes:
-                    raise ConformanceError(f"{name}: agent {i} sent a {len(m.payload)}-byte {m.kind!r} message "
-                                           f"at round {k} (limit {max_bytes})")
+                    raise ConformanceError(
+                        f"{name}: agent {i} sent a {len(m.payload)}-byte {m.kind!r} message "
+                        f"at round {k} (limit {max_bytes})"
+                    )
                 if kinds and m.kind not in kinds:
                     raise ConformanceError(f"{name}: message kind {m.kind!r} not in message_kinds {sorted(kinds)}")
                 unpack(m.payload)  # serializable both ways
@@ -149,8 +203,9 @@ def simulate(name: str, params: Mapping[str, Any], inst: Instance, rounds: int, 
     return trace
 
 
-def _moved(allocator: Allocator, name: str, params: Mapping[str, Any], agent_id: int, seed: int,
-           scenario: str | None) -> Allocator:
+def _moved(
+    allocator: Allocator, name: str, params: Mapping[str, Any], agent_id: int, seed: int, scenario: str | None
+) -> Allocator:
     """A fresh instance restored from ``allocator``'s snapshot through its bytes."""
     state = unpack_state(pack_state(allocator.snapshot()))
     fresh = make(name, params, agent_id, np.random.default_rng(12345), seed, scenario)  # rng from the snapshot
@@ -160,8 +215,10 @@ def _moved(allocator: Allocator, name: str, params: Mapping[str, Any], agent_id:
 
 # -- generic checks ---------------------------------------------------------------------------------
 
-def check_determinism(name: str, params: Mapping[str, Any], scenario: str = "mtsr", seeds=(0, 1, 2),
-                      rounds: int = 30) -> dict:
+
+def check_determinism(
+    name: str, params: Mapping[str, Any], scenario: str = "mtsr", seeds=(0, 1, 2), rounds: int = 30
+) -> dict:
     for seed in seeds:
         inst = random_instance(seed, 5, 12, scenario=scenario)
         a = simulate(name, params, inst, rounds, seed=seed, scenario=scenario)
@@ -171,10 +228,12 @@ def check_determinism(name: str, params: Mapping[str, Any], scenario: str = "mts
     return {"seeds": len(seeds)}
 
 
-def check_messages(name: str, params: Mapping[str, Any], scenario: str = "mtsr",
-                   max_bytes: int = DEFAULT_MAX_BYTES) -> dict:
-    trace = simulate(name, params, random_instance(7, 8, 30, scenario=scenario), 40, max_bytes=max_bytes,
-                     scenario=scenario)
+def check_messages(
+    name: str, params: Mapping[str, Any], scenario: str = "mtsr", max_bytes: int = DEFAULT_MAX_BYTES
+) -> dict:
+    trace = simulate(
+        name, params, random_instance(7, 8, 30, scenario=scenario), 40, max_bytes=max_bytes, scenario=scenario
+    )
     sizes = [len(p) for rnd in trace.messages for _, _, p in rnd]
     return {"messages": len(sizes), "max_bytes": max(sizes, default=0)}
 
@@ -219,8 +278,7 @@ def check_snapshot(name: str, params: Mapping[str, Any], scenario: str = "mtsr",
     moved = simulate(name, params, inst, rounds, seed=4, scenario=scenario, move_at=(1, 7, 23))
     for k, (a, b) in enumerate(zip(plain.decisions, moved.decisions)):
         if a != b or plain.messages[k] != moved.messages[k]:
-            raise ConformanceError(f"{name}: after moving through a snapshot, round {k} differs "
-                                   f"(decisions {a} vs {b})")
+            raise ConformanceError(f"{name}: after moving through a snapshot, round {k} differs (decisions {a} vs {b})")
     size = max(len(pack_state(a.snapshot())) for a in moved.allocators)
     return {"moves": 3, "snapshot_bytes_max": size}
 

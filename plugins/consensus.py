@@ -171,7 +171,7 @@ class ConsensusState:
         Returns how many bundle tasks were lost to other agents' bids."""
         for n, task in enumerate(self.bundle):
             if self.z.get(task) != self.agent_id:
-                for later in self.bundle[n + 1:]:
+                for later in self.bundle[n + 1 :]:
                     if self.z.get(later) == self.agent_id:
                         self.reset(later)
                 cut = set(self.bundle[n:])

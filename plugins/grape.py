@@ -53,13 +53,19 @@ class GRAPEParams(BaseModel):
     cost_weight: float = Field(1.0, ge=0, description="weight of the distance cost")
     social_inhibition: float = Field(100.0, ge=0, description="f_s: exponent on the coalition size")
     nearest_start: bool = Field(True, description="start (and restart after completion) at the nearest task")
-    void_task: bool = Field(False, description="offer the void task (utility 0) of the original GRAPE; SPACE's "
-                            "MT-SR adaptation does not")
-    hold_while_converging: bool = Field(True, description="stay still on a tick where the partition was not "
-                                        "converged (SPACE's MT-SR behaviour)")
-    full_every: int = Field(1, ge=1, description="every n-th tick's message carries the whole partition, those "
-                                                 "between only the agents whose task changed since the message "
-                                                 "before, and none when nothing did (1: always whole, as SPACE's)")
+    void_task: bool = Field(
+        False, description="offer the void task (utility 0) of the original GRAPE; SPACE's MT-SR adaptation does not"
+    )
+    hold_while_converging: bool = Field(
+        True, description="stay still on a tick where the partition was not converged (SPACE's MT-SR behaviour)"
+    )
+    full_every: int = Field(
+        1,
+        ge=1,
+        description="every n-th tick's message carries the whole partition, those "
+        "between only the agents whose task changed since the message "
+        "before, and none when nothing did (1: always whole, as SPACE's)",
+    )
 
 
 class GRAPE(Allocator):

@@ -92,8 +92,10 @@ def scenario_target(kind: str) -> str:
         return _SCENARIOS[kind]
     if is_target(kind):
         return kind
-    raise PluginError(f"unknown scenario {kind!r}; registered: {', '.join(scenario_names())}; "
-                      "or give 'module:Class' / 'path/to/file.py:Class'")
+    raise PluginError(
+        f"unknown scenario {kind!r}; registered: {', '.join(scenario_names())}; "
+        "or give 'module:Class' / 'path/to/file.py:Class'"
+    )
 
 
 def only_scenario(name: str) -> str | None:
@@ -111,14 +113,17 @@ def allocator_target(name: str, scenario: str | None = None) -> str:
     if not kinds:
         if is_target(name):
             return name
-        raise PluginError(f"unknown allocator {name!r}; registered: {', '.join(names())}; "
-                          "or give 'module:Class' / 'path/to/file.py:Class'")
+        raise PluginError(
+            f"unknown allocator {name!r}; registered: {', '.join(names())}; "
+            "or give 'module:Class' / 'path/to/file.py:Class'"
+        )
     if scenario is None:
         return kinds.get(ANY) or kinds[sorted(kinds)[0]]
     target = kinds.get(scenario, kinds.get(ANY))
     if target is None:
-        raise PluginError(f"allocator {name!r} has no implementation for scenario {scenario!r} "
-                          f"(it has: {', '.join(sorted(kinds))})")
+        raise PluginError(
+            f"allocator {name!r} has no implementation for scenario {scenario!r} (it has: {', '.join(sorted(kinds))})"
+        )
     return target
 
 
@@ -140,10 +145,13 @@ def _validate(model: type[BaseModel], params: Mapping[str, Any], section: str) -
     try:
         return model.model_validate(dict(params))
     except ValidationError as exc:
-        raise PluginError("\n".join(
-            f"{'.'.join([section, *(str(p) for p in e['loc'])])}: "
-            f"{'unknown key' if e['type'] == 'extra_forbidden' else e['msg']}"
-            for e in exc.errors())) from None
+        raise PluginError(
+            "\n".join(
+                f"{'.'.join([section, *(str(p) for p in e['loc'])])}: "
+                f"{'unknown key' if e['type'] == 'extra_forbidden' else e['msg']}"
+                for e in exc.errors()
+            )
+        ) from None
 
 
 def validate_params(name: str, params: Mapping[str, Any], scenario: str | None = None) -> BaseModel:
@@ -154,8 +162,14 @@ def validate_scenario_params(kind: str, params: Mapping[str, Any]) -> BaseModel:
     return _validate(resolve_scenario(kind).Params, params, "scenario")
 
 
-def make(name: str, params: Mapping[str, Any], agent_id: int, rng: np.random.Generator,
-         run_seed: int = 0, scenario: str | None = None) -> Allocator:
+def make(
+    name: str,
+    params: Mapping[str, Any],
+    agent_id: int,
+    rng: np.random.Generator,
+    run_seed: int = 0,
+    scenario: str | None = None,
+) -> Allocator:
     """An allocator instance outside a run (tests, the conformance kit)."""
     cls = resolve(name, scenario)
     return cls(agent_id, validate_params(name, params, scenario), rng, run_seed)

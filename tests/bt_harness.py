@@ -99,8 +99,7 @@ def run_btcpp(xml: str, scripts: dict[str, list[str]], ticks: int):
 
 
 CONTROLS = ["Sequence", "Fallback", "ReactiveSequence", "ReactiveFallback", "Parallel"]
-DECORATORS = ["Inverter", "ForceSuccess", "ForceFailure", "Repeat", "RetryUntilSuccessful",
-              "KeepRunningUntilFailure"]
+DECORATORS = ["Inverter", "ForceSuccess", "ForceFailure", "Repeat", "RetryUntilSuccessful", "KeepRunningUntilFailure"]
 
 
 def random_case(seed: int, max_depth: int = 3):
@@ -134,8 +133,10 @@ def random_case(seed: int, max_depth: int = 3):
         attrs = ""
         if kind == "Parallel":
             n = len(children)
-            attrs = (f' success_count="{rng.choice([-1] + list(range(1, n + 1)))}"'
-                     f' failure_count="{rng.choice([-1] + list(range(1, n + 1)))}"')
+            attrs = (
+                f' success_count="{rng.choice([-1] + list(range(1, n + 1)))}"'
+                f' failure_count="{rng.choice([-1] + list(range(1, n + 1)))}"'
+            )
         return f"<{kind}{attrs}>{''.join(children)}</{kind}>"
 
     body = node(0)

@@ -45,8 +45,16 @@ def under_way(run_dir: Path) -> bool:
 
 def read_ledger(run_dir: Path) -> list[dict]:
     with open(run_dir / "network_ledger.csv") as f:
-        return [{**r, "tick": int(r["tick"]), "sender": int(r["sender"]), "messages": int(r["messages"]),
-                 "bytes": int(r["bytes"])} for r in csv.DictReader(f)]
+        return [
+            {
+                **r,
+                "tick": int(r["tick"]),
+                "sender": int(r["sender"]),
+                "messages": int(r["messages"]),
+                "bytes": int(r["bytes"]),
+            }
+            for r in csv.DictReader(f)
+        ]
 
 
 def ledger_outcomes(rows: list[dict]) -> dict[str, int]:
@@ -61,9 +69,14 @@ def no_orphans():
     """Every process a test starts must be gone when it ends."""
     yield
     me = psutil.Process()
-    left = [p for p in me.children(recursive=True) if p.is_running() and p.status() != psutil.STATUS_ZOMBIE
-            # the standard library's helper for spawned pools: it lives as long as this process does
-            and "multiprocessing.resource_tracker" not in " ".join(p.cmdline())]
+    left = [
+        p
+        for p in me.children(recursive=True)
+        if p.is_running()
+        and p.status() != psutil.STATUS_ZOMBIE
+        # the standard library's helper for spawned pools: it lives as long as this process does
+        and "multiprocessing.resource_tracker" not in " ".join(p.cmdline())
+    ]
     for p in left:
         p.kill()
     assert not left, f"processes left behind: {[(p.pid, p.cmdline()[:4]) for p in left]}"
@@ -98,11 +111,27 @@ def whole_rows(path: Path) -> int:
 
 #: modules whose tests start real processes (runs, host daemons, browsers) and take seconds each:
 #: marked ``slow``. ``pytest -m "not slow"`` is the fast lane for day-to-day work; CI runs everything.
-SLOW_MODULES = frozenset({
-    "test_access", "test_disk_full", "test_e2e", "test_examples", "test_failures", "test_forkserver", "test_hosts",
-    "test_netem_e2e", "test_realtime", "test_report", "test_sar_e2e", "test_soak", "test_swaps", "test_sweep",
-    "test_sweep_executors", "test_tls", "test_watch",
-})
+SLOW_MODULES = frozenset(
+    {
+        "test_access",
+        "test_disk_full",
+        "test_e2e",
+        "test_examples",
+        "test_failures",
+        "test_forkserver",
+        "test_hosts",
+        "test_netem_e2e",
+        "test_realtime",
+        "test_report",
+        "test_sar_e2e",
+        "test_soak",
+        "test_swaps",
+        "test_sweep",
+        "test_sweep_executors",
+        "test_tls",
+        "test_watch",
+    }
+)
 
 
 def pytest_collection_modifyitems(config, items):

@@ -95,11 +95,26 @@ class PickupWorld(World):
     def observations(self) -> dict[int, PickupObservation]:
         waiting = np.flatnonzero(self.status == WAITING)
         table = np.zeros(len(waiting), dtype=TASK_DTYPE)
-        table["id"], table["x"], table["y"], table["remaining"], table["color"] = waiting, self.ix[waiting], \
-            self.iy[waiting], 1.0, -1
-        return {i: PickupObservation(self.time, float(self.ax[i]), float(self.ay[i]), 0.0, 0.0, table,
-                                     carrying=int(self.carrying[i]), depot=self.p.depot)
-                for i in self.positions()[0]}
+        table["id"], table["x"], table["y"], table["remaining"], table["color"] = (
+            waiting,
+            self.ix[waiting],
+            self.iy[waiting],
+            1.0,
+            -1,
+        )
+        return {
+            i: PickupObservation(
+                self.time,
+                float(self.ax[i]),
+                float(self.ay[i]),
+                0.0,
+                0.0,
+                table,
+                carrying=int(self.carrying[i]),
+                depot=self.p.depot,
+            )
+            for i in self.positions()[0]
+        }
 
     def _move(self, i: int, x: float, y: float) -> bool:
         """Toward (x, y) at full speed; whether it is within reach afterwards."""
@@ -119,8 +134,12 @@ class PickupWorld(World):
                 if self._move(i, *self.p.depot):
                     self.status[self.carrying[i]] = DELIVERED
                     self.carrying[i] = -1
-            elif (len(action) == 2 and action[0] == "goto_task" and isinstance(action[1], int)
-                  and 0 <= action[1] < len(self.status)):
+            elif (
+                len(action) == 2
+                and action[0] == "goto_task"
+                and isinstance(action[1], int)
+                and 0 <= action[1] < len(self.status)
+            ):
                 item = action[1]
                 if self.status[item] == WAITING and self._move(i, float(self.ix[item]), float(self.iy[item])):
                     self.status[item], self.carrying[i] = CARRIED, item
@@ -138,13 +157,21 @@ class PickupWorld(World):
             self.carrying[agent_id] = -1
 
     def row(self) -> dict:
-        return {"tick": self.tick, "time": self.time, "delivered": int((self.status == DELIVERED).sum()),
-                "carried": int((self.status == CARRIED).sum())}
+        return {
+            "tick": self.tick,
+            "time": self.time,
+            "delivered": int((self.status == DELIVERED).sum()),
+            "carried": int((self.status == CARRIED).sum()),
+        }
 
     def summary(self) -> dict:
-        return {"delivered": int((self.status == DELIVERED).sum()), "items": int(len(self.status)),
-                "carried": int((self.status == CARRIED).sum()), "distance_total": float(self.distance.sum()),
-                "invalid_actions": int(self.invalid.sum())}
+        return {
+            "delivered": int((self.status == DELIVERED).sum()),
+            "items": int(len(self.status)),
+            "carried": int((self.status == CARRIED).sum()),
+            "distance_total": float(self.distance.sum()),
+            "invalid_actions": int(self.invalid.sum()),
+        }
 
     def per_agent(self) -> dict[str, list]:
         return {"distance": [float(d) for d in self.distance], "invalid_actions": [int(v) for v in self.invalid]}

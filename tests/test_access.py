@@ -36,8 +36,19 @@ def stolen(keys: Keys, user: str) -> Path:
 
 
 def agent_cmd(keys: Keys, endpoint: str, agent: int, *extra: str) -> list[str]:
-    return [sys.executable, "-m", "swarmbed", "agent", "--connect", endpoint, "--run-id", keys.run_id,
-            "--id", str(agent), *extra]
+    return [
+        sys.executable,
+        "-m",
+        "swarmbed",
+        "agent",
+        "--connect",
+        endpoint,
+        "--run-id",
+        keys.run_id,
+        "--id",
+        str(agent),
+        *extra,
+    ]
 
 
 def test_credentials_files_are_private_and_checked(tmp_path):
@@ -65,7 +76,10 @@ def test_the_launcher_keeps_credentials_off_the_command_line_and_removes_them():
     assert not access.folder.exists()
     rules = access_rules(Keys("abc123"), [0], operators=["me"], hosts={})
     assert rules["default_permission"] == "deny" and {p["subjects"][0] for p in rules["policies"]} == {
-        "netem", "agent-0", "operators"}
+        "netem",
+        "agent-0",
+        "operators",
+    }
 
 
 def test_only_processes_with_the_runs_credentials_join(tmp_path):
@@ -82,12 +96,17 @@ def test_only_processes_with_the_runs_credentials_join(tmp_path):
             tried[name] = (proc.returncode, proc.stderr)
         # one of the run's own identities, used by a second process: our code refuses it
         for name, agent in (("twin", 1), ("other", 2), ("outside", 99)):
-            proc = subprocess.run(agent_cmd(keys, endpoint, agent, "--credentials", str(stolen(keys, "agent-1"))),
-                                  capture_output=True, text=True, timeout=60)
+            proc = subprocess.run(
+                agent_cmd(keys, endpoint, agent, "--credentials", str(stolen(keys, "agent-1"))),
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
             tried[name] = (proc.returncode, proc.stderr)
 
-    result = run_experiment(experiment("run.duration=300", "run.stop_when_done=false"), tmp_path / "run",
-                            progress=False, on_ready=intruders)
+    result = run_experiment(
+        experiment("run.duration=300", "run.stop_when_done=false"), tmp_path / "run", progress=False, on_ready=intruders
+    )
     none_rc, none_err = tried["none"]
     assert none_rc == 2 and "cannot open a session" in none_err and "no credentials" in none_err
     assert tried["wrong"][0] == 2 and "wrong.json" in tried["wrong"][1]
@@ -110,15 +129,27 @@ def test_an_agent_may_publish_only_on_its_own_keys(tmp_path):
             time.sleep(0.5)
             sub.undeclare()
             seen["heard"] = len(heard)
-            for key in (keys.agent_out(4), keys.agent_in(4), keys.world, keys.netem_step, keys.netem_stop,
-                        keys.status, keys.agent_report(4), keys.root + "/anything"):
+            for key in (
+                keys.agent_out(4),
+                keys.agent_in(4),
+                keys.world,
+                keys.netem_step,
+                keys.netem_stop,
+                keys.status,
+                keys.agent_report(4),
+                keys.root + "/anything",
+            ):
                 for junk in (b"\xc1", b"\x93\x01\x02", os.urandom(64)):
                     s.put(key, junk, congestion_control=BLOCK)
             seen["report taken"] = hand_over(s, keys.agent_report(4), b"\xc1", timeout=2)
             seen["stop taken"] = hand_over(s, keys.netem_report, b"\xc1", timeout=2)
 
-    sets = ["allocator={name: noop, peers: 3}", "scenario.initial_tasks=0", "run.stop_when_done=false",
-            "run.duration=400"]
+    sets = [
+        "allocator={name: noop, peers: 3}",
+        "scenario.initial_tasks=0",
+        "run.stop_when_done=false",
+        "run.duration=400",
+    ]
     attacked = run_experiment(experiment(*sets), tmp_path / "attacked", progress=False, on_ready=impostor)
     run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
     assert seen == {"report taken": False, "stop taken": False, "heard": 0}
@@ -140,8 +171,13 @@ def test_an_operator_watches_and_asks_but_cannot_publish(tmp_path, operator):
             sub.undeclare()
             seen["outs"] = len(outs)
 
-    result = run_experiment(experiment("run.duration=600", "run.stop_when_done=false"), tmp_path / "run",
-                            progress=False, on_ready=look, admit=[operator.identity])
+    result = run_experiment(
+        experiment("run.duration=600", "run.stop_when_done=false"),
+        tmp_path / "run",
+        progress=False,
+        on_ready=look,
+        admit=[operator.identity],
+    )
     assert seen["outs"] > 0  # it reads what agents send
     assert result.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}
 
@@ -164,8 +200,16 @@ def test_junk_at_every_key_is_refused_or_counted_and_changes_nothing(tmp_path, o
         yield encode_agent_out(10**6, 3, ["none"], [])  # a tick that never comes
 
     def attack(keys: Keys, endpoint: str) -> None:
-        every = [*(keys.agent_in(i) for i in range(5)), *(keys.agent_out(i) for i in range(5)), keys.world,
-                 keys.netem_step, keys.netem_stop, keys.status, keys.swap, keys.root + "/anything"]
+        every = [
+            *(keys.agent_in(i) for i in range(5)),
+            *(keys.agent_out(i) for i in range(5)),
+            keys.world,
+            keys.netem_step,
+            keys.netem_stop,
+            keys.status,
+            keys.swap,
+            keys.root + "/anything",
+        ]
         for who in (str(stolen(keys, "agent-3")), str(operator.path)):
             with zenoh.open(zenoh_config("client", [endpoint], credentials=who)) as s:
                 for n in range(490):
@@ -190,10 +234,16 @@ def test_junk_at_every_key_is_refused_or_counted_and_changes_nothing(tmp_path, o
     def in_the_background(keys: Keys, endpoint: str) -> None:
         threading.Thread(target=attack, args=(keys, endpoint), daemon=True).start()
 
-    sets = ["agents.count=5", "allocator={name: noop, peers: 3}", "scenario.initial_tasks=0",
-            "run.stop_when_done=false", "run.duration=3000"]
-    attacked = run_experiment(experiment(*sets), tmp_path / "attacked", progress=False, on_ready=in_the_background,
-                              admit=[operator.identity])
+    sets = [
+        "agents.count=5",
+        "allocator={name: noop, peers: 3}",
+        "scenario.initial_tasks=0",
+        "run.stop_when_done=false",
+        "run.duration=3000",
+    ]
+    attacked = run_experiment(
+        experiment(*sets), tmp_path / "attacked", progress=False, on_ready=in_the_background, admit=[operator.identity]
+    )
     assert done.is_set(), "the run ended before all junk was sent"
     run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
     assert sent == {"out": 531, "report": 3}  # of 16,972 junk samples in all
@@ -210,8 +260,12 @@ def _agent_process(keys: Keys, agent: int) -> psutil.Process:
     """The local process of ``agent`` in run ``keys`` (the fork server titles each with its arguments)."""
     for proc in psutil.process_iter(["cmdline"]):
         cmd = proc.info["cmdline"] or []
-        if keys.run_id in " ".join(cmd) and "swarmbed.agent_runtime" in " ".join(cmd) and "--id" in cmd \
-                and cmd[cmd.index("--id") + 1] == str(agent):
+        if (
+            keys.run_id in " ".join(cmd)
+            and "swarmbed.agent_runtime" in " ".join(cmd)
+            and "--id" in cmd
+            and cmd[cmd.index("--id") + 1] == str(agent)
+        ):
             return proc
     raise AssertionError(f"no process of agent {agent}")
 
@@ -231,25 +285,33 @@ def test_a_host_identity_may_carry_only_its_own_agents_and_act_only_as_its_own_h
 
         with session(host_file) as listener, session(host_file) as s, session(operator.path) as op:
             heard: dict[int, list] = {0: [], 2: []}  # a session of its own: never its own puts
-            subs = [listener.declare_subscriber(keys.agent_in(i), lambda sample, i=i: heard[i].append(1))
-                    for i in heard]
+            subs = [
+                listener.declare_subscriber(keys.agent_in(i), lambda sample, i=i: heard[i].append(1)) for i in heard
+            ]
             for key in (keys.agent_out(0), keys.agent_in(2), keys.agent_in(0), keys.world, keys.netem_step):
                 for junk in (b"\xc1", pack([0, 1, {}, b""]), os.urandom(32)):
                     s.put(key, junk, congestion_control=BLOCK)
             seen["report of agent 0 taken"] = hand_over(s, keys.agent_report(0), b"\xc1", timeout=2)
-            tokens = [s.liveliness().declare_token(k) for k in ("swarmbed/hosts/h1", "swarmbed/hosts/fake",
-                                                                 keys.alive_agent(0, 7), keys.alive_agent(2, 7))]
-            serve = [s.declare_queryable(f"swarmbed/hosts/{h}/info",
-                                         lambda q, h=h: q.reply(f"swarmbed/hosts/{h}/info", h))
-                     for h in ("h1", "fake")]
+            tokens = [
+                s.liveliness().declare_token(k)
+                for k in ("swarmbed/hosts/h1", "swarmbed/hosts/fake", keys.alive_agent(0, 7), keys.alive_agent(2, 7))
+            ]
+            serve = [
+                s.declare_queryable(f"swarmbed/hosts/{h}/info", lambda q, h=h: q.reply(f"swarmbed/hosts/{h}/info", h))
+                for h in ("h1", "fake")
+            ]
             time.sleep(1.5)
-            seen["tokens"] = sorted(str(r.ok.key_expr) for r in op.liveliness().get("swarmbed/hosts/**", timeout=2)
-                                    if r.ok is not None)
-            seen["agent tokens"] = sorted(str(r.ok.key_expr).split("/alive/agent/")[1]
-                                          for r in op.liveliness().get(keys.alive_agents, timeout=2)
-                                          if r.ok is not None and str(r.ok.key_expr).endswith("/7"))
-            seen["answers"] = sorted(r.ok.payload.to_string() for r in op.get("swarmbed/hosts/*/info", timeout=2)
-                                     if r.ok is not None)
+            seen["tokens"] = sorted(
+                str(r.ok.key_expr) for r in op.liveliness().get("swarmbed/hosts/**", timeout=2) if r.ok is not None
+            )
+            seen["agent tokens"] = sorted(
+                str(r.ok.key_expr).split("/alive/agent/")[1]
+                for r in op.liveliness().get(keys.alive_agents, timeout=2)
+                if r.ok is not None and str(r.ok.key_expr).endswith("/7")
+            )
+            seen["answers"] = sorted(
+                r.ok.payload.to_string() for r in op.get("swarmbed/hosts/*/info", timeout=2) if r.ok is not None
+            )
             for entity in subs + tokens + serve:
                 entity.undeclare()
             seen["heard"] = {i: len(v) > 0 for i, v in heard.items()}
@@ -258,14 +320,28 @@ def test_a_host_identity_may_carry_only_its_own_agents_and_act_only_as_its_own_h
         threads.append(threading.Thread(target=attack, args=(keys, endpoint)))
         threads[-1].start()
 
-    sets = ["allocator={name: noop, peers: 3}", "scenario.initial_tasks=0", "run.stop_when_done=false",
-            "run.duration=6000"]
-    attacked = run_experiment(experiment(*sets, "may_carry={h1: 2}"), tmp_path / "attacked", progress=False,
-                              on_ready=in_the_background, admit=[host, operator.identity])
+    sets = [
+        "allocator={name: noop, peers: 3}",
+        "scenario.initial_tasks=0",
+        "run.stop_when_done=false",
+        "run.duration=6000",
+    ]
+    attacked = run_experiment(
+        experiment(*sets, "may_carry={h1: 2}"),
+        tmp_path / "attacked",
+        progress=False,
+        on_ready=in_the_background,
+        admit=[host, operator.identity],
+    )
     threads[0].join(timeout=30)
     run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
-    assert seen == {"report of agent 0 taken": False, "heard": {0: False, 2: True},
-                    "tokens": ["swarmbed/hosts/h1"], "agent tokens": ["2/7"], "answers": ["h1"]}
+    assert seen == {
+        "report of agent 0 taken": False,
+        "heard": {0: False, 2: True},
+        "tokens": ["swarmbed/hosts/h1"],
+        "agent tokens": ["2/7"],
+        "answers": ["h1"],
+    }
     assert attacked.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}
     same_results(tmp_path / "clean", tmp_path / "attacked")
 
@@ -277,9 +353,26 @@ def test_a_swap_to_a_host_that_may_not_carry_the_agent_is_refused_before_anythin
     asked = {}
 
     def ask(keys: Keys, endpoint: str) -> None:
-        proc = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
-                               "--agent", "1", "--to", "h9", *operator.args], capture_output=True, text=True,
-                              timeout=120)
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "swarmbed",
+                "swap",
+                "--connect",
+                endpoint,
+                "--run",
+                keys.run_id,
+                "--agent",
+                "1",
+                "--to",
+                "h9",
+                *operator.args,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         asked["rc"], asked["out"], asked["err"] = proc.returncode, proc.stdout, proc.stderr
 
     threads: list[threading.Thread] = []
@@ -289,8 +382,13 @@ def test_a_swap_to_a_host_that_may_not_carry_the_agent_is_refused_before_anythin
         threads[-1].start()
 
     sets = ["allocator.name=cbba", "run.duration=1000", "run.stop_when_done=false", "may_carry={h9: 4}"]
-    run_experiment(experiment(*sets), tmp_path / "run", progress=False, admit=[host, operator.identity],
-                   on_ready=from_another_terminal)
+    run_experiment(
+        experiment(*sets),
+        tmp_path / "run",
+        progress=False,
+        admit=[host, operator.identity],
+        on_ready=from_another_terminal,
+    )
     threads[0].join(timeout=60)
     assert "host h9 may not carry agent 1" in asked["out"] + asked["err"], asked
 
@@ -307,16 +405,34 @@ def test_state_nobody_asked_for_is_refused_even_from_the_agent_itself(tmp_path):
         with zenoh.open(zenoh_config("client", [endpoint], credentials=str(stolen(keys, "agent-3")))) as s:
             for ticket in (b"", b"\x00" * 16, os.urandom(16)):
                 seen.setdefault("snapshots taken", []).append(
-                    hand_over(s, keys.agent_snapshot(3), encode_handover(ticket, b"\xc1"), timeout=2))
+                    hand_over(s, keys.agent_snapshot(3), encode_handover(ticket, b"\xc1"), timeout=2)
+                )
             for ticket in (b"", b"\x00" * 16, None):
-                hand_over(s, keys.agent_report(3), encode_report(
-                    {"kind": "checkpoint", "agent": 3, "incarnation": 0, "ticks": 1, "state": b"\xc1",
-                     **({"ticket": ticket} if ticket is not None else {})}))
+                hand_over(
+                    s,
+                    keys.agent_report(3),
+                    encode_report(
+                        {
+                            "kind": "checkpoint",
+                            "agent": 3,
+                            "incarnation": 0,
+                            "ticks": 1,
+                            "state": b"\xc1",
+                            **({"ticket": ticket} if ticket is not None else {}),
+                        }
+                    ),
+                )
         time.sleep(0.5)
         _agent_process(keys, 3).kill()
 
-    sets = ["agents.count=5", "allocator={name: noop, peers: 3}", "scenario.initial_tasks=0",
-            "run.stop_when_done=false", "run.duration=3000", "run.on_agent_loss=restart"]
+    sets = [
+        "agents.count=5",
+        "allocator={name: noop, peers: 3}",
+        "scenario.initial_tasks=0",
+        "run.stop_when_done=false",
+        "run.duration=3000",
+        "run.on_agent_loss=restart",
+    ]
     result = run_experiment(experiment(*sets), tmp_path / "run", progress=False, on_ready=plant)
     assert seen["snapshots taken"] == [False, False, False]
     with open(tmp_path / "run" / "restarts.csv") as f:
@@ -335,13 +451,14 @@ def test_on_an_open_hub_malformed_keys_and_control_samples_are_counted_not_fatal
     def attack(keys: Keys, endpoint: str) -> None:
         with zenoh.open(zenoh_config("client", [endpoint])) as s:
             for chunk in ("abc", "-1", "+1", "1_0", "99999", "007", "٣"):
-                s.put(f"{keys.root}/agent/{chunk}/out", encode_agent_out(0, 1, ["stop"], []),
-                      congestion_control=BLOCK)
+                s.put(f"{keys.root}/agent/{chunk}/out", encode_agent_out(0, 1, ["stop"], []), congestion_control=BLOCK)
             for key in (keys.netem_stop, keys.netem_control):
                 for junk in (b"\xc1", pack({"tick": "x"}), pack([]), os.urandom(64)):
                     s.put(key, junk, congestion_control=BLOCK)
-            tokens = [s.liveliness().declare_token(f"{keys.root}/alive/agent/{chunk}") for chunk in
-                      ("abc/0", "1/x", "99999/0", "3/0/extra", "-2/0")]
+            tokens = [
+                s.liveliness().declare_token(f"{keys.root}/alive/agent/{chunk}")
+                for chunk in ("abc/0", "1/x", "99999/0", "3/0/extra", "-2/0")
+            ]
             time.sleep(0.5)
             for token in tokens:
                 token.undeclare()
@@ -351,10 +468,16 @@ def test_on_an_open_hub_malformed_keys_and_control_samples_are_counted_not_fatal
     def in_the_background(keys: Keys, endpoint: str) -> None:
         threading.Thread(target=attack, args=(keys, endpoint), daemon=True).start()
 
-    sets = ["agents.count=5", "allocator={name: noop, peers: 3}", "scenario.initial_tasks=0",
-            "run.stop_when_done=false", "run.duration=3000"]
-    attacked = run_experiment(experiment(*sets), tmp_path / "attacked", progress=False, auth=False,
-                              on_ready=in_the_background)
+    sets = [
+        "agents.count=5",
+        "allocator={name: noop, peers: 3}",
+        "scenario.initial_tasks=0",
+        "run.stop_when_done=false",
+        "run.duration=3000",
+    ]
+    attacked = run_experiment(
+        experiment(*sets), tmp_path / "attacked", progress=False, auth=False, on_ready=in_the_background
+    )
     assert done.is_set(), "the run ended before all junk was sent"
     run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
     malformed = attacked.summary["network"]["malformed"]

@@ -33,8 +33,11 @@ def _state(a: CBBA):
 
 def sequential_greedy(inst, max_tasks, discount, speed):
     """Centralized SGA with a path-independent score: repeatedly give the best (agent, task) pair."""
-    score = {(i, j): discount ** (math.hypot(tx - ax, ty - ay) / speed) * w
-             for i, (ax, ay) in enumerate(inst.agents) for j, (tx, ty, w) in inst.tasks.items()}
+    score = {
+        (i, j): discount ** (math.hypot(tx - ax, ty - ay) / speed) * w
+        for i, (ax, ay) in enumerate(inst.agents)
+        for j, (tx, ty, w) in inst.tasks.items()
+    }
     load = dict.fromkeys(range(len(inst.agents)), 0)
     assigned = {}
     while True:
@@ -83,8 +86,13 @@ def test_cbba_matches_sequential_greedy_with_a_path_independent_score(full_every
         rng = np.random.default_rng(case)
         n_a, n_t, l_t = int(rng.integers(2, 6)), int(rng.integers(1, 15)), int(rng.integers(1, 4))
         inst = random_instance(1000 + case, n_a, n_t)
-        params = {"max_tasks": l_t, "score": "distance_discounted", "discount": 0.99, "reset_after": None,
-                  "full_every": full_every}
+        params = {
+            "max_tasks": l_t,
+            "score": "distance_discounted",
+            "discount": 0.99,
+            "reset_after": None,
+            "full_every": full_every,
+        }
         rounds = min(n_t, l_t * n_a) + (100 if lossy else 4)
         agents = simulate("cbba", params, inst, rounds, seed=case, network=LOSSY if lossy else CLEAN).allocators
         got = {t: a.agent_id for a in agents for t in a.bundle}
@@ -144,12 +152,15 @@ def _grape_utility(inst, params, agent, task, size):
 
 
 @pytest.mark.parametrize("full_every, lossy", [(1, False), (10, False), (1, True), (10, True)])
-@pytest.mark.parametrize("params", [
-    {"cost_weight": 1.0, "social_inhibition": 100.0, "void_task": True},
-    {"cost_weight": 0.05, "social_inhibition": 1.0, "void_task": True},
-    {"cost_weight": 1.0, "social_inhibition": 100.0},  # SPACE's MT-SR: no void task
-    {"cost_weight": 0.05, "social_inhibition": 1.0},
-])
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"cost_weight": 1.0, "social_inhibition": 100.0, "void_task": True},
+        {"cost_weight": 0.05, "social_inhibition": 1.0, "void_task": True},
+        {"cost_weight": 1.0, "social_inhibition": 100.0},  # SPACE's MT-SR: no void task
+        {"cost_weight": 0.05, "social_inhibition": 1.0},
+    ],
+)
 def test_grape_ends_in_a_nash_stable_partition(params, full_every, lossy):
     """Every agent agrees on the partition and none gains by moving alone: to another task, or,
     where the void task is offered, to it. Without it every agent holds a task. With whole

@@ -21,8 +21,11 @@ HAND_WRITTEN = {
     ),
     "parallel with thresholds": (
         "<Parallel success_count='2' failure_count='2'><Act name='a'/><Act name='b'/><Act name='c'/></Parallel>",
-        {"a": ["RUNNING", "SUCCESS"], "b": ["RUNNING", "RUNNING", "FAILURE"],
-         "c": ["RUNNING", "RUNNING", "RUNNING", "SUCCESS"]},
+        {
+            "a": ["RUNNING", "SUCCESS"],
+            "b": ["RUNNING", "RUNNING", "FAILURE"],
+            "c": ["RUNNING", "RUNNING", "RUNNING", "SUCCESS"],
+        },
     ),
     "repeat yields between synchronous cycles": (
         "<Repeat num_cycles='3'><Cond name='c'/></Repeat>",

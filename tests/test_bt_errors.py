@@ -14,21 +14,32 @@ def load(text):
     return load_tree("trees/t.xml", space_registry(), text=text)
 
 
-@pytest.mark.parametrize("body, needle", [
-    ('<root BTCPP_format="4"><BehaviorTree ID="M"><Sequence></BehaviorTree></root>',
-     "trees/t.xml:1: malformed XML"),
-    ('<root BTCPP_format="4">\n<BehaviorTree ID="M">\n  <Teleport/>\n</BehaviorTree></root>',
-     "trees/t.xml:3 <Teleport>: unknown node type 'Teleport'"),
-    ('<root BTCPP_format="4">\n<BehaviorTree ID="M">\n<Repeat name="r"><AlwaysSuccess/></Repeat>\n'
-     '</BehaviorTree></root>',
-     "trees/t.xml:3 <Repeat name='r'>: required port 'num_cycles' is missing"),
-    ('<root BTCPP_format="4"><BehaviorTree ID="M"><ExplorationNode duraton="5"/></BehaviorTree></root>',
-     "unknown port 'duraton'"),
-    ('<root BTCPP_format="3"><BehaviorTree ID="M"><AlwaysSuccess/></BehaviorTree></root>', 'BTCPP_format="4"'),
-    ('<root BTCPP_format="4"><BehaviorTree ID="M"><Inverter/></BehaviorTree></root>', "exactly one child"),
-    ('<root BTCPP_format="4"><BehaviorTree ID="M"><SubTree ID="M"/></BehaviorTree></root>', "includes itself"),
-    ('<root BTCPP_format="4"><BehaviorTree ID="M"><SubTree ID="Nope"/></BehaviorTree></root>', "no <BehaviorTree"),
-])
+@pytest.mark.parametrize(
+    "body, needle",
+    [
+        (
+            '<root BTCPP_format="4"><BehaviorTree ID="M"><Sequence></BehaviorTree></root>',
+            "trees/t.xml:1: malformed XML",
+        ),
+        (
+            '<root BTCPP_format="4">\n<BehaviorTree ID="M">\n  <Teleport/>\n</BehaviorTree></root>',
+            "trees/t.xml:3 <Teleport>: unknown node type 'Teleport'",
+        ),
+        (
+            '<root BTCPP_format="4">\n<BehaviorTree ID="M">\n<Repeat name="r"><AlwaysSuccess/></Repeat>\n'
+            "</BehaviorTree></root>",
+            "trees/t.xml:3 <Repeat name='r'>: required port 'num_cycles' is missing",
+        ),
+        (
+            '<root BTCPP_format="4"><BehaviorTree ID="M"><ExplorationNode duraton="5"/></BehaviorTree></root>',
+            "unknown port 'duraton'",
+        ),
+        ('<root BTCPP_format="3"><BehaviorTree ID="M"><AlwaysSuccess/></BehaviorTree></root>', 'BTCPP_format="4"'),
+        ('<root BTCPP_format="4"><BehaviorTree ID="M"><Inverter/></BehaviorTree></root>', "exactly one child"),
+        ('<root BTCPP_format="4"><BehaviorTree ID="M"><SubTree ID="M"/></BehaviorTree></root>', "includes itself"),
+        ('<root BTCPP_format="4"><BehaviorTree ID="M"><SubTree ID="Nope"/></BehaviorTree></root>', "no <BehaviorTree"),
+    ],
+)
 def test_load_errors_name_file_line_and_node(body, needle):
     with pytest.raises(BTError) as info:
         load(body)
@@ -76,9 +87,11 @@ def test_check_allocator_command(capsys, tmp_path):
     assert main(["check-allocator", "fcg", "--set", "mode=Random"]) == 0
     assert capsys.readouterr().out.count("PASS") == 5  # check_snapshot among them
     bad = tmp_path / "bad.py"
-    bad.write_text("from swarmbed.plugins.base import Allocator\n"
-                   "class Liar(Allocator):\n"
-                   "    def decide(self, view):\n"
-                   "        return 10**6\n")
+    bad.write_text(
+        "from swarmbed.plugins.base import Allocator\n"
+        "class Liar(Allocator):\n"
+        "    def decide(self, view):\n"
+        "        return 10**6\n"
+    )
     assert main(["check-allocator", f"{bad}:Liar"]) == 1
     assert "does not exist" in capsys.readouterr().out

@@ -13,19 +13,22 @@ def load_text(tmp_path, text, *overrides):
     return cfg.load(p, list(overrides))
 
 
-@pytest.mark.parametrize("text, needle", [
-    ("agents:\n  cuont: 3\n", "agents.cuont: unknown key"),
-    ("agents:\n  count: many\n", "agents.count:"),
-    ("agents:\n  count: 0\n", "agents.count: Input should be greater than or equal to 1"),
-    ("network:\n  loss: 1.5\n", "network.loss:"),
-    ("run:\n  clock: warp\n", "run.clock:"),
-    ("scenario:\n  workload: [60, 6]\n", "scenario: Value error, workload"),
-    ("allocator:\n  name: fcg\n  mode: Fastest\n", "allocator.mode:"),
-    ("allocator:\n  name: nosuch\n", "unknown allocator 'nosuch'"),
-    ("agents:\n  behavior_tree: missing.xml\n", "agents.behavior_tree: file"),
-    ("[1, 2]\n", "top level must be a mapping"),
-    ("agents: {count: 3\n", "not valid YAML"),
-])
+@pytest.mark.parametrize(
+    "text, needle",
+    [
+        ("agents:\n  cuont: 3\n", "agents.cuont: unknown key"),
+        ("agents:\n  count: many\n", "agents.count:"),
+        ("agents:\n  count: 0\n", "agents.count: Input should be greater than or equal to 1"),
+        ("network:\n  loss: 1.5\n", "network.loss:"),
+        ("run:\n  clock: warp\n", "run.clock:"),
+        ("scenario:\n  workload: [60, 6]\n", "scenario: Value error, workload"),
+        ("allocator:\n  name: fcg\n  mode: Fastest\n", "allocator.mode:"),
+        ("allocator:\n  name: nosuch\n", "unknown allocator 'nosuch'"),
+        ("agents:\n  behavior_tree: missing.xml\n", "agents.behavior_tree: file"),
+        ("[1, 2]\n", "top level must be a mapping"),
+        ("agents: {count: 3\n", "not valid YAML"),
+    ],
+)
 def test_bad_files_are_refused_with_key_and_file(tmp_path, text, needle):
     with pytest.raises(cfg.ConfigError) as info:
         load_text(tmp_path, text)
@@ -42,8 +45,11 @@ def test_overrides_apply_to_any_dotted_key():
 def test_bad_overrides_are_refused():
     with pytest.raises(cfg.ConfigError, match="^--set agents.speed=3: unknown key$"):
         cfg.load(QUICKSTART, ["agents.speed=3"])
-    with pytest.raises(cfg.ConfigError, match=r"^--set scenario.generations=\{'interval': -1\}: "
-                                              r"scenario.generations.interval: Input should be greater than 0$"):
+    with pytest.raises(
+        cfg.ConfigError,
+        match=r"^--set scenario.generations=\{'interval': -1\}: "
+        r"scenario.generations.interval: Input should be greater than 0$",
+    ):
         cfg.load(QUICKSTART, ["scenario.generations={interval: -1}"])
     with pytest.raises(cfg.ConfigError, match="^--set allocator.mode=Fastest: Input should be"):
         cfg.load(QUICKSTART, ["allocator.mode=Fastest"])
@@ -100,8 +106,9 @@ def test_a_bad_tree_given_with_set_is_refused_before_any_process_starts(tmp_path
 def test_a_tree_named_in_the_file_is_read_from_the_files_folder(tmp_path, monkeypatch):
     (tmp_path / "trees").mkdir()
     (tmp_path / "trees" / "mine.xml").write_text((ROOT / "agent_runtime" / "trees" / "space_default.xml").read_text())
-    text = QUICKSTART.read_text().replace("  exploration_duration: 60", "  exploration_duration: 60\n"
-                                                                      "  behavior_tree: trees/mine.xml")
+    text = QUICKSTART.read_text().replace(
+        "  exploration_duration: 60", "  exploration_duration: 60\n  behavior_tree: trees/mine.xml"
+    )
     (tmp_path / "exp.yaml").write_text(text)
     monkeypatch.chdir(ROOT)  # not where the file is
     assert cfg.load(tmp_path / "exp.yaml").agents.behavior_tree == str(tmp_path / "trees" / "mine.xml")
@@ -123,20 +130,23 @@ def test_run_help_shows_no_python_internals(capsys):
     assert main(["params", "nosuch"]) == 2
 
 
-@pytest.mark.parametrize("text, needle", [
-    ("run:\n  dt: .inf\n", "run.dt: infinite and NaN numbers are not accepted"),
-    ("network:\n  range: .nan\n", "network.range: infinite and NaN numbers are not accepted"),
-    ("allocator:\n  name: cbba\n  epsilon: -.inf\n", "allocator.epsilon: infinite and NaN"),
-    ("run:\n  seed: true\n", "run.seed: Input should be a valid integer"),
-    ("network:\n  loss: '0.1'\n", "network.loss: Input should be a valid number"),
-    ("run:\n  duration: 1.0e+12\n  dt: 0.001\n", "more than the 100,000,000 a run may have"),
-    ("agents:\n  count: 5\nplacement:\n  h1: 0-1000000000\n", "placement.h1: agent 1000000000 is outside 0..4"),
-    ("agents:\n  count: 5\nmay_carry:\n  h1: '3-99'\n", "may_carry.h1: agent 99 is outside 0..4"),
-    ("name: ../../etc\n", "name: String should match pattern"),
-    ("name: /tmp/elsewhere\n", "name: String should match pattern"),
-    ("base: &b {count: 3}\nagents: *b\n", "anchors and aliases"),
-    ("a: " + "[" * 40 + "]" * 40 + "\n", "nested more than 32 levels deep"),
-])
+@pytest.mark.parametrize(
+    "text, needle",
+    [
+        ("run:\n  dt: .inf\n", "run.dt: infinite and NaN numbers are not accepted"),
+        ("network:\n  range: .nan\n", "network.range: infinite and NaN numbers are not accepted"),
+        ("allocator:\n  name: cbba\n  epsilon: -.inf\n", "allocator.epsilon: infinite and NaN"),
+        ("run:\n  seed: true\n", "run.seed: Input should be a valid integer"),
+        ("network:\n  loss: '0.1'\n", "network.loss: Input should be a valid number"),
+        ("run:\n  duration: 1.0e+12\n  dt: 0.001\n", "more than the 100,000,000 a run may have"),
+        ("agents:\n  count: 5\nplacement:\n  h1: 0-1000000000\n", "placement.h1: agent 1000000000 is outside 0..4"),
+        ("agents:\n  count: 5\nmay_carry:\n  h1: '3-99'\n", "may_carry.h1: agent 99 is outside 0..4"),
+        ("name: ../../etc\n", "name: String should match pattern"),
+        ("name: /tmp/elsewhere\n", "name: String should match pattern"),
+        ("base: &b {count: 3}\nagents: *b\n", "anchors and aliases"),
+        ("a: " + "[" * 40 + "]" * 40 + "\n", "nested more than 32 levels deep"),
+    ],
+)
 def test_input_that_must_never_reach_a_process_is_refused_in_one_line(tmp_path, text, needle):
     with pytest.raises(cfg.ConfigError) as info:
         load_text(tmp_path, text)
@@ -145,8 +155,11 @@ def test_input_that_must_never_reach_a_process_is_refused_in_one_line(tmp_path, 
 
 
 def test_binary_huge_and_non_utf8_files_are_refused_before_they_are_parsed(tmp_path):
-    cases = {"binary.yaml": b"\x7fELF\x02\x01\x01\0\0\0", "latin1.yaml": "name: caf\xe9\n".encode("latin-1"),
-             "huge.yaml": b"# padding\n" * 200_000}
+    cases = {
+        "binary.yaml": b"\x7fELF\x02\x01\x01\0\0\0",
+        "latin1.yaml": "name: caf\xe9\n".encode("latin-1"),
+        "huge.yaml": b"# padding\n" * 200_000,
+    }
     needles = {"binary.yaml": "a binary file", "latin1.yaml": "not UTF-8 text", "huge.yaml": "larger than the"}
     for name, data in cases.items():
         (tmp_path / name).write_bytes(data)

@@ -50,8 +50,13 @@ def test_a_whole_file_written_to_a_full_disk_leaves_no_temporary_behind(small_di
 
 
 def test_a_run_that_fills_the_disk_fails_in_one_line_and_leaves_no_result_under_its_name(small_disk):
-    exp = experiment("agents.count=5", "allocator={name: noop, peers: 4}", "scenario.initial_tasks=0",
-                     "run.stop_when_done=false", "run.duration=50000")
+    exp = experiment(
+        "agents.count=5",
+        "allocator={name: noop, peers: 4}",
+        "scenario.initial_tasks=0",
+        "run.stop_when_done=false",
+        "run.duration=50000",
+    )
     with pytest.raises(RunError) as info:
         run_experiment(exp, small_disk / "run", progress=False)
     assert "no space left on device in" in str(info.value).splitlines()[0], str(info.value)

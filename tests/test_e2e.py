@@ -62,14 +62,25 @@ def test_agents_and_proxy_agree_on_bytes(quickstart_runs):
 def test_summary_is_written_last_and_names_its_metrics(quickstart_runs):
     out = quickstart_runs["a"].out_dir
     summary = json.loads((out / "summary.json").read_text())
-    for key in ("mission_time", "time_99", "tasks_total", "tasks_completed", "distance_total", "work_total",
-                "distance_per_agent", "work_per_agent", "ticks", "network"):
+    for key in (
+        "mission_time",
+        "time_99",
+        "tasks_total",
+        "tasks_completed",
+        "distance_total",
+        "work_total",
+        "distance_per_agent",
+        "work_per_agent",
+        "ticks",
+        "network",
+    ):
         assert key in summary
     for key in ("messages_sent", "bytes_sent", "copies", "delivered", "dropped"):
         assert key in summary["network"]
     assert not list(out.glob("*.part"))
     assert (out / "summary.json").stat().st_mtime_ns >= max(
-        (out / f).stat().st_mtime_ns for f in ("timeseries.csv", "agents.csv", "timings.json", "network_ledger.csv"))
+        (out / f).stat().st_mtime_ns for f in ("timeseries.csv", "agents.csv", "timings.json", "network_ledger.csv")
+    )
 
 
 @pytest.mark.parametrize("allocator", ["cbba", "grape"])

@@ -19,8 +19,16 @@ from swarmbed.wire.membership import hand_over
 from swarmbed.wire.session import zenoh_config
 from tests.conftest import QUICKSTART, ROOT, experiment, under_way
 
-LONG_NOOP = ["--set", "allocator={name: noop, peers: 2}", "--set", "scenario.initial_tasks=0",
-             "--set", "run.stop_when_done=false", "--set", "run.duration=1000000"]
+LONG_NOOP = [
+    "--set",
+    "allocator={name: noop, peers: 2}",
+    "--set",
+    "scenario.initial_tasks=0",
+    "--set",
+    "run.stop_when_done=false",
+    "--set",
+    "run.duration=1000000",
+]
 
 
 def _agents_of(runner: psutil.Process) -> list[psutil.Process]:
@@ -29,8 +37,19 @@ def _agents_of(runner: psutil.Process) -> list[psutil.Process]:
 
 @pytest.mark.parametrize("allow", [False, True])
 def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
-    cmd = [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
-           *LONG_NOOP, "--set", f"run.allow_agent_failures={str(allow).lower()}"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "swarmbed",
+        "run",
+        str(QUICKSTART),
+        "--out",
+        str(tmp_path),
+        "--no-progress",
+        *LONG_NOOP,
+        "--set",
+        f"run.allow_agent_failures={str(allow).lower()}",
+    ]
     if allow:
         cmd[cmd.index("run.duration=1000000")] = "run.duration=3000"
     runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -48,6 +67,7 @@ def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
     if allow:
         assert runner.returncode == 0, err
         import json
+
         summary = json.loads((tmp_path / "summary.json").read_text())
         assert "2" in summary["agents_lost"]
         assert summary["network"]["copies"] == summary["network"]["delivered"] + summary["network"]["dropped_total"]
@@ -63,8 +83,17 @@ def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
 
 
 def _start_long_run(tmp_path):
-    cmd = [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
-           *LONG_NOOP]
+    cmd = [
+        sys.executable,
+        "-m",
+        "swarmbed",
+        "run",
+        str(QUICKSTART),
+        "--out",
+        str(tmp_path),
+        "--no-progress",
+        *LONG_NOOP,
+    ]
     runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(runner.pid)
     deadline = time.monotonic() + 60
@@ -102,7 +131,7 @@ def test_crashed_proxy_stops_the_run_with_a_clear_message(tmp_path):
     assert not alive
 
 
-BOOM = textwrap.dedent('''
+BOOM = textwrap.dedent("""
     from swarmbed.plugins.base import Allocator
 
     class Boom(Allocator):
@@ -110,7 +139,7 @@ BOOM = textwrap.dedent('''
             if view.tick == 5 and self.agent_id == 1:
                 raise RuntimeError("boom at five")
             return None
-''')
+""")
 
 
 def test_plugin_that_raises_stops_the_run_with_its_traceback(tmp_path):
@@ -128,8 +157,12 @@ def test_plugin_that_raises_stops_the_run_with_its_traceback(tmp_path):
 def test_run_goes_on_without_a_failed_agent_when_allowed(tmp_path):
     plugin = tmp_path / "boom.py"
     plugin.write_text(BOOM)
-    exp = experiment(f"allocator={{name: '{plugin}:Boom'}}", "run.allow_agent_failures=true",
-                     "run.stop_when_done=false", "run.duration=40")
+    exp = experiment(
+        f"allocator={{name: '{plugin}:Boom'}}",
+        "run.allow_agent_failures=true",
+        "run.stop_when_done=false",
+        "run.duration=40",
+    )
     result = run_experiment(exp, tmp_path / "run", progress=False)
     assert result.summary["agents_lost"] == {"1": 5}
     assert result.summary["ticks"] == 40
@@ -147,16 +180,24 @@ def test_malformed_samples_are_dropped_counted_and_survived(tmp_path):
             for junk in (b"\xc1", b"\x93\x01\x02", b"not msgpack at all"):  # reports are handed over as queries
                 assert hand_over(s, keys.agent_report(1), junk, timeout=5)
             far = 10**6  # observations for ticks that never come: the answers the agent gives are never used
-            for k, obs in enumerate(({"t": "noon", "me": [0, 0, 0, 0], "tasks": b""},
-                                     {"t": 0, "me": [0, 0], "tasks": b""},
-                                     {"t": 0, "me": [0, 0, 0, 0], "tasks": b"\x01\x02"},
-                                     {"t": 0, "me": [0, 0, 0, 0], "tasks": b"", "weather": "rain"})):
-                s.put(keys.agent_in(0), encode_tick(far + k, obs, EMPTY_INBOX),
-                      congestion_control=zenoh.CongestionControl.BLOCK)
+            for k, obs in enumerate(
+                (
+                    {"t": "noon", "me": [0, 0, 0, 0], "tasks": b""},
+                    {"t": 0, "me": [0, 0], "tasks": b""},
+                    {"t": 0, "me": [0, 0, 0, 0], "tasks": b"\x01\x02"},
+                    {"t": 0, "me": [0, 0, 0, 0], "tasks": b"", "weather": "rain"},
+                )
+            ):
+                s.put(
+                    keys.agent_in(0),
+                    encode_tick(far + k, obs, EMPTY_INBOX),
+                    congestion_control=zenoh.CongestionControl.BLOCK,
+                )
             time.sleep(0.3)
 
-    exp = experiment("allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
-                     "run.duration=400")
+    exp = experiment(
+        "allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false", "run.duration=400"
+    )
     # an open hub: these samples test our own decoding, behind the hub's access control (which
     # refuses most of them before they reach us; see test_access.py)
     result = run_experiment(exp, tmp_path, progress=False, on_ready=inject, auth=False)
@@ -173,8 +214,12 @@ def test_a_second_agent_with_a_taken_id_is_refused(tmp_path):
     refused = {}
 
     def second(keys: Keys, endpoint: str) -> None:
-        proc = subprocess.run([sys.executable, "-m", "swarmbed", "agent", "--connect", endpoint, "--run-id",
-                               keys.run_id, "--id", "1"], capture_output=True, text=True, timeout=60)
+        proc = subprocess.run(
+            [sys.executable, "-m", "swarmbed", "agent", "--connect", endpoint, "--run-id", keys.run_id, "--id", "1"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         refused["rc"], refused["err"] = proc.returncode, proc.stderr
 
     exp = experiment("run.duration=50")

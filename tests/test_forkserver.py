@@ -31,9 +31,22 @@ def test_forked_agents_give_the_results_of_fresh_interpreters(tmp_path):
 
 
 def _run_until_under_way(tmp_path) -> tuple[subprocess.Popen, psutil.Process]:
-    cmd = [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(tmp_path), "--no-progress",
-           "--set", "allocator={name: noop, peers: 2}", "--set", "run.stop_when_done=false",
-           "--set", "run.duration=1000000"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "swarmbed",
+        "run",
+        str(QUICKSTART),
+        "--out",
+        str(tmp_path),
+        "--no-progress",
+        "--set",
+        "allocator={name: noop, peers: 2}",
+        "--set",
+        "run.stop_when_done=false",
+        "--set",
+        "run.duration=1000000",
+    ]
     runner = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while not under_way(tmp_path):
@@ -77,8 +90,21 @@ def test_a_run_started_beside_another_swarmbed_runs_every_process_on_the_launche
     elsewhere = tmp_path / "elsewhere"
     (elsewhere / "swarmbed").mkdir(parents=True)
     (elsewhere / "swarmbed" / "__init__.py").write_text('raise ImportError("the other swarmbed was imported")\n')
-    cmd = [sys.executable, "-P", "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(tmp_path / "run"),
-           "--no-progress", "--set", "run.duration=20", "--set", "agents.count=2"]
+    cmd = [
+        sys.executable,
+        "-P",
+        "-m",
+        "swarmbed",
+        "run",
+        str(QUICKSTART),
+        "--out",
+        str(tmp_path / "run"),
+        "--no-progress",
+        "--set",
+        "run.duration=20",
+        "--set",
+        "agents.count=2",
+    ]
     done = subprocess.run(cmd, cwd=elsewhere, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["ticks"] == 20

@@ -27,12 +27,21 @@ def test_agents_split_over_three_hosts_give_the_all_local_results(lab, tmp_path,
     seen = {}
 
     def look(keys, endpoint):
-        seen["hosts"] = subprocess.run([sys.executable, "-m", "swarmbed", "hosts", "--connect", endpoint,
-                                        *operator.args],
-                                       capture_output=True, text=True, timeout=30).stdout
+        seen["hosts"] = subprocess.run(
+            [sys.executable, "-m", "swarmbed", "hosts", "--connect", endpoint, *operator.args],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        ).stdout
 
-    spread = run_experiment(placed, tmp_path / "spread", progress=False, listen=[lab.hub],
-                            admit=[*lab.admitted, operator.identity], on_ready=look)
+    spread = run_experiment(
+        placed,
+        tmp_path / "spread",
+        progress=False,
+        listen=[lab.hub],
+        admit=[*lab.admitted, operator.identity],
+        on_ready=look,
+    )
     same_results(tmp_path / "local", tmp_path / "spread")
     assert spread.summary["network"]["messages_sent"] == local.summary["network"]["messages_sent"] > 0
     deployment = (tmp_path / "spread" / "deployment.json").read_text()
@@ -47,25 +56,41 @@ def test_search_and_rescue_over_two_hosts_gives_the_all_local_results(lab, tmp_p
     lab.add_host("b")
     sets = ["allocator.name=cbba-etc", "run.duration=40"]
     run_experiment(experiment(*sets, base=SAR), tmp_path / "local", progress=False)
-    run_experiment(experiment(*sets, "placement={a: '0-9', b: '10-19'}", base=SAR), tmp_path / "spread",
-                   progress=False, listen=[lab.hub], admit=lab.admitted)
+    run_experiment(
+        experiment(*sets, "placement={a: '0-9', b: '10-19'}", base=SAR),
+        tmp_path / "spread",
+        progress=False,
+        listen=[lab.hub],
+        admit=lab.admitted,
+    )
     same_results(tmp_path / "local", tmp_path / "spread")
 
 
 def _kill_when_running(lab, name, delay):
     def later(keys, endpoint):
         threading.Timer(delay, lab.kill_host, [name]).start()
+
     return later
 
 
 def test_a_host_that_dies_takes_its_agents_and_the_run_accounts_for_them(lab, tmp_path):
     lab.add_host("doomed")
     lab.add_host("fine")
-    long = ["allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
-            "agents.count=6", "placement={doomed: '0-1', fine: '2-3'}"]
-    result = run_experiment(experiment(*long, "run.duration=3000", "run.allow_agent_failures=true"),
-                            tmp_path / "allowed", progress=False, listen=[lab.hub], admit=lab.admitted,
-                            on_ready=_kill_when_running(lab, "doomed", 1.0))
+    long = [
+        "allocator={name: noop, peers: 2}",
+        "scenario.initial_tasks=0",
+        "run.stop_when_done=false",
+        "agents.count=6",
+        "placement={doomed: '0-1', fine: '2-3'}",
+    ]
+    result = run_experiment(
+        experiment(*long, "run.duration=3000", "run.allow_agent_failures=true"),
+        tmp_path / "allowed",
+        progress=False,
+        listen=[lab.hub],
+        admit=lab.admitted,
+        on_ready=_kill_when_running(lab, "doomed", 1.0),
+    )
     assert set(result.summary["agents_lost"]) == {"0", "1"}
     net = result.summary["network"]
     assert net["copies"] == net["delivered"] + net["dropped_total"] and net["dropped"]["receiver_dead"] > 0
@@ -73,16 +98,27 @@ def test_a_host_that_dies_takes_its_agents_and_the_run_accounts_for_them(lab, tm
 
     lab.start_daemon("doomed", lab.namespaces[0])  # the machine comes back for the next run
     with pytest.raises(RunError, match=r"agent [01] stopped at tick \d+ .* logs of host doomed"):
-        run_experiment(experiment(*long, "run.duration=1000000"), tmp_path / "strict", progress=False,
-                       listen=[lab.hub], admit=lab.admitted, on_ready=_kill_when_running(lab, "doomed", 1.0))
+        run_experiment(
+            experiment(*long, "run.duration=1000000"),
+            tmp_path / "strict",
+            progress=False,
+            listen=[lab.hub],
+            admit=lab.admitted,
+            on_ready=_kill_when_running(lab, "doomed", 1.0),
+        )
 
 
 def test_a_missing_host_is_named_with_the_command_that_starts_it(lab, tmp_path):
     lab.add_host("here")
     t0 = time.monotonic()
     with pytest.raises(RunError) as info:
-        run_experiment(experiment("placement={here: 0, gone: '1-2'}", "run.join_timeout=3"), tmp_path,
-                       progress=False, listen=[lab.hub], admit=lab.admitted)
+        run_experiment(
+            experiment("placement={here: 0, gone: '1-2'}", "run.join_timeout=3"),
+            tmp_path,
+            progress=False,
+            listen=[lab.hub],
+            admit=lab.admitted,
+        )
     msg = str(info.value)
     assert "hosts not reachable after 3 s: gone" in msg and f"swarmbed host --name gone --connect {lab.hub}" in msg
     assert time.monotonic() - t0 < 20
@@ -96,10 +132,17 @@ def test_ten_swaps_between_hosts_give_the_all_local_results(lab, tmp_path):
     run_experiment(experiment(*sets), tmp_path / "local", progress=False)
     rng = np.random.default_rng(3)
     ticks = sorted(int(t) for t in rng.choice(np.arange(1, 110), 10, replace=False))
-    swaps = ", ".join(f"{{agent: {int(rng.integers(8))}, tick: {t}, to: {['h1', 'h2', 'local'][int(rng.integers(3))]}}}"
-                      for t in ticks)
-    run_experiment(experiment(*sets, "placement={h1: '0-2', h2: '3-5'}", f"swaps=[{swaps}]"), tmp_path / "moved",
-                   progress=False, listen=[lab.hub], admit=lab.admitted)
+    swaps = ", ".join(
+        f"{{agent: {int(rng.integers(8))}, tick: {t}, to: {['h1', 'h2', 'local'][int(rng.integers(3))]}}}"
+        for t in ticks
+    )
+    run_experiment(
+        experiment(*sets, "placement={h1: '0-2', h2: '3-5'}", f"swaps=[{swaps}]"),
+        tmp_path / "moved",
+        progress=False,
+        listen=[lab.hub],
+        admit=lab.admitted,
+    )
     same_results(tmp_path / "local", tmp_path / "moved")
     with open(tmp_path / "moved" / "swaps.csv") as f:
         records = list(csv.DictReader(f))
@@ -123,8 +166,13 @@ def test_a_swap_to_a_dead_host_fails_and_the_agent_goes_on_where_it_was(lab, tmp
     lab.kill_host("dead")
     sets = ["allocator={name: cbba}", "run.duration=60", "run.stop_when_done=false"]
     run_experiment(experiment(*sets), tmp_path / "local", progress=False)
-    run_experiment(experiment(*sets, "placement={alive: '0-1'}", "swaps=[{agent: 1, tick: 10, to: dead}]"),
-                   tmp_path / "tried", progress=False, listen=[lab.hub], admit=lab.admitted)
+    run_experiment(
+        experiment(*sets, "placement={alive: '0-1'}", "swaps=[{agent: 1, tick: 10, to: dead}]"),
+        tmp_path / "tried",
+        progress=False,
+        listen=[lab.hub],
+        admit=lab.admitted,
+    )
     same_results(tmp_path / "local", tmp_path / "tried")
     with open(tmp_path / "tried" / "swaps.csv") as f:
         (record,) = list(csv.DictReader(f))
@@ -137,10 +185,17 @@ def test_sigterm_on_a_host_daemon_stops_its_agents_and_leaves_nothing(lab, tmp_p
     def stop_the_daemon_soon(keys, endpoint):
         threading.Timer(1.0, lab.daemons["h"].send_signal, [signal.SIGTERM]).start()
 
-    exp = experiment("allocator={name: noop, peers: 2}", "scenario.initial_tasks=0", "run.stop_when_done=false",
-                     "run.duration=3000", "run.allow_agent_failures=true", "placement={h: '0-1'}")
-    result = run_experiment(exp, tmp_path, progress=False, listen=[lab.hub], admit=lab.admitted,
-                            on_ready=stop_the_daemon_soon)
+    exp = experiment(
+        "allocator={name: noop, peers: 2}",
+        "scenario.initial_tasks=0",
+        "run.stop_when_done=false",
+        "run.duration=3000",
+        "run.allow_agent_failures=true",
+        "placement={h: '0-1'}",
+    )
+    result = run_experiment(
+        exp, tmp_path, progress=False, listen=[lab.hub], admit=lab.admitted, on_ready=stop_the_daemon_soon
+    )
     assert set(result.summary["agents_lost"]) == {"0", "1"}
     assert lab.daemons["h"].wait(timeout=20) == 0
     assert lab.pids("h") == []

@@ -11,16 +11,27 @@ from tests.conftest import experiment, read_ledger
 
 
 def noop_run(tmp_path, *overrides):
-    exp = experiment("allocator={name: noop, peers: 1, payload_bytes: 100}", "scenario.initial_tasks=0",
-                     "run.stop_when_done=false", "network.range=null", *overrides)
+    exp = experiment(
+        "allocator={name: noop, peers: 1, payload_bytes: 100}",
+        "scenario.initial_tasks=0",
+        "run.stop_when_done=false",
+        "network.range=null",
+        *overrides,
+    )
     return run_experiment(exp, tmp_path, progress=False)
 
 
 def test_agents_moving_apart_stop_hearing_each_other_at_the_range(tmp_path):
-    exp = experiment("agents.count=2", "agents.awareness_range=300", "scenario.initial_tasks=2",
-                     "scenario.workload=[6, 6]", "scenario.agent_positions=[[95, 75], [105, 75]]",
-                     "scenario.task_positions=[[0, 75], [200, 75]]", "network.range=60",
-                     "run.record_trajectories=true")
+    exp = experiment(
+        "agents.count=2",
+        "agents.awareness_range=300",
+        "scenario.initial_tasks=2",
+        "scenario.workload=[6, 6]",
+        "scenario.agent_positions=[[95, 75], [105, 75]]",
+        "scenario.task_positions=[[0, 75], [200, 75]]",
+        "network.range=60",
+        "run.record_trajectories=true",
+    )
     run = run_experiment(exp, tmp_path, progress=False)
     pos = defaultdict(dict)
     with open(tmp_path / "trajectories.csv") as f:
@@ -63,8 +74,12 @@ def test_rate_cap_delays_messages_as_tc_netem_computes(tmp_path):
     size = len(msgpack.packb(b"\0" * 100))
     run = noop_run(tmp_path, "agents.count=2", "run.duration=20", f"network.rate={size / 2}")
     expected, _ = _tc_rate(lambda k: [size], size / 2, None, 20)
-    got = sorted(r["tick"] for r in read_ledger(tmp_path) if r["sender"] == 0 and r["outcome"] == "delivered"
-                 for _ in range(r["messages"]))
+    got = sorted(
+        r["tick"]
+        for r in read_ledger(tmp_path)
+        if r["sender"] == 0 and r["outcome"] == "delivered"
+        for _ in range(r["messages"])
+    )
     assert got == [t for t in expected if t <= 19]
     assert run.summary["network"]["dropped"]["run_ended"] > 0
 

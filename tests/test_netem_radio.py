@@ -121,16 +121,23 @@ def test_receiver_ledger_books_each_copy_once_and_sums_to_the_sender_ledger(tmp_
     path = tmp_path / "receivers.parquet"
     ledger = Ledger(sink, ReceiverLog(path, group=50))  # small row groups: several flushes
     n = 6
-    r = Radio(NetemParams(range=3.0, loss=0.3, rate=40.0, limit=3), n_agents=n, dt=1.0,
-              rng=np.random.default_rng(1), ledger=ledger)
+    r = Radio(
+        NetemParams(range=3.0, loss=0.3, rate=40.0, limit=3),
+        n_agents=n,
+        dt=1.0,
+        rng=np.random.default_rng(1),
+        ledger=ledger,
+    )
     for k in range(40):
         alive = [a for a in range(n) if not (a == 5 and k >= 20)]  # agent 5 dies at tick 20
         xs, ys = rng.uniform(0, 6, n), rng.uniform(0, 2, n)
         outs = {}
         for a in alive:
             dests = [BROADCAST, int(rng.integers(0, n + 1)), (0, 5, 9)]
-            outs[a] = [msg(int(rng.integers(1, 30)), dest=dests[int(rng.integers(0, 3))], kind=f"k{a % 2}")
-                       for _ in range(int(rng.integers(0, 3)))]
+            outs[a] = [
+                msg(int(rng.integers(1, 30)), dest=dests[int(rng.integers(0, 3))], kind=f"k{a % 2}")
+                for _ in range(int(rng.integers(0, 3)))
+            ]
         r.confirm()
         r.route(k, alive, [xs[a] for a in alive], [ys[a] for a in alive], outs)
         r.deliver(k + 1, [a for a in alive if not (a == 5 and k + 1 >= 20)])
@@ -146,8 +153,9 @@ def test_receiver_ledger_books_each_copy_once_and_sums_to_the_sender_ledger(tmp_
     assert set(to_self["outcome"]) <= {"no_such_receiver"}  # addressed to itself: refused, never delivered
     rows = pd.read_csv(sink.finish())
     copies = rows[rows["outcome"] != "sent"].set_index(["tick", "sender", "kind", "outcome"]).sort_index()
-    summed = per_copy.groupby(["tick", "sender", "kind", "outcome"]).agg(messages=("bytes", "size"),
-                                                                         bytes=("bytes", "sum"))
+    summed = per_copy.groupby(["tick", "sender", "kind", "outcome"]).agg(
+        messages=("bytes", "size"), bytes=("bytes", "sum")
+    )
     pd.testing.assert_frame_equal(copies[["messages", "bytes"]], summed, check_dtype=False)
 
 
@@ -202,8 +210,10 @@ def _one_copy_at_a_time(params: NetemParams, n: int, dt: float, rng, ticks):
                     queues[sender] = queue + [end]
                 near = []
                 for r in candidates:
-                    far = params.range is not None and math.hypot(pos[sender][0] - pos[r][0],
-                                                                  pos[sender][1] - pos[r][1]) > params.range + 1e-9
+                    far = (
+                        params.range is not None
+                        and math.hypot(pos[sender][0] - pos[r][0], pos[sender][1] - pos[r][1]) > params.range + 1e-9
+                    )
                     if far:
                         book(tick, sender, r, "out_of_range")
                     else:
@@ -218,8 +228,14 @@ def _one_copy_at_a_time(params: NetemParams, n: int, dt: float, rng, ticks):
     return booked, inboxes
 
 
-@pytest.mark.parametrize("params", [{"range": 300.0, "loss": 0.2}, {"loss": 0.0},
-                                    {"range": 200.0, "loss": 0.3, "rate": 2000.0, "limit": 3, "latency": 1}])
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"range": 300.0, "loss": 0.2},
+        {"loss": 0.0},
+        {"range": 200.0, "loss": 0.3, "rate": 2000.0, "limit": 3, "latency": 1},
+    ],
+)
 def test_batched_routing_books_and_delivers_what_one_copy_at_a_time_would(params, tmp_path):
     """Broadcast, unicast and multicast (repeated and unknown receivers too) among agents that come
     and go: every copy's outcome and every inbox equal the per-copy rules of the module docstring,
@@ -234,8 +250,14 @@ def test_batched_routing_books_and_delivers_what_one_copy_at_a_time_would(params
         outs = {}
         for a in ids:
             kinds = g.random(int(g.integers(0, 3)))
-            dests = [BROADCAST if c < 0.5 else int(g.integers(-1, n + 2)) if c < 0.8
-                     else tuple(int(x) for x in g.integers(0, n, 3)) for c in kinds]
+            dests = [
+                BROADCAST
+                if c < 0.5
+                else int(g.integers(-1, n + 2))
+                if c < 0.8
+                else tuple(int(x) for x in g.integers(0, n, 3))
+                for c in kinds
+            ]
             if dests:
                 outs[a] = [RadioMessage(d, f"k{i}", bytes(int(g.integers(1, 400)))) for i, d in enumerate(dests)]
         script.append((tick, ids, pos, outs))

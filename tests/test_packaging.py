@@ -31,8 +31,11 @@ def test_every_package_folder_is_installed():
         assert _folder_of(pkg, mapping).is_dir(), f"{pkg} is listed but {_folder_of(pkg, mapping)} is missing"
     for top, folder in mapping.items():
         for d in (ROOT / folder).rglob("*"):
-            if d.is_dir() and d.name != "__pycache__" and (any(d.glob("*.py")) or any(d.glob("*.xml"))
-                                                             or any(d.glob("*.yaml"))):
+            if (
+                d.is_dir()
+                and d.name != "__pycache__"
+                and (any(d.glob("*.py")) or any(d.glob("*.xml")) or any(d.glob("*.yaml")))
+            ):
                 pkg = ".".join([top, *d.relative_to(ROOT / folder).parts])
                 assert pkg in listed, f"{d.relative_to(ROOT)} holds files but {pkg} is not in pyproject's packages"
 
@@ -74,12 +77,14 @@ def test_processes_never_import_the_launcher_or_the_registry():
 
 
 def test_the_proxy_process_loads_no_plugin_and_no_tree_engine():
-    code = ("import sys, swarmbed.netem.proxy; "
-            "print('\\n'.join(m for m in sys.modules if m.startswith('swarmbed.')))")
+    code = "import sys, swarmbed.netem.proxy; print('\\n'.join(m for m in sys.modules if m.startswith('swarmbed.')))"
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert "swarmbed.netem.proxy" in loaded
-    assert not [m for m in loaded if m.startswith(("swarmbed.plugins", "swarmbed.experiments", "swarmbed.agent_runtime",
-                                                   "swarmbed.coordinator"))], loaded
+    assert not [
+        m
+        for m in loaded
+        if m.startswith(("swarmbed.plugins", "swarmbed.experiments", "swarmbed.agent_runtime", "swarmbed.coordinator"))
+    ], loaded
 
 
 def test_agents_and_the_proxy_import_no_analysis_library():
@@ -87,8 +92,10 @@ def test_agents_and_the_proxy_import_no_analysis_library():
     allocator) and the proxy process stay lean: none of the launcher's and the reports'
     libraries (each would be held by hundreds of agent processes)."""
     heavy = ("pandas", "scipy", "matplotlib", "plotly", "pyarrow", "rich", "tqdm", "psutil", "yaml")
-    code = ("import sys; from swarmbed.experiments.launch.forkserver import _preload; _preload(); "
-            "import swarmbed.netem.proxy; print('\\n'.join(sys.modules))")
+    code = (
+        "import sys; from swarmbed.experiments.launch.forkserver import _preload; _preload(); "
+        "import swarmbed.netem.proxy; print('\\n'.join(sys.modules))"
+    )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     loaded = set(run.stdout.split())
     assert "swarmbed.agent_runtime.process" in loaded and "swarmbed.plugins.cbba" in loaded

@@ -45,8 +45,10 @@ def _run(tmp_path, name, *clock):
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("realtime")
-    return {"realtime": _run(base, "rt", "run.clock=realtime", "run.speed=2", "run.deadline=0.5"),
-            "lockstep": _run(base, "ls")}
+    return {
+        "realtime": _run(base, "rt", "run.clock=realtime", "run.speed=2", "run.deadline=0.5"),
+        "lockstep": _run(base, "ls"),
+    }
 
 
 def test_exactly_the_ticks_whose_answer_crossed_the_deadline_are_missed(runs):

@@ -22,14 +22,17 @@ LOSSY = ("network.loss=0.2", "network.ledger=per_receiver")
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("report")
-    return {name: run_experiment(experiment(*LOSSY, "run.seed=4"), base / name, progress=False).out_dir
-            for name in ("a", "b")}
+    return {
+        name: run_experiment(experiment(*LOSSY, "run.seed=4"), base / name, progress=False).out_dir
+        for name in ("a", "b")
+    }
 
 
 @pytest.fixture(scope="module")
 def sweep_dir(tmp_path_factory):
     base = tmp_path_factory.mktemp("report_sweep")
-    (base / "sweep.yaml").write_text(textwrap.dedent(f"""
+    (base / "sweep.yaml").write_text(
+        textwrap.dedent(f"""
         name: costs
         base: {QUICKSTART}
         seed: 5
@@ -37,7 +40,8 @@ def sweep_dir(tmp_path_factory):
         scenarios:
           - {{name: fcg, set: {{agents.count: 3}}}}
           - {{name: cbba, set: {{agents.count: 3, allocator: {{name: cbba}}}}}}
-    """))
+    """)
+    )
     run_sweep(load_sweep(base / "sweep.yaml", extra=["run.duration=150"]), base / "out", jobs=2, progress=False)
     return base / "out"
 
@@ -79,8 +83,12 @@ def test_run_report_is_one_offline_page_whose_numbers_come_from_the_run(runs, tm
     summary = json.loads((run / "summary.json").read_text())
     wire = json.loads((run / "transport.json").read_text())["totals"]
     assert f"seed {summary['seed']}" in page and summary["name"] in page
-    for value in (summary["network"]["messages_sent"], summary["network"]["bytes_sent"],
-                  wire["agent_tcp_bytes_sent"], summary["network"]["dropped"]["loss"]):
+    for value in (
+        summary["network"]["messages_sent"],
+        summary["network"]["bytes_sent"],
+        wire["agent_tcp_bytes_sent"],
+        summary["network"]["dropped"]["loss"],
+    ):
         assert f">{value:,}<" in page
     assert "Copies delivered, sender by receiver" in page  # the receiver-level ledger's matrices
     _, figures = run_report(run)
@@ -105,10 +113,12 @@ def test_report_command_names_a_folder_that_is_neither_run_nor_sweep(tmp_path, c
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
 # Installed before the page's own scripts: records every uncaught error and console.error, then
 # writes them into the page once it has loaded, where --dump-dom shows them.
-ERROR_PROBE = ("<script>window.__errors=[];addEventListener('error',e=>__errors.push(String(e.message)));"
-               "const __ce=console.error;console.error=(...a)=>{__errors.push(a.join(' '));__ce(...a)};"
-               "addEventListener('load',()=>setTimeout(()=>{const p=document.createElement('pre');"
-               "p.id='errors';p.textContent=JSON.stringify(__errors);document.body.appendChild(p)},0));</script>")
+ERROR_PROBE = (
+    "<script>window.__errors=[];addEventListener('error',e=>__errors.push(String(e.message)));"
+    "const __ce=console.error;console.error=(...a)=>{__errors.push(a.join(' '));__ce(...a)};"
+    "addEventListener('load',()=>setTimeout(()=>{const p=document.createElement('pre');"
+    "p.id='errors';p.textContent=JSON.stringify(__errors);document.body.appendChild(p)},0));</script>"
+)
 
 
 NO_CHROMIUM = "no Chromium here (Debian: apt-get install chromium; .ci/run does)"
@@ -126,9 +136,21 @@ def assert_renders(page: str, tmp_path) -> None:
     assert CHROMIUM is not None
     probed = tmp_path / "probed.html"
     probed.write_text(page.replace("<head>", "<head>" + ERROR_PROBE, 1))
-    dom = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--user-data-dir=" +
-                          str(tmp_path / "profile"), "--virtual-time-budget=20000", "--dump-dom", probed.as_uri()],
-                         capture_output=True, text=True, timeout=120).stdout
+    dom = subprocess.run(
+        [
+            CHROMIUM,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--user-data-dir=" + str(tmp_path / "profile"),
+            "--virtual-time-budget=20000",
+            "--dump-dom",
+            probed.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    ).stdout
     errors = re.search(r'<pre id="errors">(.*?)</pre>', dom, re.S)
     assert errors, "the page never finished loading"
     assert json.loads(errors.group(1).replace("&quot;", '"')) == []
@@ -142,15 +164,24 @@ def assert_renders(page: str, tmp_path) -> None:
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     base = tmp_path_factory.mktemp("replay")
-    return {rec: run_experiment(experiment(*LOSSY, "run.seed=4", f"run.record_trajectories={rec}"),
-                                base / str(rec), progress=False).out_dir for rec in (True, False)}
+    return {
+        rec: run_experiment(
+            experiment(*LOSSY, "run.seed=4", f"run.record_trajectories={rec}"), base / str(rec), progress=False
+        ).out_dir
+        for rec in (True, False)
+    }
 
 
 def test_recording_for_a_replay_changes_no_result(recorded, runs):
     with_rec, without = recorded[True], recorded[False]
     assert (with_rec / "markers.csv").exists() and not (without / "markers.csv").exists()
-    for name in ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv",
-                 "network_ledger_receivers.parquet"):
+    for name in (
+        "summary.json",
+        "timeseries.csv",
+        "agents.csv",
+        "network_ledger.csv",
+        "network_ledger_receivers.parquet",
+    ):
         assert (with_rec / name).read_bytes() == (without / name).read_bytes() == (runs["a"] / name).read_bytes()
 
 
@@ -181,15 +212,17 @@ def test_replay_says_what_is_missing(runs, capsys):
 
 # After load: for every plot, its title, its x tick labels left to right, and each bar trace's
 # horizontal extents (screen coordinates), written into the page for --dump-dom.
-GEOMETRY_PROBE = ("<script>addEventListener('load',()=>setTimeout(()=>{const out=[];"
-                  "document.querySelectorAll('.plotly-graph-div').forEach(d=>{"
-                  "const ticks=[...d.querySelectorAll('.xtick text')].map(t=>[t.getBoundingClientRect().x,"
-                  "t.textContent]).sort((a,b)=>a[0]-b[0]).map(t=>t[1]);"
-                  "const bars=[...d.querySelectorAll('.trace.bars')].map(tr=>[...tr.querySelectorAll('.point path')]"
-                  ".map(p=>{const r=p.getBoundingClientRect();return [r.left,r.right]}));"
-                  "const title=(d.querySelector('.gtitle')||{}).textContent||'';out.push({title,ticks,bars})});"
-                  "const p=document.createElement('pre');p.id='geometry';p.textContent=JSON.stringify(out);"
-                  "document.body.appendChild(p)},500));</script>")
+GEOMETRY_PROBE = (
+    "<script>addEventListener('load',()=>setTimeout(()=>{const out=[];"
+    "document.querySelectorAll('.plotly-graph-div').forEach(d=>{"
+    "const ticks=[...d.querySelectorAll('.xtick text')].map(t=>[t.getBoundingClientRect().x,"
+    "t.textContent]).sort((a,b)=>a[0]-b[0]).map(t=>t[1]);"
+    "const bars=[...d.querySelectorAll('.trace.bars')].map(tr=>[...tr.querySelectorAll('.point path')]"
+    ".map(p=>{const r=p.getBoundingClientRect();return [r.left,r.right]}));"
+    "const title=(d.querySelector('.gtitle')||{}).textContent||'';out.push({title,ticks,bars})});"
+    "const p=document.createElement('pre');p.id='geometry';p.textContent=JSON.stringify(out);"
+    "document.body.appendChild(p)},500));</script>"
+)
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason=NO_CHROMIUM)
@@ -197,14 +230,28 @@ def test_charts_order_agents_by_number_and_draw_paired_bars_side_by_side(tmp_pat
     """Twelve agents (so that string order, 0 1 10 11 2 ..., would show): every per-agent chart lists
     them by number, and the bars of a chart with two y axes stand beside each other, not on top."""
     assert CHROMIUM is not None
-    run = run_experiment(experiment("agents.count=12", "run.duration=120", *LOSSY), tmp_path / "run",
-                         progress=False).out_dir
+    run = run_experiment(
+        experiment("agents.count=12", "run.duration=120", *LOSSY), tmp_path / "run", progress=False
+    ).out_dir
     page = report(run, tmp_path / "page.html").read_text()
     probed = tmp_path / "geometry.html"
     probed.write_text(page.replace("<head>", "<head>" + GEOMETRY_PROBE, 1))
-    dom = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000",
-                          "--user-data-dir=" + str(tmp_path / "profile"), "--virtual-time-budget=20000",
-                          "--dump-dom", probed.as_uri()], capture_output=True, text=True, timeout=120).stdout
+    dom = subprocess.run(
+        [
+            CHROMIUM,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--window-size=1400,1000",
+            "--user-data-dir=" + str(tmp_path / "profile"),
+            "--virtual-time-budget=20000",
+            "--dump-dom",
+            probed.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    ).stdout
     found = re.search(r'<pre id="geometry">(.*?)</pre>', dom, re.S)
     assert found, "the page never finished loading"
     plots = {p["title"]: p for p in json.loads(found.group(1).replace("&quot;", '"'))}

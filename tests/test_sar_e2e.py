@@ -45,8 +45,11 @@ def test_each_strategy_rescues_victims_and_accounts_for_every_one(tmp_path, stra
 def _check_members_talk_to_their_leader_only(run_dir: Path, summary: dict):
     with open(run_dir / "trajectories.csv") as f:
         start = [(int(r["agent"]), float(r["x"]), float(r["y"])) for r in csv.DictReader(f) if r["tick"] == "0"]
-    labels = kmeans_pp(np.array([[x, y] for _, x, y in start]),
-                       2, np.random.default_rng(np.random.SeedSequence([summary["seed"], CLUSTER_STREAM])))
+    labels = kmeans_pp(
+        np.array([[x, y] for _, x, y in start]),
+        2,
+        np.random.default_rng(np.random.SeedSequence([summary["seed"], CLUSTER_STREAM])),
+    )
     leaders = {min(a for (a, _, _), lab in zip(start, labels) if lab == c) for c in set(labels)}
     sent = defaultdict(lambda: defaultdict(int))
     copies = defaultdict(int)
@@ -71,8 +74,7 @@ def test_same_seed_same_rescue(tmp_path):
 
 
 def test_agent_loss_stops_the_process_and_the_run_goes_on(tmp_path):
-    result = sar_run(tmp_path, "cbba-etc", "scenario.agent_loss=0.01", "scenario.agent_loss_grace=5",
-                     "run.duration=40")
+    result = sar_run(tmp_path, "cbba-etc", "scenario.agent_loss=0.01", "scenario.agent_loss_grace=5", "run.duration=40")
     s = result.summary
     assert s["agents_lost"], "with 1% per step over 140 steps some robot should be lost"
     lost = {int(a): t for a, t in s["agents_lost"].items()}

@@ -47,12 +47,26 @@ def test_interval_is_clipped_to_both_bounds():
 
 # -- event triggers ------------------------------------------------------------------------------
 
+
 def view(t, x, y, victims, inbox=(), agent=0, color=0):
     tasks = {v: TaskInfo(v, vx, vy, 100.0, c) for v, (vx, vy, c) in victims.items()}
-    obs = SARObservation(float(t), x, y, 0.0, 0.0, np.empty(0, TASK_DTYPE), color=color, reach=5.0, robots=[],
-                         inspected=[], rescued=[], busy=0)
-    return LocalView(agent, 4, int(t), float(t), x, y, 0.0, 0.0, 1.0, tasks, list(inbox), 11.1, math.inf,
-                     2 * math.pi, obs)
+    obs = SARObservation(
+        float(t),
+        x,
+        y,
+        0.0,
+        0.0,
+        np.empty(0, TASK_DTYPE),
+        color=color,
+        reach=5.0,
+        robots=[],
+        inspected=[],
+        rescued=[],
+        busy=0,
+    )
+    return LocalView(
+        agent, 4, int(t), float(t), x, y, 0.0, 0.0, 1.0, tasks, list(inbox), 11.1, math.inf, 2 * math.pi, obs
+    )
 
 
 def etc(**params):
@@ -120,6 +134,7 @@ def test_tr_fallback_fires_when_the_adaptive_interval_elapses():
 
 # -- C-CBBA ----------------------------------------------------------------------------------------
 
+
 def test_kmeans_clustering_is_deterministic_under_a_seed():
     points = np.random.default_rng(1).uniform(-30, 30, (20, 2))
     a = kmeans_pp(points, 2, np.random.default_rng(7))
@@ -153,6 +168,7 @@ def test_ccbba_members_talk_only_to_their_leader():
 
 
 # -- a lost robot's claims stop mattering -----------------------------------------------------------
+
 
 def test_comm_claims_of_a_silent_robot_lapse():
     b = make("comm", {"claim_ttl": 30.0}, 1, np.random.default_rng(0), 0, "sar")

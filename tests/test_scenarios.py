@@ -25,8 +25,11 @@ PICKUP = f"{EXAMPLE}:PickupDelivery"
 
 
 #: agents fast enough that tasks get done, victims inspected and items carried within the check
-CHECK_AGENTS = {"mtsr": {"max_speed": 20.0, "max_accel": 5.0, "max_turn_rate": 3.0, "awareness_range": 2000.0},
-                "sar": {"max_speed": 11.1}, PICKUP: {"max_speed": 5.0}}
+CHECK_AGENTS = {
+    "mtsr": {"max_speed": 20.0, "max_accel": 5.0, "max_turn_rate": 3.0, "awareness_range": 2000.0},
+    "sar": {"max_speed": 11.1},
+    PICKUP: {"max_speed": 5.0},
+}
 
 
 @pytest.mark.parametrize("kind", [*scenario_names(), PICKUP])
@@ -126,17 +129,26 @@ def test_an_installed_package_adds_a_scenario_and_an_allocator_through_entry_poi
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: pickup-plugin\nVersion: 0.1\n")
     (dist / "entry_points.txt").write_text(
         "[swarmbed.scenarios]\npickup = tests.example_scenario:PickupDelivery\n\n"
-        "[swarmbed.allocators]\nnearest@pickup = tests.example_scenario:NearestItem\n")
+        "[swarmbed.allocators]\nnearest@pickup = tests.example_scenario:NearestItem\n"
+    )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
-    listing = subprocess.run([sys.executable, "-m", "swarmbed", "params"], env=env, capture_output=True, text=True,
-                             check=True).stdout
+    listing = subprocess.run(
+        [sys.executable, "-m", "swarmbed", "params"], env=env, capture_output=True, text=True, check=True
+    ).stdout
     assert "pickup" in listing and "nearest (pickup)" in listing
     exp = tmp_path / "exp.yaml"
-    exp.write_text("run: {seed: 1, duration: 40}\nscenario: {kind: pickup, items: 4}\n"
-                   "agents: {count: 2, max_speed: 3.0}\nallocator: {name: nearest}\n")
+    exp.write_text(
+        "run: {seed: 1, duration: 40}\nscenario: {kind: pickup, items: 4}\n"
+        "agents: {count: 2, max_speed: 3.0}\nallocator: {name: nearest}\n"
+    )
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "swarmbed", "run", str(exp), "--out", str(out), "--no-progress"],
-                          env=env, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "swarmbed", "run", str(exp), "--out", str(out), "--no-progress"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["scenario_kind"] == "pickup" and summary["items"] == 4

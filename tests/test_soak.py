@@ -91,18 +91,30 @@ def test_durations_and_chaos_files_are_checked_with_clear_errors(tmp_path):
     bad.write_text("events:\n  - action: melt_cpu\n    at: [3]\n")
     with pytest.raises(ChaosError, match=r"events\.0\.action"):
         load_chaos(bad)
-    out = subprocess.run([sys.executable, "-m", "swarmbed", "soak", str(SOAK), "--duration", "15s", "--chaos",
-                          str(bad)], capture_output=True, text=True, cwd=tmp_path)
+    out = subprocess.run(
+        [sys.executable, "-m", "swarmbed", "soak", str(SOAK), "--duration", "15s", "--chaos", str(bad)],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
     assert out.returncode == 2 and "melt_cpu" not in out.stdout and "action" in out.stderr
 
 
 def test_faults_are_scheduled_only_where_their_window_ends_in_the_run_and_one_cut_short_is_no_breach(tmp_path):
     """A stop or a radio change still in force at the end tests nothing: it is not started. A kill
     moments before the end whose restart could not be seen is logged as cut short, not unresolved."""
+
     def plan(duration: float) -> ChaosPlan:
-        return ChaosPlan.model_validate({"seed": 4, "events": [
-            {"action": "rate_cap", "every": 10, "for": duration, "rate": 50},
-            {"action": "stop_agent", "at": [5, 95], "for": 2}]})
+        return ChaosPlan.model_validate(
+            {
+                "seed": 4,
+                "events": [
+                    {"action": "rate_cap", "every": 10, "for": duration, "rate": 50},
+                    {"action": "stop_agent", "at": [5, 95], "for": 2},
+                ],
+            }
+        )
+
     short, long = Chaos(plan(1), 100, 0).schedule(), Chaos(plan(30), 100, 0).schedule()
     assert all(d.at + d.event.duration <= 100 for d in short + long)
     assert [d.at for d in short if d.event.action == "stop_agent"] == [5, 95]
@@ -113,8 +125,20 @@ def test_faults_are_scheduled_only_where_their_window_ends_in_the_run_and_one_cu
     chaos.run = SimpleNamespace(coordinator=SimpleNamespace(restart_log=[], lost={}))
     chaos.table = RowFile(tmp_path / "chaos.csv", CHAOS_COLUMNS, chunk_rows=1)
     for give_up in (time.monotonic() + 20, time.monotonic() - 1):
-        chaos._pending.append((give_up, {"wall_s": 99.0, "tick": 7, "action": "kill_agent", "target": 3,
-                                         "detail": "SIGKILL", "kind": "kill", "agent": 3}))
+        chaos._pending.append(
+            (
+                give_up,
+                {
+                    "wall_s": 99.0,
+                    "tick": 7,
+                    "action": "kill_agent",
+                    "target": 3,
+                    "detail": "SIGKILL",
+                    "kind": "kill",
+                    "agent": 3,
+                },
+            )
+        )
     chaos._resolve(final=True)
     assert [row[-1] for row in chaos.rows] == [CUT_SHORT, "unresolved: no ending within 30 s"]
     rows = [dict(zip(CHAOS_COLUMNS, row)) for row in chaos.rows]
@@ -125,16 +149,21 @@ def test_faults_are_scheduled_only_where_their_window_ends_in_the_run_and_one_cu
 def chaos_soak(tmp_path_factory):
     """Kills (each agent restarted from its checkpoint), a stop, a loss burst and a rate cap, in a
     60-second soak of 8 agents."""
-    plan = ChaosPlan.model_validate({"events": [
-        {"action": "kill_agent", "at": [8, 22, 38]},
-        {"action": "stop_agent", "at": [15], "for": 1.5},
-        {"action": "loss_burst", "at": [28], "for": 5, "loss": 0.6},
-        {"action": "rate_cap", "at": [46], "for": 4, "rate": 30},
-    ]})
+    plan = ChaosPlan.model_validate(
+        {
+            "events": [
+                {"action": "kill_agent", "at": [8, 22, 38]},
+                {"action": "stop_agent", "at": [15], "for": 1.5},
+                {"action": "loss_burst", "at": [28], "for": 5, "loss": 0.6},
+                {"action": "rate_cap", "at": [46], "for": 4, "rate": 30},
+            ]
+        }
+    )
     out = tmp_path_factory.mktemp("chaos") / "soak"
     # checkpoints every 100 ticks: the first kill (8 s in) finds one even on a loaded machine
-    return out, soak(experiment("agents.count=8", "run.snapshot_every=100", base=SOAK), out, 60, plan, interval=1.0,
-                     limits=SHORT)
+    return out, soak(
+        experiment("agents.count=8", "run.snapshot_every=100", base=SOAK), out, 60, plan, interval=1.0, limits=SHORT
+    )
 
 
 def test_a_minute_of_chaos_is_survived_accounted_and_judged(chaos_soak, tmp_path):
@@ -216,8 +245,15 @@ CHATTY = textwrap.dedent('''
 def test_process_logs_rotate_at_their_size_keeping_their_backups(tmp_path):
     plugin = tmp_path / "chatty.py"
     plugin.write_text(CHATTY)
-    exp = experiment(f"allocator={{name: '{plugin}:Chatty'}}", "agents.count=2", "run.stop_when_done=false",
-                     "run.duration=1000", "run.dt=1", "run.log_max_mb=1", "run.log_backups=2")
+    exp = experiment(
+        f"allocator={{name: '{plugin}:Chatty'}}",
+        "agents.count=2",
+        "run.stop_when_done=false",
+        "run.duration=1000",
+        "run.dt=1",
+        "run.log_max_mb=1",
+        "run.log_backups=2",
+    )
     run_experiment(exp, tmp_path / "run", progress=False)
     logs = tmp_path / "run" / "logs"
     for agent in (0, 1):
@@ -231,10 +267,24 @@ def test_process_logs_rotate_at_their_size_keeping_their_backups(tmp_path):
 
 def test_a_killed_soak_leaves_files_that_parse(tmp_path):
     out = tmp_path / "soak"
-    cmd = [sys.executable, "-m", "swarmbed", "soak", str(SOAK), "--duration", "10m", "--out", str(out),
-           "--interval", "0.5", "--set", "agents.count=4"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "swarmbed",
+        "soak",
+        str(SOAK),
+        "--duration",
+        "10m",
+        "--out",
+        str(out),
+        "--interval",
+        "0.5",
+        "--set",
+        "agents.count=4",
+    ]
     soak_proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 90
+
     def rows(name: str) -> int:
         part = out / (name + ".part")
         return len(part.read_text().splitlines()) - 1 if part.exists() else 0
@@ -252,8 +302,11 @@ def test_a_killed_soak_leaves_files_that_parse(tmp_path):
     assert not (out / "summary.json").exists() and not (out / VERDICT).exists()
     assert "No verdict" in report(out, tmp_path / "killed.html").read_text()  # reported from its .part files
     # its private credentials folder outlived it; the next run's launcher removes it, and no live run's
-    left = [f for f in Path(tempfile.gettempdir()).glob("swarmbed-*-*")
-            if (f / OWNER).exists() and json.loads((f / OWNER).read_text())["pid"] == soak_proc.pid]
+    left = [
+        f
+        for f in Path(tempfile.gettempdir()).glob("swarmbed-*-*")
+        if (f / OWNER).exists() and json.loads((f / OWNER).read_text())["pid"] == soak_proc.pid
+    ]
     assert len(left) <= 1  # another launcher on this machine (a test beside this one) may have cleared it
     live = RunAccess(Keys("live"), [0])  # a new run's launcher clears what dead launchers left
     try:
@@ -269,7 +322,8 @@ def test_a_run_that_stops_keeps_its_rows_as_partial_files(tmp_path):
     from swarmbed.experiments.launch.runner import run_experiment
 
     plugin = tmp_path / "boom.py"
-    plugin.write_text(textwrap.dedent('''
+    plugin.write_text(
+        textwrap.dedent("""
         from swarmbed.plugins.base import Allocator
 
         class Boom(Allocator):
@@ -277,7 +331,8 @@ def test_a_run_that_stops_keeps_its_rows_as_partial_files(tmp_path):
                 if view.tick == 30 and self.agent_id == 1:
                     raise RuntimeError("boom")
                 return None
-    '''))
+    """)
+    )
     out = tmp_path / "run"
     with pytest.raises(RunError, match="boom"):
         run_experiment(experiment(f"allocator={{name: '{plugin}:Boom'}}"), out, progress=False)
@@ -294,8 +349,9 @@ def test_a_killed_agent_is_lost_or_restarted_and_copies_to_it_are_booked(policy,
     receiver_dead); restart (no checkpoints here) starts it fresh before the next tick (copies
     routed while the proxy saw it gone are receiver_dead: none, if it came back first)."""
     plan = ChaosPlan.model_validate({"events": [{"action": "kill_agent", "at": [3], "agents": [2]}]})
-    exp = experiment("agents.count=5", "allocator={name: noop, peers: 4}", "run.stop_when_done=false",
-                     f"run.on_agent_loss={policy}")
+    exp = experiment(
+        "agents.count=5", "allocator={name: noop, peers: 4}", "run.stop_when_done=false", f"run.on_agent_loss={policy}"
+    )
     v = soak(exp, tmp_path / "soak", 10, plan, interval=1.0, limits=SHORT)
     assert v["passed"], v["breaches"]
     outcome = v["faults"][0]["outcome"]
@@ -315,8 +371,14 @@ def test_on_the_real_time_clock_a_stopped_agent_misses_ticks_and_the_soak_says_h
     """SIGSTOP for 1.5 s at 10 ticks per second: the agent misses about 15 ticks (booked late), the
     run's clock goes on, and the fault's outcome counts them."""
     plan = ChaosPlan.model_validate({"events": [{"action": "stop_agent", "at": [3], "for": 1.5, "agents": [1]}]})
-    exp = experiment("agents.count=4", "allocator={name: noop, peers: 3}", "run.stop_when_done=false",
-                     "run.clock=realtime", "run.dt=1", "run.speed=10")
+    exp = experiment(
+        "agents.count=4",
+        "allocator={name: noop, peers: 3}",
+        "run.stop_when_done=false",
+        "run.clock=realtime",
+        "run.dt=1",
+        "run.speed=10",
+    )
     v = soak(exp, tmp_path / "soak", 8, plan, interval=1.0, limits=SHORT)
     assert v["passed"], v["breaches"]
     late = int(v["faults"][0]["outcome"].split(", ")[1].split()[0])
@@ -332,8 +394,9 @@ def test_host_daemons_on_this_machine_and_their_agents_are_watched(lab, tmp_path
     """Agents placed on a stand-in host (a network namespace with its own daemon) are sampled
     under their host's name, and so is the daemon."""
     lab.add_host("h1")
-    exp = experiment("agents.count=4", "allocator={name: noop, peers: 2}", "run.stop_when_done=false",
-                     "placement={h1: '0-1'}")
+    exp = experiment(
+        "agents.count=4", "allocator={name: noop, peers: 2}", "run.stop_when_done=false", "placement={h1: '0-1'}"
+    )
     v = soak(exp, tmp_path / "soak", 8, interval=0.5, limits=SHORT, listen=[lab.hub], admit=lab.admitted)
     assert v["passed"], v["breaches"]
     procs = pd.read_csv(tmp_path / "soak" / PROCESSES)
@@ -345,11 +408,11 @@ def test_a_host_cut_off_for_a_window_stalls_the_ticks_and_its_agents_come_back(l
     """A stand-in host's links go down for 3 s (within Zenoh's 10 s lease): lock-step waits for
     its agents, the links come back, every agent keeps its session and the run goes on."""
     lab.add_host("h1")
-    exp = experiment("agents.count=4", "allocator={name: noop, peers: 3}", "run.stop_when_done=false",
-                     "placement={h1: '0-1'}")
+    exp = experiment(
+        "agents.count=4", "allocator={name: noop, peers: 3}", "run.stop_when_done=false", "placement={h1: '0-1'}"
+    )
     plan = ChaosPlan.model_validate({"events": [{"action": "cut_host", "at": [2], "for": 3}]})
-    v = soak(exp, tmp_path / "soak", 10, chaos=plan, interval=0.5, limits=SHORT, listen=[lab.hub],
-             admit=lab.admitted)
+    v = soak(exp, tmp_path / "soak", 10, chaos=plan, interval=0.5, limits=SHORT, listen=[lab.hub], admit=lab.admitted)
     assert v["passed"], v["breaches"]
     (fault,) = v["faults"]
     assert (fault["action"], fault["target"]) == ("cut_host", "h1")
@@ -364,13 +427,19 @@ def test_a_restart_that_finds_its_host_away_is_tried_again_once_the_host_is_back
     """A 20 s cut outlasts Zenoh's lease: the host's two agents are lost. The first tries to start
     them find the host away and fail; later tries, after the cut, bring both back."""
     lab.add_host("h1")
-    exp = experiment("agents.count=4", "allocator={name: noop, peers: 3}", "run.stop_when_done=false",
-                     "placement={h1: '0-1'}", "run.on_agent_loss=restart", "run.restart_attempts=4",
-                     "run.restart_backoff=2", "run.tick_timeout=30")
+    exp = experiment(
+        "agents.count=4",
+        "allocator={name: noop, peers: 3}",
+        "run.stop_when_done=false",
+        "placement={h1: '0-1'}",
+        "run.on_agent_loss=restart",
+        "run.restart_attempts=4",
+        "run.restart_backoff=2",
+        "run.tick_timeout=30",
+    )
     plan = ChaosPlan.model_validate({"events": [{"action": "cut_host", "at": [2], "for": 20}]})
     limits = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=30.0)
-    v = soak(exp, tmp_path / "soak", 45, chaos=plan, interval=1.0, limits=limits, listen=[lab.hub],
-             admit=lab.admitted)
+    v = soak(exp, tmp_path / "soak", 45, chaos=plan, interval=1.0, limits=limits, listen=[lab.hub], admit=lab.admitted)
     assert v["passed"], v["breaches"]
     restarts = pd.read_csv(tmp_path / "soak" / "restarts.csv")
     assert "retrying" in set(restarts["outcome"]) and "failed" not in set(restarts["outcome"]), restarts

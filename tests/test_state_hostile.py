@@ -43,17 +43,19 @@ def hostile_payloads(canary) -> dict[str, bytes]:
         "enum walks to os.system": crafted(ext(st.EXT_ENUM, ["swarmbed.wire.lifecycle:os.system", cmd])),
         "enum walks from a prefix module": crafted(ext(st.EXT_ENUM, ["swarmbedx:system", cmd])),
         "enum names subprocess": crafted(ext(st.EXT_ENUM, ["subprocess:getoutput", cmd])),
-        "enum names a declared module's import": crafted(ext(st.EXT_ENUM, ["swarmbed.wire.state:msgpack.unpackb",
-                                                                          b"\x00"])),
+        "enum names a declared module's import": crafted(
+            ext(st.EXT_ENUM, ["swarmbed.wire.state:msgpack.unpackb", b"\x00"])
+        ),
         # the object path: a class whose __new__ or attribute setting would do work
         "object names subprocess.Popen": crafted(ext(st.EXT_OBJECT, ["subprocess:Popen", {"args": cmd}])),
-        "object walks attributes": crafted(ext(st.EXT_OBJECT, ["swarmbed.agent_runtime.view:np.random.Generator",
-                                                                {}])),
+        "object walks attributes": crafted(ext(st.EXT_OBJECT, ["swarmbed.agent_runtime.view:np.random.Generator", {}])),
         "object names a builtin": crafted(ext(st.EXT_OBJECT, ["builtins:eval", {}])),
         "named tuple of a declared type with extra fields": crafted(
-            ext(st.EXT_OBJECT, ["swarmbed.agent_runtime.view:TaskInfo", {"id": 1, "__class__": 2}])),
+            ext(st.EXT_OBJECT, ["swarmbed.agent_runtime.view:TaskInfo", {"id": 1, "__class__": 2}])
+        ),
         "dunder attribute on a declared class": crafted(
-            ext(st.EXT_OBJECT, ["swarmbed.plugins.taskbook:TaskBook", {"__class__": 1}])),
+            ext(st.EXT_OBJECT, ["swarmbed.plugins.taskbook:TaskBook", {"__class__": 1}])
+        ),
         "non-string attribute name": crafted(ext(st.EXT_OBJECT, ["swarmbed.plugins.taskbook:TaskBook", {1: 2}])),
         "an enum as an object": crafted(ext(st.EXT_OBJECT, ["swarmbed.agent_runtime.bt.status:Status", {}])),
         "a plain class as an enum": crafted(ext(st.EXT_ENUM, ["swarmbed.plugins.taskbook:TaskBook", 1])),
@@ -113,8 +115,17 @@ class Mood(enum.Enum):
 
 def test_declared_types_round_trip_and_undeclared_ones_are_refused_by_name():
     rng = np.random.default_rng(3)
-    value = {"d": Declared(), "p": Point(1.0, 2.0), "m": Mood.BUSY, "rng": rng, "a": np.arange(3), "t": (1, 2),
-             "big": 2**70, "s": {1, 2}, "f": frozenset({3})}
+    value = {
+        "d": Declared(),
+        "p": Point(1.0, 2.0),
+        "m": Mood.BUSY,
+        "rng": rng,
+        "a": np.arange(3),
+        "t": (1, 2),
+        "big": 2**70,
+        "s": {1, 2},
+        "f": frozenset({3}),
+    }
     back = unpack_state(pack_state(value))
     assert type(back["d"]) is Declared and back["d"].x == 1
     assert back["p"] == Point(1.0, 2.0) and back["m"] is Mood.BUSY and back["big"] == 2**70
@@ -133,6 +144,7 @@ def test_state_type_refuses_local_classes_and_two_classes_under_one_name():
     def local():
         class Inner:
             pass
+
         return Inner
 
     with pytest.raises(TypeError, match="inside a function"):

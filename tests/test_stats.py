@@ -12,10 +12,12 @@ from tests.conftest import ROOT
 
 def test_anova_dunnett_and_cohens_d_find_the_shifted_group():
     rng = np.random.default_rng(0)
-    df = pd.DataFrame({
-        "allocator": ["control"] * 40 + ["same"] * 40 + ["better"] * 40,
-        "rescued": np.concatenate([rng.normal(100, 5, 40), rng.normal(100, 5, 40), rng.normal(110, 5, 40)]),
-    })
+    df = pd.DataFrame(
+        {
+            "allocator": ["control"] * 40 + ["same"] * 40 + ["better"] * 40,
+            "rescued": np.concatenate([rng.normal(100, 5, 40), rng.normal(100, 5, 40), rng.normal(110, 5, 40)]),
+        }
+    )
     table = compare(df, "allocator", ["rescued"], control="control").set_index("strategy")
     assert table.loc["better", "anova_p"] < 1e-6
     assert table.loc["better", "dunnett_p"] < 1e-6 and table.loc["same", "dunnett_p"] > 0.05
@@ -36,17 +38,25 @@ def test_sar_analysis_of_two_sweeps(tmp_path):
     for victims in (10, 20):  # the second leaves the base's victim count as it is (20)
         spec = tmp_path / f"v{victims}.yaml"
         setting = f"set: {{scenario.victims: {victims}}}\n" if victims == 10 else ""
-        spec.write_text(f"name: v{victims}\nbase: {base}\nruns: 2\n{setting}"
-                        "grid: {allocator.name: [tree, cbba-etc]}\n")
+        spec.write_text(
+            f"name: v{victims}\nbase: {base}\nruns: 2\n{setting}grid: {{allocator.name: [tree, cbba-etc]}}\n"
+        )
         extra = ["agents.count=4", "run.duration=15"] + ([] if victims == 10 else [f"scenario.victims={victims}"])
         sweep = load_sweep(spec, extra=extra)
         run_sweep(sweep, tmp_path / f"out{victims}", jobs=2, progress=False)
         dirs.append(tmp_path / f"out{victims}")
     names = {p.name for p in analyze(dirs, control="cbba-etc")}
     # one rescued/expired figure per sweep: trials of different sweeps are not pooled in one bar
-    assert {"statistics.csv", "statistics.md", "fig_rescued_expired_v10.png", "fig_rescued_expired_v20.png",
-            "fig_boxplots.png",
-            "fig_rescued_vs_messages.png", "fig_messages_vs_victims.png", "fig_rescued_vs_victims.png"} <= names
+    assert {
+        "statistics.csv",
+        "statistics.md",
+        "fig_rescued_expired_v10.png",
+        "fig_rescued_expired_v20.png",
+        "fig_boxplots.png",
+        "fig_rescued_vs_messages.png",
+        "fig_messages_vs_victims.png",
+        "fig_rescued_vs_victims.png",
+    } <= names
     assert sorted(load(dirs).groupby("sweep")["scenario.victims"].unique().map(list).sum()) == [10, 20]
     for png in (n for n in names if n.endswith(".png")):  # vector copies for papers, the papers' names
         assert (dirs[0] / png).with_suffix(".pdf").stat().st_size > 0

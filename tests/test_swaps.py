@@ -25,10 +25,14 @@ def _swaps(run_dir):
         return list(csv.DictReader(f))
 
 
-@pytest.mark.parametrize("base, sets", [
-    (QUICKSTART, ["allocator.name=cbba", "run.duration=120", "run.stop_when_done=false"]),
-    (SAR, ["allocator.name=cbba-etc", "run.duration=30"]),
-], ids=["mtsr-cbba", "sar-cbba-etc"])
+@pytest.mark.parametrize(
+    "base, sets",
+    [
+        (QUICKSTART, ["allocator.name=cbba", "run.duration=120", "run.stop_when_done=false"]),
+        (SAR, ["allocator.name=cbba-etc", "run.duration=30"]),
+    ],
+    ids=["mtsr-cbba", "sar-cbba-etc"],
+)
 def test_swapped_agents_give_the_files_of_a_run_where_nothing_moved(tmp_path, base, sets):
     run_experiment(experiment(*sets, base=base), tmp_path / "still", progress=False)
     rng = np.random.default_rng(7)
@@ -48,21 +52,56 @@ def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path, operator):
 
     def ask(keys, endpoint):
         # The refused request goes first: the run may end soon after the good swap is done.
-        bad = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
-                              "--agent", "99", "--to", "local", *operator.args],
-                             capture_output=True, text=True, timeout=60)
+        bad = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "swarmbed",
+                "swap",
+                "--connect",
+                endpoint,
+                "--run",
+                keys.run_id,
+                "--agent",
+                "99",
+                "--to",
+                "local",
+                *operator.args,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         asked["bad"] = (bad.returncode, bad.stderr)
-        proc = subprocess.run([sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id,
-                               "--agent", "2", "--to", "local", *operator.args],
-                              capture_output=True, text=True, timeout=120)
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "swarmbed",
+                "swap",
+                "--connect",
+                endpoint,
+                "--run",
+                keys.run_id,
+                "--agent",
+                "2",
+                "--to",
+                "local",
+                *operator.args,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         asked["rc"], asked["out"], asked["err"] = proc.returncode, proc.stdout, proc.stderr
 
     def from_another_terminal(keys, endpoint):
         threads.append(threading.Thread(target=ask, args=(keys, endpoint)))
         threads[-1].start()
 
-    run_experiment(experiment(*sets), tmp_path / "moved", progress=False, on_ready=from_another_terminal,
-                   admit=[operator.identity])
+    run_experiment(
+        experiment(*sets), tmp_path / "moved", progress=False, on_ready=from_another_terminal, admit=[operator.identity]
+    )
     threads[0].join(timeout=60)
     assert asked["rc"] == 0, asked["err"]
     assert "swap of agent 2 from local to local before tick" in asked["out"] and ": ok," in asked["out"]

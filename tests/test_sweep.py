@@ -10,30 +10,32 @@ from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.views.analyze import analyze
 from tests.conftest import QUICKSTART
 
-BOOM = textwrap.dedent('''
+BOOM = textwrap.dedent("""
     from swarmbed.plugins.base import Allocator
 
     class Boom(Allocator):
         def decide(self, view):
             raise RuntimeError("always")
-''')
+""")
 
 
 @pytest.fixture(scope="module")
 def sweep_dir(tmp_path_factory):
     base = tmp_path_factory.mktemp("sweep")
     (base / "boom.py").write_text(BOOM)
-    (base / "sweep.yaml").write_text(textwrap.dedent(f"""
+    (base / "sweep.yaml").write_text(
+        textwrap.dedent(f"""
         name: small
         base: {QUICKSTART}
         seed: 3
         runs: 2
         scenarios:
           - {{name: fast, set: {{agents.count: 3}}}}
-          - {{name: broken, set: {{allocator: {{name: "{base / 'boom.py'}:Boom"}}}}}}
+          - {{name: broken, set: {{allocator: {{name: "{base / "boom.py"}:Boom"}}}}}}
         grid:
           network.range: [30, 60]
-    """))
+    """)
+    )
     sweep = load_sweep(base / "sweep.yaml", extra=["run.duration=150"])
     run_sweep(sweep, base / "out", jobs=2, progress=False)
     return base
@@ -134,8 +136,9 @@ def test_analyze_writes_tables_and_figures(sweep_dir):
     assert row["n"] == 2 and row["ci95_low"] <= row["mean"] <= row["ci95_high"]
     assert {"fig_distance_per_agent.png", "fig_work_per_agent.png"} <= names
     # the same sweep again rewrites the table: what analyze made of the old one goes with it
-    run_sweep(load_sweep(sweep_dir / "sweep.yaml", extra=["run.duration=150"]), sweep_dir / "out", jobs=2,
-              progress=False)
+    run_sweep(
+        load_sweep(sweep_dir / "sweep.yaml", extra=["run.duration=150"]), sweep_dir / "out", jobs=2, progress=False
+    )
     assert not list((sweep_dir / "out").glob("fig_*")) and not list((sweep_dir / "out").glob("scenario_summary.*"))
 
 
@@ -180,8 +183,24 @@ def test_ctrl_c_stops_a_sweep_at_once_and_the_same_command_resumes(tmp_path):
     import psutil
 
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "swarmbed", "sweep", str(QUICKSTART), "--runs", "6", "--jobs", "2", "--out", str(out),
-           "--no-progress", "--set", "run.duration=1500", "--set", "run.stop_when_done=false"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "swarmbed",
+        "sweep",
+        str(QUICKSTART),
+        "--runs",
+        "6",
+        "--jobs",
+        "2",
+        "--out",
+        str(out),
+        "--no-progress",
+        "--set",
+        "run.duration=1500",
+        "--set",
+        "run.stop_when_done=false",
+    ]
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     while not list(out.glob("*/run_*/summary.json")):

@@ -80,8 +80,9 @@ def test_slurm_executor_through_submitit_gives_the_local_bytes(sweep_file, local
 def test_dask_executor_on_a_local_cluster_gives_the_local_bytes(sweep_file, local_sweep):
     distributed = pytest.importorskip("distributed")
     out = sweep_file.parent / "dask"
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                                  resources={"cores": 2, "mem_gb": 4}) as cluster:
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, resources={"cores": 2, "mem_gb": 4}
+    ) as cluster:
         executor = executors.get("dask", scheduler=cluster.scheduler_address)
         table = run_sweep(load_sweep(sweep_file), out, progress=False, executor=executor)
         assert "sized by cores, mem_gb" in executor.describe()
@@ -115,8 +116,16 @@ def test_a_claim_is_exclusive_until_released_or_its_holder_dies(tmp_path):
     assert claims.holder(run) is None
     # a holder whose process is gone (same host) is stale at once; one on another host after stale_after
     dead = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
-    (run / claims.CLAIM).write_text(json.dumps({"host": claims.socket.gethostname(), "pid": dead.pid,
-                                                "started": psutil.Process(dead.pid).create_time(), "token": "t"}))
+    (run / claims.CLAIM).write_text(
+        json.dumps(
+            {
+                "host": claims.socket.gethostname(),
+                "pid": dead.pid,
+                "started": psutil.Process(dead.pid).create_time(),
+                "token": "t",
+            }
+        )
+    )
     assert claims.holder(run).alive()
     dead.kill()
     dead.wait()
@@ -165,8 +174,7 @@ def test_a_run_whose_worker_was_killed_is_redone_by_the_next_command(sweep_file,
     the runs not yet started still run, --status shows it interrupted, and the same command again
     redoes it alone."""
     out = tmp_path / "killed"
-    cmd = _sweep_cmd(sweep_file, out, "--jobs", "1", "--set", "run.duration=1500", "--set",
-                     "run.stop_when_done=false")
+    cmd = _sweep_cmd(sweep_file, out, "--jobs", "1", "--set", "run.duration=1500", "--set", "run.stop_when_done=false")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while not (victim := [d for d in out.glob("*/run_*") if under_way(d)]):
@@ -180,8 +188,9 @@ def test_a_run_whose_worker_was_killed_is_redone_by_the_next_command(sweep_file,
     table = status(out)
     assert table.loc[victim[0].parent.name, "interrupted"] == 1 and table["ok"].sum() == 3, table
     assert not (victim[0] / "summary.json").exists()
-    listed = subprocess.run([sys.executable, "-m", "swarmbed", "sweep", "--status", str(out)], capture_output=True,
-                            text=True, timeout=60)
+    listed = subprocess.run(
+        [sys.executable, "-m", "swarmbed", "sweep", "--status", str(out)], capture_output=True, text=True, timeout=60
+    )
     assert listed.returncode == 0 and "interrupted" in listed.stdout, listed
     done = {d: len(_attempts(d)) for d in out.glob("*/run_*") if d != victim[0]}
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=240)
@@ -215,8 +224,7 @@ def test_a_killed_sweep_process_takes_its_workers_and_their_runs_with_it(sweep_f
     import psutil
 
     out = tmp_path / "orphans"
-    cmd = _sweep_cmd(sweep_file, out, "--jobs", "2", "--set", "run.duration=1500", "--set",
-                     "run.stop_when_done=false")
+    cmd = _sweep_cmd(sweep_file, out, "--jobs", "2", "--set", "run.duration=1500", "--set", "run.stop_when_done=false")
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
     while not [d for d in out.glob("*/run_*") if under_way(d)]:

@@ -18,8 +18,13 @@ x509 = pytest.importorskip("cryptography.x509", reason="swarmbed certs needs the
 
 
 def certs(folder: Path, *machines: str) -> None:
-    subprocess.run([sys.executable, "-m", "swarmbed", "certs", str(folder), *machines], check=True,
-                   capture_output=True, text=True, timeout=60)
+    subprocess.run(
+        [sys.executable, "-m", "swarmbed", "certs", str(folder), *machines],
+        check=True,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
 
 
 def test_certs_make_a_ca_and_one_certificate_per_machine(tmp_path):
@@ -37,8 +42,12 @@ def test_certs_make_a_ca_and_one_certificate_per_machine(tmp_path):
     assert x509.load_pem_x509_certificate((tmp_path / "labpc3.pem").read_bytes()).issuer == ca.subject
     with pytest.raises(CredentialsError, match="nobody.pem"):
         tls_settings(tmp_path, "nobody")
-    bad = subprocess.run([sys.executable, "-m", "swarmbed", "certs", str(tmp_path), "no/slash"],
-                         capture_output=True, text=True, timeout=60)
+    bad = subprocess.run(
+        [sys.executable, "-m", "swarmbed", "certs", str(tmp_path), "no/slash"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert bad.returncode == 2 and "no/slash" in bad.stderr
 
 
@@ -49,20 +58,41 @@ def test_a_host_over_tls_gives_the_all_local_results_and_strangers_are_refused(t
     hub = free_loopback_endpoint().replace("tcp/", "tls/")
     host_id = Identity.new("host-h1", "host", host="h1")
     creds = write_credentials(tmp_path / "h1.credentials", host_id)
-    daemon = subprocess.Popen([sys.executable, "-m", "swarmbed", "host", "--name", "h1", "--connect", hub,
-                               "--tls", str(lab), "--credentials", str(creds), "--logs", str(tmp_path / "h1")],
-                              stdout=subprocess.DEVNULL, stderr=open(tmp_path / "host.log", "wb"))
+    daemon = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "swarmbed",
+            "host",
+            "--name",
+            "h1",
+            "--connect",
+            hub,
+            "--tls",
+            str(lab),
+            "--credentials",
+            str(creds),
+            "--logs",
+            str(tmp_path / "h1"),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=open(tmp_path / "host.log", "wb"),
+    )
     refused = {}
     # an admitted operator's valid credentials, the lab's CA trusted, but no certificate of its own:
     # only mutual TLS refuses it (the other strangers would be refused by the password check alone)
     insider = Identity.new("tester", "operator")
     insider_file = write_credentials(tmp_path / "insider.json", insider)
-    no_cert = {"transport/link/tls": {"root_ca_certificate": str((lab / "ca.pem").resolve()),
-                                      "verify_name_on_connect": True}}
+    no_cert = {
+        "transport/link/tls": {"root_ca_certificate": str((lab / "ca.pem").resolve()), "verify_name_on_connect": True}
+    }
 
     def strangers(keys, endpoint):
-        for name, settings, creds in (("foreign CA", tls_settings(elsewhere, "intruder"), None), ("plain", None, None),
-                                      ("credentials, no certificate", no_cert, str(insider_file))):
+        for name, settings, creds in (
+            ("foreign CA", tls_settings(elsewhere, "intruder"), None),
+            ("plain", None, None),
+            ("credentials, no certificate", no_cert, str(insider_file)),
+        ):
             target = hub if settings else hub.replace("tls/", "tcp/")
             try:
                 zenoh.open(zenoh_config("client", [target], credentials=creds, settings=settings)).close()
@@ -72,8 +102,15 @@ def test_a_host_over_tls_gives_the_all_local_results_and_strangers_are_refused(t
 
     sets = ["agents.count=4", "allocator={name: cbba}", "run.duration=120", "run.stop_when_done=false"]
     try:
-        run_experiment(experiment(*sets, "placement={h1: '1-2'}"), tmp_path / "tls", progress=False, listen=[hub],
-                       tls=tls_settings(lab, "hub"), admit=[host_id, insider], on_ready=strangers)
+        run_experiment(
+            experiment(*sets, "placement={h1: '1-2'}"),
+            tmp_path / "tls",
+            progress=False,
+            listen=[hub],
+            tls=tls_settings(lab, "hub"),
+            admit=[host_id, insider],
+            on_ready=strangers,
+        )
     finally:
         daemon.send_signal(signal.SIGTERM)
         daemon.wait(timeout=20)

@@ -21,8 +21,7 @@ ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
 
 def _run_in_background(tmp_path, endpoint, results, operator):
     exp = experiment("agents.count=6", "run.stop_when_done=false", "run.duration=2500", "run.seed=9")
-    results["run"] = run_experiment(exp, tmp_path / "run", progress=False, listen=[endpoint],
-                                    admit=[operator.identity])
+    results["run"] = run_experiment(exp, tmp_path / "run", progress=False, listen=[endpoint], admit=[operator.identity])
 
 
 def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(tmp_path, operator):
@@ -32,11 +31,26 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
     runner.start()
     main_fd, child_fd = pty.openpty()
     fcntl.ioctl(child_fd, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 140, 0, 0))
-    watcher = subprocess.Popen([sys.executable, "-m", "swarmbed", "watch", "--connect", endpoint, "--wait", "30",
-                                *operator.args,
-                                "--map", str(tmp_path / "map.html")],
-                               stdin=child_fd, stdout=child_fd, stderr=child_fd, close_fds=True,
-                               env={**os.environ, "TERM": "xterm-256color", "COLUMNS": "140", "LINES": "40"})
+    watcher = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "swarmbed",
+            "watch",
+            "--connect",
+            endpoint,
+            "--wait",
+            "30",
+            *operator.args,
+            "--map",
+            str(tmp_path / "map.html"),
+        ],
+        stdin=child_fd,
+        stdout=child_fd,
+        stderr=child_fd,
+        close_fds=True,
+        env={**os.environ, "TERM": "xterm-256color", "COLUMNS": "140", "LINES": "40"},
+    )
     os.close(child_fd)
     screen = b""
     deadline = time.monotonic() + 120

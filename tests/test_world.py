@@ -44,8 +44,13 @@ def test_agent_reaches_its_target_and_stops():
 
 
 def test_collaborative_work_adds_rates_and_never_overcounts():
-    exp = experiment("agents.count=3", "scenario.initial_tasks=1", "scenario.workload=[5, 5]",
-                     "scenario.task_positions=[[50, 50]]", "scenario.agent_positions=[[50, 50], [51, 50], [50, 51]]")
+    exp = experiment(
+        "agents.count=3",
+        "scenario.initial_tasks=1",
+        "scenario.workload=[5, 5]",
+        "scenario.task_positions=[[50, 50]]",
+        "scenario.agent_positions=[[50, 50], [51, 50], [50, 51]]",
+    )
     w = MTSRWorld(exp, np.random.default_rng(0))
     ticks = 0
     while not w.finished:
@@ -59,9 +64,14 @@ def test_collaborative_work_adds_rates_and_never_overcounts():
 def test_mission_time_is_when_the_last_task_was_done_even_if_the_run_goes_on():
     """stop_when_done: false keeps ticking after the last task; mission_time still says when every
     task was done (here at 2 s), not how long the run went on."""
-    exp = experiment("agents.count=3", "scenario.initial_tasks=1", "scenario.workload=[5, 5]",
-                     "scenario.task_positions=[[50, 50]]", "scenario.agent_positions=[[50, 50], [51, 50], [50, 51]]",
-                     "run.stop_when_done=false")
+    exp = experiment(
+        "agents.count=3",
+        "scenario.initial_tasks=1",
+        "scenario.workload=[5, 5]",
+        "scenario.task_positions=[[50, 50]]",
+        "scenario.agent_positions=[[50, 50], [51, 50], [50, 51]]",
+        "run.stop_when_done=false",
+    )
     w = MTSRWorld(exp, np.random.default_rng(0))
     for _ in range(10):
         w.apply({i: ["goto_task", 0] for i in range(3)})
@@ -100,8 +110,16 @@ def test_sar_actions_take_their_duration_in_seconds_whatever_the_tick():
     began, the robot rescues at once, and the victim is saved rescue_time later; the same instant
     at every dt that divides the durations, and never before it at any dt."""
     for dt in (1.0, 0.5, 0.25, 0.1, 0.3):
-        w = _sar_world(dt, 0, "agents.count=1", "scenario.victims=1", "scenario.replace=false",
-                       "scenario.inspect_time=3", "scenario.rescue_time=2", "scenario.lifetime=1000")
+        w = _sar_world(
+            dt,
+            0,
+            "agents.count=1",
+            "scenario.victims=1",
+            "scenario.replace=false",
+            "scenario.inspect_time=3",
+            "scenario.rescue_time=2",
+            "scenario.lifetime=1000",
+        )
         w.vx[0], w.vy[0], w.vcolor[0] = w.ax[0], w.ay[0], w.color[0]
         seen = rescued_at = None
         while rescued_at is None and w.time < 20:
@@ -183,7 +201,11 @@ def test_within_agrees_with_hypot_to_the_last_bit():
     for reach in (300.0, 5.0, 1e-5, 0.0, math.inf):
         angle, scale = rng.uniform(0, 2 * math.pi, 5000), reach if math.isfinite(reach) else 1.0
         on_x, on_y = np.cos(angle) * scale, np.sin(angle) * scale  # on the edge, give or take rounding
-        cases = [(rng.uniform(-500, 500, (50, 80)), rng.uniform(-500, 500, (50, 80))), (on_x, on_y),
-                 (np.nextafter(on_x, math.inf), on_y), (np.nextafter(on_x, -math.inf), np.nextafter(on_y, -math.inf))]
+        cases = [
+            (rng.uniform(-500, 500, (50, 80)), rng.uniform(-500, 500, (50, 80))),
+            (on_x, on_y),
+            (np.nextafter(on_x, math.inf), on_y),
+            (np.nextafter(on_x, -math.inf), np.nextafter(on_y, -math.inf)),
+        ]
         for dx, dy in cases:
             assert np.array_equal(within(dx, dy, reach), np.hypot(dx, dy) <= reach), reach

@@ -70,6 +70,7 @@ def _is_int(x: Any) -> bool:
 
 # --- radio messages -------------------------------------------------------------------------
 
+
 @dataclass(frozen=True, slots=True)
 class RadioMessage:
     """One message an agent hands to the radio. ``dest`` is BROADCAST, one id, or a tuple of ids."""
@@ -169,8 +170,10 @@ def decode_netem_control(data: bytes) -> NetemControl:
     _expect(isinstance(msg, list) and len(msg) == 3, "netem control must be [from_tick, overrides, label]")
     tick, overrides, label = msg
     _expect(_is_int(tick) and tick >= 0, "from_tick must be a non-negative int")
-    _expect(isinstance(overrides, dict) and all(k in NETEM_OVERRIDABLE for k in overrides),
-            f"overrides must be a map of {', '.join(NETEM_OVERRIDABLE)}")
+    _expect(
+        isinstance(overrides, dict) and all(k in NETEM_OVERRIDABLE for k in overrides),
+        f"overrides must be a map of {', '.join(NETEM_OVERRIDABLE)}",
+    )
     _expect(isinstance(label, str), "label must be a string")
     return NetemControl(tick, overrides, label)
 
@@ -219,8 +222,10 @@ def decode_agent_in(data: bytes) -> TickIn | StopIn | ControlIn:
         _expect(len(msg) == 2 and isinstance(msg[1], str), "stop must be [1, reason]")
         return StopIn(msg[1])
     if msg[0] in CONTROLS:
-        _expect(len(msg) in (2, 3) and _is_int(msg[1]) and msg[1] >= 0,
-                "a swap order must be [tag, incarnation] or [tag, incarnation, ticket]")
+        _expect(
+            len(msg) in (2, 3) and _is_int(msg[1]) and msg[1] >= 0,
+            "a swap order must be [tag, incarnation] or [tag, incarnation, ticket]",
+        )
         ticket = msg[2] if len(msg) == 3 else b""
         _expect(isinstance(ticket, bytes) and len(ticket) <= 64, "a ticket must be at most 64 bytes")
         return ControlIn(CONTROLS[msg[0]], msg[1], ticket)
@@ -228,6 +233,7 @@ def decode_agent_in(data: bytes) -> TickIn | StopIn | ControlIn:
 
 
 # --- agent -> netem proxy -------------------------------------------------------------------
+
 
 @dataclass(frozen=True, slots=True)
 class AgentOut:
@@ -238,8 +244,9 @@ class AgentOut:
     events: dict[str, int]  # what the allocator counted this tick (e.g. negotiations)
 
 
-def encode_agent_out(tick: int, agent_id: int, action: list, messages: list[RadioMessage],
-                     events: dict[str, int] | None = None) -> bytes:
+def encode_agent_out(
+    tick: int, agent_id: int, action: list, messages: list[RadioMessage], events: dict[str, int] | None = None
+) -> bytes:
     return pack([tick, agent_id, action, [m.to_wire() for m in messages], events or {}])
 
 
@@ -251,12 +258,15 @@ def decode_agent_out(data: bytes) -> AgentOut:
     _expect(_is_int(agent_id) and agent_id >= 0, "agent id must be a non-negative int")
     _expect(isinstance(action, list) and bool(action) and isinstance(action[0], str), "action must be [name, ...]")
     _expect(isinstance(messages, list), "messages must be a list")
-    _expect(isinstance(events, dict) and all(isinstance(k, str) and _is_int(v) for k, v in events.items()),
-            "events must map names to counts")
+    _expect(
+        isinstance(events, dict) and all(isinstance(k, str) and _is_int(v) for k, v in events.items()),
+        "events must map names to counts",
+    )
     return AgentOut(tick, agent_id, action, [_radio_from_wire(m) for m in messages], events)
 
 
 # --- coordinator -> netem proxy -------------------------------------------------------------
+
 
 @dataclass(frozen=True, slots=True)
 class WorldSample:
@@ -281,8 +291,10 @@ def decode_world(data: bytes) -> WorldSample:
     msg = unpack(data)
     _expect(isinstance(msg, list) and len(msg) == 6, "world must be [tick, ids, xs, ys, alive_next, incarnations]")
     tick, ids, xs, ys, alive_next, incarnations = msg
-    _expect(isinstance(incarnations, dict) and all(_is_int(k) and _is_int(v) for k, v in incarnations.items()),
-            "incarnations must map agent ids to numbers")
+    _expect(
+        isinstance(incarnations, dict) and all(_is_int(k) and _is_int(v) for k, v in incarnations.items()),
+        "incarnations must map agent ids to numbers",
+    )
     _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
     _expect(all(isinstance(v, list) for v in (ids, xs, ys, alive_next)), "world fields must be lists")
     _expect(len(ids) == len(xs) == len(ys), "ids, xs and ys must have one entry per agent")
@@ -290,6 +302,7 @@ def decode_world(data: bytes) -> WorldSample:
 
 
 # --- netem proxy -> coordinator -------------------------------------------------------------
+
 
 @dataclass(frozen=True, slots=True)
 class NetemStep:
@@ -311,8 +324,10 @@ def encode_netem_step(s: NetemStep) -> bytes:
 
 def decode_netem_step(data: bytes) -> NetemStep:
     msg = unpack(data)
-    _expect(isinstance(msg, list) and len(msg) == 8,
-            "netem step must be [tick, actions, inboxes, counters, lost, events, drops, late]")
+    _expect(
+        isinstance(msg, list) and len(msg) == 8,
+        "netem step must be [tick, actions, inboxes, counters, lost, events, drops, late]",
+    )
     tick, actions, inboxes, counters, lost, events, drops, late = msg
     _expect(_is_int(tick) and isinstance(actions, dict) and isinstance(inboxes, dict), "bad netem step")
     _expect(isinstance(counters, list) and len(counters) == 5 and isinstance(lost, list), "bad netem step")
@@ -330,13 +345,16 @@ def encode_status(status: dict) -> bytes:
 def decode_status(data: bytes) -> dict:
     """The coordinator's progress sample (for ``swarmbed watch``): a map with ``STATUS_KEYS``."""
     msg = unpack(data)
-    _expect(isinstance(msg, dict) and all(k in msg for k in STATUS_KEYS),
-            f"status must be a map with {', '.join(STATUS_KEYS)}")
+    _expect(
+        isinstance(msg, dict) and all(k in msg for k in STATUS_KEYS),
+        f"status must be a map with {', '.join(STATUS_KEYS)}",
+    )
     _expect(isinstance(msg["row"], dict) and isinstance(msg["drops"], dict), "bad status")
     return msg
 
 
 # --- reports (maps: rare, and read by people too) ---------------------------------------------
+
 
 def encode_netem_stop(last_tick: int) -> bytes:
     """Coordinator -> proxy: the run is over after ``last_tick`` (-1: before any tick)."""
@@ -345,8 +363,9 @@ def encode_netem_stop(last_tick: int) -> bytes:
 
 def decode_netem_stop(data: bytes) -> int:
     msg = unpack(data)
-    _expect(isinstance(msg, list) and len(msg) == 1 and _is_int(msg[0]) and msg[0] >= -1,
-            "a stop order must be [last tick]")
+    _expect(
+        isinstance(msg, list) and len(msg) == 1 and _is_int(msg[0]) and msg[0] >= -1, "a stop order must be [last tick]"
+    )
     return msg[0]
 
 
@@ -357,8 +376,10 @@ def encode_handover(ticket: bytes, state: bytes) -> bytes:
 
 def decode_handover(data: bytes) -> tuple[bytes, bytes]:
     msg = unpack(data, MAX_AGENT_SAMPLE_BYTES)
-    _expect(isinstance(msg, list) and len(msg) == 2 and all(isinstance(m, bytes) for m in msg),
-            "a snapshot handover must be [ticket, state]")
+    _expect(
+        isinstance(msg, list) and len(msg) == 2 and all(isinstance(m, bytes) for m in msg),
+        "a snapshot handover must be [ticket, state]",
+    )
     return msg[0], msg[1]
 
 

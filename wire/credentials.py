@@ -73,12 +73,14 @@ def read_credentials(path: str | Path) -> Identity:
     except OSError as exc:
         raise CredentialsError(f"credentials file {path}: {exc.strerror}") from None
     if mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise CredentialsError(f"credentials file {path}: readable by others (mode {stat.S_IMODE(mode):o}); "
-                               f"run chmod 600 {path}")
+        raise CredentialsError(
+            f"credentials file {path}: readable by others (mode {stat.S_IMODE(mode):o}); run chmod 600 {path}"
+        )
     try:
         data = json.loads(text)
-        identity = Identity(str(data["user"]), str(data["password"]), str(data.get("role", "operator")),
-                            str(data.get("host", "")))
+        identity = Identity(
+            str(data["user"]), str(data["password"]), str(data.get("role", "operator")), str(data.get("host", ""))
+        )
     except (ValueError, KeyError, TypeError):
         raise CredentialsError(f"credentials file {path}: not a JSON object with user and password") from None
     return identity

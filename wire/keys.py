@@ -147,7 +147,7 @@ def alive_agent_of(key: str, root: str, n_agents: int) -> tuple[int, int]:
     ``0 <= id < n_agents``; anything else is a WireError."""
     parts = str(key).split("/")
     head = f"{root}/alive/agent".split("/")
-    if len(parts) != len(head) + 2 or parts[:len(head)] != head:
+    if len(parts) != len(head) + 2 or parts[: len(head)] != head:
         raise WireError(f"not an agent's token: {key!r}")
     agent, incarnation = agent_id_of(key), incarnation_of(key)
     if agent >= n_agents:

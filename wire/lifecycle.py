@@ -118,8 +118,9 @@ def setup_logging(max_mb: int | None, backups: int) -> None:
         logging.basicConfig(level=logging.INFO, format=LOG_FORMAT, stream=sys.stderr)
 
 
-def child_args(prog: str, description: str, add_args: Callable[[argparse.ArgumentParser], object],
-               argv: list[str] | None) -> argparse.Namespace:
+def child_args(
+    prog: str, description: str, add_args: Callable[[argparse.ArgumentParser], object], argv: list[str] | None
+) -> argparse.Namespace:
     """Parse a child process's command line (its own flags, ``--run-id``, ``--parent-pid``, the log
     rotation and the zenoh flags), tie it to its parent and set up logging to stderr."""
     from swarmbed.wire.session import add_zenoh_args

@@ -61,8 +61,9 @@ def hand_over(session: zenoh.Session, key: str, payload: bytes, timeout: float =
     lost; a query is answered only once the other side holds the payload."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        for reply in session.get(key, payload=payload, timeout=min(5.0, timeout),
-                                 congestion_control=zenoh.CongestionControl.BLOCK):
+        for reply in session.get(
+            key, payload=payload, timeout=min(5.0, timeout), congestion_control=zenoh.CongestionControl.BLOCK
+        ):
             if reply.ok is not None:
                 return True
         time.sleep(0.05)

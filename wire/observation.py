@@ -48,8 +48,11 @@ class Observation:
         return fields
 
     def to_wire(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"t": self.time, "me": [self.x, self.y, self.heading, self.speed],
-                               "tasks": encode_task_table(self.tasks)}
+        out: dict[str, Any] = {
+            "t": self.time,
+            "me": [self.x, self.y, self.heading, self.speed],
+            "tasks": encode_task_table(self.tasks),
+        }
         for name, _ in self.extra_fields():
             value = getattr(self, name)
             if value is not None:

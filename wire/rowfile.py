@@ -91,7 +91,7 @@ class RowFile:
             try:
                 view = memoryview(data)
                 while view:
-                    view = view[os.write(self._fd, view):]
+                    view = view[os.write(self._fd, view) :]
             except OSError as exc:
                 self.failed = True
                 os.ftruncate(self._fd, self._size)

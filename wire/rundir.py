@@ -29,9 +29,29 @@ PARTIAL_PREFIX = "partial_"
 
 #: what a run that starts again into the same folder removes first, and what one that fails keeps
 #: only as partial_<name> (deployment.json stays: it says where the failed run's processes were)
-RESULT_FILES = (SUMMARY, TIMESERIES, AGENTS, TIMINGS, TRANSPORT, TRAJECTORIES, MARKERS, LEDGER, RECEIVER_LEDGER,
-                DEPLOYMENT)
+RESULT_FILES = (
+    SUMMARY,
+    TIMESERIES,
+    AGENTS,
+    TIMINGS,
+    TRANSPORT,
+    TRAJECTORIES,
+    MARKERS,
+    LEDGER,
+    RECEIVER_LEDGER,
+    DEPLOYMENT,
+)
 
 #: the files that are identical for the same configuration and seed, wherever the agents ran
-REPRODUCIBLE = (CONFIG, PROVENANCE, SUMMARY, TIMESERIES, AGENTS, TRAJECTORIES, MARKERS, LEDGER, RECEIVER_LEDGER,
-                RESTARTS)
+REPRODUCIBLE = (
+    CONFIG,
+    PROVENANCE,
+    SUMMARY,
+    TIMESERIES,
+    AGENTS,
+    TRAJECTORIES,
+    MARKERS,
+    LEDGER,
+    RECEIVER_LEDGER,
+    RESTARTS,
+)

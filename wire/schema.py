@@ -34,25 +34,37 @@ class Strict(BaseModel):
 class RunSection(Strict):
     seed: int = Field(0, ge=0, description="run seed; every random source derives from it")
     clock: Literal["lockstep", "realtime"] = Field(
-        "lockstep", description="lockstep: a tick ends when every agent has acted; realtime: ticks follow the wall")
+        "lockstep", description="lockstep: a tick ends when every agent has acted; realtime: ticks follow the wall"
+    )
     speed: float = Field(1.0, gt=0, description="realtime: simulated seconds per wall second")
     deadline: float = Field(0.8, gt=0, le=1, description="realtime: part of a tick an agent has to answer in")
     on_late: Literal["stop", "hold"] = Field(
-        "stop", description="realtime: a late agent's robot stops for that tick, or holds its last command")
+        "stop", description="realtime: a late agent's robot stops for that tick, or holds its last command"
+    )
     dt: float = Field(1.0, gt=0, description="simulated seconds per tick")
     duration: float = Field(3000.0, gt=0, description="simulated seconds before the run stops")
     tick_timeout: float = Field(60.0, gt=0, description="wall seconds a tick may wait for a silent process")
     join_timeout: float = Field(120.0, gt=0, description="wall seconds to wait for every process to join")
     allow_agent_failures: bool = Field(False, description="the same as on_agent_loss: continue (kept for old files)")
     on_agent_loss: Literal["fail", "continue", "restart"] = Field(
-        "fail", description="when an agent's process dies: stop the run, go on without it, or start it again "
-                            "under its id (from its last checkpoint where there is one)")
-    snapshot_every: int = Field(0, ge=0, description="restart: ticks between the agents' checkpoints (0: none, "
-                                                     "a restarted agent starts fresh)")
-    restart_attempts: int = Field(3, ge=1, description="restart: tries to start a lost agent before it counts "
-                                                       "as lost (its host may be away for a while)")
-    restart_backoff: float = Field(2.0, gt=0, description="restart: wall seconds before the second try, doubling "
-                                                          "after each failed one; ticks go on meanwhile")
+        "fail",
+        description="when an agent's process dies: stop the run, go on without it, or start it again "
+        "under its id (from its last checkpoint where there is one)",
+    )
+    snapshot_every: int = Field(
+        0, ge=0, description="restart: ticks between the agents' checkpoints (0: none, a restarted agent starts fresh)"
+    )
+    restart_attempts: int = Field(
+        3,
+        ge=1,
+        description="restart: tries to start a lost agent before it counts as lost (its host may be away for a while)",
+    )
+    restart_backoff: float = Field(
+        2.0,
+        gt=0,
+        description="restart: wall seconds before the second try, doubling "
+        "after each failed one; ticks go on meanwhile",
+    )
     log_max_mb: int = Field(20, ge=1, description="each process's log file is rotated at this size (MB)")
     log_backups: int = Field(2, ge=0, description="rotated log files kept per process (name.log.1, ...)")
     record_every: int = Field(1, ge=1, description="ticks between time-series rows")
@@ -73,8 +85,9 @@ class AgentsSection(Strict):
     work_rate: float = Field(1.0, gt=0, description="workload done per second (MT-SR)")
     awareness_range: float = Field(300.0, gt=0, description="tasks within this distance are observed (MT-SR)")
     exploration_duration: float = Field(1000.0, gt=0, description="seconds spent exploring toward one waypoint")
-    behavior_tree: str = Field("default", description="'default' (the allocator's or scenario's tree) or a path to "
-                                                      "BT.CPP v4 XML")
+    behavior_tree: str = Field(
+        "default", description="'default' (the allocator's or scenario's tree) or a path to BT.CPP v4 XML"
+    )
 
 
 class ScenarioSection(BaseModel):
@@ -107,7 +120,8 @@ class NetworkSection(Strict):
     limit: int | None = Field(None, ge=1, description="messages that may wait behind the rate cap (tail drop)")
     latency: int = Field(0, ge=0, description="extra ticks of delay on top of the one-tick minimum")
     ledger: Literal["per_sender", "per_receiver"] = Field(
-        "per_sender", description="per_receiver adds network_ledger_receivers.parquet: one row per copy")
+        "per_sender", description="per_receiver adds network_ledger_receivers.parquet: one row per copy"
+    )
 
 
 HOST_NAME = r"^[A-Za-z0-9_.-]+$"
@@ -157,6 +171,7 @@ def carriers(exp: Experiment) -> dict[str, frozenset[int]]:
 def parse_ids(ids: str | int | list[int], n_agents: int, where: str = "placement") -> list[int]:
     """``"0-9,12"``, ``7`` or ``[1, 2]`` as a list of ids, each checked to lie in ``0..n_agents-1``
     before any range is built (``0-1000000000`` is refused, not materialised)."""
+
     def bounded(i: int) -> int:
         if not 0 <= i < n_agents:
             raise ValueError(f"{where}: agent {i} is outside 0..{n_agents - 1}")
@@ -181,19 +196,27 @@ def parse_ids(ids: str | int | list[int], n_agents: int, where: str = "placement
 
 
 class Experiment(Strict):
-    name: str = Field("experiment", pattern=SAFE_NAME,
-                      description="names the run directory and the progress bar (letters, digits, _ . + = -)")
+    name: str = Field(
+        "experiment",
+        pattern=SAFE_NAME,
+        description="names the run directory and the progress bar (letters, digits, _ . + = -)",
+    )
     # Where agents run: not part of the results (config.yaml leaves these out, deployment.json
     # records them), so the same experiment gives the same files wherever its agents run.
     placement: dict[str, str | int | list[int]] = Field(
-        default_factory=dict, exclude=True,
-        description="host name -> agent ids ('0-9,12', 7 or [1, 2]); the others run on the launching machine")
-    swaps: list[SwapEntry] = Field(default_factory=list, exclude=True,
-                                   description="scripted moves of agents between hosts before given ticks")
+        default_factory=dict,
+        exclude=True,
+        description="host name -> agent ids ('0-9,12', 7 or [1, 2]); the others run on the launching machine",
+    )
+    swaps: list[SwapEntry] = Field(
+        default_factory=list, exclude=True, description="scripted moves of agents between hosts before given ticks"
+    )
     may_carry: dict[str, str | int | list[int]] = Field(
-        default_factory=dict, exclude=True,
+        default_factory=dict,
+        exclude=True,
         description="host name -> more agent ids ('0-9,12') that a swap asked for during the run may move to it; "
-                    "a host identity may carry only these, the agents placed on it and those scripted swaps move to it")
+        "a host identity may carry only these, the agents placed on it and those scripted swaps move to it",
+    )
     run: RunSection = RunSection()
     scenario: ScenarioSection = ScenarioSection()
     agents: AgentsSection = AgentsSection()
@@ -207,8 +230,10 @@ class Experiment(Strict):
     @model_validator(mode="after")
     def _bounded(self) -> Experiment:
         if self.run.duration / self.run.dt > MAX_TICKS:
-            raise ValueError(f"run.duration / run.dt is {self.run.duration / self.run.dt:.3g} ticks, more than the "
-                             f"{MAX_TICKS:,} a run may have")
+            raise ValueError(
+                f"run.duration / run.dt is {self.run.duration / self.run.dt:.3g} ticks, more than the "
+                f"{MAX_TICKS:,} a run may have"
+            )
         return self
 
 
@@ -242,8 +267,14 @@ class NetemSpec(Strict):
 
 
 def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
-    return AgentSpec(seed=exp.run.seed, dt=exp.run.dt, agents=exp.agents, scenario=exp.scenario,
-                     allocator=exp.allocator, targets=targets)
+    return AgentSpec(
+        seed=exp.run.seed,
+        dt=exp.run.dt,
+        agents=exp.agents,
+        scenario=exp.scenario,
+        allocator=exp.allocator,
+        targets=targets,
+    )
 
 
 def netem_spec(exp: Experiment) -> NetemSpec:

@@ -65,32 +65,56 @@ def tls_settings(folder: str | Path, name: str) -> dict[str, object]:
     needed = [folder / "ca.pem", folder / f"{name}.pem", folder / f"{name}.key"]
     missing = [str(p) for p in needed if not p.exists()]
     if missing:
-        raise CredentialsError(f"TLS files missing: {', '.join(missing)} "
-                               f"(swarmbed certs {folder} {name}=ADDRESS makes them)")
+        raise CredentialsError(
+            f"TLS files missing: {', '.join(missing)} (swarmbed certs {folder} {name}=ADDRESS makes them)"
+        )
     ca, cert, key = (str(p.resolve()) for p in needed)
-    return {"transport/link/tls": {
-        "root_ca_certificate": ca, "enable_mtls": True, "verify_name_on_connect": True,
-        "listen_certificate": cert, "listen_private_key": key,
-        "connect_certificate": cert, "connect_private_key": key,
-    }}
+    return {
+        "transport/link/tls": {
+            "root_ca_certificate": ca,
+            "enable_mtls": True,
+            "verify_name_on_connect": True,
+            "listen_certificate": cert,
+            "listen_private_key": key,
+            "connect_certificate": cert,
+            "connect_private_key": key,
+        }
+    }
 
 
 def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client") -> None:
     """The flags every swarmbed process accepts, as zenoh-python's examples share them."""
     g = parser.add_argument_group("zenoh")
-    g.add_argument("--mode", choices=["client", "peer", "router"], default=default_mode,
-                   help=f"zenoh session mode (default: {default_mode})")
-    g.add_argument("--connect", "-e", action="append", default=[], metavar="ENDPOINT",
-                   help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
-    g.add_argument("--listen", "-l", action="append", default=[], metavar="ENDPOINT",
-                   help="endpoint to listen on (repeatable)")
+    g.add_argument(
+        "--mode",
+        choices=["client", "peer", "router"],
+        default=default_mode,
+        help=f"zenoh session mode (default: {default_mode})",
+    )
+    g.add_argument(
+        "--connect",
+        "-e",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
+    )
+    g.add_argument(
+        "--listen", "-l", action="append", default=[], metavar="ENDPOINT", help="endpoint to listen on (repeatable)"
+    )
     g.add_argument("--config", dest="zenoh_config", metavar="FILE", help="a zenoh JSON5 configuration file")
-    g.add_argument("--credentials", metavar="FILE",
-                   help="a credentials file (user and password, mode 600) for a hub that requires them")
+    g.add_argument(
+        "--credentials",
+        metavar="FILE",
+        help="a credentials file (user and password, mode 600) for a hub that requires them",
+    )
     g.add_argument("--tls", metavar="DIR", help="certificates made by swarmbed certs, for tls/HOST:PORT endpoints")
-    g.add_argument("--tls-name", metavar="NAME",
-                   help="whose certificate in --tls DIR this process presents (default: the host's --name, else "
-                        "this machine's host name)")
+    g.add_argument(
+        "--tls-name",
+        metavar="NAME",
+        help="whose certificate in --tls DIR this process presents (default: the host's --name, else "
+        "this machine's host name)",
+    )
 
 
 CHILD_CONNECT_TIMEOUT_S = 20.0
@@ -102,14 +126,27 @@ def open_from_args(args: argparse.Namespace) -> zenoh.Session:
     code 2 and a message that says where and why."""
     try:
         # a hub that hundreds of agents reach at once refuses some connections for a moment: retry
-        return zenoh.open(zenoh_config(args.mode, args.connect, args.listen, args.zenoh_config, args.credentials,
-                                       tls_from_args(args), connect_timeout_s=CHILD_CONNECT_TIMEOUT_S))
+        return zenoh.open(
+            zenoh_config(
+                args.mode,
+                args.connect,
+                args.listen,
+                args.zenoh_config,
+                args.credentials,
+                tls_from_args(args),
+                connect_timeout_s=CHILD_CONNECT_TIMEOUT_S,
+            )
+        )
     except CredentialsError as exc:
         logging.getLogger("swarmbed").error("%s", exc)
     except zenoh.ZError as exc:
         who = f"credentials of {args.credentials}" if args.credentials else "no credentials"
-        logging.getLogger("swarmbed").error("cannot open a session to %s with %s: %s", ", ".join(args.connect) or
-                                            "any endpoint", who, str(exc).split("  at ")[0])
+        logging.getLogger("swarmbed").error(
+            "cannot open a session to %s with %s: %s",
+            ", ".join(args.connect) or "any endpoint",
+            who,
+            str(exc).split("  at ")[0],
+        )
     raise SystemExit(2)
 
 

@@ -31,8 +31,9 @@ from swarmbed.wire.codec import pack
 EXT_TUPLE, EXT_SET, EXT_ARRAY, EXT_SCALAR, EXT_BIGINT, EXT_RNG, EXT_OBJECT, EXT_FROZENSET, EXT_ENUM = range(1, 10)
 
 #: numpy's bit generators, the only ones a snapshot may name (by their class name)
-BIT_GENERATORS: dict[str, type] = {c.__name__: c for c in (np.random.PCG64, np.random.PCG64DXSM, np.random.MT19937,
-                                                           np.random.Philox, np.random.SFC64)}
+BIT_GENERATORS: dict[str, type] = {
+    c.__name__: c for c in (np.random.PCG64, np.random.PCG64DXSM, np.random.MT19937, np.random.Philox, np.random.SFC64)
+}
 
 T = TypeVar("T", bound=type)
 _DECLARED: dict[str, type] = {}  # "module:qualname" -> the class
@@ -121,8 +122,10 @@ def pack_state(obj: Any) -> bytes:
         cls = type(value)
         ref = type_ref(cls)
         if _DECLARED.get(ref) is not cls:
-            raise StateError(f"{where}: cannot snapshot a {cls.__module__}.{cls.__qualname__}: not a declared state "
-                             "type (decorate the class with swarmbed.wire.state.state_type)")
+            raise StateError(
+                f"{where}: cannot snapshot a {cls.__module__}.{cls.__qualname__}: not a declared state "
+                "type (decorate the class with swarmbed.wire.state.state_type)"
+            )
         if isinstance(value, enum.Enum):
             return ext(EXT_ENUM, [ref, value.value], where)
         if dataclasses.is_dataclass(value):
@@ -188,8 +191,16 @@ def _enum(value: Any, where: str) -> enum.Enum:
     return cls(member)  # a lookup of a member by its value
 
 
-_DECODERS = {EXT_TUPLE: lambda v, w: tuple(v), EXT_SET: lambda v, w: set(v), EXT_FROZENSET: lambda v, w: frozenset(v),
-             EXT_ARRAY: _array, EXT_SCALAR: _scalar, EXT_RNG: _generator, EXT_OBJECT: _object, EXT_ENUM: _enum}
+_DECODERS = {
+    EXT_TUPLE: lambda v, w: tuple(v),
+    EXT_SET: lambda v, w: set(v),
+    EXT_FROZENSET: lambda v, w: frozenset(v),
+    EXT_ARRAY: _array,
+    EXT_SCALAR: _scalar,
+    EXT_RNG: _generator,
+    EXT_OBJECT: _object,
+    EXT_ENUM: _enum,
+}
 
 
 def unpack_state(data: bytes, max_bytes: int = 256 * 2**20) -> Any:

@@ -56,8 +56,9 @@ def load_target(target: str, base: type[T]) -> type[T]:
     except ImportError as exc:
         raise TargetError(f"cannot import {module_ref!r}: {exc}") from exc
     except SyntaxError as exc:  # the user's file: one line naming where, not a traceback through ours
-        raise TargetError(f"cannot import {module_ref!r}: {type(exc).__name__}: {exc.msg} "
-                          f"({exc.filename}, line {exc.lineno})") from None
+        raise TargetError(
+            f"cannot import {module_ref!r}: {type(exc).__name__}: {exc.msg} ({exc.filename}, line {exc.lineno})"
+        ) from None
     cls = getattr(module, cls_name, None)
     if not (isinstance(cls, type) and issubclass(cls, base)):
         raise TargetError(f"{target} is not a subclass of {base.__name__}")

@@ -4,15 +4,15 @@ it tick by tick against BehaviorTree.CPP itself."""
 
 from swarmbed.agent_runtime.bt.blackboard import Blackboard
 from swarmbed.agent_runtime.bt.node import (
-                                   BTError,
-                                   Condition,
-                                   InputPort,
-                                   NodeConfig,
-                                   OutputPort,
-                                   Port,
-                                   StatefulAction,
-                                   SyncAction,
-                                   TreeNode,
+    BTError,
+    Condition,
+    InputPort,
+    NodeConfig,
+    OutputPort,
+    Port,
+    StatefulAction,
+    SyncAction,
+    TreeNode,
 )
 from swarmbed.agent_runtime.bt.palette import palette_xml
 from swarmbed.agent_runtime.bt.registry import NodeRegistry
@@ -20,6 +20,19 @@ from swarmbed.agent_runtime.bt.status import Status
 from swarmbed.agent_runtime.bt.tree import Tree, load_tree
 
 __all__ = [
-    "Blackboard", "BTError", "Condition", "InputPort", "NodeConfig", "NodeRegistry", "OutputPort", "Port",
-    "StatefulAction", "Status", "SyncAction", "Tree", "TreeNode", "load_tree", "palette_xml",
+    "Blackboard",
+    "BTError",
+    "Condition",
+    "InputPort",
+    "NodeConfig",
+    "NodeRegistry",
+    "OutputPort",
+    "Port",
+    "StatefulAction",
+    "Status",
+    "SyncAction",
+    "Tree",
+    "TreeNode",
+    "load_tree",
+    "palette_xml",
 ]

@@ -15,8 +15,9 @@ _MISSING = object()
 
 
 class Blackboard:
-    def __init__(self, parent: Blackboard | None = None, remap: dict[str, str] | None = None,
-                 autoremap: bool = False) -> None:
+    def __init__(
+        self, parent: Blackboard | None = None, remap: dict[str, str] | None = None, autoremap: bool = False
+    ) -> None:
         self._store: dict[str, Any] = {}
         self.parent = parent
         self.remap = dict(remap or {})

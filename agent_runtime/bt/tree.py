@@ -179,8 +179,15 @@ class _Builder:
         return node
 
 
-def load_tree(source: str | Path, registry: NodeRegistry, *, text: str | None = None,
-              blackboard: Blackboard | None = None, context: Any = None, main: str | None = None) -> Tree:
+def load_tree(
+    source: str | Path,
+    registry: NodeRegistry,
+    *,
+    text: str | None = None,
+    blackboard: Blackboard | None = None,
+    context: Any = None,
+    main: str | None = None,
+) -> Tree:
     """Load a tree from a file (or from ``text``, with ``source`` naming it in errors)."""
     where = str(source)
     if text is None:
@@ -193,7 +200,7 @@ def load_tree(source: str | Path, registry: NodeRegistry, *, text: str | None = 
         raise BTError(f"{where}:{root.line}: the top element must be <root>, not <{root.tag}>")
     fmt = root.attrs.get("BTCPP_format")
     if fmt != "4":
-        raise BTError(f"{where}:{root.line}: <root BTCPP_format=\"4\"> required (found {fmt!r})")
+        raise BTError(f'{where}:{root.line}: <root BTCPP_format="4"> required (found {fmt!r})')
     trees: dict[str, _Element] = {}
     for el in root.children:
         if el.tag == "BehaviorTree":

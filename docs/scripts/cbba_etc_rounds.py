@@ -22,8 +22,10 @@ import pandas as pd  # noqa: E402
 
 from swarmbed.experiments.views.analyze import COLUMN_IN, STYLE  # noqa: E402
 
-LINE = re.compile(r"round t=(?P<t>[\d.]+) triggers=(?P<triggers>[\w,]*) Lc=(?P<lc>-?\d+) dLc=(?P<dlc>-?\d+) "
-                  r"interval=(?P<before>[\d.]+)->(?P<after>[\d.]+)")
+LINE = re.compile(
+    r"round t=(?P<t>[\d.]+) triggers=(?P<triggers>[\w,]*) Lc=(?P<lc>-?\d+) dLc=(?P<dlc>-?\d+) "
+    r"interval=(?P<before>[\d.]+)->(?P<after>[\d.]+)"
+)
 TRIGGERS = ("tr_init", "tr_delta_bid", "tr_conflict", "tr_fallback")
 MARKERS = {"tr_init": "o", "tr_delta_bid": "^", "tr_conflict": "s", "tr_fallback": "x"}
 
@@ -34,9 +36,17 @@ def rounds(run: Path) -> pd.DataFrame:
         agent = int(log.stem.split("_")[1])
         for m in LINE.finditer(log.read_text()):
             fired = set(m["triggers"].split(",")) - {""}
-            rows.append({"agent": agent, "time": float(m["t"]), "lc": int(m["lc"]), "dlc": int(m["dlc"]),
-                         "interval_before": float(m["before"]), "interval_after": float(m["after"]),
-                         **{t: t in fired for t in TRIGGERS}})
+            rows.append(
+                {
+                    "agent": agent,
+                    "time": float(m["t"]),
+                    "lc": int(m["lc"]),
+                    "dlc": int(m["dlc"]),
+                    "interval_before": float(m["before"]),
+                    "interval_after": float(m["after"]),
+                    **{t: t in fired for t in TRIGGERS},
+                }
+            )
     if not rows:
         raise SystemExit(f"{run}: no round lines in logs/agent_*.log (run with allocator.trace_rounds=true)")
     return pd.DataFrame(rows).sort_values(["agent", "time"], ignore_index=True)
@@ -56,16 +66,26 @@ def main() -> None:
         alone = (df[t] & (df[list(TRIGGERS)].sum(axis=1) == 1)).sum()
         print(f"  {t:<13} fired in {df[t].sum():5d} rounds ({100 * df[t].mean():5.1f} %), alone in {alone}")
     gaps = df.groupby("agent")["time"].diff().dropna()
-    print(f"  time between a robot's rounds: median {gaps.median():.1f} s, p10 {gaps.quantile(0.1):.1f} s, "
-          f"p90 {gaps.quantile(0.9):.1f} s; Lc: mean {df['lc'].mean():.2f}, max {df['lc'].max()}")
+    print(
+        f"  time between a robot's rounds: median {gaps.median():.1f} s, p10 {gaps.quantile(0.1):.1f} s, "
+        f"p90 {gaps.quantile(0.9):.1f} s; Lc: mean {df['lc'].mean():.2f}, max {df['lc'].max()}"
+    )
     one = df[df["agent"] == args.agent]
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.4))
         ax.step(one["time"], one["interval_after"], where="post", color="#D55E00", lw=1, label="I_adapt after round")
         for t, marker in MARKERS.items():
             hit = one[one[t]]
-            ax.scatter(hit["time"], hit["interval_before"], marker=marker, s=14, color="0.2", label=t,
-                       facecolors="none" if marker in "os^" else None, linewidths=0.8)
+            ax.scatter(
+                hit["time"],
+                hit["interval_before"],
+                marker=marker,
+                s=14,
+                color="0.2",
+                label=t,
+                facecolors="none" if marker in "os^" else None,
+                linewidths=0.8,
+            )
         ax.set_xlabel("time (s)")
         ax.set_ylabel("interval (s)")
         ax.set_ylim(0, one["interval_after"].max() * 1.15)

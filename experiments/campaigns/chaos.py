@@ -132,8 +132,9 @@ class Chaos:
     def __init__(self, plan: ChaosPlan, horizon_s: float, seed: int) -> None:
         self.plan = plan
         self.horizon_s = horizon_s
-        self.rng = np.random.default_rng(np.random.SeedSequence(plan.seed if plan.seed is not None else seed)
-                                         .spawn(1)[0])
+        self.rng = np.random.default_rng(
+            np.random.SeedSequence(plan.seed if plan.seed is not None else seed).spawn(1)[0]
+        )
         self.rows: list[list[Any]] = []  # every resolved event (also in chaos.csv)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -229,14 +230,16 @@ class Chaos:
             agent, pid = target
             if event.action == "kill_agent":
                 self._signal(pid, signal.SIGKILL)
-                self._pend(due, agent, f"SIGKILL pid {pid}", {"kind": "kill", "agent": agent,
-                                                               "tick": coord.last_tick})
+                self._pend(due, agent, f"SIGKILL pid {pid}", {"kind": "kill", "agent": agent, "tick": coord.last_tick})
                 return None
             self._signal(pid, signal.SIGSTOP)
             late_before = coord.late_ticks.get(agent, 0)
-            record = self._pend(due, agent, f"SIGSTOP pid {pid} for {event.duration:g} s",
-                                {"kind": "stop", "agent": agent, "tick": coord.last_tick, "late_before": late_before,
-                                 "ended": False})
+            record = self._pend(
+                due,
+                agent,
+                f"SIGSTOP pid {pid} for {event.duration:g} s",
+                {"kind": "stop", "agent": agent, "tick": coord.last_tick, "late_before": late_before, "ended": False},
+            )
             return {"pid": pid, "record": record}
         if event.action == "cut_host":
             return self._cut_host(due)
@@ -244,8 +247,12 @@ class Chaos:
         start = coord.last_tick + 2
         self._radio(NetemControl(start, overrides, event.action))
         detail = ", ".join(f"{k} {v:g}" for k, v in overrides.items()) + f" for {event.duration:g} s"
-        record = self._pend(due, "netem", detail, {"kind": "radio", "start_tick": start, "ended": False,
-                                                   "drops_start": dict(coord.drops_cum)})
+        record = self._pend(
+            due,
+            "netem",
+            detail,
+            {"kind": "radio", "start_tick": start, "ended": False, "drops_start": dict(coord.drops_cum)},
+        )
         return {"record": record}
 
     def _draw_agent(self, event: ChaosEvent) -> tuple[int, int] | None:
@@ -276,9 +283,18 @@ class Chaos:
         cut = netns.cut_off(ns)
         self._cut[host] = cut
         agents = sorted(a for a, h in coord.hosts.items() if h == host)
-        record = self._pend(due, host, f"{', '.join(cut.links)} of {ns} down for {due.event.duration:g} s",
-                            {"kind": "cut", "tick": coord.last_tick, "agents": agents, "ended": False,
-                             "restarts_before": len(coord.restart_log)})
+        record = self._pend(
+            due,
+            host,
+            f"{', '.join(cut.links)} of {ns} down for {due.event.duration:g} s",
+            {
+                "kind": "cut",
+                "tick": coord.last_tick,
+                "agents": agents,
+                "ended": False,
+                "restarts_before": len(coord.restart_log),
+            },
+        )
         return {"cut": cut, "record": record}
 
     def _signal(self, pid: int, sig: int) -> None:
@@ -296,8 +312,7 @@ class Chaos:
 
     # -- outcomes ------------------------------------------------------------------------------
     def _pend(self, due: _Due, target: Any, detail: str, state: dict[str, Any]) -> dict[str, Any]:
-        record = {"wall_s": round(due.at, 3), "action": due.event.action, "target": target, "detail": detail,
-                  **state}
+        record = {"wall_s": round(due.at, 3), "action": due.event.action, "target": target, "detail": detail, **state}
         self._pending.append((time.monotonic() + due.event.duration + RESOLVE_WITHIN, record))
         return record
 
@@ -306,7 +321,7 @@ class Chaos:
         coord = self.run.coordinator
         if coord.last_tick <= record["end_tick"] + 1 or any(a in coord.down for a in record["agents"]):
             return None
-        restarts = [r for r in coord.restart_log[record["restarts_before"]:] if r["agent"] in record["agents"]]
+        restarts = [r for r in coord.restart_log[record["restarts_before"] :] if r["agent"] in record["agents"]]
         ok = sorted({r["agent"] for r in restarts if r["outcome"] == "ok"})
         lost = sorted(a for a in record["agents"] if coord.lost.get(a, -1) >= record["tick"])
         went = f"ticks {record['tick']}-{record['end_tick']} during the cut"
@@ -315,12 +330,26 @@ class Chaos:
         return f"{went}; agents restarted: {ok or 'none'}; agents lost: {lost or 'none'}"
 
     def _record(self, due: _Due, target: Any, detail: str, outcome: str) -> None:
-        self._write({"wall_s": round(due.at, 3), "tick": self.run.coordinator.last_tick,
-                     "action": due.event.action, "target": target, "detail": detail}, outcome)
+        self._write(
+            {
+                "wall_s": round(due.at, 3),
+                "tick": self.run.coordinator.last_tick,
+                "action": due.event.action,
+                "target": target,
+                "detail": detail,
+            },
+            outcome,
+        )
 
     def _write(self, record: dict[str, Any], outcome: str) -> None:
-        row = [record["wall_s"], record.get("tick", record.get("start_tick", "")), record["action"],
-               record["target"], record["detail"], outcome]
+        row = [
+            record["wall_s"],
+            record.get("tick", record.get("start_tick", "")),
+            record["action"],
+            record["target"],
+            record["detail"],
+            outcome,
+        ]
         self.rows.append(row)
         self.table.write(row)
 

@@ -57,8 +57,9 @@ def holder(run_dir: Path) -> Holder | None:
     path = run_dir / CLAIM
     try:
         data = json.loads(path.read_text())
-        return Holder(str(data["host"]), int(data["pid"]), float(data["started"]), str(data["token"]),
-                      path.stat().st_mtime)
+        return Holder(
+            str(data["host"]), int(data["pid"]), float(data["started"]), str(data["token"]), path.stat().st_mtime
+        )
     except (OSError, ValueError, KeyError, TypeError):
         return None
 
@@ -80,8 +81,9 @@ class Claim:
         self.run_dir = run_dir
         self.token = token
         self._stop = threading.Event()
-        self._beat = threading.Thread(target=self._touch, args=(max(0.5, min(15.0, stale_after / 4)),),
-                                      daemon=True, name="claim-heartbeat")
+        self._beat = threading.Thread(
+            target=self._touch, args=(max(0.5, min(15.0, stale_after / 4)),), daemon=True, name="claim-heartbeat"
+        )
         self._beat.start()
 
     def _touch(self, every: float) -> None:
@@ -116,8 +118,14 @@ def take(run_dir: Path, stale_after: float = STALE_AFTER_S) -> Claim | Holder:
             return current
         token = secrets.token_hex(8)
         me = psutil.Process()
-        record = {"host": socket.gethostname(), "pid": me.pid, "started": me.create_time(), "token": token,
-                  "taken": time.time(), "took_over": current.describe() if current else None}
+        record = {
+            "host": socket.gethostname(),
+            "pid": me.pid,
+            "started": me.create_time(),
+            "token": token,
+            "taken": time.time(),
+            "took_over": current.describe() if current else None,
+        }
         tmp = run_dir / f"{CLAIM}.{token}"
         tmp.write_text(json.dumps(record))
         os.replace(tmp, run_dir / CLAIM)

@@ -51,9 +51,24 @@ PROCESSES = "soak_processes.csv"
 RUN = "soak_run.csv"
 VERDICT = "soak_verdict.json"
 PROCESS_COLUMNS = ["wall_s", "tick", "process", "kind", "pid", "rss_mb", "cpu_pct", "fds", "threads", "tcp"]
-RUN_COLUMNS = ["wall_s", "tick", "sim_s", "ticks_per_s", "slowest_tick_ms", "start_lag_ms", "messages_per_s",
-               "bytes_per_s", "copies", "delivered", "dropped", "in_flight", "agents_alive", "agents_down",
-               "agents_lost", "restarts"]
+RUN_COLUMNS = [
+    "wall_s",
+    "tick",
+    "sim_s",
+    "ticks_per_s",
+    "slowest_tick_ms",
+    "start_lag_ms",
+    "messages_per_s",
+    "bytes_per_s",
+    "copies",
+    "delivered",
+    "dropped",
+    "in_flight",
+    "agents_alive",
+    "agents_down",
+    "agents_lost",
+    "restarts",
+]
 UNBOUNDED_S = 1e9  # the simulated duration of a soak: it ends on the wall clock
 MIN_SAMPLES = 10  # a process sampled fewer times (or alive for less than a quarter of the soak) gets no slope
 
@@ -147,9 +162,18 @@ class Monitor:
                     proc = self._procs[pid] = psutil.Process(pid)
                     proc.cpu_percent(None)  # the first reading is a baseline
                 with proc.oneshot():
-                    row = [wall, tick, name, kind_of(name.split(".")[0]), pid,
-                           round(proc.memory_info().rss / 2**20, 3), proc.cpu_percent(None), proc.num_fds(),
-                           proc.num_threads(), len(proc.net_connections("tcp"))]
+                    row = [
+                        wall,
+                        tick,
+                        name,
+                        kind_of(name.split(".")[0]),
+                        pid,
+                        round(proc.memory_info().rss / 2**20, 3),
+                        proc.cpu_percent(None),
+                        proc.num_fds(),
+                        proc.num_threads(),
+                        len(proc.net_connections("tcp")),
+                    ]
             except (psutil.Error, OSError):
                 continue  # it exited between the listing and the reading
             self.processes.write(row)
@@ -159,11 +183,26 @@ class Monitor:
         lags = coord.start_lags[lag_index:]
         slowest, coord.slowest_in_interval = coord.slowest_in_interval, 0.0
         alive = int(np.count_nonzero(coord.world.alive))
-        self.counters.write([
-            wall, tick, round(coord.world.time, 6), round((tick - last_tick) / span, 3), round(1000 * slowest, 3),
-            round(1000 * max(lags), 3) if len(lags) else "", round((net[0] - last_net[0]) / span, 3),
-            round((net[1] - last_net[1]) / span, 3), net[2], net[3], net[4], net[2] - net[3] - net[4], alive,
-            len(coord.down), len(coord.lost), sum(r["outcome"] == "ok" for r in coord.restart_log)])
+        self.counters.write(
+            [
+                wall,
+                tick,
+                round(coord.world.time, 6),
+                round((tick - last_tick) / span, 3),
+                round(1000 * slowest, 3),
+                round(1000 * max(lags), 3) if len(lags) else "",
+                round((net[0] - last_net[0]) / span, 3),
+                round((net[1] - last_net[1]) / span, 3),
+                net[2],
+                net[3],
+                net[4],
+                net[2] - net[3] - net[4],
+                alive,
+                len(coord.down),
+                len(coord.lost),
+                sum(r["outcome"] == "ok" for r in coord.restart_log),
+            ]
+        )
         self._last = (now, tick, net, lag_index + len(lags))
         self.processes.flush()  # one sample, one chunk: a kill loses at most the sample under way
         self.counters.flush()
@@ -217,9 +256,13 @@ def rss_growth(t: np.ndarray, rss: np.ndarray, limits: Thresholds) -> dict[str, 
         judged = "too short to judge"
     else:
         judged = "steady"
-    return {"rss_mb_mean": round(mean, 2), "rss_slope_pct_h": round(pct, 2),
-            "rss_slope_low_pct_h": round(low * 3600 / mean * 100 if mean else 0.0, 2),
-            "rss_growth_mb": round(growth_mb, 2), "rss": judged}
+    return {
+        "rss_mb_mean": round(mean, 2),
+        "rss_slope_pct_h": round(pct, 2),
+        "rss_slope_low_pct_h": round(low * 3600 / mean * 100 if mean else 0.0, 2),
+        "rss_growth_mb": round(growth_mb, 2),
+        "rss": judged,
+    }
 
 
 def fault_breaches(faults: list[dict[str, Any]]) -> list[str]:
@@ -228,8 +271,14 @@ def fault_breaches(faults: list[dict[str, Any]]) -> list[str]:
     return [f"{f['action']} at {f['wall_s']} s: {f['outcome']}" for f in faults if str(f["outcome"]).startswith(bad)]
 
 
-def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summary: dict | None,
-            failure: str | None, slowest_tick: tuple[float, int]) -> dict[str, Any]:
+def verdict(
+    out_dir: Path,
+    limits: Thresholds,
+    chaos_rows: list[list[Any]],
+    summary: dict | None,
+    failure: str | None,
+    slowest_tick: tuple[float, int],
+) -> dict[str, Any]:
     """The soak's verdict from its files (see the module docstring)."""
     import pandas as pd
 
@@ -240,26 +289,52 @@ def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summ
     for name, life in procs.groupby("process"):
         first, last = float(life["wall_s"].min()), float(life["wall_s"].max())
         if len(life) < MIN_SAMPLES or last - first < end / 4:  # e.g. an agent killed early: no trend to read
-            per_process.append({"process": name, "kind": life["kind"].iloc[0], "samples": len(life),
-                                "short_lived": True, "rss_mb_last": float(life["rss_mb"].iloc[-1])})
+            per_process.append(
+                {
+                    "process": name,
+                    "kind": life["kind"].iloc[0],
+                    "samples": len(life),
+                    "short_lived": True,
+                    "rss_mb_last": float(life["rss_mb"].iloc[-1]),
+                }
+            )
             continue
         rows = life[life["wall_s"] >= (first + last) / 2]  # the second half of this process's life
         t, rss, fds = rows["wall_s"].to_numpy(float), rows["rss_mb"].to_numpy(float), rows["fds"].to_numpy(float)
         fd_slope = float(np.polyfit(t, fds, 1)[0]) * 3600 if len(t) >= 3 and np.ptp(t) > 0 else 0.0
-        per_process.append({"process": name, "kind": rows["kind"].iloc[0], "samples": len(rows),
-                            **rss_growth(t, rss, limits),
-                            "fd_growth_h": round(fd_slope, 2), "fds_last": int(fds[-1]) if len(fds) else 0})
+        per_process.append(
+            {
+                "process": name,
+                "kind": rows["kind"].iloc[0],
+                "samples": len(rows),
+                **rss_growth(t, rss, limits),
+                "fd_growth_h": round(fd_slope, 2),
+                "fds_last": int(fds[-1]) if len(fds) else 0,
+            }
+        )
     by_kind: dict[str, dict[str, Any]] = {}
     for p in per_process:
         if p.get("short_lived"):
             continue
-        worst = by_kind.setdefault(p["kind"], {"processes": 0, "rss_slope_pct_h": -math.inf, "fd_growth_h": -math.inf,
-                                              "rss_mb_peak": 0.0, "rss": "steady"})
+        worst = by_kind.setdefault(
+            p["kind"],
+            {
+                "processes": 0,
+                "rss_slope_pct_h": -math.inf,
+                "fd_growth_h": -math.inf,
+                "rss_mb_peak": 0.0,
+                "rss": "steady",
+            },
+        )
         worst["processes"] += 1
         rank = ("steady", "too short to judge", "grows")
         if (rank.index(p["rss"]), p["rss_slope_pct_h"]) > (rank.index(worst["rss"]), worst["rss_slope_pct_h"]):
-            worst.update(rss_slope_pct_h=p["rss_slope_pct_h"], worst_rss=p["process"], rss=p["rss"],
-                         rss_growth_mb=p["rss_growth_mb"])
+            worst.update(
+                rss_slope_pct_h=p["rss_slope_pct_h"],
+                worst_rss=p["process"],
+                rss=p["rss"],
+                rss_growth_mb=p["rss_growth_mb"],
+            )
         if p["fd_growth_h"] > worst["fd_growth_h"]:
             worst.update(fd_growth_h=p["fd_growth_h"], worst_fds=p["process"])
     for kind, rows in procs.groupby("kind"):
@@ -270,17 +345,21 @@ def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summ
     rate_start = float(steady["ticks_per_s"].head(tenth).mean()) if len(steady) else 0.0
     rate_end = float(steady["ticks_per_s"].tail(tenth).mean()) if len(steady) else 0.0
     net = (summary or {}).get("network", {})
-    conserved = (bool(net) and net["copies"] == net["delivered"] + net["dropped_total"])
+    conserved = bool(net) and net["copies"] == net["delivered"] + net["dropped_total"]
     faults = [dict(zip(["wall_s", "tick", "action", "target", "detail", "outcome"], row)) for row in chaos_rows]
     breaches = []
     for _kind, worst in sorted(by_kind.items()):
         if worst["rss"] == "grows":
-            breaches.append(f"RSS of {worst['worst_rss']} grows {worst['rss_slope_pct_h']:.1f} %/h, "
-                            f"{worst['rss_growth_mb']:.1f} MB over the judged window "
-                            f"(limit {limits.max_rss_slope_pct_h:g} %/h)")
+            breaches.append(
+                f"RSS of {worst['worst_rss']} grows {worst['rss_slope_pct_h']:.1f} %/h, "
+                f"{worst['rss_growth_mb']:.1f} MB over the judged window "
+                f"(limit {limits.max_rss_slope_pct_h:g} %/h)"
+            )
         if worst["fd_growth_h"] > limits.max_fd_growth_h:
-            breaches.append(f"open files of {worst['worst_fds']} grow {worst['fd_growth_h']:.1f}/h "
-                            f"(limit {limits.max_fd_growth_h:g})")
+            breaches.append(
+                f"open files of {worst['worst_fds']} grow {worst['fd_growth_h']:.1f}/h "
+                f"(limit {limits.max_fd_growth_h:g})"
+            )
     if slowest_tick[0] > limits.max_stall_s:
         breaches.append(f"tick {slowest_tick[1]} took {slowest_tick[0]:.1f} s (limit {limits.max_stall_s:g})")
     if failure:
@@ -289,25 +368,38 @@ def verdict(out_dir: Path, limits: Thresholds, chaos_rows: list[list[Any]], summ
         breaches.append("the ledger does not balance (copies != delivered + dropped)")
     breaches += fault_breaches(faults)
     return {
-        "passed": not breaches, "breaches": breaches,
-        "wall_s": end, "ticks": int(counters["tick"].max()) + 1 if len(counters) else 0,
+        "passed": not breaches,
+        "breaches": breaches,
+        "wall_s": end,
+        "ticks": int(counters["tick"].max()) + 1 if len(counters) else 0,
         "ticks_per_s": {"start": round(rate_start, 3), "end": round(rate_end, 3)},
-        "longest_stall_s": round(slowest_tick[0], 3), "longest_stall_tick": slowest_tick[1],
-        "conserved": conserved, "network": {k: net.get(k) for k in ("messages_sent", "copies", "delivered",
-                                                                    "dropped_total")},
-        "agents_lost": (summary or {}).get("agents_lost"), "restarts": (summary or {}).get("agent_restarts", 0),
-        "faults": faults, "by_kind": by_kind, "processes": per_process,
+        "longest_stall_s": round(slowest_tick[0], 3),
+        "longest_stall_tick": slowest_tick[1],
+        "conserved": conserved,
+        "network": {k: net.get(k) for k in ("messages_sent", "copies", "delivered", "dropped_total")},
+        "agents_lost": (summary or {}).get("agents_lost"),
+        "restarts": (summary or {}).get("agent_restarts", 0),
+        "faults": faults,
+        "by_kind": by_kind,
+        "processes": per_process,
         "thresholds": vars(limits),
     }
 
 
-def soak(exp: Experiment, out_dir: Path, duration_s: float, chaos: ChaosPlan | None = None, interval: float = 5.0,
-         limits: Thresholds | None = None, progress: bool = True, **run_options: Any) -> dict[str, Any]:
+def soak(
+    exp: Experiment,
+    out_dir: Path,
+    duration_s: float,
+    chaos: ChaosPlan | None = None,
+    interval: float = 5.0,
+    limits: Thresholds | None = None,
+    progress: bool = True,
+    **run_options: Any,
+) -> dict[str, Any]:
     """Run ``exp`` for ``duration_s`` wall seconds under ``chaos``; write and return the verdict."""
     from swarmbed.coordinator.coordinator import RunError
 
-    exp = exp.model_copy(update={"run": exp.run.model_copy(update={"duration": UNBOUNDED_S,
-                                                                    "stop_when_done": False})})
+    exp = exp.model_copy(update={"run": exp.run.model_copy(update={"duration": UNBOUNDED_S, "stop_when_done": False})})
     monitor = Monitor(duration_s, interval)
     injector = Chaos(chaos, duration_s, exp.run.seed) if chaos and chaos.events else None
     observers: list[RunObserver] = [monitor, *([injector] if injector else [])]
@@ -326,15 +418,21 @@ def soak(exp: Experiment, out_dir: Path, duration_s: float, chaos: ChaosPlan | N
 
 
 def format_verdict(v: dict[str, Any]) -> str:
-    lines = [f"soak verdict: {'PASSED' if v['passed'] else 'FAILED'} after {v['wall_s']:.0f} s, {v['ticks']} ticks "
-             f"({v['ticks_per_s']['start']:.1f} ticks/s at the start, {v['ticks_per_s']['end']:.1f} at the end)"]
+    lines = [
+        f"soak verdict: {'PASSED' if v['passed'] else 'FAILED'} after {v['wall_s']:.0f} s, {v['ticks']} ticks "
+        f"({v['ticks_per_s']['start']:.1f} ticks/s at the start, {v['ticks_per_s']['end']:.1f} at the end)"
+    ]
     for kind, worst in sorted(v["by_kind"].items()):
         judged = " (too short to judge)" if worst.get("rss") == "too short to judge" else ""
-        lines.append(f"  {kind:<12} x{worst['processes']:<4} RSS slope {worst['rss_slope_pct_h']:+8.1f} %/h{judged}   "
-                     f"fds {worst['fd_growth_h']:+7.1f}/h   peak RSS {worst['rss_mb_peak']:.0f} MB")
-    lines.append(f"  longest stall {v['longest_stall_s']:.2f} s (tick {v['longest_stall_tick']}); ledger "
-                 f"{'balanced' if v['conserved'] else 'NOT balanced'}; restarts {v['restarts']}; "
-                 f"agents lost {len(v['agents_lost'] or {})}")
+        lines.append(
+            f"  {kind:<12} x{worst['processes']:<4} RSS slope {worst['rss_slope_pct_h']:+8.1f} %/h{judged}   "
+            f"fds {worst['fd_growth_h']:+7.1f}/h   peak RSS {worst['rss_mb_peak']:.0f} MB"
+        )
+    lines.append(
+        f"  longest stall {v['longest_stall_s']:.2f} s (tick {v['longest_stall_tick']}); ledger "
+        f"{'balanced' if v['conserved'] else 'NOT balanced'}; restarts {v['restarts']}; "
+        f"agents lost {len(v['agents_lost'] or {})}"
+    )
     for f in v["faults"]:
         lines.append(f"  fault {f['wall_s']:>8.1f} s tick {f['tick']}: {f['action']} {f['target']}: {f['outcome']}")
     lines += [f"  BREACH: {b}" for b in v["breaches"]]

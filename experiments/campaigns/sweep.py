@@ -134,8 +134,13 @@ def _parse_grid(text: str) -> tuple[str, list[Any]]:
         raise cfg.ConfigError(str(exc)) from None
 
 
-def load_sweep(path: str | Path, runs: int | None = None, grid: Sequence[str] = (), extra: Sequence[str] = (),
-               seed: int | None = None) -> Sweep:
+def load_sweep(
+    path: str | Path,
+    runs: int | None = None,
+    grid: Sequence[str] = (),
+    extra: Sequence[str] = (),
+    seed: int | None = None,
+) -> Sweep:
     path = Path(path)
     try:
         data = read_yaml(path) or {}
@@ -148,8 +153,9 @@ def load_sweep(path: str | Path, runs: int | None = None, grid: Sequence[str] = 
     try:
         spec = SweepFile.model_validate(data)
     except ValidationError as exc:
-        raise cfg.ConfigError("\n".join(f"{path}: {'.'.join(map(str, e['loc']))}: {e['msg']}"
-                                        for e in exc.errors())) from None
+        raise cfg.ConfigError(
+            "\n".join(f"{path}: {'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        ) from None
     common = tuple(spec.set.items())
     grid_spec = dict(spec.grid)
     grid_spec.update(_parse_grid(g) for g in grid)
@@ -165,29 +171,44 @@ def load_sweep(path: str | Path, runs: int | None = None, grid: Sequence[str] = 
     names = [s.name for s in scenarios]
     if len(set(names)) != len(names):
         raise cfg.ConfigError(f"{path}: two scenarios share a name")
-    varying = {k for s in scenarios for k, _ in s.overrides if k not in spec.set or
-               any(dict(s2.overrides).get(k) != spec.set[k] for s2 in scenarios)}
+    varying = {
+        k
+        for s in scenarios
+        for k, _ in s.overrides
+        if k not in spec.set or any(dict(s2.overrides).get(k) != spec.set[k] for s2 in scenarios)
+    }
     factors = sorted(varying)
     if runs is not None and runs < 1:
         raise cfg.ConfigError(f"--runs {runs}: a sweep needs at least one run per scenario")
-    return Sweep(spec.name, (path.parent / spec.base).resolve(), spec.seed if seed is None else seed,
-                 spec.runs if runs is None else runs, scenarios, factors, list(extra))
+    return Sweep(
+        spec.name,
+        (path.parent / spec.base).resolve(),
+        spec.seed if seed is None else seed,
+        spec.runs if runs is None else runs,
+        scenarios,
+        factors,
+        list(extra),
+    )
 
 
 def run_seeds(sweep_seed: int, runs: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(sweep_seed).spawn(runs)]
 
 
-def experiment_for(base: str | Path, scenario: SweepScenario, seed: int,
-                   extra: list[str] | tuple[str, ...]) -> cfg.Experiment:
+def experiment_for(
+    base: str | Path, scenario: SweepScenario, seed: int, extra: list[str] | tuple[str, ...]
+) -> cfg.Experiment:
     pairs = list(scenario.overrides) + [cfg.parse_override(t) for t in extra] + [("run.seed", seed)]
     return cfg.load(base, [f"{k}={json.dumps(v)}" for k, v in pairs], origin=f"sweep scenario {scenario.name}:")
 
 
 def plan(sweep: Sweep, out: Path) -> list[RunSpec]:
     seeds = run_seeds(sweep.seed, sweep.runs)
-    return [RunSpec(str(sweep.base), sc, r, seeds[r], str(out / sc.name / f"run_{r:03d}"), tuple(sweep.extra))
-            for sc in sweep.scenarios for r in range(sweep.runs)]
+    return [
+        RunSpec(str(sweep.base), sc, r, seeds[r], str(out / sc.name / f"run_{r:03d}"), tuple(sweep.extra))
+        for sc in sweep.scenarios
+        for r in range(sweep.runs)
+    ]
 
 
 def _record_attempt(run_dir: Path, **fields: Any) -> None:
@@ -221,8 +242,9 @@ def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S) -> Outcome
             results.write_atomic(out / ERROR, detail)
             outcome = ("failed", f"{type(exc).__name__}: {exc}")
         except BaseException:  # Ctrl-C, or the sweep's SIGTERM to its pool worker: say so, then stop
-            _record_attempt(out, event="end", time=time.time(), outcome="interrupted",
-                            wall_s=round(time.time() - started, 3))
+            _record_attempt(
+                out, event="end", time=time.time(), outcome="interrupted", wall_s=round(time.time() - started, 3)
+            )
             raise
         _record_attempt(out, event="end", time=time.time(), outcome=outcome[0], wall_s=round(time.time() - started, 3))
         return outcome
@@ -297,8 +319,9 @@ def _parquet_ready(table: pd.DataFrame) -> pd.DataFrame:
     for name in [c for c in table.columns if table[c].dtype == object]:
         kinds = {type(v) for v in table[name].dropna()}
         if len(kinds) > 1:
-            table[name] = table[name].map(lambda v: v if v is None or (isinstance(v, float) and np.isnan(v))
-                                          else str(v))
+            table[name] = table[name].map(
+                lambda v: v if v is None or (isinstance(v, float) and np.isnan(v)) else str(v)
+            )
     return table
 
 
@@ -338,10 +361,19 @@ def _complete(specs: list[RunSpec]) -> int:
 
 
 def write_spec(sweep: Sweep, out: Path) -> None:
-    results.write_json(out / SPEC, {"name": sweep.name, "base": str(sweep.base), "seed": sweep.seed,
-                                    "runs": sweep.runs, "factors": sweep.factors, "extra": sweep.extra,
-                                    "scenarios": {s.name: dict(s.overrides) for s in sweep.scenarios},
-                                    "order": [s.name for s in sweep.scenarios]})  # the keys above get sorted
+    results.write_json(
+        out / SPEC,
+        {
+            "name": sweep.name,
+            "base": str(sweep.base),
+            "seed": sweep.seed,
+            "runs": sweep.runs,
+            "factors": sweep.factors,
+            "extra": sweep.extra,
+            "scenarios": {s.name: dict(s.overrides) for s in sweep.scenarios},
+            "order": [s.name for s in sweep.scenarios],
+        },
+    )  # the keys above get sorted
 
 
 def read_spec(out: Path) -> Sweep:
@@ -349,9 +381,15 @@ def read_spec(out: Path) -> Sweep:
     try:
         data = json.loads((out / SPEC).read_text())
         order = data.get("order") or list(data["scenarios"])
-        return Sweep(data["name"], Path(data["base"]), int(data["seed"]), int(data["runs"]),
-                     [SweepScenario(name, tuple(data["scenarios"][name].items())) for name in order],
-                     list(data["factors"]), list(data["extra"]))
+        return Sweep(
+            data["name"],
+            Path(data["base"]),
+            int(data["seed"]),
+            int(data["runs"]),
+            [SweepScenario(name, tuple(data["scenarios"][name].items())) for name in order],
+            list(data["factors"]),
+            list(data["extra"]),
+        )
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise cfg.ConfigError(f"{out}: not a sweep directory (no readable {SPEC}: {exc})") from None
 
@@ -360,8 +398,9 @@ def status(out: Path, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame
     """Runs per scenario by status (ok, running, failed, interrupted, missing), one row per scenario."""
     sweep = read_spec(out)
     rows = [(spec.scenario.name, run_status(Path(spec.out_dir), stale_after)) for spec in plan(sweep, out)]
-    table = pd.crosstab(pd.Series([r[0] for r in rows], name="scenario"), pd.Series([r[1] for r in rows],
-                                                                                     name="status"))
+    table = pd.crosstab(
+        pd.Series([r[0] for r in rows], name="scenario"), pd.Series([r[1] for r in rows], name="status")
+    )
     order = [c for c in ("ok", "running", "failed", "interrupted", "missing") if c in table.columns]
     table = table.reindex(columns=order).reindex([s.name for s in sweep.scenarios])
     table.columns.name = None
@@ -376,6 +415,7 @@ def _dotted(data: Any, prefix: str = "") -> dict[str, Any]:
 
 def config_differences(made: str, planned: str, limit: int = 3) -> str:
     """What differs between two ``config.yaml`` texts, as ``key: made -> planned`` (at most ``limit``)."""
+
     def read(text: str) -> dict[str, Any]:
         try:
             return _dotted(parse_yaml(text, "config.yaml") or {})
@@ -423,8 +463,10 @@ def mixed_configurations(sweep_dir: Path, table: pd.DataFrame) -> str | None:
                 first = (name, config)
             elif config != first[1]:
                 keys = sorted(k for k in config.keys() | first[1].keys() if config.get(k) != first[1].get(k))
-                return (f"{first[0]} and {name} were made under different configurations "
-                        f"({', '.join(f'{k}: {first[1].get(k)!r} / {config.get(k)!r}' for k in keys[:3])})")
+                return (
+                    f"{first[0]} and {name} were made under different configurations "
+                    f"({', '.join(f'{k}: {first[1].get(k)!r} / {config.get(k)!r}' for k in keys[:3])})"
+                )
     return None
 
 
@@ -454,12 +496,19 @@ def _check_completed(specs: list[RunSpec], out: Path, redo: bool) -> None:
     raise cfg.ConfigError(
         f"{out}: {len(mismatched)} completed run(s) were made under another configuration than this sweep plans "
         f"(first: {Path(spec.out_dir).relative_to(out)}: {config_differences(made, planned) or 'no config.yaml'}); "
-        f"redo them with --redo-mismatched, or give --out a new folder")
+        f"redo them with --redo-mismatched, or give --out a new folder"
+    )
 
 
-def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool = True,
-              executor: Executor | None = None, stale_after: float = claims.STALE_AFTER_S,
-              redo_mismatched: bool = False) -> pd.DataFrame:
+def run_sweep(
+    sweep: Sweep,
+    out: Path,
+    jobs: int | None = None,
+    progress: bool = True,
+    executor: Executor | None = None,
+    stale_after: float = claims.STALE_AFTER_S,
+    redo_mismatched: bool = False,
+) -> pd.DataFrame:
     """Run every incomplete run of ``sweep`` into ``out`` through ``executor`` (default: the local
     process pool with ``jobs`` workers), then write the tables (on Ctrl-C too, of what completed).
     Runs another command holds are left to it; runs that never started because a worker died are
@@ -509,7 +558,8 @@ def run_sweep(sweep: Sweep, out: Path, jobs: int | None = None, progress: bool =
         raise SweepInterrupted(
             f"interrupted: {done} of {len(specs)} runs are complete ({done - done_before} finished in this session) "
             f"and in {out / TABLE}; the runs under way were stopped and nothing else was started. Run the same "
-            f"command again to do the other {len(specs) - done}.") from None
+            f"command again to do the other {len(specs) - done}."
+        ) from None
     finally:
         bar.close()
         executor.close()

@@ -41,7 +41,6 @@ from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 log = logging.getLogger("swarmbed.host")
 
 
-
 def process_name(agent: int, incarnation: int = 0) -> str:
     """An agent process's name (and log file): ``agent_3``, or ``agent_3.1`` for its second process."""
     return f"agent_{agent}" if incarnation == 0 else f"agent_{agent}.{incarnation}"
@@ -56,8 +55,9 @@ class HostError(RuntimeError):
 
 
 class Host:
-    def __init__(self, name: str, session: zenoh.Session, endpoint: str, logs: Path,
-                 agent_credentials: str | None = None) -> None:
+    def __init__(
+        self, name: str, session: zenoh.Session, endpoint: str, logs: Path, agent_credentials: str | None = None
+    ) -> None:
         self.name = name
         self.agent_credentials = agent_credentials  # what its agents present to its router, if it asks
         self.keys = HostKeys(name)
@@ -70,17 +70,28 @@ class Host:
 
     def info(self) -> dict[str, Any]:
         with self.lock:
-            agents = {run: sorted(_agent_of(n) for n, p in ch.procs.items() if p.poll() is None)
-                      for run, ch in self.runs.items()}
-        return {"name": self.name, "cores": os.cpu_count(), "mem_free_mb": psutil.virtual_memory().available // 2**20,
-                "pid": os.getpid(), "endpoint": self.endpoint, "agents": {r: a for r, a in agents.items() if a}}
+            agents = {
+                run: sorted(_agent_of(n) for n, p in ch.procs.items() if p.poll() is None)
+                for run, ch in self.runs.items()
+            }
+        return {
+            "name": self.name,
+            "cores": os.cpu_count(),
+            "mem_free_mb": psutil.virtual_memory().available // 2**20,
+            "pid": os.getpid(),
+            "endpoint": self.endpoint,
+            "agents": {r: a for r, a in agents.items() if a},
+        }
 
     def start_agents(self, request: dict[str, Any]) -> dict[str, Any]:
         run_id, ids = request.get("run_id"), request.get("agents")
         if not isinstance(run_id, str) or not (run_id.isascii() and run_id.isalnum() and len(run_id) <= 64):
             return {"error": f"start: run_id must be alphanumeric, got {run_id!r}"}
-        if not isinstance(ids, list) or not all(isinstance(i, int) and 0 <= i < 10**6 for i in ids) \
-                or not 0 < len(ids) <= 1000:
+        if (
+            not isinstance(ids, list)
+            or not all(isinstance(i, int) and 0 <= i < 10**6 for i in ids)
+            or not 0 < len(ids) <= 1000
+        ):
             return {"error": f"start: agents must be a list of 1 to 1000 ids, got {str(ids)[:100]}"}
         if not is_alive(self.session, Keys(run_id).alive_coordinator):
             # the hub's access rules let only the hub ask; a run that is not there is not its run
@@ -88,8 +99,10 @@ class Host:
         extra = request.get("args", [])
         allowed = ("--restore", "--incarnation", "--log-max-mb", "--log-backups")
         if not (isinstance(extra, list) and all(a in allowed or str(a).isdigit() for a in extra)):
-            return {"error": f"start: args may be --incarnation N, --restore, --log-max-mb N and --log-backups N, "
-                             f"got {extra!r}"}
+            return {
+                "error": f"start: args may be --incarnation N, --restore, --log-max-mb N and --log-backups N, "
+                f"got {extra!r}"
+            }
         incarnation = int(extra[extra.index("--incarnation") + 1]) if "--incarnation" in extra else 0
         with self.lock:
             children = self.runs.get(run_id)
@@ -103,15 +116,20 @@ class Host:
                     children = self.runs[run_id] = Children(log_dir, fork_agents=True)
                 except ForkServerError as exc:
                     return {"error": str(exc)}
-            busy = [i for i in ids if (p := children.procs.get(process_name(i, incarnation))) is not None
-                    and p.poll() is None]
+            busy = [
+                i
+                for i in ids
+                if (p := children.procs.get(process_name(i, incarnation))) is not None and p.poll() is None
+            ]
             if busy:
                 return {"error": f"agents {busy} of run {run_id} already run on host {self.name}"}
             identity = ["--credentials", self.agent_credentials] if self.agent_credentials else []
             for i in ids:
-                children.spawn(process_name(i, incarnation), AGENT_MODULE,
-                               ["--run-id", run_id, "--connect", self.endpoint, *identity, "--id", str(i),
-                                *map(str, extra)])
+                children.spawn(
+                    process_name(i, incarnation),
+                    AGENT_MODULE,
+                    ["--run-id", run_id, "--connect", self.endpoint, *identity, "--id", str(i), *map(str, extra)],
+                )
         log.info("host %s: started agents %s of run %s", self.name, ids, run_id)
         return {"started": ids, "logs": str(self.logs / run_id)}
 
@@ -141,6 +159,7 @@ class Host:
         """Answer queries on ``key`` with ``handler(request)``, replying on ``key`` itself: a query
         on ``swarmbed/hosts/*/info`` gets its answer under this host's own name, the only one the
         hub lets this host reply on."""
+
         def on_query(query: zenoh.Query) -> None:
             try:
                 request = json.loads(query.payload.to_bytes()) if query.payload is not None else {}
@@ -148,6 +167,7 @@ class Host:
             except (ValueError, UnicodeDecodeError) as exc:
                 answer = {"error": f"request is not JSON: {exc}"}
             query.reply(key, json.dumps(answer))
+
         return on_query
 
     def declare(self) -> None:
@@ -195,19 +215,43 @@ def host_router_rules(agents_user: str) -> dict:
     query, serve or announce anything under ``swarmbed/hosts`` (an agent must not ask its host to
     start or stop agents); what else they send, the hub holds to the agents this host may carry."""
     return {
-        "enabled": True, "default_permission": "allow",
-        "rules": [{"id": "no-host-orders", "permission": "deny", "flows": ["ingress"],
-                   "messages": ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
-                                "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"],
-                   "key_exprs": [HOSTS, f"{HOSTS}/**"]}],
+        "enabled": True,
+        "default_permission": "allow",
+        "rules": [
+            {
+                "id": "no-host-orders",
+                "permission": "deny",
+                "flows": ["ingress"],
+                "messages": [
+                    "put",
+                    "delete",
+                    "declare_subscriber",
+                    "query",
+                    "declare_queryable",
+                    "reply",
+                    "liveliness_token",
+                    "declare_liveliness_subscriber",
+                    "liveliness_query",
+                ],
+                "key_exprs": [HOSTS, f"{HOSTS}/**"],
+            }
+        ],
         "subjects": [{"id": "agents", "usernames": [agents_user]}],
         "policies": [{"subjects": ["agents"], "rules": ["no-host-orders"]}],
     }
 
 
-def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_config_file: str | None = None,
-          mode: str = "router", credentials: str | None = None, tls: dict[str, object] | None = None,
-          insecure: bool = False) -> int:
+def serve(
+    name: str,
+    connect: list[str],
+    listen: list[str],
+    logs: Path,
+    zenoh_config_file: str | None = None,
+    mode: str = "router",
+    credentials: str | None = None,
+    tls: dict[str, object] | None = None,
+    insecure: bool = False,
+) -> int:
     """Run the host daemon until SIGINT or SIGTERM: a router (or peer) for this machine.
 
     ``credentials``: a host credentials file the hubs it connects to admit (``swarmbed run --admit``).
@@ -218,12 +262,16 @@ def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_co
     endpoint it listens on or connects to is on loopback: an unauthenticated host daemon runs
     whatever anyone who reaches it names."""
     if not credentials and not insecure:
-        raise HostError(f"host {name}: no --credentials: a host daemon without them lets anyone who reaches it start "
-                        "agents, which run code; make them with swarmbed credentials FILE --user NAME --role host "
-                        "(and admit the file with swarmbed run --admit), or pass --insecure on loopback")
+        raise HostError(
+            f"host {name}: no --credentials: a host daemon without them lets anyone who reaches it start "
+            "agents, which run code; make them with swarmbed credentials FILE --user NAME --role host "
+            "(and admit the file with swarmbed run --admit), or pass --insecure on loopback"
+        )
     if not credentials and not all(map(_on_loopback, [*connect, *listen])):
-        raise HostError(f"host {name}: --insecure is allowed with loopback endpoints only, got "
-                        f"{', '.join(e for e in [*connect, *listen] if not _on_loopback(e))}")
+        raise HostError(
+            f"host {name}: --insecure is allowed with loopback endpoints only, got "
+            f"{', '.join(e for e in [*connect, *listen] if not _on_loopback(e))}"
+        )
     listen = listen or [free_loopback_endpoint()]
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -235,14 +283,19 @@ def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_co
     if credentials:
         mine, local = read_credentials(credentials), Identity.new(f"{name}-agents", "agent")
         if mine.role != "host" or mine.host_name != name:
-            raise HostError(f"host {name}: credentials file {credentials} is for {mine.role} "
-                            f"{mine.host_name if mine.role == 'host' else mine.user!r}, not for host {name!r} "
-                            f"(make one with swarmbed credentials FILE --user USER --role host --host {name})")
+            raise HostError(
+                f"host {name}: credentials file {credentials} is for {mine.role} "
+                f"{mine.host_name if mine.role == 'host' else mine.user!r}, not for host {name!r} "
+                f"(make one with swarmbed credentials FILE --user USER --role host --host {name})"
+            )
         private = Path(tempfile.mkdtemp(prefix=f"swarmbed-host-{name}-"))
         agent_credentials = str(write_credentials(private / "agents.json", local))
         dictionary = write_dictionary(private / "router.dictionary", [local])
-        settings["transport/auth/usrpwd"] = {"user": mine.user, "password": mine.password,
-                                             "dictionary_file": str(dictionary)}
+        settings["transport/auth/usrpwd"] = {
+            "user": mine.user,
+            "password": mine.password,
+            "dictionary_file": str(dictionary),
+        }
         settings["access_control"] = host_router_rules(local.user)
     tune_malloc()  # a daemon meant to stay up for days
     try:
@@ -254,8 +307,13 @@ def serve(name: str, connect: list[str], listen: list[str], logs: Path, zenoh_co
     with session:
         host = Host(name, session, listen[0], logs, agent_credentials)
         host.declare()
-        log.info("host %s: router on %s, connecting to %s; agents log to %s", name, ", ".join(listen),
-                 ", ".join(connect) or "nothing", logs)
+        log.info(
+            "host %s: router on %s, connecting to %s; agents log to %s",
+            name,
+            ", ".join(listen),
+            ", ".join(connect) or "nothing",
+            logs,
+        )
         print(f"host {name} up: router on {', '.join(listen)}", flush=True)
         try:
             while not stop.wait(1.0):
@@ -298,8 +356,9 @@ def host_info(session: zenoh.Session, name: str, timeout: float = 5.0) -> dict |
     return _get_json(session, HostKeys(name).info, None, timeout)
 
 
-def wait_for_hosts(session: zenoh.Session, names: list[str], timeout: float, endpoint_hint: str,
-                   auth: bool = True) -> None:
+def wait_for_hosts(
+    session: zenoh.Session, names: list[str], timeout: float, endpoint_hint: str, auth: bool = True
+) -> None:
     """Until every named host holds its token; else a HostError naming the missing ones and the
     command that starts each (``auth``: with the credentials a hub that requires them admits)."""
     deadline = time.monotonic() + timeout
@@ -309,26 +368,45 @@ def wait_for_hosts(session: zenoh.Session, names: list[str], timeout: float, end
         if missing and time.monotonic() > deadline:
             creds = " --credentials FILE" if auth else ""
             commands = "\n".join(f"    swarmbed host --name {h} --connect {endpoint_hint}{creds}" for h in missing)
-            admit = ("\nwhere FILE is a host credentials file (swarmbed credentials FILE --user NAME --role host) "
-                     "this run admits (swarmbed run --admit FILE)") if auth else ""
-            raise HostError(f"hosts not reachable after {timeout:.0f} s: {', '.join(missing)}; start each on its "
-                            f"machine with:\n{commands}{admit}")
+            admit = (
+                (
+                    "\nwhere FILE is a host credentials file (swarmbed credentials FILE --user NAME --role host) "
+                    "this run admits (swarmbed run --admit FILE)"
+                )
+                if auth
+                else ""
+            )
+            raise HostError(
+                f"hosts not reachable after {timeout:.0f} s: {', '.join(missing)}; start each on its "
+                f"machine with:\n{commands}{admit}"
+            )
 
 
-def start_agents(session: zenoh.Session, host: str, run_id: str, agents: list[int], args: list[str] | None = None,
-                 timeout: float = 30.0) -> None:
+def start_agents(
+    session: zenoh.Session,
+    host: str,
+    run_id: str,
+    agents: list[int],
+    args: list[str] | None = None,
+    timeout: float = 30.0,
+) -> None:
     """Ask ``host`` to start ``agents`` of ``run_id`` (with ``args``: ``--incarnation N --restore``
     for a swap); a HostError says why it did not."""
-    answer = _get_json(session, HostKeys(host).start, {"run_id": run_id, "agents": agents, "args": args or []},
-                       timeout)
+    answer = _get_json(session, HostKeys(host).start, {"run_id": run_id, "agents": agents, "args": args or []}, timeout)
     if answer is None:
         raise HostError(f"host {host} did not answer the request to start agents {agents}")
     if "error" in answer:
         raise HostError(f"host {host} refused to start agents {agents}: {answer['error']}")
 
 
-def stop_agents(session: zenoh.Session, host: str, run_id: str, agents: list[int] | None = None,
-                incarnation: int = 0, timeout: float = 10.0) -> None:
+def stop_agents(
+    session: zenoh.Session,
+    host: str,
+    run_id: str,
+    agents: list[int] | None = None,
+    incarnation: int = 0,
+    timeout: float = 10.0,
+) -> None:
     """Ask ``host`` to stop ``agents`` (every agent of the run where None) of ``run_id``."""
     request: dict[str, Any] = {"run_id": run_id, "incarnation": incarnation}
     if agents is not None:

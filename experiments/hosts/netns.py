@@ -95,11 +95,29 @@ class Lab:
         log = open(self.logs / f"host_{name}.log", "wb")
         identity = self.identities.setdefault(name, Identity.new(f"host-{name}", "host", host=name))
         credentials = write_credentials(self.logs / f"host_{name}.credentials", identity)
-        cmd = ["ip", "netns", "exec", ns, sys.executable, "-m", "swarmbed", "host", "--name", name,
-               "--connect", self.hub, "--listen", "tcp/127.0.0.1:7447", "--logs", str(self.logs / name),
-               "--credentials", str(credentials)]
-        self.daemons[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                              env=python_env())
+        cmd = [
+            "ip",
+            "netns",
+            "exec",
+            ns,
+            sys.executable,
+            "-m",
+            "swarmbed",
+            "host",
+            "--name",
+            name,
+            "--connect",
+            self.hub,
+            "--listen",
+            "tcp/127.0.0.1:7447",
+            "--logs",
+            str(self.logs / name),
+            "--credentials",
+            str(credentials),
+        ]
+        self.daemons[name] = subprocess.Popen(
+            cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=python_env()
+        )
         log.close()
 
     def kill_host(self, name: str) -> None:
@@ -156,6 +174,7 @@ class Lab:
 @dataclass
 class Cut:
     """A namespace whose links were taken down, and what brings it back (:func:`cut_off`)."""
+
     namespace: str
     links: list[str]
     routes: list[str]

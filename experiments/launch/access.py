@@ -44,8 +44,17 @@ from swarmbed.wire.lifecycle import process_alive
 log = logging.getLogger("swarmbed.access")
 OWNER = "owner.json"  # in a run's private folder: the launcher that made it (pid, start time)
 
-EVERY_MESSAGE = ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token",
-                 "declare_liveliness_subscriber", "liveliness_query"]
+EVERY_MESSAGE = [
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "declare_queryable",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+]
 
 
 def _allow(rule_id: str, messages: list[str], key_exprs: list[str], flow: str = "ingress") -> dict:
@@ -65,14 +74,18 @@ def _agent_rules(k: Keys, user: str, ids: Iterable[int]) -> list[dict]:
     return [
         _allow(f"{user}-put", ["put"], [k.agent_out(i) for i in ids]),
         _allow(f"{user}-subscribe", ["declare_subscriber"], [k.agent_in(i) for i in ids]),
-        _allow(f"{user}-query", ["query"], [k.agent_config, *(key for i in ids
-                                                              for key in (k.agent_report(i), k.agent_snapshot(i)))]),
+        _allow(
+            f"{user}-query",
+            ["query"],
+            [k.agent_config, *(key for i in ids for key in (k.agent_report(i), k.agent_snapshot(i)))],
+        ),
         _allow(f"{user}-alive", ["liveliness_token"], [k.alive_agent_any(i) for i in ids]),
     ]
 
 
-def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str],
-                 hosts: Mapping[str, tuple[str, Iterable[int]]]) -> dict:
+def access_rules(
+    keys: Keys, agent_ids: Iterable[int], operators: Iterable[str], hosts: Mapping[str, tuple[str, Iterable[int]]]
+) -> dict:
     """The hub's ``access_control`` section for one run (default deny). ``hosts``: each admitted
     host's user name -> (the host name it is bound to, the agents it may carry, as
     :func:`~swarmbed.wire.schema.carriers` gives them)."""
@@ -85,15 +98,22 @@ def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str],
         _allow("netem-query", ["query"], [k.netem_config, k.netem_report]),
         _allow("netem-alive", ["liveliness_token"], [k.alive_netem]),
         _allow("watch-alive", ["declare_liveliness_subscriber", "liveliness_query"], [alive]),
-        _allow("operator-read", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
-               [f"{root}/**", f"{HOSTS}/**"]),
+        _allow(
+            "operator-read",
+            ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+            [f"{root}/**", f"{HOSTS}/**"],
+        ),
         _allow("operator-ask", ["query"], [k.swap, f"{HOSTS}/*/info"]),
         _allow("operator-find", ["liveliness_query"], [f"{PREFIX}/*/alive/coordinator"]),
         _allow("host-watch", ["declare_liveliness_subscriber", "liveliness_query"], [alive, f"{HOSTS}/**"]),
     ]
     subjects: list[dict] = [{"id": "netem", "usernames": ["netem"]}]
-    policies: list[dict] = [{"subjects": ["netem"], "rules": ["deliver", "netem", "netem-subscribe", "netem-query",
-                                                                 "netem-alive", "watch-alive"]}]
+    policies: list[dict] = [
+        {
+            "subjects": ["netem"],
+            "rules": ["deliver", "netem", "netem-subscribe", "netem-query", "netem-alive", "watch-alive"],
+        }
+    ]
     for i in agent_ids:
         user = agent_user(i)
         own = _agent_rules(k, user, [i])
@@ -103,8 +123,9 @@ def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str],
     operators = list(operators)
     if operators:
         subjects.append({"id": "operators", "usernames": operators})
-        policies.append({"subjects": ["operators"], "rules": ["deliver", "operator-read", "operator-ask",
-                                                                   "operator-find"]})
+        policies.append(
+            {"subjects": ["operators"], "rules": ["deliver", "operator-read", "operator-ask", "operator-find"]}
+        )
     for user, (host, ids) in sorted(hosts.items()):
         subject = f"host-{user}"
         own = _agent_rules(k, subject, ids)
@@ -113,8 +134,12 @@ def access_rules(keys: Keys, agent_ids: Iterable[int], operators: Iterable[str],
             _allow(f"{subject}-announce", ["liveliness_token"], [f"{HOSTS}/{host}"]),
         ]
         subjects.append({"id": subject, "usernames": [user]})
-        policies.append({"subjects": [subject], "rules": ["deliver", "host-watch", f"{subject}-serve",
-                                                          f"{subject}-announce", *(r["id"] for r in own)]})
+        policies.append(
+            {
+                "subjects": [subject],
+                "rules": ["deliver", "host-watch", f"{subject}-serve", f"{subject}-announce", *(r["id"] for r in own)],
+            }
+        )
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
 
 
@@ -122,8 +147,13 @@ class RunAccess:
     """One run's identities: a private folder (mode 700, removed by :meth:`close`) holding the hub's
     dictionary and one credentials file per process the launcher spawns."""
 
-    def __init__(self, keys: Keys, agent_ids: Iterable[int], admitted: Iterable[Identity] = (),
-                 carriers: Mapping[str, Iterable[int]] | None = None) -> None:
+    def __init__(
+        self,
+        keys: Keys,
+        agent_ids: Iterable[int],
+        admitted: Iterable[Identity] = (),
+        carriers: Mapping[str, Iterable[int]] | None = None,
+    ) -> None:
         self.keys = keys
         self.agent_ids = sorted(agent_ids)
         self.admitted = list(admitted)
@@ -136,8 +166,9 @@ class RunAccess:
         self.folder = Path(tempfile.mkdtemp(prefix=f"swarmbed-{keys.run_id}-"))  # mode 700
         (self.folder / OWNER).write_text(json.dumps({"pid": os.getpid(), "started": psutil.Process().create_time()}))
         own = [Identity.new("netem", "netem")] + [Identity.new(agent_user(i), "agent") for i in self.agent_ids]
-        self.files = {identity.user: write_credentials(self.folder / f"{identity.user}.json", identity)
-                      for identity in own}
+        self.files = {
+            identity.user: write_credentials(self.folder / f"{identity.user}.json", identity) for identity in own
+        }
         self.dictionary = write_dictionary(self.folder / "hub.dictionary", own + self.admitted)
 
     def credentials(self, process: str) -> str:
@@ -148,10 +179,13 @@ class RunAccess:
         return {
             "transport/auth/usrpwd": {"dictionary_file": str(self.dictionary)},
             "access_control": access_rules(
-                self.keys, self.agent_ids,
+                self.keys,
+                self.agent_ids,
                 operators=[i.user for i in self.admitted if i.role != "host"],
-                hosts={i.user: (i.host_name, self.carriers.get(i.host_name, [])) for i in self.admitted
-                       if i.role == "host"}),
+                hosts={
+                    i.user: (i.host_name, self.carriers.get(i.host_name, [])) for i in self.admitted if i.role == "host"
+                },
+            ),
         }
 
     def close(self) -> None:

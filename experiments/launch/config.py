@@ -45,8 +45,20 @@ from swarmbed.wire.schema import (
     hosts_of,
 )
 
-__all__ = ["ConfigError", "Experiment", "Resolved", "load", "resolve_experiment", "to_yaml", "from_yaml",
-           "parse_override", "apply_overrides", "validate", "describe", "SECTIONS"]
+__all__ = [
+    "ConfigError",
+    "Experiment",
+    "Resolved",
+    "load",
+    "resolve_experiment",
+    "to_yaml",
+    "from_yaml",
+    "parse_override",
+    "apply_overrides",
+    "validate",
+    "describe",
+    "SECTIONS",
+]
 
 #: the generic sections, for ``swarmbed params``
 SECTIONS: dict[str, type[BaseModel]] = {"run": RunSection, "agents": AgentsSection, "network": NetworkSection}
@@ -166,25 +178,35 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
         lines = str(exc).splitlines()
         # a name that does not resolve (a line naming its key already is the parameters' own error)
         if not lines[0].startswith(("scenario.", "allocator.", "scenario:", "allocator:")):
-            lines = [f"{'scenario.kind' if lines[0].startswith(('scenario', 'unknown scenario')) else 'allocator.name'}"
-                     f": {line}" for line in lines]
+            lines = [
+                f"{'scenario.kind' if lines[0].startswith(('scenario', 'unknown scenario')) else 'allocator.name'}"
+                f": {line}"
+                for line in lines
+            ]
         raise fail(lines) from None
-    exp = exp.model_copy(update={
-        "scenario": ScenarioSection(kind=kind, **scenario_params.model_dump(mode="json")),
-        "allocator": AllocatorSection(name=exp.allocator.name, **allocator_params.model_dump(mode="json")),
-    })
+    exp = exp.model_copy(
+        update={
+            "scenario": ScenarioSection(kind=kind, **scenario_params.model_dump(mode="json")),
+            "allocator": AllocatorSection(name=exp.allocator.name, **allocator_params.model_dump(mode="json")),
+        }
+    )
     problems = resolve_scenario(kind).check(exp, scenario_params)
     for check in (lambda: hosts_of(exp.placement, exp.agents.count), lambda: carriers(exp)):
         try:
             check()
         except ValueError as exc:
             problems.append(str(exc))
-    problems += [f"swaps[{k}].agent: {s.agent} is outside 0..{exp.agents.count - 1}"
-                 for k, s in enumerate(exp.swaps) if s.agent >= exp.agents.count]
+    problems += [
+        f"swaps[{k}].agent: {s.agent} is outside 0..{exp.agents.count - 1}"
+        for k, s in enumerate(exp.swaps)
+        if s.agent >= exp.agents.count
+    ]
     allocator = resolve(exp.allocator.name, kind)
     if exp.swaps and not allocator.snapshottable:
-        problems.append(f"swaps: allocator {exp.allocator.name} cannot move between processes "
-                        f"({allocator.__name__}.snapshottable is False)")
+        problems.append(
+            f"swaps: allocator {exp.allocator.name} cannot move between processes "
+            f"({allocator.__name__}.snapshottable is False)"
+        )
     if problems:
         raise fail(problems)
     tree_problem = _check_tree(exp)
@@ -240,8 +262,9 @@ def _get_dotted(data: dict, dotted: str) -> Any:
     return node
 
 
-def load(path: str | Path, overrides: list[str] | tuple[str, ...] = (), seed: int | None = None,
-         origin: str = "--set") -> Experiment:
+def load(
+    path: str | Path, overrides: list[str] | tuple[str, ...] = (), seed: int | None = None, origin: str = "--set"
+) -> Experiment:
     """The experiment in ``path`` with ``overrides`` (``dotted.key=value``) applied and checked; an
     error about an overridden key names it as ``<origin> key=value`` (a sweep names its scenario)."""
     path = Path(path)
@@ -250,13 +273,16 @@ def load(path: str | Path, overrides: list[str] | tuple[str, ...] = (), seed: in
     except YamlFileError as exc:
         raise ConfigError(str(exc)) from None
     if data is None:
-        raise ConfigError(f"{path}: the file is empty; an experiment names at least its scenario or allocator "
-                          "(see experiments/quickstart.yaml)")
+        raise ConfigError(
+            f"{path}: the file is empty; an experiment names at least its scenario or allocator "
+            "(see experiments/quickstart.yaml)"
+        )
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: the top level must be a mapping of sections")
     if "base" in data and "run" not in data:
-        raise ConfigError(f"{path}: this is a sweep file (it names a base experiment): "
-                          f"run it with `swarmbed sweep {path}`")
+        raise ConfigError(
+            f"{path}: this is a sweep file (it names a base experiment): run it with `swarmbed sweep {path}`"
+        )
     for key in PATH_KEYS:  # paths in the file are relative to the file
         value = _get_dotted(data, key)
         if value is not None:

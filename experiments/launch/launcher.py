@@ -124,9 +124,15 @@ class ForkServer:
 
     def __init__(self, log_path: Path, timeout: float = 60.0) -> None:
         self.log = open(log_path, "wb")
-        self.proc = subprocess.Popen([sys.executable, "-m", "swarmbed.experiments.launch.forkserver", str(os.getpid())],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log,
-                                     start_new_session=True, close_fds=True, env=python_env())
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "swarmbed.experiments.launch.forkserver", str(os.getpid())],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self.log,
+            start_new_session=True,
+            close_fds=True,
+            env=python_env(),
+        )
         self.replies: queue.SimpleQueue = queue.SimpleQueue()
         self.exits: dict[int, int] = {}
         self.lock = threading.Lock()
@@ -216,9 +222,15 @@ class Children:
             proc = self.server.spawn(name, args, log_path)
         else:
             with open(log_path, "wb") as log:
-                proc = subprocess.Popen([sys.executable, "-m", module, *args, "--parent-pid", str(os.getpid())],
-                                        stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                        start_new_session=True, close_fds=True, env=python_env())
+                proc = subprocess.Popen(
+                    [sys.executable, "-m", module, *args, "--parent-pid", str(os.getpid())],
+                    stdin=subprocess.DEVNULL,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                    close_fds=True,
+                    env=python_env(),
+                )
         self.procs[name] = proc
         self.started_at[name] = time.monotonic()
         return proc
@@ -248,8 +260,10 @@ class Children:
         for name, proc in self.procs.items():
             rc = proc.poll()
             if rc is not None:
-                raise ChildExited(f"{name} {describe_exit(rc)} before the run started; "
-                                  f"logs/{name}.log ends with:\n{self.log_tail(name)}")
+                raise ChildExited(
+                    f"{name} {describe_exit(rc)} before the run started; "
+                    f"logs/{name}.log ends with:\n{self.log_tail(name)}"
+                )
 
     def _each(self, read) -> dict:
         """``read(pid)`` for every child still there."""
@@ -268,9 +282,11 @@ class Children:
         """Each child's proportional and unique set sizes (PSS, USS): what it costs the machine,
         pages shared with its siblings (imported code, the fork server's heap) counted by share or
         not at all. Reads /proc/<pid>/smaps: a few milliseconds per process."""
+
         def read(pid: int) -> tuple[float, float]:
             info = psutil.Process(pid).memory_full_info()
             return info.pss / 2**20, info.uss / 2**20
+
         return self._each(read)
 
     def cpu_s(self) -> dict[str, float]:

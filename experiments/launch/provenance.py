@@ -33,11 +33,16 @@ def code_state() -> dict[str, Any]:
     if not all((checkout / name).is_dir() for name in ("wire", "netem", "coordinator")):
         return _versions(git)  # an installed copy: whatever repository encloses site-packages is not its source
     try:
-        head = subprocess.run(["git", "-C", str(checkout), "rev-parse", "HEAD"], capture_output=True, text=True,
-                              timeout=10)
+        head = subprocess.run(
+            ["git", "-C", str(checkout), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10
+        )
         if head.returncode == 0:
-            status = subprocess.run(["git", "-C", str(checkout), "status", "--porcelain", "--untracked-files=no"],
-                                    capture_output=True, text=True, timeout=10)
+            status = subprocess.run(
+                ["git", "-C", str(checkout), "status", "--porcelain", "--untracked-files=no"],
+                capture_output=True,
+                text=True,
+                timeout=10,
+            )
             git = {"commit": head.stdout.strip(), "dirty": bool(status.stdout.strip())}
     except (OSError, subprocess.SubprocessError):
         git = None
@@ -51,12 +56,13 @@ def _versions(git: dict[str, Any] | None) -> dict[str, Any]:
             libraries[name] = version(name)
         except PackageNotFoundError:
             libraries[name] = None
-    return {"swarmbed": swarmbed.__version__, "git": git, "python": platform.python_version(),
-            "libraries": libraries}
+    return {"swarmbed": swarmbed.__version__, "git": git, "python": platform.python_version(), "libraries": libraries}
 
 
 def provenance(scenario_cls: type, scenario_target: str, allocator_cls: type, allocator_target: str) -> dict:
     """What ``provenance.json`` holds for a run of this scenario and allocator."""
-    return {**code_state(),
-            "scenario": {"target": scenario_target, "version": str(getattr(scenario_cls, "version", "1"))},
-            "allocator": {"target": allocator_target, "version": str(getattr(allocator_cls, "version", "1"))}}
+    return {
+        **code_state(),
+        "scenario": {"target": scenario_target, "version": str(getattr(scenario_cls, "version", "1"))},
+        "allocator": {"target": allocator_target, "version": str(getattr(allocator_cls, "version", "1"))},
+    }

@@ -78,8 +78,9 @@ class RunResult:
     timings: dict
 
 
-def open_hub(listen: Sequence[str] = (), attempts: int = 5,
-             settings: dict[str, object] | None = None) -> tuple[zenoh.Session, str]:
+def open_hub(
+    listen: Sequence[str] = (), attempts: int = 5, settings: dict[str, object] | None = None
+) -> tuple[zenoh.Session, str]:
     """A router session listening on a free loopback TCP port (the run's own processes connect
     there) and on ``listen`` (where other hosts' routers connect); ``settings``: e.g. the run's
     authentication and access control (:meth:`RunAccess.hub_settings`)."""
@@ -94,11 +95,18 @@ def open_hub(listen: Sequence[str] = (), attempts: int = 5,
     raise RunError(f"could not listen on a loopback port: {last}")
 
 
-def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
-                   on_ready: Callable[[Keys, str], None] | None = None, listen: Sequence[str] = (),
-                   auth: bool = True, admit: Sequence[Identity] = (),
-                   tls: dict[str, object] | None = None, fork_agents: bool = True,
-                   observers: Sequence[RunObserver] = ()) -> RunResult:
+def run_experiment(
+    exp: Experiment,
+    out_dir: Path,
+    progress: bool = True,
+    on_ready: Callable[[Keys, str], None] | None = None,
+    listen: Sequence[str] = (),
+    auth: bool = True,
+    admit: Sequence[Identity] = (),
+    tls: dict[str, object] | None = None,
+    fork_agents: bool = True,
+    observers: Sequence[RunObserver] = (),
+) -> RunResult:
     """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
     (tests use it to reach the run's keys from outside). ``listen``: endpoints where the hub also
     listens, for the routers of the hosts in ``exp.placement``. ``auth``: the hub admits only
@@ -116,8 +124,12 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
     log_dir.mkdir(exist_ok=True)
     resolved = resolve_experiment(exp)
     results.write_atomic(out_dir / results.CONFIG, to_yaml(exp))
-    results.write_json(out_dir / PROVENANCE, provenance(resolved.scenario_cls, resolved.targets.scenario,
-                                                        resolved.allocator_cls, resolved.targets.allocator))
+    results.write_json(
+        out_dir / PROVENANCE,
+        provenance(
+            resolved.scenario_cls, resolved.targets.scenario, resolved.allocator_cls, resolved.targets.allocator
+        ),
+    )
 
     t_start = time.perf_counter()
     hub_cpu_before = own_cpu_s()  # a sweep's pool worker hosts one run after another: count this one's
@@ -138,13 +150,25 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         undo.callback(children.kill_all)
         # every agent connects at about the same moment (the fork server starts hundreds a second):
         # the hub must take that many handshakes at once, and that many sessions
-        capacity = {"transport/unicast/accept_pending": max(100, exp.agents.count + 16),
-                    "transport/unicast/max_sessions": max(1000, exp.agents.count + 64)}
-        session, endpoint = open_hub(listen, settings={**capacity, **(access.hub_settings() if access else {}),
-                                                       **(tls or {})})
+        capacity = {
+            "transport/unicast/accept_pending": max(100, exp.agents.count + 16),
+            "transport/unicast/max_sessions": max(1000, exp.agents.count + 64),
+        }
+        session, endpoint = open_hub(
+            listen, settings={**capacity, **(access.hub_settings() if access else {}), **(tls or {})}
+        )
         undo.callback(session.close)
-        coord = Coordinator(exp, resolved.scenario(), resolved.allocator_cls, resolved.targets, keys, session, out_dir,
-                            where, carriers(exp) if auth else None)
+        coord = Coordinator(
+            exp,
+            resolved.scenario(),
+            resolved.allocator_cls,
+            resolved.targets,
+            keys,
+            session,
+            out_dir,
+            where,
+            carriers(exp) if auth else None,
+        )
         undo.pop_all()
     started: list[str] = []
     try:
@@ -159,29 +183,40 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             children.spawn("netem", "swarmbed.netem", [*common, *identity("netem"), "--out", str(out_dir)])
             for i in range(exp.agents.count):
                 if where[i] == LOCAL:
-                    children.spawn(f"agent_{i}", "swarmbed.agent_runtime",
-                                   [*common, *identity(agent_user(i)), "--id", str(i)])
+                    children.spawn(
+                        f"agent_{i}", "swarmbed.agent_runtime", [*common, *identity(agent_user(i)), "--id", str(i)]
+                    )
         except ForkServerError as exc:
             raise RunError(str(exc)) from None
         hosts = {}
         if remote:
             try:
-                wait_for_hosts(session, remote, exp.run.join_timeout, listen[0] if listen else endpoint,
-                               auth=access is not None)
+                wait_for_hosts(
+                    session, remote, exp.run.join_timeout, listen[0] if listen else endpoint, auth=access is not None
+                )
                 for host in remote:
                     hosts[host] = host_info(session, host)
                     start_agents(session, host, keys.run_id, [i for i, h in where.items() if h == host], args=logs)
                     started.append(host)
             except HostError as exc:
                 raise RunError(str(exc)) from None
+
         def place(agent: int, host: str, incarnation: int, restore: bool = True) -> None:
             args = ["--id", str(agent), "--incarnation", str(incarnation), *(["--restore"] if restore else [])]
             if host == LOCAL:
-                children.spawn(process_name(agent, incarnation), "swarmbed.agent_runtime",
-                               [*common, *identity(agent_user(agent)), *args])
+                children.spawn(
+                    process_name(agent, incarnation),
+                    "swarmbed.agent_runtime",
+                    [*common, *identity(agent_user(agent)), *args],
+                )
                 return
-            wait_for_hosts(session, [host], min(5.0, exp.run.join_timeout), listen[0] if listen else endpoint,
-                           auth=access is not None)
+            wait_for_hosts(
+                session,
+                [host],
+                min(5.0, exp.run.join_timeout),
+                listen[0] if listen else endpoint,
+                auth=access is not None,
+            )
             start_agents(session, host, keys.run_id, [agent], args=[*args[2:], *logs])
             if host not in started:
                 started.append(host)
@@ -196,8 +231,12 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
 
         coord.place, coord.unplace, coord.exit_status = place, unplace, children.exit_status
         t_spawned = time.perf_counter()
-        deployment = {"run_id": keys.run_id, "hub": [endpoint, *listen],
-                      "placement": {str(i): h for i, h in where.items()}, "hosts": hosts}
+        deployment = {
+            "run_id": keys.run_id,
+            "hub": [endpoint, *listen],
+            "placement": {str(i): h for i, h in where.items()},
+            "hosts": hosts,
+        }
         results.write_json(out_dir / DEPLOYMENT, deployment)
         try:
             coord.wait_for_members(children.check)
@@ -207,8 +246,14 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
         if on_ready:
             on_ready(keys, endpoint)
 
-        bar = tqdm(total=exp.run.duration, unit="sim s", desc=exp.name, disable=not progress, leave=False,
-                   bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]")
+        bar = tqdm(
+            total=exp.run.duration,
+            unit="sim s",
+            desc=exp.name,
+            disable=not progress,
+            leave=False,
+            bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]",
+        )
         shown = [0.0]
 
         def on_tick(_tick: int, sim_time: float) -> None:
@@ -226,9 +271,14 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             if coord.swap_log:  # where agents ran at the end, and what each host ran then
                 for host in sorted({h for h in coord.hosts.values() if h != LOCAL}):
                     hosts[host] = host_info(session, host) or hosts.get(host)
-                results.write_json(out_dir / DEPLOYMENT, {
-                    **deployment, "hosts": hosts,
-                    "placement_at_end": {str(i): coord.hosts.get(i, LOCAL) for i in range(exp.agents.count)}})
+                results.write_json(
+                    out_dir / DEPLOYMENT,
+                    {
+                        **deployment,
+                        "hosts": hosts,
+                        "placement_at_end": {str(i): coord.hosts.get(i, LOCAL) for i in range(exp.agents.count)},
+                    },
+                )
         finally:
             bar.close()
             for observer in reversed(running):
@@ -253,13 +303,20 @@ def run_experiment(exp: Experiment, out_dir: Path, progress: bool = True,
             "total_s": time.perf_counter() - t_start,
             "rss_mb": rss,
             "peak_rss_mb": peak,
-            "cpu_s": {"coordinator": own_cpu_s() - hub_cpu_before, "netem": cpu.get("netem"),
-                      "agents_total": sum(agent_cpu), "agent_max": max(agent_cpu, default=None)},
+            "cpu_s": {
+                "coordinator": own_cpu_s() - hub_cpu_before,
+                "netem": cpu.get("netem"),
+                "agents_total": sum(agent_cpu),
+                "agent_max": max(agent_cpu, default=None),
+            },
             "agent_rss_mb_mean": sum(agent_rss) / len(agent_rss) if agent_rss else None,
             "agent_pss_mb_mean": sum(p for p, _ in shared.values()) / len(shared) if shared else None,
             "agent_uss_mb_mean": sum(u for _, u in shared.values()) / len(shared) if shared else None,
-            "startup": {"fork_server_s": t_server - t_start if children.forked else None,
-                        "spawn_s": t_spawned - t_server, "join_s": t_joined - t_spawned},
+            "startup": {
+                "fork_server_s": t_server - t_start if children.forked else None,
+                "spawn_s": t_spawned - t_server,
+                "join_s": t_joined - t_spawned,
+            },
             "exit_codes": exit_codes,
         }
         summary = coord.write_results(timings)

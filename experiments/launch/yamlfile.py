@@ -36,8 +36,10 @@ def parse_yaml(text: str, where: str) -> Any:
         depth = 0
         for event in yaml.parse(text, Loader=_Loader):
             if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None):
-                raise YamlFileError(f"{_where(where, event.start_mark)}: YAML anchors and aliases (&name, *name) "
-                                    "are not accepted; write the values out")
+                raise YamlFileError(
+                    f"{_where(where, event.start_mark)}: YAML anchors and aliases (&name, *name) "
+                    "are not accepted; write the values out"
+                )
             if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
                 depth += 1
                 if depth > MAX_DEPTH:

@@ -83,13 +83,17 @@ def load(sweep_dirs: list[Path], mixed_versions_ok: bool = False) -> pd.DataFram
         if not spec.exists():
             raise AnalyzeError(f"{sweep_dir}: no {SPEC}; run `swarmbed sweep` into it first")
         if not ((sweep_dir / TABLE).exists() or (sweep_dir / PARQUET).exists()):
-            raise AnalyzeError(f"{sweep_dir}: no {TABLE} yet (a sweep writes it when it stops); run the same "
-                               f"`swarmbed sweep` again: it skips the runs that completed and writes the table")
+            raise AnalyzeError(
+                f"{sweep_dir}: no {TABLE} yet (a sweep writes it when it stops); run the same "
+                f"`swarmbed sweep` again: it skips the runs that completed and writes the table"
+            )
         df = read_table(sweep_dir)
         mixed = mixed_configurations(sweep_dir, df)
         if mixed:
-            raise AnalyzeError(f"{sweep_dir}: {mixed}; a scenario's runs may differ only in their seed "
-                               "(redo them with swarmbed sweep ... --redo-mismatched)")
+            raise AnalyzeError(
+                f"{sweep_dir}: {mixed}; a scenario's runs may differ only in their seed "
+                "(redo them with swarmbed sweep ... --redo-mismatched)"
+            )
         meta = json.loads(spec.read_text())
         df["sweep"] = meta["name"]
         df["run_dir"] = [str(sweep_dir / str(sc) / f"run_{int(r):03d}") for sc, r in zip(df["scenario"], df["run"])]
@@ -99,8 +103,10 @@ def load(sweep_dirs: list[Path], mixed_versions_ok: bool = False) -> pd.DataFram
     df = pd.concat(frames, ignore_index=True)
     versions = mixed_versions(df)
     if versions and not mixed_versions_ok:
-        raise AnalyzeError(f"{', '.join(map(str, sweep_dirs))}: runs made by {versions}: their results may not be "
-                           "comparable (provenance.json of each run says which); pass --mixed-versions to pool them")
+        raise AnalyzeError(
+            f"{', '.join(map(str, sweep_dirs))}: runs made by {versions}: their results may not be "
+            "comparable (provenance.json of each run says which); pass --mixed-versions to pool them"
+        )
     df = df[df["status"] == "ok"].copy()
     if df.empty:
         raise AnalyzeError(f"{', '.join(map(str, sweep_dirs))}: no completed run to analyze")
@@ -121,8 +127,10 @@ def _resolve_series_keys(df: pd.DataFrame, sweep_dir: Path) -> None:
         if key in df and df[key].notna().all():
             continue
         first_run = df.groupby("scenario")["run"].min()  # a scenario's runs differ only in their seed
-        used = {scenario: _config_value(sweep_dir / str(scenario) / f"run_{int(run):03d}" / "config.yaml", key)
-                for scenario, run in first_run.items()}
+        used = {
+            scenario: _config_value(sweep_dir / str(scenario) / f"run_{int(run):03d}" / "config.yaml", key)
+            for scenario, run in first_run.items()
+        }
         values = df["scenario"].map(used)
         df[key] = df[key].fillna(values) if key in df else values
 
@@ -154,8 +162,18 @@ def scenario_summary(df: pd.DataFrame, metrics: dict) -> pd.DataFrame:
                 continue
             v = group[metric].dropna().astype(float)
             lo, hi = _ci(v)
-            rows.append({"scenario": scenario, "metric": metric, "n": len(v), "mean": v.mean(), "sd": v.std(ddof=1),
-                         "median": v.median(), "ci95_low": lo, "ci95_high": hi})
+            rows.append(
+                {
+                    "scenario": scenario,
+                    "metric": metric,
+                    "n": len(v),
+                    "mean": v.mean(),
+                    "sd": v.std(ddof=1),
+                    "median": v.median(),
+                    "ci95_low": lo,
+                    "ci95_high": hi,
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -178,9 +196,18 @@ def _allocator_label(value) -> str:
 #    sized for a paper's column (3.5 in) or page (7 in) at 8-9 pt text ------------------------------
 COLUMN_IN, PAGE_IN = 3.5, 7.16
 STYLE: Any = {  # matplotlib types rc keys as literals
-    "font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8, "xtick.labelsize": 7, "ytick.labelsize": 7,
-    "legend.fontsize": 7, "axes.spines.top": False, "axes.spines.right": False, "savefig.bbox": "tight",
-    "pdf.fonttype": 42, "svg.fonttype": "none"}
+    "font.size": 8,
+    "axes.titlesize": 8,
+    "axes.labelsize": 8,
+    "xtick.labelsize": 7,
+    "ytick.labelsize": 7,
+    "legend.fontsize": 7,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "savefig.bbox": "tight",
+    "pdf.fonttype": 42,
+    "svg.fonttype": "none",
+}
 MEDIAN = {"color": "black", "linewidth": 1.4}  # visible on every fill colour
 
 
@@ -204,9 +231,16 @@ SHOW_POINTS_UP_TO = 20  # runs per box: fewer, and each run is drawn too (a box 
 
 def _boxes(ax, data: list, positions, width: float, colors: list[str]) -> None:
     points = [0 < len(values) <= SHOW_POINTS_UP_TO for values in data]
-    bp = ax.boxplot(data, positions=positions, widths=width, patch_artist=True, manage_ticks=False,
-                    medianprops=MEDIAN, flierprops={"markersize": 2.5, "alpha": 0.6},
-                    showfliers=not all(points))  # every run drawn: no second marker for outliers
+    bp = ax.boxplot(
+        data,
+        positions=positions,
+        widths=width,
+        patch_artist=True,
+        manage_ticks=False,
+        medianprops=MEDIAN,
+        flierprops={"markersize": 2.5, "alpha": 0.6},
+        showfliers=not all(points),
+    )  # every run drawn: no second marker for outliers
     for box, color in zip(bp["boxes"], colors):
         box.set_facecolor(color)
         box.set_alpha(0.75)
@@ -246,8 +280,13 @@ def fig3(df: pd.DataFrame, metric: str, out: Path) -> Path | None:
         if not have:
             groups = sorted(df["scenario"].unique())
             fig, ax = plt.subplots(figsize=(max(COLUMN_IN, 0.5 * len(groups)), 2.8))
-            _boxes(ax, [_values(df[df["scenario"] == g], metric) for g in groups], np.arange(len(groups)), 0.6,
-                   ["0.75"] * len(groups))
+            _boxes(
+                ax,
+                [_values(df[df["scenario"] == g], metric) for g in groups],
+                np.arange(len(groups)),
+                0.6,
+                ["0.75"] * len(groups),
+            )
             ax.set_xticks(range(len(groups)), groups)
             ax.set_ylabel(label)
             ax.tick_params(axis="x", rotation=30)
@@ -290,14 +329,28 @@ def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
                 means = np.array([chosen[g][metric].mean() for g in strategies])
                 cis = [_ci(chosen[g][metric]) for g in strategies]
                 err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
-                ax.bar(x + (k - 0.5) * 0.4, means, 0.4, yerr=np.nan_to_num(err), capsize=2, color=colors,
-                       alpha=0.85 if k == 0 else 0.35, hatch=None if k == 0 else "///", edgecolor="0.2",
-                       linewidth=0.5, error_kw={"elinewidth": 0.8})
+                ax.bar(
+                    x + (k - 0.5) * 0.4,
+                    means,
+                    0.4,
+                    yerr=np.nan_to_num(err),
+                    capsize=2,
+                    color=colors,
+                    alpha=0.85 if k == 0 else 0.35,
+                    hatch=None if k == 0 else "///",
+                    edgecolor="0.2",
+                    linewidth=0.5,
+                    error_kw={"elinewidth": 0.8},
+                )
             ax.set_xticks(x, labels, rotation=30, ha="right")
             ax.set_ylabel("victims per trial (mean, 95 % CI)")
-            ax.legend(handles=[Patch(facecolor="0.5", alpha=0.85, edgecolor="0.2", linewidth=0.5, label="rescued"),
-                               Patch(facecolor="0.5", alpha=0.35, hatch="///", edgecolor="0.2", linewidth=0.5,
-                                     label="expired")], frameon=False)
+            ax.legend(
+                handles=[
+                    Patch(facecolor="0.5", alpha=0.85, edgecolor="0.2", linewidth=0.5, label="rescued"),
+                    Patch(facecolor="0.5", alpha=0.35, hatch="///", edgecolor="0.2", linewidth=0.5, label="expired"),
+                ],
+                frameon=False,
+            )
             if sweep is not None:
                 ax.set_title(str(sweep))
             written.append(_save(fig, out, "fig_rescued_expired" + ("" if sweep is None else f"_{sweep}")))
@@ -312,15 +365,22 @@ def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
             ax.set_title(SAR_METRICS[metric])
             if metric.startswith("network") or metric == "negotiations":
                 _log_counts(ax)
-        for ax in list(axes.flat)[len(shown):]:
+        for ax in list(axes.flat)[len(shown) :]:
             ax.set_visible(False)
         fig.tight_layout()
         written.append(_save(fig, out, "fig_boxplots"))
         # rescued against messages sent
         fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.8))
         for g in strategies:
-            ax.scatter(per[g]["network.messages_sent"], per[g]["rescued"], s=10, color=strategy_color(g),
-                       label=strategy_label(g), alpha=0.8, linewidths=0)
+            ax.scatter(
+                per[g]["network.messages_sent"],
+                per[g]["rescued"],
+                s=10,
+                color=strategy_color(g),
+                label=strategy_label(g),
+                alpha=0.8,
+                linewidths=0,
+            )
         _log_counts(ax, "x")
         ax.set_xlabel("messages sent per trial (symlog: 0 shown)")
         ax.set_ylabel("victims rescued per trial")
@@ -331,16 +391,26 @@ def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
             counts = df.get("agents" if key == AGENTS else key)
             if counts is None or counts.nunique() < 2:
                 continue
-            for metric, ylabel, stem in (("network.messages_sent", "messages sent per trial (symlog)", "messages"),
-                                         ("rescued", "victims rescued per trial (mean, 95 % CI)", "rescued")):
+            for metric, ylabel, stem in (
+                ("network.messages_sent", "messages sent per trial (symlog)", "messages"),
+                ("rescued", "victims rescued per trial (mean, 95 % CI)", "rescued"),
+            ):
                 fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
                 for g in strategies:
                     groups = df[df[ALLOCATOR] == g].groupby(counts)[metric]
                     means = groups.mean()
                     cis = [_ci(v) for _, v in groups]
                     err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
-                    ax.errorbar(means.index, means.to_numpy(), yerr=np.nan_to_num(err), marker="o", ms=3, capsize=2,
-                                color=strategy_color(g), label=strategy_label(g))
+                    ax.errorbar(
+                        means.index,
+                        means.to_numpy(),
+                        yerr=np.nan_to_num(err),
+                        marker="o",
+                        ms=3,
+                        capsize=2,
+                        color=strategy_color(g),
+                        label=strategy_label(g),
+                    )
                 if stem == "messages":
                     _log_counts(ax)
                 ax.set_xscale("log")
@@ -359,8 +429,11 @@ def _factor_figures(df: pd.DataFrame, out: Path, strategies: list[str]) -> list[
     """For each numeric factor a sweep varies other than the agent and victim counts (the tick
     length of the dt study, a failure rate): the outcome per strategy against it, mean and 95 % CI."""
     written = []
-    factors = [f for f in df.attrs.get("factors", []) if f in df and f not in (ALLOCATOR, "allocator.name", AGENTS,
-                                                                                "scenario.victims")]
+    factors = [
+        f
+        for f in df.attrs.get("factors", [])
+        if f in df and f not in (ALLOCATOR, "allocator.name", AGENTS, "scenario.victims")
+    ]
     for factor in factors:
         values = pd.to_numeric(df[factor], errors="coerce")
         if values.isna().any() or values.nunique() < 2:
@@ -371,9 +444,18 @@ def _factor_figures(df: pd.DataFrame, out: Path, strategies: list[str]) -> list[
             xs = sorted(values[sub.index].unique())
             means = [sub.loc[values[sub.index] == v, "rescued"].mean() for v in xs]
             cis = [_ci(sub.loc[values[sub.index] == v, "rescued"]) for v in xs]
-            ax.errorbar(xs, means, yerr=np.nan_to_num([[m - lo for m, (lo, _) in zip(means, cis)],
-                                                       [hi - m for m, (_, hi) in zip(means, cis)]]),
-                        marker="o", ms=3, capsize=2, color=strategy_color(g), label=strategy_label(g))
+            ax.errorbar(
+                xs,
+                means,
+                yerr=np.nan_to_num(
+                    [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
+                ),
+                marker="o",
+                ms=3,
+                capsize=2,
+                color=strategy_color(g),
+                label=strategy_label(g),
+            )
         ax.set_xlabel(factor)
         ax.set_ylabel("victims rescued per trial (mean, 95 % CI)")
         ax.legend(frameon=False)
@@ -381,8 +463,7 @@ def _factor_figures(df: pd.DataFrame, out: Path, strategies: list[str]) -> list[
     return written
 
 
-def analyze(sweep_dirs: list[Path] | Path, control: str | None = None,
-            mixed_versions_ok: bool = False) -> list[Path]:
+def analyze(sweep_dirs: list[Path] | Path, control: str | None = None, mixed_versions_ok: bool = False) -> list[Path]:
     """Tables and figures from sweep directories, written to the first. ``control``: the strategy
     the others are compared with (default: cbba-etc where the sweeps have it); one the sweeps do
     not have is refused before anything is written. Runs of one scenario or allocator made in two
@@ -392,8 +473,10 @@ def analyze(sweep_dirs: list[Path] | Path, control: str | None = None,
     df = load(dirs, mixed_versions_ok)
     sar = "rescued" in df
     if control is not None and control not in set(df[ALLOCATOR]):
-        raise AnalyzeError(f"--control {control}: no such strategy in these sweeps "
-                           f"(they have: {', '.join(sorted(set(df[ALLOCATOR])))})")
+        raise AnalyzeError(
+            f"--control {control}: no such strategy in these sweeps "
+            f"(they have: {', '.join(sorted(set(df[ALLOCATOR])))})"
+        )
     control = control or DEFAULT_CONTROL
     for stale in ("statistics.csv", "statistics.md"):  # never leave an earlier analysis's statistics
         (out / stale).unlink(missing_ok=True)

@@ -29,8 +29,14 @@ def _segments(rows: pd.DataFrame, pos: dict[int, tuple[float, float]]) -> list[l
     return [[pos[s], pos[r]] for s, r in zip(rows["sender"], rows["receiver"]) if s in pos and r in pos]
 
 
-def replay(run: Path, out: Path | None = None, start: float | None = None, end: float | None = None,
-           fps: int = 10, every: int | None = None) -> tuple[Path, int]:
+def replay(
+    run: Path,
+    out: Path | None = None,
+    start: float | None = None,
+    end: float | None = None,
+    fps: int = 10,
+    every: int | None = None,
+) -> tuple[Path, int]:
     """Write the movie (``.gif``, or ``.mp4`` where ffmpeg is installed); returns it and its frame count."""
     import matplotlib
 
@@ -43,8 +49,9 @@ def replay(run: Path, out: Path | None = None, start: float | None = None, end: 
     if not (run / "summary.json").exists():
         raise ReplayError(f"{run}: not a completed run (no summary.json)")
     if not traj_file.exists() or not marker_file.exists():
-        raise ReplayError(f"{run}: no trajectories.csv/markers.csv; run it again with "
-                          "--set run.record_trajectories=true")
+        raise ReplayError(
+            f"{run}: no trajectories.csv/markers.csv; run it again with --set run.record_trajectories=true"
+        )
     out = out or run / "replay.gif"
     if out.suffix not in (".gif", ".mp4"):
         raise ReplayError(f"{out}: a replay is a .gif or an .mp4")
@@ -92,8 +99,14 @@ def replay(run: Path, out: Path | None = None, start: float | None = None, end: 
         handles += [Line2D([], [], color=DROP_COLORS[r], lw=1, ls="--", label=r.replace("_", " ")) for r in reasons]
         ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
     else:
-        ax.text(0.01, 0.01, "links: run with network.ledger: per_receiver", transform=ax.transAxes, fontsize=8,
-                color="#777777")
+        ax.text(
+            0.01,
+            0.01,
+            "links: run with network.ledger: per_receiver",
+            transform=ax.transAxes,
+            fontsize=8,
+            color="#777777",
+        )
     present: dict[int, tuple[float, float, str]] = {}
     applied = [-1]  # last tick whose marker events are in `present`
 

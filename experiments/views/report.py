@@ -66,30 +66,45 @@ class Page:
         if note:
             self.parts.append(f"<p class='note'>{html.escape(note)}</p>")
 
-    def table(self, rows: list[tuple[str, Any, str]],
-              header: tuple[str, str, str] = ("figure", "value", "from")) -> None:
-        cells = "".join(f"<tr><td>{html.escape(str(a))}</td><td class='num'>{html.escape(_fmt(b))}</td>"
-                        f"<td class='src'>{html.escape(c)}</td></tr>" for a, b, c in rows)
+    def table(
+        self, rows: list[tuple[str, Any, str]], header: tuple[str, str, str] = ("figure", "value", "from")
+    ) -> None:
+        cells = "".join(
+            f"<tr><td>{html.escape(str(a))}</td><td class='num'>{html.escape(_fmt(b))}</td>"
+            f"<td class='src'>{html.escape(c)}</td></tr>"
+            for a, b, c in rows
+        )
         head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
         self.parts.append(f"<table><tr>{head}</tr>{cells}</table>")
 
     def figure(self, fig: go.Figure, source: str) -> None:
         fig.update_layout(template="plotly_white", height=420, margin={"l": 60, "r": 20, "t": 50, "b": 50})
-        self.parts.append(pio.to_html(fig, full_html=False, include_plotlyjs=self.figures == 0,
-                                      div_id=f"fig{self.figures}", config={"displaylogo": False}))
+        self.parts.append(
+            pio.to_html(
+                fig,
+                full_html=False,
+                include_plotlyjs=self.figures == 0,
+                div_id=f"fig{self.figures}",
+                config={"displaylogo": False},
+            )
+        )
         self.parts.append(f"<p class='src'>from {html.escape(source)}</p>")
         self.figures += 1
 
     def render(self, subtitle: str) -> str:
-        return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(self.title)}</title>"
-                f"<style>{CSS}</style></head><body><h1>{html.escape(self.title)}</h1>"
-                f"<p class='note'>{html.escape(subtitle)}</p>{''.join(self.parts)}</body></html>")
+        return (
+            f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(self.title)}</title>"
+            f"<style>{CSS}</style></head><body><h1>{html.escape(self.title)}</h1>"
+            f"<p class='note'>{html.escape(subtitle)}</p>{''.join(self.parts)}</body></html>"
+        )
 
 
-CSS = ("body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;color:#222}"
-       "table{border-collapse:collapse;margin:1em 0}td,th{border-bottom:1px solid #ddd;padding:4px 10px;"
-       "text-align:left}.num{text-align:right;font-variant-numeric:tabular-nums}.src,.note{color:#777;"
-       "font-size:0.85em}h2{margin-top:2em;border-bottom:2px solid #eee}")
+CSS = (
+    "body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;color:#222}"
+    "table{border-collapse:collapse;margin:1em 0}td,th{border-bottom:1px solid #ddd;padding:4px 10px;"
+    "text-align:left}.num{text-align:right;font-variant-numeric:tabular-nums}.src,.note{color:#777;"
+    "font-size:0.85em}h2{margin-top:2em;border-bottom:2px solid #eee}"
+)
 
 
 def _fmt(v: Any) -> str:
@@ -125,133 +140,223 @@ def run_report(run: Path) -> tuple[str, int]:
     delivered = int(copies.loc[copies["outcome"] == "delivered", "messages"].sum())
     dropped = copies[copies["outcome"] != "delivered"].groupby("outcome")["messages"].sum()
     balanced = int(copies["messages"].sum()) == delivered + int(dropped.sum()) == net["copies"]
-    page.heading("Totals", "Messages count transmissions; copies count one per intended receiver. Payload bytes "
-                           "are the encoded messages as agents hand them to the radio.")
+    page.heading(
+        "Totals",
+        "Messages count transmissions; copies count one per intended receiver. Payload bytes "
+        "are the encoded messages as agents hand them to the radio.",
+    )
     benefit = _benefit(summary.get("scenario_kind", ""))
-    rows = [("scenario / allocator", f"{summary.get('scenario_kind')} / {summary['allocator']}", "summary.json"),
-            ("agents, ticks, dt", f"{summary['agents']}, {ticks}, {dt} s", "summary.json, config.yaml"),
-            ("messages sent", int(sent["messages"].sum()), "network_ledger.csv (sent rows)"),
-            ("payload bytes sent", int(sent["bytes"].sum()), "network_ledger.csv (sent rows)"),
-            ("copies", int(copies["messages"].sum()), "network_ledger.csv (other rows)"),
-            ("copies delivered", delivered, "network_ledger.csv"),
-            *[(f"copies dropped: {reason}", int(n), "network_ledger.csv") for reason, n in dropped.items()],
-            ("copies = delivered + dropped, and as summary.json says", balanced, "network_ledger.csv, summary.json"),
-            ("agents' and proxy's byte counts agree", net.get("bytes_agree"), "summary.json")]
+    rows = [
+        ("scenario / allocator", f"{summary.get('scenario_kind')} / {summary['allocator']}", "summary.json"),
+        ("agents, ticks, dt", f"{summary['agents']}, {ticks}, {dt} s", "summary.json, config.yaml"),
+        ("messages sent", int(sent["messages"].sum()), "network_ledger.csv (sent rows)"),
+        ("payload bytes sent", int(sent["bytes"].sum()), "network_ledger.csv (sent rows)"),
+        ("copies", int(copies["messages"].sum()), "network_ledger.csv (other rows)"),
+        ("copies delivered", delivered, "network_ledger.csv"),
+        *[(f"copies dropped: {reason}", int(n), "network_ledger.csv") for reason, n in dropped.items()],
+        ("copies = delivered + dropped, and as summary.json says", balanced, "network_ledger.csv, summary.json"),
+        ("agents' and proxy's byte counts agree", net.get("bytes_agree"), "summary.json"),
+    ]
     if benefit and benefit in summary:
         kb = max(net["bytes_sent"], 1) / 1000
-        rows += [(benefit.replace("_", " "), summary[benefit], "summary.json"),
-                 (f"{benefit.replace('_', ' ')} per kB sent", summary[benefit] / kb, "summary.json")]
+        rows += [
+            (benefit.replace("_", " "), summary[benefit], "summary.json"),
+            (f"{benefit.replace('_', ' ')} per kB sent", summary[benefit] / kb, "summary.json"),
+        ]
     page.table(rows)
 
     transport_file = run / "transport.json"
     if transport_file.exists():
         wire = json.loads(transport_file.read_text())
         t = wire["totals"]
-        page.heading("On the wire", "Payload: the radio messages as agents encode them (reproducible). Samples: "
-                     "the per-tick Zenoh samples agents publish (actions, radio messages, framing of ours) and "
-                     "receive (observation, inbox). TCP: what each process's sockets sent and received, as the "
-                     "kernel counts it (Zenoh framing, control traffic, keep-alives; not IP/TCP headers). "
-                     "Measured, so not reproducible byte for byte.")
-        page.table([("radio payload bytes sent", t["radio_payload_bytes"], "transport.json, summary.json"),
-                    ("per-tick sample bytes agents published", t["agent_sample_bytes_out"], "transport.json"),
-                    ("per-tick sample bytes agents received", t["agent_sample_bytes_in"], "transport.json"),
-                    ("TCP bytes agents sent", t["agent_tcp_bytes_sent"], "transport.json"),
-                    ("TCP bytes agents received", t["agent_tcp_bytes_received"], "transport.json"),
-                    ("overhead: TCP bytes agents sent / radio payload bytes", t["overhead_ratio"], "transport.json"),
-                    ("TCP bytes all processes sent / received",
-                     f"{_fmt(t['tcp_bytes_sent'])} / {_fmt(t['tcp_bytes_received'])}", "transport.json")])
-        procs = {n: wire["processes"][n] for n in sorted(
-            (n for n in wire["processes"] if n.startswith("agent_")),
-            key=lambda n: tuple(int(x) for x in n.removeprefix("agent_").split(".") if x.isdigit()))}
+        page.heading(
+            "On the wire",
+            "Payload: the radio messages as agents encode them (reproducible). Samples: "
+            "the per-tick Zenoh samples agents publish (actions, radio messages, framing of ours) and "
+            "receive (observation, inbox). TCP: what each process's sockets sent and received, as the "
+            "kernel counts it (Zenoh framing, control traffic, keep-alives; not IP/TCP headers). "
+            "Measured, so not reproducible byte for byte.",
+        )
+        page.table(
+            [
+                ("radio payload bytes sent", t["radio_payload_bytes"], "transport.json, summary.json"),
+                ("per-tick sample bytes agents published", t["agent_sample_bytes_out"], "transport.json"),
+                ("per-tick sample bytes agents received", t["agent_sample_bytes_in"], "transport.json"),
+                ("TCP bytes agents sent", t["agent_tcp_bytes_sent"], "transport.json"),
+                ("TCP bytes agents received", t["agent_tcp_bytes_received"], "transport.json"),
+                ("overhead: TCP bytes agents sent / radio payload bytes", t["overhead_ratio"], "transport.json"),
+                (
+                    "TCP bytes all processes sent / received",
+                    f"{_fmt(t['tcp_bytes_sent'])} / {_fmt(t['tcp_bytes_received'])}",
+                    "transport.json",
+                ),
+            ]
+        )
+        procs = {
+            n: wire["processes"][n]
+            for n in sorted(
+                (n for n in wire["processes"] if n.startswith("agent_")),
+                key=lambda n: tuple(int(x) for x in n.removeprefix("agent_").split(".") if x.isdigit()),
+            )
+        }
         names = [n.removeprefix("agent_") for n in procs]  # agent 2 before agent 10, as every other chart
         sent_by = agents.set_index("agent")["bytes_sent"]
-        fig = go.Figure([
-            go.Bar(x=names, y=[sent_by.get(int(n), 0) for n in names], name="radio payload"),
-            go.Bar(x=names, y=[(p.get("samples") or {}).get("out") for p in procs.values()],
-                   name="per-tick samples published"),
-            go.Bar(x=names, y=[(p.get("tcp") or {}).get("sent") for p in procs.values()], name="TCP bytes sent")])
-        fig.update_layout(title="What each agent sent, layer by layer", xaxis_title="agent", yaxis_title="bytes",
-                          barmode="group", xaxis={"type": "category", "categoryorder": "array", "categoryarray": names})
+        fig = go.Figure(
+            [
+                go.Bar(x=names, y=[sent_by.get(int(n), 0) for n in names], name="radio payload"),
+                go.Bar(
+                    x=names,
+                    y=[(p.get("samples") or {}).get("out") for p in procs.values()],
+                    name="per-tick samples published",
+                ),
+                go.Bar(x=names, y=[(p.get("tcp") or {}).get("sent") for p in procs.values()], name="TCP bytes sent"),
+            ]
+        )
+        fig.update_layout(
+            title="What each agent sent, layer by layer",
+            xaxis_title="agent",
+            yaxis_title="bytes",
+            barmode="group",
+            xaxis={"type": "category", "categoryorder": "array", "categoryarray": names},
+        )
         page.figure(fig, "transport.json, agents.csv")
 
     page.heading("Per agent")
-    fig = go.Figure(_side_by_side(agents["agent"], agents["bytes_sent"], "payload bytes sent",
-                                  agents["messages_sent"], "messages sent"))
-    fig.update_layout(title="Bytes and messages each agent sent", xaxis_title="agent", yaxis_title="bytes",
-                      yaxis2=_count_axis("messages", agents["messages_sent"]), barmode="group",
-                      xaxis={"type": "category"}, legend=LEGEND_BELOW)
+    fig = go.Figure(
+        _side_by_side(
+            agents["agent"], agents["bytes_sent"], "payload bytes sent", agents["messages_sent"], "messages sent"
+        )
+    )
+    fig.update_layout(
+        title="Bytes and messages each agent sent",
+        xaxis_title="agent",
+        yaxis_title="bytes",
+        yaxis2=_count_axis("messages", agents["messages_sent"]),
+        barmode="group",
+        xaxis={"type": "category"},
+        legend=LEGEND_BELOW,
+    )
     page.figure(fig, "agents.csv")
 
     page.heading("Per message kind")
     kinds = pd.DataFrame(net["per_kind"]).T.reset_index(names="kind") if net["per_kind"] else pd.DataFrame()
     if len(kinds):
         fig = go.Figure(_side_by_side(kinds["kind"], kinds["bytes"], "payload bytes", kinds["messages"], "messages"))
-        fig.update_layout(title="Bytes and messages per kind", yaxis_title="bytes", barmode="group",
-                          yaxis2=_count_axis("messages", kinds["messages"]), legend=LEGEND_BELOW)
+        fig.update_layout(
+            title="Bytes and messages per kind",
+            yaxis_title="bytes",
+            barmode="group",
+            yaxis2=_count_axis("messages", kinds["messages"]),
+            legend=LEGEND_BELOW,
+        )
         page.figure(fig, "summary.json (network.per_kind)")
         sizes = sent.assign(size=sent["bytes"] / sent["messages"])
         fig = go.Figure([go.Histogram(x=g["size"], name=k, opacity=0.7) for k, g in sizes.groupby("kind")])
-        fig.update_layout(title="Message sizes per kind (mean per sender and tick)", xaxis_title="bytes",
-                          yaxis_title="count", barmode="overlay")
+        fig.update_layout(
+            title="Message sizes per kind (mean per sender and tick)",
+            xaxis_title="bytes",
+            yaxis_title="count",
+            barmode="overlay",
+        )
         page.figure(fig, "network_ledger.csv (sent rows)")
 
     page.heading("Over simulated time")
     for by, what in (("kind", "message kind"), ("sender", "sending agent")):
         rate = _binned(sent, ticks, dt, by, "bytes")
-        fig = go.Figure([go.Scatter(x=rate.index, y=rate[c], name=str(c), stackgroup="one", mode="lines")
-                         for c in rate.columns])
-        fig.update_layout(title=f"Payload bytes per second by {what} (stacked)", xaxis_title="simulated time (s)",
-                          yaxis_title="bytes/s")
+        fig = go.Figure(
+            [go.Scatter(x=rate.index, y=rate[c], name=str(c), stackgroup="one", mode="lines") for c in rate.columns]
+        )
+        fig.update_layout(
+            title=f"Payload bytes per second by {what} (stacked)",
+            xaxis_title="simulated time (s)",
+            yaxis_title="bytes/s",
+        )
         page.figure(fig, "network_ledger.csv (sent rows)")
     drops = copies[copies["outcome"] != "delivered"]
     if len(drops):
         rate = _binned(drops, ticks, dt, "outcome", "messages")
-        fig = go.Figure([go.Scatter(x=rate.index, y=rate[c], name=str(c), mode="lines",
-                                    line={"color": DROP_COLORS.get(str(c))}) for c in rate.columns])
-        fig.update_layout(title="Dropped copies per second by reason", xaxis_title="simulated time (s)",
-                          yaxis_title="copies/s")
+        fig = go.Figure(
+            [
+                go.Scatter(x=rate.index, y=rate[c], name=str(c), mode="lines", line={"color": DROP_COLORS.get(str(c))})
+                for c in rate.columns
+            ]
+        )
+        fig.update_layout(
+            title="Dropped copies per second by reason", xaxis_title="simulated time (s)", yaxis_title="copies/s"
+        )
         page.figure(fig, "network_ledger.csv (drop rows)")
 
     receivers_file = run / "network_ledger_receivers.parquet"
     if receivers_file.exists():
-        page.heading("Who sent what to whom, and what became of it",
-                     "One cell per sender and receiver: copies delivered, and copies dropped (any reason).")
+        page.heading(
+            "Who sent what to whom, and what became of it",
+            "One cell per sender and receiver: copies delivered, and copies dropped (any reason).",
+        )
         per_copy = pd.read_parquet(receivers_file, columns=["sender", "receiver", "outcome"])
         ids = [str(i) for i in range(int(summary["agents"]))]
-        for title, rows in (("delivered", per_copy["outcome"] == "delivered"),
-                            ("dropped", per_copy["outcome"] != "delivered")):
+        for title, rows in (
+            ("delivered", per_copy["outcome"] == "delivered"),
+            ("dropped", per_copy["outcome"] != "delivered"),
+        ):
             cells = per_copy[rows].groupby(["sender", "receiver"]).size().unstack(fill_value=0)
             cells = cells.reindex(index=range(len(ids)), columns=range(len(ids)), fill_value=0)
-            fig = go.Figure(go.Heatmap(z=cells.values, x=ids, y=ids, colorscale="Blues" if title == "delivered"
-                                       else "Reds", hovertemplate="sender %{y} to receiver %{x}<br>%{z} copies "
-                                       f"{title}<extra></extra>"))
-            fig.update_layout(title=f"Copies {title}, sender by receiver", xaxis_title="receiver",
-                              yaxis_title="sender", yaxis_autorange="reversed")
+            fig = go.Figure(
+                go.Heatmap(
+                    z=cells.values,
+                    x=ids,
+                    y=ids,
+                    colorscale="Blues" if title == "delivered" else "Reds",
+                    hovertemplate=f"sender %{{y}} to receiver %{{x}}<br>%{{z}} copies {title}<extra></extra>",
+                )
+            )
+            fig.update_layout(
+                title=f"Copies {title}, sender by receiver",
+                xaxis_title="receiver",
+                yaxis_title="sender",
+                yaxis_autorange="reversed",
+            )
             page.figure(fig, receivers_file.name)
     else:
-        page.heading("Who sent what, and what became of it",
-                     "Copies by sending agent and outcome (network.ledger: per_receiver adds the sender by "
-                     "receiver matrices).")
-        matrix = copies.pivot_table(index="outcome", columns="sender", values="messages", aggfunc="sum",
-                                    fill_value=0)
-        fig = go.Figure(go.Heatmap(z=matrix.values, x=[str(c) for c in matrix.columns], y=list(matrix.index),
-                                   colorscale="Blues",
-                                   hovertemplate="sender %{x}<br>%{y}: %{z} copies<extra></extra>"))
+        page.heading(
+            "Who sent what, and what became of it",
+            "Copies by sending agent and outcome (network.ledger: per_receiver adds the sender by receiver matrices).",
+        )
+        matrix = copies.pivot_table(index="outcome", columns="sender", values="messages", aggfunc="sum", fill_value=0)
+        fig = go.Figure(
+            go.Heatmap(
+                z=matrix.values,
+                x=[str(c) for c in matrix.columns],
+                y=list(matrix.index),
+                colorscale="Blues",
+                hovertemplate="sender %{x}<br>%{y}: %{z} copies<extra></extra>",
+            )
+        )
         fig.update_layout(title="Copies by sender and outcome", xaxis_title="sender")
         page.figure(fig, "network_ledger.csv")
 
     if benefit and (run / "timeseries.csv").exists():
         series = pd.read_csv(run / "timeseries.csv")
         if benefit in series:
-            fig = go.Figure([go.Scatter(x=series["time"], y=series[benefit], name=benefit.replace("_", " ")),
-                             go.Scatter(x=series["time"], y=series["bytes_sent"] / 1000, name="kB sent (cumulative)",
-                                        yaxis="y2")])
-            fig.update_layout(title="Outcome beside traffic", xaxis_title="simulated time (s)",
-                              yaxis_title=benefit.replace("_", " "),
-                              yaxis2={"title": "kB sent", "overlaying": "y", "side": "right"}, legend=LEGEND_BELOW)
+            fig = go.Figure(
+                [
+                    go.Scatter(x=series["time"], y=series[benefit], name=benefit.replace("_", " ")),
+                    go.Scatter(
+                        x=series["time"], y=series["bytes_sent"] / 1000, name="kB sent (cumulative)", yaxis="y2"
+                    ),
+                ]
+            )
+            fig.update_layout(
+                title="Outcome beside traffic",
+                xaxis_title="simulated time (s)",
+                yaxis_title=benefit.replace("_", " "),
+                yaxis2={"title": "kB sent", "overlaying": "y", "side": "right"},
+                legend=LEGEND_BELOW,
+            )
             page.figure(fig, "timeseries.csv")
-    subtitle = (f"run {run} · seed {summary['seed']} · swarmbed {swarmbed.__version__} · "
-                f"report made {time.strftime('%Y-%m-%d %H:%M')}")
+    subtitle = (
+        f"run {run} · seed {summary['seed']} · swarmbed {swarmbed.__version__} · "
+        f"report made {time.strftime('%Y-%m-%d %H:%M')}"
+    )
     return page.render(subtitle), page.figures
 
 
@@ -262,8 +367,10 @@ LEGEND_BELOW = {"orientation": "h", "yanchor": "top", "y": -0.2, "xanchor": "lef
 def _side_by_side(x, left, left_name: str, right, right_name: str) -> list:
     """Two bar series on two y axes, drawn beside each other: plotly groups bars only within an
     axis, so each series gets its own offset group (else the second is drawn over the first)."""
-    return [go.Bar(x=x, y=left, name=left_name, offsetgroup="left"),
-            go.Bar(x=x, y=right, name=right_name, yaxis="y2", offsetgroup="right", opacity=0.7)]
+    return [
+        go.Bar(x=x, y=left, name=left_name, offsetgroup="left"),
+        go.Bar(x=x, y=right, name=right_name, yaxis="y2", offsetgroup="right", opacity=0.7),
+    ]
 
 
 def _count_axis(title: str, counts) -> dict:
@@ -271,8 +378,15 @@ def _count_axis(title: str, counts) -> dict:
     top = max(float(pd.Series(counts).max() or 0), 1.0)
     magnitude = 10 ** int(np.floor(np.log10(top / 5))) if top >= 5 else 1
     step = next(m * magnitude for m in (1, 2, 5, 10) if m * magnitude * 5 >= top)  # about five ticks
-    return {"title": title, "overlaying": "y", "side": "right", "rangemode": "tozero", "tick0": 0,
-            "dtick": step, "showgrid": False}
+    return {
+        "title": title,
+        "overlaying": "y",
+        "side": "right",
+        "rangemode": "tozero",
+        "tick0": 0,
+        "dtick": step,
+        "showgrid": False,
+    }
 
 
 def _ci(values: pd.Series) -> float:
@@ -292,37 +406,73 @@ def sweep_report(sweep: Path) -> tuple[str, int]:
     kinds = ok["scenario_kind"].dropna().unique() if "scenario_kind" in ok else []
     # the outcome to set against the cost: the scenario's benefit metric, or where that is the same in
     # every run (MT-SR's tasks completed, when every run completes its mission) the first outcome that varies
-    outcomes = [m for kind in kinds for m in _outcomes(kind)
-                if m in ok and pd.api.types.is_numeric_dtype(ok[m]) and not pd.api.types.is_bool_dtype(ok[m])]
+    outcomes = [
+        m
+        for kind in kinds
+        for m in _outcomes(kind)
+        if m in ok and pd.api.types.is_numeric_dtype(ok[m]) and not pd.api.types.is_bool_dtype(ok[m])
+    ]
     benefit = next((m for m in outcomes if ok[m].nunique() > 1), outcomes[0] if outcomes else None)
     page = Page(f"{sweep.name}: bandwidth accounting of a sweep")
     page.heading("Per scenario", "Means over the completed runs with 95 % confidence intervals (t).")
-    metrics = [m for m in ("network.messages_sent", "network.bytes_sent", "wire.agent_tcp_bytes_sent",
-                           "wire.overhead_ratio", benefit) if m and m in ok]
+    metrics = [
+        m
+        for m in (
+            "network.messages_sent",
+            "network.bytes_sent",
+            "wire.agent_tcp_bytes_sent",
+            "wire.overhead_ratio",
+            benefit,
+        )
+        if m and m in ok
+    ]
     rows = []
     for scenario, group in ok.groupby("scenario"):
         for m in metrics:
-            rows.append((f"{scenario}: {m}", f"{group[m].mean():,.1f} ± {_ci(group[m]):,.1f} (n={group[m].count()})",
-                         "sweep.csv"))
+            rows.append(
+                (
+                    f"{scenario}: {m}",
+                    f"{group[m].mean():,.1f} ± {_ci(group[m]):,.1f} (n={group[m].count()})",
+                    "sweep.csv",
+                )
+            )
     page.table(rows, ("scenario: figure", "mean ± 95 % CI", "from"))
     for m in metrics:
         g = ok.groupby("scenario")[m]
-        fig = go.Figure(go.Bar(x=list(g.mean().index), y=g.mean().values,
-                               error_y={"type": "data", "array": [_ci(v) for _, v in g]}))
+        fig = go.Figure(
+            go.Bar(x=list(g.mean().index), y=g.mean().values, error_y={"type": "data", "array": [_ci(v) for _, v in g]})
+        )
         fig.update_layout(title=f"{m} per scenario (95 % CI)", yaxis_title=m)
         page.figure(fig, "sweep.csv")
     if benefit:
         page.heading("Cost and benefit", f"One point per run: {benefit} against what it cost on the radio.")
-        for cost in [c for c in ("network.messages_sent", "network.bytes_sent", "wire.agent_tcp_bytes_sent")
-                     if c in ok]:
-            fig = go.Figure([go.Scatter(x=g[cost], y=g[benefit], mode="markers", name=str(s),
-                                        hovertemplate=f"{s}<br>run %{{text}}<extra></extra>", text=g["run"])
-                             for s, g in ok.groupby("scenario")])
-            fig.update_layout(title=f"{benefit} against {cost}", xaxis_title=cost, yaxis_title=benefit,
-                              xaxis_type="log" if (ok[cost] > 0).all() else "linear")
+        for cost in [
+            c for c in ("network.messages_sent", "network.bytes_sent", "wire.agent_tcp_bytes_sent") if c in ok
+        ]:
+            fig = go.Figure(
+                [
+                    go.Scatter(
+                        x=g[cost],
+                        y=g[benefit],
+                        mode="markers",
+                        name=str(s),
+                        hovertemplate=f"{s}<br>run %{{text}}<extra></extra>",
+                        text=g["run"],
+                    )
+                    for s, g in ok.groupby("scenario")
+                ]
+            )
+            fig.update_layout(
+                title=f"{benefit} against {cost}",
+                xaxis_title=cost,
+                yaxis_title=benefit,
+                xaxis_type="log" if (ok[cost] > 0).all() else "linear",
+            )
             page.figure(fig, "sweep.csv")
-    subtitle = (f"sweep {sweep} · {len(ok)} of {len(table)} runs complete · swarmbed {swarmbed.__version__} · "
-                f"report made {time.strftime('%Y-%m-%d %H:%M')}")
+    subtitle = (
+        f"sweep {sweep} · {len(ok)} of {len(table)} runs complete · swarmbed {swarmbed.__version__} · "
+        f"report made {time.strftime('%Y-%m-%d %H:%M')}"
+    )
     return page.render(subtitle), page.figures
 
 
@@ -337,8 +487,10 @@ def report(folder: Path, out: Path | None = None) -> Path:
     elif (folder / TABLE).exists() or (folder / PARQUET).exists():
         text, _ = sweep_report(folder)
     else:
-        raise ReportError(f"{folder}: neither a completed run (no summary.json), a sweep (no sweep.csv) nor a soak "
-                          "(no soak_processes.csv)")
+        raise ReportError(
+            f"{folder}: neither a completed run (no summary.json), a sweep (no sweep.csv) nor a soak "
+            "(no soak_processes.csv)"
+        )
     out = out or folder / "report.html"
     tmp = out.with_name(out.name + ".part")
     tmp.write_text(text)

@@ -36,8 +36,9 @@ def compare(df: pd.DataFrame, group: str, metrics: list[str], control: str) -> p
         samples = {g: df.loc[df[group] == g, metric].dropna().to_numpy(dtype=float) for g in names}
         if any(len(v) < 2 for v in samples.values()):
             continue
-        constant = (all(np.all(v == v[0]) for v in samples.values())
-                    and len({float(v[0]) for v in samples.values()}) == 1)
+        constant = (
+            all(np.all(v == v[0]) for v in samples.values()) and len({float(v[0]) for v in samples.values()}) == 1
+        )
         if constant:
             f, p_anova, dunnett_p = float("nan"), 1.0, [1.0] * len(others)
         else:
@@ -46,8 +47,19 @@ def compare(df: pd.DataFrame, group: str, metrics: list[str], control: str) -> p
                 f, p_anova = stats.f_oneway(*samples.values())
                 dunnett_p = list(stats.dunnett(*[samples[g] for g in others], control=samples[control]).pvalue)
         for g, p in zip(others, dunnett_p):
-            rows.append({"metric": metric, "strategy": g, "mean": samples[g].mean(), "sd": samples[g].std(ddof=1),
-                         "control": control, "control_mean": samples[control].mean(),
-                         "anova_F": float(f), "anova_p": float(p_anova), "dunnett_p": float(p),
-                         "cohens_d": cohens_d(samples[g], samples[control]), "n": len(samples[g])})
+            rows.append(
+                {
+                    "metric": metric,
+                    "strategy": g,
+                    "mean": samples[g].mean(),
+                    "sd": samples[g].std(ddof=1),
+                    "control": control,
+                    "control_mean": samples[control].mean(),
+                    "anova_F": float(f),
+                    "anova_p": float(p_anova),
+                    "dunnett_p": float(p),
+                    "cohens_d": cohens_d(samples[g], samples[control]),
+                    "n": len(samples[g]),
+                }
+            )
     return pd.DataFrame(rows)

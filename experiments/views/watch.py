@@ -124,31 +124,50 @@ class RunView:
             return Group(Text(f"run {self.run_id}: waiting for its first progress sample ..."))
         dt = s["time"] / max(s["tick"], 1) if s["tick"] else 0.0
         head = Table.grid(padding=(0, 2))
-        head.add_row(Text(f"{s['name']}", style="bold"), f"run {self.run_id}",
-                     f"{s.get('scenario', '?')} / {s.get('allocator', '?')}")
-        head.add_row(f"tick {s['tick'] + 1:,} of {s['ticks']:,}", f"t = {s['time']:,.1f} s",
-                     f"{self.ticks_per_s:,.1f} ticks/s  ({self.ticks_per_s * dt:,.1f} sim s per wall s)")
-        outcome = "  ".join(f"{k} {v:,}" if isinstance(v, int) else f"{k} {v:,.1f}"
-                            for k, v in s["row"].items() if k not in ("tick", "time"))
+        head.add_row(
+            Text(f"{s['name']}", style="bold"),
+            f"run {self.run_id}",
+            f"{s.get('scenario', '?')} / {s.get('allocator', '?')}",
+        )
+        head.add_row(
+            f"tick {s['tick'] + 1:,} of {s['ticks']:,}",
+            f"t = {s['time']:,.1f} s",
+            f"{self.ticks_per_s:,.1f} ticks/s  ({self.ticks_per_s * dt:,.1f} sim s per wall s)",
+        )
+        outcome = "  ".join(
+            f"{k} {v:,}" if isinstance(v, int) else f"{k} {v:,.1f}"
+            for k, v in s["row"].items()
+            if k not in ("tick", "time")
+        )
         head.add_row("outcome", outcome, "")
         net = s["network"]
-        head.add_row("radio", f"{net['messages_sent']:,} messages, {net['bytes_sent']:,} B",
-                     f"copies {net['delivered']:,} delivered / {net['copies']:,}")
+        head.add_row(
+            "radio",
+            f"{net['messages_sent']:,} messages, {net['bytes_sent']:,} B",
+            f"copies {net['delivered']:,} delivered / {net['copies']:,}",
+        )
         drops = ", ".join(f"{r} {n:,}" for r, n in sorted(s["drops"].items())) or "none"
         head.add_row("dropped", drops, f"late ticks {s.get('late_ticks', 0):,}")
         agents_alive = sorted({i for k in alive if k.startswith("agent/") and (i := _agent_or_none(k)) is not None})
         procs = [("coordinator", "coordinator" in alive), ("netem", "netem" in alive)]
-        head.add_row("processes", "  ".join(f"{n} {'up' if ok else 'DOWN'}" for n, ok in procs),
-                     f"agents {len(agents_alive)} up of {len(s['alive'])} in the world")
-        table = Table(title="payload each agent sent since this view attached (the run totals are above; "
-                      "rates: per wall second, last 2 s)", title_justify="left")
+        head.add_row(
+            "processes",
+            "  ".join(f"{n} {'up' if ok else 'DOWN'}" for n, ok in procs),
+            f"agents {len(agents_alive)} up of {len(s['alive'])} in the world",
+        )
+        table = Table(
+            title="payload each agent sent since this view attached (the run totals are above; "
+            "rates: per wall second, last 2 s)",
+            title_justify="left",
+        )
         for col in ("agent", "process", "msgs/s", "B/s", "messages", "bytes"):
             table.add_column(col, justify="right")
         for a in sorted(set(s["alive"]) | set(totals)):
             m, b = rates.get(a, (0.0, 0.0))
             t = totals.get(a, [0, 0])
-            table.add_row(str(a), "up" if a in agents_alive else "-", f"{m:,.1f}", f"{b:,.0f}", f"{t[0]:,}",
-                          f"{t[1]:,}")
+            table.add_row(
+                str(a), "up" if a in agents_alive else "-", f"{m:,.1f}", f"{b:,.0f}", f"{t[0]:,}", f"{t[1]:,}"
+            )
         return Group(head, table)
 
     def line(self) -> str:
@@ -156,9 +175,11 @@ class RunView:
         s = self.status
         if s is None:
             return f"run {self.run_id}: waiting"
-        return (f"tick {s['tick'] + 1} t={s['time']:.1f}s {self.ticks_per_s:.1f} ticks/s "
-                + " ".join(f"{k}={v:.6g}" for k, v in s["row"].items() if k not in ("tick", "time"))
-                + f" messages={s['network']['messages_sent']} dropped={s['network']['dropped']}")
+        return (
+            f"tick {s['tick'] + 1} t={s['time']:.1f}s {self.ticks_per_s:.1f} ticks/s "
+            + " ".join(f"{k}={v:.6g}" for k, v in s["row"].items() if k not in ("tick", "time"))
+            + f" messages={s['network']['messages_sent']} dropped={s['network']['dropped']}"
+        )
 
 
 def write_map(status: dict, path: Path, bounds: list[float]) -> None:
@@ -174,26 +195,39 @@ def write_map(status: dict, path: Path, bounds: list[float]) -> None:
     def sy(y: float) -> float:  # SVG's y grows downwards
         return y0 + y1 - y
 
-    shapes = [f"<rect x='{x - r:.2f}' y='{sy(y) - r:.2f}' width='{2 * r:.2f}' height='{2 * r:.2f}' "
-              f"fill='{LABEL_COLORS.get(lab, '#999')}'/>" for x, y, lab in status.get("markers", [])]
+    shapes = [
+        f"<rect x='{x - r:.2f}' y='{sy(y) - r:.2f}' width='{2 * r:.2f}' height='{2 * r:.2f}' "
+        f"fill='{LABEL_COLORS.get(lab, '#999')}'/>"
+        for x, y, lab in status.get("markers", [])
+    ]
     labels = {int(k): v for k, v in status.get("labels", {}).items()}
-    shapes += [f"<circle cx='{x:.2f}' cy='{sy(y):.2f}' r='{1.4 * r:.2f}' "
-               f"fill='{LABEL_COLORS.get(labels.get(a, ''), '#222')}' "
-               f"stroke='black' stroke-width='{r / 3:.2f}'><title>agent {a}</title></circle>"
-               for a, x, y in status.get("positions", [])]
-    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><meta http-equiv='refresh' content='1'>"
-            f"<title>{html.escape(status['name'])}: tick {status['tick'] + 1}</title></head>"
-            f"<body style='font-family:sans-serif'><p>{html.escape(status['name'])}: tick {status['tick'] + 1:,} of "
-            f"{status['ticks']:,}, t = {status['time']:,.1f} s</p>"
-            f"<svg viewBox='{x0 - pad:.2f} {y0 - pad:.2f} {w:.2f} {h:.2f}' style='width:90vmin;height:90vmin;"
-            f"border:1px solid #ccc'>{''.join(shapes)}</svg></body></html>")
+    shapes += [
+        f"<circle cx='{x:.2f}' cy='{sy(y):.2f}' r='{1.4 * r:.2f}' "
+        f"fill='{LABEL_COLORS.get(labels.get(a, ''), '#222')}' "
+        f"stroke='black' stroke-width='{r / 3:.2f}'><title>agent {a}</title></circle>"
+        for a, x, y in status.get("positions", [])
+    ]
+    page = (
+        f"<!DOCTYPE html><html><head><meta charset='utf-8'><meta http-equiv='refresh' content='1'>"
+        f"<title>{html.escape(status['name'])}: tick {status['tick'] + 1}</title></head>"
+        f"<body style='font-family:sans-serif'><p>{html.escape(status['name'])}: tick {status['tick'] + 1:,} of "
+        f"{status['ticks']:,}, t = {status['time']:,.1f} s</p>"
+        f"<svg viewBox='{x0 - pad:.2f} {y0 - pad:.2f} {w:.2f} {h:.2f}' style='width:90vmin;height:90vmin;"
+        f"border:1px solid #ccc'>{''.join(shapes)}</svg></body></html>"
+    )
     tmp = path.with_name(path.name + ".part")
     tmp.write_text(page)
     tmp.replace(path)
 
 
-def watch(session: zenoh.Session, run_id: str | None, console: Console | None = None,
-          refresh: float = 4.0, wait: float = 10.0, map_file: Path | None = None) -> int:
+def watch(
+    session: zenoh.Session,
+    run_id: str | None,
+    console: Console | None = None,
+    refresh: float = 4.0,
+    wait: float = 10.0,
+    map_file: Path | None = None,
+) -> int:
     """Show one run until it ends (0) or Ctrl-C (130); 1 when no such run answers within ``wait`` s."""
     console = console or Console()
     if run_id is None:
@@ -209,10 +243,11 @@ def watch(session: zenoh.Session, run_id: str | None, console: Console | None = 
         run_id = runs[0]
     keys = Keys(run_id)
     view = RunView(run_id)
-    subs = [session.declare_subscriber(keys.status, lambda s: view.on_status(s.payload.to_bytes())),
-            session.declare_subscriber(keys.agent_out_all, lambda s: view.on_out(s.payload.to_bytes())),
-            session.liveliness().declare_subscriber(keys.alive_all, view.on_alive,
-                                                    history=True)]
+    subs = [
+        session.declare_subscriber(keys.status, lambda s: view.on_status(s.payload.to_bytes())),
+        session.declare_subscriber(keys.agent_out_all, lambda s: view.on_out(s.payload.to_bytes())),
+        session.liveliness().declare_subscriber(keys.alive_all, view.on_alive, history=True),
+    ]
     started = time.monotonic()
     bounds = [float("inf"), float("inf"), float("-inf"), float("-inf")]
 

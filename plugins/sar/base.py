@@ -57,9 +57,11 @@ class SARStrategy(Allocator):
             self.inspected.add(v)
             self.colors[v] = color
         rescued = set(obs.rescued)
-        gone = [v for v, info in self.victims.items()
-                if v in rescued
-                or (v not in view.tasks and (view.sees(info.x, info.y) or self.expires[v] <= view.time))]
+        gone = [
+            v
+            for v, info in self.victims.items()
+            if v in rescued or (v not in view.tasks and (view.sees(info.x, info.y) or self.expires[v] <= view.time))
+        ]
         for v in gone:  # what was known of it goes too: a gone victim is never a candidate again
             del self.victims[v]
             del self.expires[v]

@@ -39,8 +39,12 @@ class ConsensusParams(StrategyParams):
     mismatch_factor: float = Field(0.1, ge=0, description="utility factor for a known colour mismatch")
     period: float = Field(100.0, gt=0, description="cbba: forced round after this many seconds; cbba-tree: period")
     winner_timeout: float = Field(300.0, gt=0, description="forget wins by robots silent this long (s)")
-    full_every: int = Field(1, ge=1, description="every n-th round's message carries the whole state, those between "
-                                                 "only what changed (1, the paper's rounds: always whole)")
+    full_every: int = Field(
+        1,
+        ge=1,
+        description="every n-th round's message carries the whole state, those between "
+        "only what changed (1, the paper's rounds: always whole)",
+    )
 
 
 class SARConsensus(SARStrategy):
@@ -175,8 +179,11 @@ class CBBATree(SARConsensus):
 class ETCParams(ConsensusParams, IntervalParams):
     theta_bid_change: float = Field(0.1, ge=0, description="Tr_delta_bid: utility change of the primary task")
     theta_outbid_margin: float = Field(0.05, ge=0, description="Tr_conflict: margin over a known winning bid")
-    trace_rounds: bool = Field(False, description="log every round (time, triggers fired, Lc, dLc, interval) to the "
-                               "agent's log, for audits (docs/reproduction.md)")
+    trace_rounds: bool = Field(
+        False,
+        description="log every round (time, triggers fired, Lc, dLc, interval) to the "
+        "agent's log, for audits (docs/reproduction.md)",
+    )
 
 
 class CBBAETC(SARConsensus):
@@ -202,11 +209,15 @@ class CBBAETC(SARConsensus):
         primary = bundle[0] if bundle else None
         return {
             "tr_init": bool(bundle) and not self.bundle_at_round,
-            "tr_delta_bid": primary is not None and primary in self.u_prev
+            "tr_delta_bid": primary is not None
+            and primary in self.u_prev
             and abs(self.utility(view, primary) - self.u_prev[primary]) > p.theta_bid_change,
-            "tr_conflict": any(v not in bundle and st.z.get(v, self.agent_id) != self.agent_id
-                               and self.utility(view, v) > st.y[v] + p.theta_outbid_margin
-                               for v in self.candidates()),
+            "tr_conflict": any(
+                v not in bundle
+                and st.z.get(v, self.agent_id) != self.agent_id
+                and self.utility(view, v) > st.y[v] + p.theta_outbid_margin
+                for v in self.candidates()
+            ),
             "tr_fallback": self.now - self.last_round >= self.interval,
         }
 
@@ -224,5 +235,12 @@ class CBBAETC(SARConsensus):
         self.interval = next_interval(self.interval, self.lost_last, self.lost_last - self.lost_before, self.params)
         if self.params.trace_rounds:
             fired = ",".join(name for name, on in self.last_triggers.items() if on)
-            log.info("round t=%.3f triggers=%s Lc=%d dLc=%d interval=%.3f->%.3f", self.now, fired, self.lost_last,
-                     self.lost_last - self.lost_before, before, self.interval)
+            log.info(
+                "round t=%.3f triggers=%s Lc=%d dLc=%d interval=%.3f->%.3f",
+                self.now,
+                fired,
+                self.lost_last,
+                self.lost_last - self.lost_before,
+                before,
+                self.interval,
+            )

@@ -20,13 +20,18 @@ from pydantic import BaseModel, ConfigDict, Field
 
 class IntervalParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    base_interval: float = Field(10.0, gt=0, description="I_base, seconds: the adaptive interval lies in "
-                                 "[I_base x phi_min, I_base x phi_max] (Eq. 2)")
+    base_interval: float = Field(
+        10.0,
+        gt=0,
+        description="I_base, seconds: the adaptive interval lies in [I_base x phi_min, I_base x phi_max] (Eq. 2)",
+    )
     rho_base: float = Field(1.0, description="rho_base, Eq. 3: the interval's factor per round in the dead zone")
-    theta_high: float = Field(3.0, description="theta_high, Eq. 4: tasks lost in a round at or above which the "
-                              "interval shortens")
-    theta_low: float = Field(1.0, description="theta_low, Eq. 4: tasks lost in a round at or below which the "
-                             "interval lengthens")
+    theta_high: float = Field(
+        3.0, description="theta_high, Eq. 4: tasks lost in a round at or above which the interval shortens"
+    )
+    theta_low: float = Field(
+        1.0, description="theta_low, Eq. 4: tasks lost in a round at or below which the interval lengthens"
+    )
     mu: float = Field(10.0, description="sigmoid steepness")
     kappa: float = Field(0.1, description="kappa, Eq. 4: how fast high conflict shortens the interval")
     lam: float = Field(6.0, description="lambda, Eq. 4: how fast low conflict lengthens the interval")

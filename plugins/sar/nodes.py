@@ -165,6 +165,19 @@ class StateMachine(_SARNode, SyncAction):
         return abs(self.waypoint[0] - v.x) + abs(self.waypoint[1] - v.y) < 1e-6
 
 
-SAR_NODES = (IsTargetValid, NeedsInspection, ColorMatch, MoveToTarget, Inspect, Rescue, Abandon,
-             SelectNearestVictim, BuildBundle, ShouldTrigger, RunConsensus, AdaptInterval, SelectNewTarget,
-             StateMachine)
+SAR_NODES = (
+    IsTargetValid,
+    NeedsInspection,
+    ColorMatch,
+    MoveToTarget,
+    Inspect,
+    Rescue,
+    Abandon,
+    SelectNearestVictim,
+    BuildBundle,
+    ShouldTrigger,
+    RunConsensus,
+    AdaptInterval,
+    SelectNewTarget,
+    StateMachine,
+)

@@ -51,8 +51,9 @@ class Executor(ABC):
     name: str = ""
 
     @abstractmethod
-    def map(self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]) -> Iterator[
-            tuple[int, Outcome]]:
+    def map(
+        self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]
+    ) -> Iterator[tuple[int, Outcome]]:
         """Start ``fn(item)`` for every item; yield ``(index, outcome)`` as each ends. A run whose
         worker was lost (killed, node gone) yields ``("lost", why)``."""
 
@@ -78,8 +79,9 @@ def get(name: str, **options: Any) -> Executor:
         try:
             importlib.import_module(needed)
         except ImportError:
-            raise ExecutorError(f"--executor {name} needs the {needed!r} package: pip install 'swarmbed[{extra}]'"
-                                ) from None
+            raise ExecutorError(
+                f"--executor {name} needs the {needed!r} package: pip install 'swarmbed[{extra}]'"
+            ) from None
     module = importlib.import_module(f"{__name__}.{NAMES[name]}")
     executor: Executor = module.make(**options)
     return executor

@@ -34,8 +34,9 @@ class DaskExecutor(Executor):
         workers = self.client.scheduler_info().get("workers", {}).values()
         return {name for w in workers for name in (w.get("resources") or {})}
 
-    def map(self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]) -> Iterator[
-            tuple[int, Outcome]]:
+    def map(
+        self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]
+    ) -> Iterator[tuple[int, Outcome]]:
         self.declared = self._declared_resources()
         index: dict[Any, int] = {}
         for i, (item, need) in enumerate(zip(items, resources)):
@@ -53,8 +54,11 @@ class DaskExecutor(Executor):
 
     def describe(self) -> str:
         where = getattr(self.scheduler, "scheduler_address", self.scheduler)
-        sized = f"tasks sized by {', '.join(sorted(self.declared))}" if self.declared else \
-            "workers declare no cores/mem_gb resources: a run per worker thread"
+        sized = (
+            f"tasks sized by {', '.join(sorted(self.declared))}"
+            if self.declared
+            else "workers declare no cores/mem_gb resources: a run per worker thread"
+        )
         return f"dask ({where}; {sized})"
 
     def cancel(self) -> None:

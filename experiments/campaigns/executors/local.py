@@ -61,8 +61,11 @@ def stop_descendants(grace: float = 10.0) -> None:
     """Stop every process this one started. The pool workers are asked first (SIGTERM: each ends
     its run through the runner's cleanup, which stops that run's processes); whatever is left
     after ``grace`` seconds is killed."""
-    family = [p for p in psutil.Process().children(recursive=True)
-              if "multiprocessing.resource_tracker" not in " ".join(_cmdline(p))]
+    family = [
+        p
+        for p in psutil.Process().children(recursive=True)
+        if "multiprocessing.resource_tracker" not in " ".join(_cmdline(p))
+    ]
     workers = [p for p in psutil.Process().children() if p in family]
     for procs, stop in ((workers, psutil.Process.terminate), (family, psutil.Process.kill)):
         for p in procs:
@@ -81,12 +84,17 @@ class LocalExecutor(Executor):
         self.pool: cf.ProcessPoolExecutor | None = None
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
-        self.pool = cf.ProcessPoolExecutor(max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
-                                           initializer=_leave_interrupts_to_the_sweep, initargs=(os.getpid(),))
+        self.pool = cf.ProcessPoolExecutor(
+            max_workers=self.jobs,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_leave_interrupts_to_the_sweep,
+            initargs=(os.getpid(),),
+        )
         return self.pool
 
-    def map(self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]) -> Iterator[
-            tuple[int, Outcome]]:
+    def map(
+        self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]
+    ) -> Iterator[tuple[int, Outcome]]:
         pool = self._new_pool()
         futures = {pool.submit(_unless_stopping, fn, item): i for i, item in enumerate(items)}
         for fut in cf.as_completed(futures):

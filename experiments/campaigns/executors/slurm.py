@@ -43,8 +43,15 @@ def parse_time_min(text: str | int) -> int:
 class SlurmExecutor(Executor):
     name = "slurm"
 
-    def __init__(self, folder: Path, partition: str | None = None, time_min: int = 120, parallel: int | None = None,
-                 cluster: str | None = None, detach: bool = False) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        partition: str | None = None,
+        time_min: int = 120,
+        parallel: int | None = None,
+        cluster: str | None = None,
+        detach: bool = False,
+    ) -> None:
         self.folder = folder
         self.partition = partition
         self.time_min = time_min
@@ -53,15 +60,21 @@ class SlurmExecutor(Executor):
         self.detach = detach
         self.jobs: list[Any] = []
 
-    def map(self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]) -> Iterator[
-            tuple[int, Outcome]]:
+    def map(
+        self, fn: RunFunction, items: Sequence[Any], resources: Sequence[Resources]
+    ) -> Iterator[tuple[int, Outcome]]:
         if not items:
             return
         executor = submitit.AutoExecutor(folder=self.folder / "%j", cluster=self.cluster)
         largest = Resources(max(r.cpus for r in resources), max(r.mem_gb for r in resources))
-        params: dict[str, Any] = {"name": "swarmbed-sweep", "timeout_min": self.time_min,
-                                  "cpus_per_task": largest.cpus, "mem_gb": largest.mem_gb, "tasks_per_node": 1,
-                                  "nodes": 1}
+        params: dict[str, Any] = {
+            "name": "swarmbed-sweep",
+            "timeout_min": self.time_min,
+            "cpus_per_task": largest.cpus,
+            "mem_gb": largest.mem_gb,
+            "tasks_per_node": 1,
+            "nodes": 1,
+        }
         if self.partition:
             params["slurm_partition"] = self.partition
         if self.parallel:
@@ -92,6 +105,13 @@ class SlurmExecutor(Executor):
                 pass
 
 
-def make(folder: Path, partition: str | None = None, time: str | int = 120, parallel: int | None = None,
-         cluster: str | None = None, detach: bool = False, **_ignored: Any) -> SlurmExecutor:
+def make(
+    folder: Path,
+    partition: str | None = None,
+    time: str | int = 120,
+    parallel: int | None = None,
+    cluster: str | None = None,
+    detach: bool = False,
+    **_ignored: Any,
+) -> SlurmExecutor:
     return SlurmExecutor(folder, partition, parse_time_min(time), parallel, cluster, detach)
