@@ -167,6 +167,19 @@ def test_ccbba_members_talk_only_to_their_leader():
             assert row["copies"] == row["messages"]
 
 
+def test_ccbba_leaders_relay_news_not_echoes():
+    """Once the clusters agree (a static instance converges in a few rounds), a leader sends the
+    other leader nothing until something changes or its period passes: the two leaders once echoed
+    the same state to each other every tick."""
+    inst = random_instance(3, 12, 30, scenario="sar")
+    trace = simulate("c-cbba", {"period": 100.0}, inst, 100, seed=9, scenario="sar")
+    leaders = {r.agent_id for r in trace.allocators if r.is_leader}
+    assert len(leaders) == 2
+    relays = [sum(1 for sender, kind, _ in rnd if sender in leaders and kind == "leaders") for rnd in trace.messages]
+    assert sum(relays[:10]) > 0  # they did talk while the views differed
+    assert sum(relays[40:]) == 0, relays
+
+
 # -- a lost robot's claims stop mattering -----------------------------------------------------------
 
 
