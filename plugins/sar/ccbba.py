@@ -15,8 +15,7 @@ import numpy as np
 from pydantic import Field
 
 from swarmbed.plugins.base import LocalView
-from swarmbed.plugins.sar.base import TREES
-from swarmbed.plugins.sar.consensus import ConsensusParams, SARConsensus
+from swarmbed.plugins.sar.consensus import ConsensusParams, ReactiveCBBA
 
 BIDS, LEADERS, RESULT = "bids", "leaders", "result"
 CLUSTER_STREAM = 0xCCBBA  # a fixed entropy word: every robot draws the same clustering stream
@@ -47,11 +46,15 @@ class CCBBAParams(ConsensusParams):
     clusters: int = Field(2, ge=1, description="k of k-means++")
 
 
-class ClusteringCBBA(SARConsensus):
+class ClusteringCBBA(ReactiveCBBA):
+    """Runs as plain ``cbba`` does (its state machine, every tick: keep the bundle full, check the
+    target, start a round when the bundle changed or ``period`` passed, work the first victim): the
+    paper contrasts the behavior tree's execution control of cbba-tree and cbba-etc with baselines
+    that have none, c-cbba among them. Only the consensus differs: two tiers through leaders."""
+
     Params = CCBBAParams
     params: CCBBAParams
     message_kinds = (BIDS, LEADERS, RESULT)
-    default_tree = str(TREES / "c_cbba.xml")
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)
@@ -116,9 +119,6 @@ class ClusteringCBBA(SARConsensus):
         self.count("negotiations")
         self.dirty = False
         self.last_relay = self.now
-
-    def should_trigger(self, view: LocalView) -> bool:
-        return self.state.bundle != self.bundle_at_round or self.now - self.last_round >= self.params.period
 
     def broadcast_round(self, view: LocalView) -> None:
         if self.is_leader or self.leader is None:
