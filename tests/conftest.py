@@ -70,16 +70,25 @@ def no_orphans():
     yield
     me = psutil.Process()
     left = [
-        p
+        (p, cmdline(p))
         for p in me.children(recursive=True)
         if p.is_running()
         and p.status() != psutil.STATUS_ZOMBIE
         # the standard library's helper for spawned pools: it lives as long as this process does
-        and "multiprocessing.resource_tracker" not in " ".join(p.cmdline())
+        and "multiprocessing.resource_tracker" not in cmdline(p)
     ]
-    for p in left:
+    for p, _ in left:
         p.kill()
-    assert not left, f"processes left behind: {[(p.pid, p.cmdline()[:4]) for p in left]}"
+    assert not left, f"processes left behind: {[(p.pid, line[:200]) for p, line in left]}"
+
+
+def cmdline(p: psutil.Process) -> str:
+    """A process's command line, or "" once it is gone: a child listed a moment ago (the launcher's
+    one-off ``git`` for provenance.json, say) may have exited before it is read."""
+    try:
+        return " ".join(p.cmdline())
+    except (psutil.NoSuchProcess, psutil.ZombieProcess):
+        return ""
 
 
 class Operator:

@@ -17,7 +17,7 @@ from swarmbed.wire.codec import EMPTY_INBOX, MAX_AGENT_SAMPLE_BYTES, encode_tick
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
 from swarmbed.wire.session import zenoh_config
-from tests.conftest import QUICKSTART, ROOT, experiment, under_way
+from tests.conftest import QUICKSTART, ROOT, cmdline, experiment, under_way
 
 LONG_NOOP = [
     "--set",
@@ -32,7 +32,7 @@ LONG_NOOP = [
 
 
 def _agents_of(runner: psutil.Process) -> list[psutil.Process]:
-    return [p for p in runner.children(recursive=True) if "agent_runtime" in " ".join(p.cmdline())]
+    return [p for p in runner.children(recursive=True) if "agent_runtime" in cmdline(p)]
 
 
 @pytest.mark.parametrize("allow", [False, True])
@@ -60,7 +60,7 @@ def test_sigkilled_agent_is_noticed_and_leaves_no_orphans(tmp_path, allow):
         time.sleep(0.1)
     time.sleep(0.5)  # well into the run
     children = proc.children(recursive=True)
-    victim = next(p for p in _agents_of(proc) if "--id 2" in " ".join(p.cmdline()))
+    victim = next(p for p in _agents_of(proc) if "--id 2" in cmdline(p))
     killed_at = time.monotonic()
     victim.send_signal(signal.SIGKILL)
     out, err = runner.communicate(timeout=120)
@@ -121,7 +121,7 @@ def test_ctrl_c_or_sigterm_stops_every_process_with_a_clear_message(tmp_path, si
 
 def test_crashed_proxy_stops_the_run_with_a_clear_message(tmp_path):
     runner, proc, children = _start_long_run(tmp_path)
-    proxy = next(p for p in proc.children() if "-m swarmbed.netem" in " ".join(p.cmdline()))
+    proxy = next(p for p in proc.children() if "-m swarmbed.netem" in cmdline(p))
     proxy.send_signal(signal.SIGKILL)
     _, err = runner.communicate(timeout=60)
     assert runner.returncode == 1
@@ -245,4 +245,4 @@ def test_a_coordinator_that_fails_while_being_built_leaves_no_process_or_credent
         run_experiment(experiment(), tmp_path / "run", progress=False)
     assert set(Path(tempfile.gettempdir()).glob("swarmbed-*-*")) <= before
     _, alive = psutil.wait_procs(psutil.Process().children(recursive=True), timeout=5)
-    assert not alive, [p.cmdline() for p in alive]
+    assert not alive, [cmdline(p) for p in alive]

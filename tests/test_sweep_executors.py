@@ -17,7 +17,7 @@ import pytest
 
 from swarmbed.experiments.campaigns import claims, executors
 from swarmbed.experiments.campaigns.sweep import ATTEMPTS, load_sweep, read_table, run_sweep, status
-from tests.conftest import QUICKSTART, same_results, under_way
+from tests.conftest import QUICKSTART, cmdline, same_results, under_way
 
 SWEEP = textwrap.dedent(f"""
     name: pair
@@ -231,8 +231,8 @@ def test_a_killed_sweep_process_takes_its_workers_and_their_runs_with_it(sweep_f
         assert time.monotonic() < deadline and proc.poll() is None
         time.sleep(0.1)
     family = psutil.Process(proc.pid).children(recursive=True)
-    assert any("swarmbed.agent_runtime" in " ".join(p.cmdline()) for p in family)
+    assert any("swarmbed.agent_runtime" in cmdline(p) for p in family)
     proc.kill()
     proc.wait()
     _, alive = psutil.wait_procs(family, timeout=15)
-    assert not alive, [(p.pid, p.cmdline()[:4]) for p in alive]
+    assert not alive, [(p.pid, cmdline(p)[:200]) for p in alive]
