@@ -31,6 +31,7 @@ from typing import Any
 import psutil
 import zenoh
 
+from swarmbed.experiments.launch.access import EVERY_MESSAGE
 from swarmbed.experiments.launch.launcher import AGENT_MODULE, Children, ForkServerError
 from swarmbed.wire.credentials import Identity, read_credentials, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, HostKeys, Keys, host_name_of
@@ -222,17 +223,7 @@ def host_router_rules(agents_user: str) -> dict:
                 "id": "no-host-orders",
                 "permission": "deny",
                 "flows": ["ingress"],
-                "messages": [
-                    "put",
-                    "delete",
-                    "declare_subscriber",
-                    "query",
-                    "declare_queryable",
-                    "reply",
-                    "liveliness_token",
-                    "declare_liveliness_subscriber",
-                    "liveliness_query",
-                ],
+                "messages": EVERY_MESSAGE,
                 "key_exprs": [HOSTS, f"{HOSTS}/**"],
             }
         ],
