@@ -131,26 +131,30 @@ def test_reports_render_every_plot_in_a_real_browser(which, runs, sweep_dir, tmp
     assert_renders(report(folder, tmp_path / "page.html").read_text(), tmp_path)
 
 
+def dump_dom(page: str, probe: str, tmp_path) -> str:
+    """``page`` with ``probe`` (a script) first in its head, opened in headless Chromium at 1400 px
+    wide: the DOM once it has loaded (where the probe writes what it found)."""
+    assert CHROMIUM is not None
+    probed = tmp_path / "probed.html"
+    probed.write_text(page.replace("<head>", "<head>" + probe, 1))
+    argv = [
+        CHROMIUM,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--window-size=1400,1000",
+        "--user-data-dir=" + str(tmp_path / "profile"),
+        "--virtual-time-budget=20000",
+        "--dump-dom",
+        probed.as_uri(),
+    ]
+    return subprocess.run(argv, capture_output=True, text=True, timeout=120).stdout
+
+
 def assert_renders(page: str, tmp_path) -> None:
     """Open ``page`` in headless Chromium: no script error, and every plot drew its SVG."""
     assert CHROMIUM is not None
-    probed = tmp_path / "probed.html"
-    probed.write_text(page.replace("<head>", "<head>" + ERROR_PROBE, 1))
-    dom = subprocess.run(
-        [
-            CHROMIUM,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--user-data-dir=" + str(tmp_path / "profile"),
-            "--virtual-time-budget=20000",
-            "--dump-dom",
-            probed.as_uri(),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    ).stdout
+    dom = dump_dom(page, ERROR_PROBE, tmp_path)
     errors = re.search(r'<pre id="errors">(.*?)</pre>', dom, re.S)
     assert errors, "the page never finished loading"
     assert json.loads(errors.group(1).replace("&quot;", '"')) == []
@@ -234,24 +238,7 @@ def test_charts_order_agents_by_number_and_draw_paired_bars_side_by_side(tmp_pat
         experiment("agents.count=12", "run.duration=120", *LOSSY), tmp_path / "run", progress=False
     ).out_dir
     page = report(run, tmp_path / "page.html").read_text()
-    probed = tmp_path / "geometry.html"
-    probed.write_text(page.replace("<head>", "<head>" + GEOMETRY_PROBE, 1))
-    dom = subprocess.run(
-        [
-            CHROMIUM,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--window-size=1400,1000",
-            "--user-data-dir=" + str(tmp_path / "profile"),
-            "--virtual-time-budget=20000",
-            "--dump-dom",
-            probed.as_uri(),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    ).stdout
+    dom = dump_dom(page, GEOMETRY_PROBE, tmp_path)
     found = re.search(r'<pre id="geometry">(.*?)</pre>', dom, re.S)
     assert found, "the page never finished loading"
     plots = {p["title"]: p for p in json.loads(found.group(1).replace("&quot;", '"'))}
