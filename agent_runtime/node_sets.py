@@ -10,6 +10,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from swarmbed.agent_runtime.bt import NodeRegistry
+from swarmbed.agent_runtime.nodes import SPACE_TREE
 
 
 def node_registry(owners: Iterable[type]) -> NodeRegistry:
@@ -23,7 +24,7 @@ def node_registry(owners: Iterable[type]) -> NodeRegistry:
 
 def tree_path(behavior_tree: str, scenario: type, allocator: type) -> Path:
     """``agents.behavior_tree`` as a path: a file the user named, else the allocator's default tree,
-    else the scenario's."""
+    else the scenario's, else SPACE's."""
     if behavior_tree != "default":
         return Path(behavior_tree)
-    return Path(getattr(allocator, "default_tree", None) or scenario.default_tree)  # type: ignore[attr-defined]
+    return Path(getattr(allocator, "default_tree", None) or getattr(scenario, "default_tree", None) or SPACE_TREE)

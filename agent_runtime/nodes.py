@@ -1,12 +1,14 @@
 """The SPACE behavior-tree nodes. They reach the agent through ``config.context`` (a
-:class:`~swarmbed.agent_runtime.context.NodeContext`): this tick's view, the allocator, the action."""
+:class:`~swarmbed.extension.context.NodeContext`): this tick's view, the allocator, the action."""
 
 from __future__ import annotations
 
 import math
+from importlib import resources
+from pathlib import Path
 
-from swarmbed.agent_runtime.allocator import HOLD
 from swarmbed.agent_runtime.bt import InputPort, NodeRegistry, OutputPort, StatefulAction, Status, SyncAction
+from swarmbed.extension.allocator import HOLD
 
 
 class LocalSensingNode(SyncAction):
@@ -98,6 +100,8 @@ class ExplorationNode(StatefulAction):
 
 
 SPACE_NODES = (LocalSensingNode, DecisionMakingNode, TaskExecutingNode, ExplorationNode)
+#: SPACE's tree over these nodes: what an agent runs when neither its allocator nor its scenario names one
+SPACE_TREE = Path(str(resources.files("swarmbed.agent_runtime") / "trees" / "space_default.xml"))
 
 
 def space_registry() -> NodeRegistry:

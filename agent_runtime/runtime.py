@@ -13,12 +13,12 @@ from collections import defaultdict
 
 import numpy as np
 
-from swarmbed.agent_runtime.allocator import Allocator
 from swarmbed.agent_runtime.bt import Blackboard, load_tree
-from swarmbed.agent_runtime.context import NodeContext
 from swarmbed.agent_runtime.node_sets import node_registry, tree_path
-from swarmbed.agent_runtime.view import LocalView, Message, TaskInfo
-from swarmbed.coordinator.scenario import Scenario
+from swarmbed.extension.allocator import Allocator
+from swarmbed.extension.context import NodeContext
+from swarmbed.extension.scenario import Scenario
+from swarmbed.extension.view import LocalView, Message, TaskInfo
 from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, unpack
 from swarmbed.wire.lifecycle import agent_seeds
 from swarmbed.wire.observation import Observation

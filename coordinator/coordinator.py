@@ -24,8 +24,8 @@ import numpy as np
 import zenoh
 
 from swarmbed.coordinator import results
-from swarmbed.coordinator.scenario import Scenario
 from swarmbed.coordinator.tickets import Tickets
+from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.codec import (
     EMPTY_INBOX,
     TAG_CHECKPOINT,
@@ -75,8 +75,8 @@ class RunError(RuntimeError):
 
 class Coordinator:
     """Drives one run. The launcher hands it the experiment, the scenario built from it, the
-    allocator class (for the traits the world and the results read: ``event_names``,
-    ``bids_with_colors``) and the targets agents load."""
+    allocator class (for the traits the world and the results read, such as ``event_names``) and
+    the targets agents load."""
 
     def __init__(
         self,

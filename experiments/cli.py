@@ -355,7 +355,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 
 def cmd_check_allocator(args: argparse.Namespace) -> int:
-    from swarmbed.plugins.conformance import GENERIC_CHECKS, ConformanceError
+    from swarmbed.plugins.checks.allocator import GENERIC_CHECKS, ConformanceError
     from swarmbed.plugins.registry import PluginError, only_scenario, validate_params
 
     args.scenario = args.scenario or only_scenario(args.allocator) or "mtsr"
@@ -414,7 +414,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_check_scenario(args: argparse.Namespace) -> int:
-    from swarmbed.coordinator.checker import ScenarioCheckError, check_scenario
+    from swarmbed.plugins.checks.scenario import ScenarioCheckError, check_scenario
 
     cls = registry.resolve_scenario(args.scenario)
     try:

@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from swarmbed.agent_runtime.allocator import Allocator
-from swarmbed.coordinator.scenario import Scenario
+from swarmbed.extension.allocator import Allocator
+from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.targets import TargetError, is_target, load_target
 
 ANY = "*"
@@ -175,8 +175,8 @@ def make(
     return cls(agent_id, validate_params(name, params, scenario), rng, run_seed)
 
 
-register_scenario("mtsr", "swarmbed.coordinator.mtsr:MTSR")
-register_scenario("sar", "swarmbed.coordinator.sar:SAR")
+register_scenario("mtsr", "swarmbed.scenarios.mtsr:MTSR")
+register_scenario("sar", "swarmbed.scenarios.sar:SAR")
 
 register("fcg", "swarmbed.plugins.fcg:FirstClaimedGreedy", "mtsr")
 register("noop", "swarmbed.plugins.noop:NoopAllocator")

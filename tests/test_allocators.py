@@ -7,8 +7,8 @@ import pytest
 
 from swarmbed.plugins.base import HOLD, LocalView, Message, TaskInfo
 from swarmbed.plugins.cbba import CBBA
-from swarmbed.plugins.conformance import CLEAN_NETWORK as CLEAN
-from swarmbed.plugins.conformance import random_instance, run_all, simulate
+from swarmbed.plugins.checks.allocator import CLEAN_NETWORK as CLEAN
+from swarmbed.plugins.checks.allocator import random_instance, run_all, simulate
 from swarmbed.plugins.consensus import NONE, ConsensusState, table
 from swarmbed.plugins.grape import VOID
 from swarmbed.plugins.registry import entries, make

@@ -5,8 +5,7 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from swarmbed.agent_runtime.bt import BTError, load_tree
-from swarmbed.agent_runtime.nodes import space_registry
-from swarmbed.coordinator.scenario import SPACE_TREE
+from swarmbed.agent_runtime.nodes import SPACE_TREE, space_registry
 from swarmbed.experiments.cli import main
 
 

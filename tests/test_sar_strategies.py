@@ -6,12 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.coordinator.sar import SARObservation
 from swarmbed.plugins.base import LocalView, Message, TaskInfo
-from swarmbed.plugins.conformance import random_instance, simulate
+from swarmbed.plugins.checks.allocator import random_instance, simulate
 from swarmbed.plugins.registry import make
 from swarmbed.plugins.sar.ccbba import ClusteringCBBA, kmeans_pp
 from swarmbed.plugins.sar.interval import IntervalParams, next_interval, omega, sigmoid
+from swarmbed.scenarios.sar import SARObservation
 from swarmbed.wire.codec import TASK_DTYPE
 
 P = IntervalParams()  # the paper's values: rho 1, theta 3/1, mu 10, kappa 0.1, lambda 6, gamma 0.001, phi 3..8

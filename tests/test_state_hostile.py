@@ -48,10 +48,10 @@ def hostile_payloads(canary) -> dict[str, bytes]:
         ),
         # the object path: a class whose __new__ or attribute setting would do work
         "object names subprocess.Popen": crafted(ext(st.EXT_OBJECT, ["subprocess:Popen", {"args": cmd}])),
-        "object walks attributes": crafted(ext(st.EXT_OBJECT, ["swarmbed.agent_runtime.view:np.random.Generator", {}])),
+        "object walks attributes": crafted(ext(st.EXT_OBJECT, ["swarmbed.extension.view:np.random.Generator", {}])),
         "object names a builtin": crafted(ext(st.EXT_OBJECT, ["builtins:eval", {}])),
         "named tuple of a declared type with extra fields": crafted(
-            ext(st.EXT_OBJECT, ["swarmbed.agent_runtime.view:TaskInfo", {"id": 1, "__class__": 2}])
+            ext(st.EXT_OBJECT, ["swarmbed.extension.view:TaskInfo", {"id": 1, "__class__": 2}])
         ),
         "dunder attribute on a declared class": crafted(
             ext(st.EXT_OBJECT, ["swarmbed.plugins.taskbook:TaskBook", {"__class__": 1}])

@@ -13,7 +13,7 @@ import pytest
 
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.runner import run_experiment
-from swarmbed.plugins.conformance import ConformanceError, check_snapshot
+from swarmbed.plugins.checks.allocator import ConformanceError, check_snapshot
 from swarmbed.plugins.registry import register
 from tests.conftest import QUICKSTART, experiment, same_results
 
@@ -175,7 +175,7 @@ def test_the_snapshot_check_fails_for_an_allocator_that_forgets_its_state():
 def test_snapshots_restore_named_tuples_as_their_own_type():
     """A TaskBook's tasks are named tuples (TaskInfo): a snapshot gives them back as TaskInfo, not
     as plain tuples or lists."""
-    from swarmbed.agent_runtime.view import TaskInfo
+    from swarmbed.extension.view import TaskInfo
     from swarmbed.wire.state import pack_state, unpack_state
 
     known = {7: TaskInfo(7, 1.5, -2.0, 30.0), 9: TaskInfo(9, 0.0, 0.0, 5.0, color=2)}

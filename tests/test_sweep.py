@@ -109,7 +109,7 @@ def test_every_run_records_the_code_that_made_it_and_analyze_will_not_pool_two_v
     runs = sorted((sweep_dir / "out").glob("fast_*/run_*/provenance.json"))
     made = [json.loads(p.read_text()) for p in runs]
     assert len(runs) == 4 and all(m == made[0] for m in made)  # nothing of the machine or the moment
-    assert made[0]["scenario"] == {"target": "swarmbed.coordinator.mtsr:MTSR", "version": "1"}, made[0]["scenario"]
+    assert made[0]["scenario"] == {"target": "swarmbed.scenarios.mtsr:MTSR", "version": "1"}, made[0]["scenario"]
     assert set(made[0]["libraries"]) == {"numpy", "eclipse-zenoh", "msgpack", "pydantic"}
     assert made[0]["git"] is None or len(made[0]["git"]["commit"]) == 40
     table = pd.read_csv(sweep_dir / "out" / "sweep.csv")

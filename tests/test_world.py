@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmbed.coordinator import sar
-from swarmbed.coordinator.kinematics import Limits, step
-from swarmbed.coordinator.sar import ALIVE
-from swarmbed.coordinator.scenario import within
 from swarmbed.experiments.launch.config import resolve_experiment
+from swarmbed.extension.scenario import within
+from swarmbed.scenarios import sar
+from swarmbed.scenarios.kinematics import Limits, step
+from swarmbed.scenarios.sar import ALIVE
 from tests.conftest import experiment
 
 

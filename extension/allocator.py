@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
-from swarmbed.agent_runtime.view import LocalView
+from swarmbed.extension.view import LocalView
 
 #: what :meth:`Allocator.decide` returns to keep the agent still this tick (no task, no exploring):
 #: SPACE's GRAPE holds its agents while their partition converges. Task ids are never negative.
@@ -35,8 +35,6 @@ class Allocator(abc.ABC):
     #: behavior-tree node classes this plugin's trees use, and its default tree (a path)
     bt_nodes: ClassVar[tuple[type, ...]] = ()
     default_tree: ClassVar[str | None] = None
-    #: SAR: whether the scenario should show victims' colours to this algorithm when bidding
-    bids_with_colors: ClassVar[bool] = False
     #: whether a running instance can move to another process (snapshot / restore); a plugin that
     #: holds what cannot move (open files, threads, sockets) sets False, and swaps are refused
     snapshottable: ClassVar[bool] = True

@@ -25,7 +25,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from swarmbed.coordinator.scenario import Scenario, World
+from swarmbed.extension.scenario import Scenario, World
 from swarmbed.wire.codec import pack, unpack
 from swarmbed.wire.schema import AgentsSection
 

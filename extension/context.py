@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarmbed.agent_runtime.allocator import Allocator
-from swarmbed.agent_runtime.view import LocalView
+from swarmbed.extension.allocator import Allocator
+from swarmbed.extension.view import LocalView
 
 if TYPE_CHECKING:
-    from swarmbed.coordinator.scenario import Scenario
+    from swarmbed.extension.scenario import Scenario
 
 
 @dataclass

@@ -30,7 +30,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.agent_runtime.nodes import SPACE_NODES
-from swarmbed.coordinator.scenario import Scenario, Sensing, World
+from swarmbed.extension.scenario import Scenario, Sensing, World
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation

@@ -5,7 +5,7 @@ observation (part of the wire contract), the behavior-tree nodes and default tre
 the metrics that measure its outcome, and it builds the :class:`World` that the coordinator drives.
 The coordinator, the agent runtime and the CLI know nothing else about scenarios, so a new one is
 one module plus one registry line (``swarmbed.plugins.registry``) or a ``swarmbed.scenarios``
-entry point in another package; ``swarmbed.coordinator.checker.check_scenario`` checks it.
+entry point in another package; ``swarmbed.plugins.checks.check_scenario`` checks it.
 
 Agents build a scenario too (from the same resolved parameters) for its sensing range and its
 helpers (``random_point``); they never build its world.
@@ -17,7 +17,6 @@ import abc
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -26,8 +25,6 @@ from pydantic import BaseModel
 
 from swarmbed.wire.observation import Observation as BaseObservation
 from swarmbed.wire.schema import AgentsSection, Experiment
-
-SPACE_TREE = Path(str(resources.files("swarmbed.agent_runtime") / "trees" / "space_default.xml"))
 
 
 @dataclass(frozen=True)
@@ -123,7 +120,8 @@ class Scenario(abc.ABC):
     Observation: ClassVar[type[BaseObservation]] = BaseObservation
     #: behavior-tree nodes its agents' trees may use, and the tree used when the allocator has none
     bt_nodes: ClassVar[tuple[type, ...]] = ()
-    default_tree: ClassVar[Path] = SPACE_TREE
+    #: (None: SPACE's default tree, ``swarmbed.agent_runtime.nodes.SPACE_TREE``)
+    default_tree: ClassVar[Path | None] = None
     #: summary keys that measure the outcome, first the headline (sweep tables, printed summaries)
     outcome_metrics: ClassVar[tuple[str, ...]] = ()
     #: the summary key that counts work done (tasks completed, victims rescued): what reports set

@@ -1,0 +1,28 @@
+"""The extension contract: what a scenario, an allocator and a behavior-tree node are written against.
+
+``Scenario`` and ``World`` (:mod:`.scenario`), ``Allocator`` (:mod:`.allocator`), the agent's
+``LocalView`` with its ``TaskInfo`` and ``Message`` (:mod:`.view`) and the node context
+(:mod:`.context`) live here, below every process role: the coordinator, the agent runtime and the
+plugins import this package, and it imports none of them (only the wire contract). A change here is
+a change to every plugin and scenario, so it is kept small.
+"""
+
+from swarmbed.extension.allocator import HOLD, Allocator, NoParams
+from swarmbed.extension.context import NodeContext
+from swarmbed.extension.scenario import Scenario, Sensing, World, within
+from swarmbed.extension.view import LocalView, Message, Outgoing, TaskInfo
+
+__all__ = [
+    "HOLD",
+    "Allocator",
+    "LocalView",
+    "Message",
+    "NodeContext",
+    "NoParams",
+    "Outgoing",
+    "Scenario",
+    "Sensing",
+    "TaskInfo",
+    "World",
+    "within",
+]
