@@ -19,3 +19,7 @@ except PackageNotFoundError:  # running from a checkout that was never installed
 _checkout = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__)))
 if all(_os.path.isfile(_os.path.join(_checkout, name, "__init__.py")) for name in ("wire", "netem", "coordinator")):
     __path__.append(_checkout)
+
+from swarmbed import _renamed as _renamed  # noqa: E402 - old module names import, with a DeprecationWarning
+
+_renamed.install()

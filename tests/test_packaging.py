@@ -99,3 +99,24 @@ def test_agents_and_the_proxy_import_no_analysis_library():
     loaded = set(run.stdout.split())
     assert "swarmbed.agent_runtime.process" in loaded and "swarmbed.plugins.cbba" in loaded
     assert not [m for m in heavy if m in loaded], sorted(m for m in heavy if m in loaded)
+
+
+def test_old_module_names_still_import_with_a_warning_naming_the_new_one():
+    """A plugin or scenario written against a name issue 30 moved keeps working, told where it went."""
+    code = (
+        "import warnings; warnings.simplefilter('error', DeprecationWarning)\n"
+        "try:\n    import swarmbed.coordinator.scenario\nexcept DeprecationWarning as w:\n    print(w)\n"
+        "warnings.simplefilter('ignore')\n"
+        "from swarmbed.coordinator.scenario import Scenario\n"
+        "from swarmbed.agent_runtime.allocator import Allocator\n"
+        "import swarmbed.extension as e\n"
+        "print(Scenario is e.Scenario, Allocator is e.Allocator)\n"
+        "from swarmbed.wire.targets import load_target\n"
+        "print(load_target('swarmbed.coordinator.sar:SAR', e.Scenario).__module__)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.splitlines()
+    assert out == [
+        "swarmbed.coordinator.scenario is now swarmbed.extension.scenario; the old name goes in a later release",
+        "True True",
+        "swarmbed.scenarios.sar",
+    ], out
