@@ -16,7 +16,8 @@ import psutil
 import pytest
 
 from swarmbed.experiments.campaigns import claims, executors
-from swarmbed.experiments.campaigns.sweep import ATTEMPTS, load_sweep, read_table, run_sweep, status
+from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep, status
+from swarmbed.experiments.folders import ATTEMPTS, read_table
 from tests.conftest import QUICKSTART, cmdline, same_results, under_way
 
 SWEEP = textwrap.dedent(f"""

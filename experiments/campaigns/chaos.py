@@ -57,6 +57,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from swarmbed.experiments.folders import CHAOS as CHAOS_FILE
 from swarmbed.experiments.hosts import netns
 from swarmbed.experiments.hosts.daemon import process_name
 from swarmbed.experiments.launch.runner import LiveRun
@@ -65,7 +66,6 @@ from swarmbed.wire.codec import NetemControl, encode_netem_control
 from swarmbed.wire.rowfile import RowFile
 
 log = logging.getLogger("swarmbed.chaos")
-CHAOS_FILE = "chaos.csv"
 CHAOS_COLUMNS = ["wall_s", "tick", "action", "target", "detail", "outcome"]
 RESOLVE_WITHIN = 30.0  # wall seconds an event's ending is waited for before it is called unresolved
 CUT_SHORT = "cut short: the run ended before its ending was due"

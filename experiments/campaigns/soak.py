@@ -42,14 +42,14 @@ import psutil
 
 from swarmbed.coordinator import results
 from swarmbed.experiments.campaigns.chaos import Chaos, ChaosPlan
+from swarmbed.experiments.folders import SOAK_PROCESSES as PROCESSES
+from swarmbed.experiments.folders import SOAK_RUN as RUN
+from swarmbed.experiments.folders import SOAK_VERDICT as VERDICT
 from swarmbed.experiments.hosts.daemon import process_name
 from swarmbed.experiments.launch.runner import LiveRun, RunObserver, run_experiment
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.schema import Experiment
 
-PROCESSES = "soak_processes.csv"
-RUN = "soak_run.csv"
-VERDICT = "soak_verdict.json"
 PROCESS_COLUMNS = ["wall_s", "tick", "process", "kind", "pid", "rss_mb", "cpu_pct", "fds", "threads", "tcp"]
 RUN_COLUMNS = [
     "wall_s",

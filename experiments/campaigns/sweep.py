@@ -53,16 +53,11 @@ from tqdm import tqdm
 from swarmbed.coordinator import results
 from swarmbed.experiments.campaigns import claims
 from swarmbed.experiments.campaigns.executors import Executor, Outcome, resources_for
+from swarmbed.experiments.folders import ATTEMPTS, DERIVED, ERROR, PARQUET, SPEC, TABLE, dotted
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
 from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml, read_yaml
 from swarmbed.wire.schema import SAFE_NAME
-
-TABLE = "sweep.csv"
-PARQUET = "sweep.parquet"
-ATTEMPTS = "attempts.jsonl"
-SPEC = "sweep.json"
-ERROR = "error.txt"
 
 
 class ScenarioEntry(BaseModel):
@@ -325,10 +320,6 @@ def _parquet_ready(table: pd.DataFrame) -> pd.DataFrame:
     return table
 
 
-#: what ``analyze`` and ``report`` made from a sweep's table: stale once the table is written anew
-DERIVED = ("fig_*", "scenario_summary.*", "statistics.*", "report.html")
-
-
 def write_tables(table: pd.DataFrame, out: Path) -> None:
     """``sweep.csv`` and ``sweep.parquet`` (every run's summary flattened, one file to read for
     thousands of runs), each written whole or not at all. Figures, summaries and reports made from
@@ -342,14 +333,6 @@ def write_tables(table: pd.DataFrame, out: Path) -> None:
     tmp = results.temp_beside(out / PARQUET)
     _parquet_ready(table).to_parquet(tmp, index=False)
     os.replace(tmp, out / PARQUET)
-
-
-def read_table(sweep_dir: Path) -> pd.DataFrame:
-    """A sweep's table: ``sweep.parquet`` where it is at least as new as ``sweep.csv``, else the CSV."""
-    parquet, csv = sweep_dir / PARQUET, sweep_dir / TABLE
-    if parquet.exists() and (not csv.exists() or parquet.stat().st_mtime_ns >= csv.stat().st_mtime_ns):
-        return pd.read_parquet(parquet)
-    return pd.read_csv(csv)
 
 
 class SweepInterrupted(KeyboardInterrupt):
@@ -407,18 +390,12 @@ def status(out: Path, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame
     return table
 
 
-def _dotted(data: Any, prefix: str = "") -> dict[str, Any]:
-    if isinstance(data, dict):
-        return {k: v for key, value in data.items() for k, v in _dotted(value, f"{prefix}{key}.").items()}
-    return {prefix.rstrip("."): data}
-
-
 def config_differences(made: str, planned: str, limit: int = 3) -> str:
     """What differs between two ``config.yaml`` texts, as ``key: made -> planned`` (at most ``limit``)."""
 
     def read(text: str) -> dict[str, Any]:
         try:
-            return _dotted(parse_yaml(text, "config.yaml") or {})
+            return dotted(parse_yaml(text, "config.yaml") or {})
         except YamlFileError:
             return {}
 
@@ -426,48 +403,6 @@ def config_differences(made: str, planned: str, limit: int = 3) -> str:
     keys = sorted(k for k in a.keys() | b.keys() if a.get(k) != b.get(k))
     shown = [f"{k}: {a.get(k)!r} -> {b.get(k)!r}" for k in keys[:limit]]
     return ", ".join(shown) + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
-
-
-VERSIONED = ("provenance.scenario.version", "provenance.allocator.version")
-
-
-def mixed_versions(table: pd.DataFrame) -> str | None:
-    """Why the completed runs of ``table`` were made by code that must not be pooled, or None: one
-    scenario kind (or allocator) in two versions. Runs that predate provenance records are not counted."""
-    ok = table[table["status"] == "ok"]
-    for column, by in zip(VERSIONED, ("scenario_kind", "allocator")):
-        if column not in ok or by not in ok:
-            continue
-        seen = ok.dropna(subset=[column]).groupby(by)[column].unique()
-        for name, versions in seen.items():
-            if len(versions) > 1:
-                what = column.split(".")[1]
-                return f"{what} {name} in versions {', '.join(sorted(map(str, versions)))}"
-    return None
-
-
-def mixed_configurations(sweep_dir: Path, table: pd.DataFrame) -> str | None:
-    """Why the completed runs of ``table`` cannot be pooled per scenario, or None: within a
-    scenario every run's ``config.yaml`` must be the same but for ``run.seed``."""
-    ok = table[table["status"] == "ok"]
-    for scenario, group in ok.groupby("scenario"):
-        first: tuple[str, dict[str, Any]] | None = None
-        for run in group["run"]:
-            name = f"{scenario}/run_{int(run):03d}"
-            try:
-                config = _dotted(parse_yaml((sweep_dir / name / results.CONFIG).read_text(), name) or {})
-            except (OSError, YamlFileError) as exc:
-                return f"{name}: no readable {results.CONFIG} ({exc})"
-            config.pop("run.seed", None)
-            if first is None:
-                first = (name, config)
-            elif config != first[1]:
-                keys = sorted(k for k in config.keys() | first[1].keys() if config.get(k) != first[1].get(k))
-                return (
-                    f"{first[0]} and {name} were made under different configurations "
-                    f"({', '.join(f'{k}: {first[1].get(k)!r} / {config.get(k)!r}' for k in keys[:3])})"
-                )
-    return None
 
 
 def _check_completed(specs: list[RunSpec], out: Path, redo: bool) -> None:

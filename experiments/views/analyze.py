@@ -32,15 +32,9 @@ from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import NullLocator  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from swarmbed.experiments.campaigns.sweep import (  # noqa: E402
-    PARQUET,
-    SPEC,
-    TABLE,
-    mixed_configurations,
-    mixed_versions,
-    read_table,
-)
+from swarmbed.experiments.folders import PARQUET, SPEC, TABLE, read_table  # noqa: E402
 from swarmbed.experiments.views.colours import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
+from swarmbed.experiments.views.pooling import mixed_configurations, mixed_versions  # noqa: E402
 from swarmbed.experiments.views.stats import compare  # noqa: E402
 
 METRICS = {

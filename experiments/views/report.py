@@ -12,22 +12,22 @@ against bytes, one point per run, one colour per scenario).
 
 from __future__ import annotations
 
-import html
 import json
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
-import plotly.io as pio
 import yaml
 from scipy import stats
 
 import swarmbed
-from swarmbed.experiments.campaigns.sweep import PARQUET, TABLE, mixed_configurations, read_table
+from swarmbed.experiments.folders import PARQUET, SOAK_PROCESSES, TABLE, read_table
 from swarmbed.experiments.views.colours import DROP_COLORS
+from swarmbed.experiments.views.page import Page, _fmt
+from swarmbed.experiments.views.pooling import mixed_configurations
+from swarmbed.experiments.views.soak_page import soak_report
 from swarmbed.plugins.registry import PluginError, resolve_scenario
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
@@ -51,70 +51,6 @@ def _outcomes(kind: str) -> list[str]:
     except PluginError:
         return []
     return [m for m in (cls.benefit_metric, *cls.outcome_metrics) if m]
-
-
-class Page:
-    """Sections of figures and tables; plotly's script goes in once, with the first figure."""
-
-    def __init__(self, title: str) -> None:
-        self.title = title
-        self.parts: list[str] = []
-        self.figures = 0
-
-    def heading(self, text: str, note: str = "") -> None:
-        self.parts.append(f"<h2>{html.escape(text)}</h2>")
-        if note:
-            self.parts.append(f"<p class='note'>{html.escape(note)}</p>")
-
-    def table(
-        self, rows: list[tuple[str, Any, str]], header: tuple[str, str, str] = ("figure", "value", "from")
-    ) -> None:
-        cells = "".join(
-            f"<tr><td>{html.escape(str(a))}</td><td class='num'>{html.escape(_fmt(b))}</td>"
-            f"<td class='src'>{html.escape(c)}</td></tr>"
-            for a, b, c in rows
-        )
-        head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-        self.parts.append(f"<table><tr>{head}</tr>{cells}</table>")
-
-    def figure(self, fig: go.Figure, source: str) -> None:
-        fig.update_layout(template="plotly_white", height=420, margin={"l": 60, "r": 20, "t": 50, "b": 50})
-        self.parts.append(
-            pio.to_html(
-                fig,
-                full_html=False,
-                include_plotlyjs=self.figures == 0,
-                div_id=f"fig{self.figures}",
-                config={"displaylogo": False},
-            )
-        )
-        self.parts.append(f"<p class='src'>from {html.escape(source)}</p>")
-        self.figures += 1
-
-    def render(self, subtitle: str) -> str:
-        return (
-            f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(self.title)}</title>"
-            f"<style>{CSS}</style></head><body><h1>{html.escape(self.title)}</h1>"
-            f"<p class='note'>{html.escape(subtitle)}</p>{''.join(self.parts)}</body></html>"
-        )
-
-
-CSS = (
-    "body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;color:#222}"
-    "table{border-collapse:collapse;margin:1em 0}td,th{border-bottom:1px solid #ddd;padding:4px 10px;"
-    "text-align:left}.num{text-align:right;font-variant-numeric:tabular-nums}.src,.note{color:#777;"
-    "font-size:0.85em}h2{margin-top:2em;border-bottom:2px solid #eee}"
-)
-
-
-def _fmt(v: Any) -> str:
-    if isinstance(v, bool) or v is None:
-        return "-" if v is None else ("yes" if v else "NO")
-    if isinstance(v, (int, np.integer)):
-        return f"{int(v):,}"
-    if isinstance(v, (float, np.floating)):
-        return f"{float(v):,.3g}" if abs(float(v)) < 1000 else f"{float(v):,.0f}"
-    return str(v)
 
 
 def _binned(frame: pd.DataFrame, ticks: int, dt: float, by: str, value: str) -> pd.DataFrame:
@@ -476,10 +412,12 @@ def sweep_report(sweep: Path) -> tuple[str, int]:
     return page.render(subtitle), page.figures
 
 
+def is_soak(folder: Path) -> bool:
+    return (folder / SOAK_PROCESSES).exists() or (folder / (SOAK_PROCESSES + ".part")).exists()
+
+
 def report(folder: Path, out: Path | None = None) -> Path:
     """Write the report of a soak, a run or a sweep folder; returns the file."""
-    from swarmbed.experiments.views.soak_page import is_soak, soak_report
-
     if is_soak(folder):
         text, _ = soak_report(folder)
     elif (folder / "summary.json").exists():

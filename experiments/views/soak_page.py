@@ -12,16 +12,14 @@ import pandas as pd
 import plotly.graph_objects as go
 
 import swarmbed
-from swarmbed.experiments.campaigns.chaos import CHAOS_FILE
-from swarmbed.experiments.campaigns.soak import PROCESSES, RUN, VERDICT
+from swarmbed.experiments.folders import CHAOS as CHAOS_FILE
+from swarmbed.experiments.folders import SOAK_PROCESSES as PROCESSES
+from swarmbed.experiments.folders import SOAK_RUN as RUN
+from swarmbed.experiments.folders import SOAK_VERDICT as VERDICT
 from swarmbed.experiments.views.colours import DROP_COLORS
-from swarmbed.experiments.views.report import Page
+from swarmbed.experiments.views.page import Page
 
 CHAOS_COLORS = {"kill_agent": "#D55E00", "stop_agent": "#E69F00", "loss_burst": "#0072B2", "rate_cap": "#009E73"}
-
-
-def is_soak(folder: Path) -> bool:
-    return (folder / PROCESSES).exists() or (folder / (PROCESSES + ".part")).exists()
 
 
 def _read(folder: Path, name: str) -> tuple[pd.DataFrame | None, str]:

@@ -1,0 +1,47 @@
+"""The files of a sweep folder and of a soak folder: one place that names them for the campaigns that
+write them and the views that read them (a run folder's files are named in ``swarmbed.wire.rundir``).
+
+A sweep folder holds ``sweep.json`` (what was planned), one folder per scenario with a ``run_NNN``
+folder per run, and, once the sweep stops, ``sweep.csv`` and ``sweep.parquet`` (every run's summary
+flattened, one row per run). A soak folder holds its process and run samples, its chaos events and
+its verdict.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+# a sweep folder
+SPEC = "sweep.json"  # the sweep as planned: name, base, seed, runs, scenarios and their overrides
+TABLE = "sweep.csv"
+PARQUET = "sweep.parquet"
+ATTEMPTS = "attempts.jsonl"  # in each run folder: one line per attempt at the run
+ERROR = "error.txt"  # in a run folder whose run failed
+
+# a soak folder
+SOAK_PROCESSES = "soak_processes.csv"
+SOAK_RUN = "soak_run.csv"
+SOAK_VERDICT = "soak_verdict.json"
+CHAOS = "chaos.csv"
+
+
+#: what ``analyze`` and ``report`` made from a sweep's table: stale once the table is written anew
+DERIVED = ("fig_*", "scenario_summary.*", "statistics.*", "report.html")
+
+
+def read_table(sweep_dir: Path) -> pd.DataFrame:
+    """A sweep's table: ``sweep.parquet`` where it is at least as new as ``sweep.csv``, else the CSV."""
+    parquet, csv = sweep_dir / PARQUET, sweep_dir / TABLE
+    if parquet.exists() and (not csv.exists() or parquet.stat().st_mtime_ns >= csv.stat().st_mtime_ns):
+        return pd.read_parquet(parquet)
+    return pd.read_csv(csv)
+
+
+def dotted(data: Any, prefix: str = "") -> dict[str, Any]:
+    """A nested mapping as one level of ``dotted.keys`` (what a config's keys look like in a sweep's columns)."""
+    if isinstance(data, dict):
+        return {k: v for key, value in data.items() for k, v in dotted(value, f"{prefix}{key}.").items()}
+    return {prefix.rstrip("."): data}
