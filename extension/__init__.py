@@ -9,12 +9,14 @@ a change to every plugin and scenario, so it is kept small.
 
 from swarmbed.extension.allocator import HOLD, Allocator, NoParams
 from swarmbed.extension.context import NodeContext
+from swarmbed.extension.figures import Figure
 from swarmbed.extension.scenario import Scenario, Sensing, World, within
 from swarmbed.extension.view import LocalView, Message, Outgoing, TaskInfo
 
 __all__ = [
     "HOLD",
     "Allocator",
+    "Figure",
     "LocalView",
     "Message",
     "NodeContext",

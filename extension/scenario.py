@@ -23,6 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel
 
+from swarmbed.extension.figures import Figure
 from swarmbed.wire.observation import Observation as BaseObservation
 from swarmbed.wire.schema import AgentsSection, Experiment
 
@@ -129,6 +130,15 @@ class Scenario(abc.ABC):
     benefit_metric: ClassVar[str | None] = None
     #: every key ``World.summary()`` returns (checked by the scenario checker)
     summary_keys: ClassVar[tuple[str, ...]] = ()
+    #: what ``swarmbed analyze`` tabulates (per sweep scenario: n, mean, CI) and labels its axes
+    #: with: summary metric -> label; empty: the outcome metrics under their own names
+    metric_labels: ClassVar[Mapping[str, str]] = {}
+    #: the figures ``swarmbed analyze`` draws (:mod:`swarmbed.extension.figures`); empty: one box
+    #: per allocator for each outcome metric
+    figures: ClassVar[tuple[Figure, ...]] = ()
+    #: the allocator the others are compared with in ``statistics.csv`` (ANOVA, Dunnett, Cohen's d)
+    #: when a sweep has it; None: no such table
+    control_allocator: ClassVar[str | None] = None
     #: bump when a change makes the same configuration and seed give other results: every run records
     #: it (provenance.json) and ``swarmbed analyze`` refuses to pool runs of two versions
     version: ClassVar[str] = "1"

@@ -16,6 +16,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from swarmbed.agent_runtime.nodes import SPACE_NODES
+from swarmbed.extension.figures import Figure
 from swarmbed.extension.scenario import Scenario, Sensing, World, within
 from swarmbed.scenarios.kinematics import Limits, step
 from swarmbed.wire.codec import TASK_DTYPE
@@ -62,6 +63,19 @@ class MTSR(Scenario):
     bt_nodes = SPACE_NODES
     outcome_metrics = ("mission_time", "time_99", "tasks_completed", "all_tasks_completed")
     benefit_metric = "tasks_completed"
+    metric_labels = {
+        "mission_time": "mission completion time (s)",
+        "time_99": "time to 99 % of tasks (s)",
+        "distance_per_agent_mean": "average distance per agent",
+        "work_per_agent_mean": "average work per agent",
+        "tasks_completed": "tasks completed",
+        # one value per agent, pooled over a scenario's runs (SPACE's per-agent panels): a run's mean
+        # work per agent is its total work over N, the same for every allocator that completes the
+        # mission; how the work is shared out is what tells allocators apart
+        "distance_per_agent": "travel distance per agent",
+        "work_per_agent": "workload per agent",
+    }
+    figures = (Figure("by_range", ("mission_time", "time_99", "distance_per_agent", "work_per_agent")),)
     summary_keys = (
         "mission_time",
         "all_tasks_completed",

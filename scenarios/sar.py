@@ -30,6 +30,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.agent_runtime.nodes import SPACE_NODES
+from swarmbed.extension.figures import Figure
 from swarmbed.extension.scenario import Scenario, Sensing, World
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
@@ -100,6 +101,25 @@ class SAR(Scenario):
     bt_nodes = SPACE_NODES
     outcome_metrics = ("rescued", "expired", "failed_rescues")
     benefit_metric = "rescued"
+    metric_labels = {
+        "rescued": "victims rescued per trial",
+        "expired": "victims expired per trial",
+        "failed_rescues": "failed rescues (mismatch found) per trial",
+        "negotiations": "negotiations per trial",
+    }
+    # CBBA-ETC Section 5.4: outcomes per strategy, their spread, the cost in messages, and the
+    # victim-count, robot-count and failure series
+    figures = (
+        Figure("means", ("rescued", "expired"), label="victims per trial"),
+        Figure(
+            "boxes",
+            ("rescued", "expired", "failed_rescues", "negotiations", "network.messages_sent", "network.bytes_sent"),
+        ),
+        Figure("scatter", ("rescued", "network.messages_sent")),
+        Figure("against_count", ("network.messages_sent", "rescued"), over=("scenario.victims", "agents.count")),
+        Figure("against_factor", ("rescued",)),
+    )
+    control_allocator = "cbba-etc"  # the paper's proposed strategy, which its tests compare the others with
     summary_keys = (
         "rescued",
         "expired",

@@ -123,6 +123,21 @@ def test_a_third_scenario_runs_end_to_end_with_no_change_to_swarmbed(tmp_path):
     assert again.summary["delivered"] == s["delivered"]
 
 
+def test_analyze_draws_the_figures_a_third_scenario_names(tmp_path):
+    """``Scenario.figures`` and ``metric_labels``: the analysis tabulates and draws a scenario it
+    has never heard of, with no edit of its own."""
+    from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
+    from swarmbed.experiments.views.analyze import analyze
+
+    _pickup_experiment(tmp_path)
+    (tmp_path / "sweep.yaml").write_text("name: pickups\nbase: pickup.yaml\nruns: 2\n")
+    run_sweep(load_sweep(tmp_path / "sweep.yaml", extra=["run.duration=40"]), tmp_path / "out", jobs=2, progress=False)
+    names = {p.name for p in analyze(tmp_path / "out")}
+    assert {"fig_delivered.png", "fig_boxplots.png", "scenario_summary.csv"} <= names, names
+    summary = (tmp_path / "out" / "scenario_summary.csv").read_text()
+    assert ",delivered,2," in summary and ",distance_total,2," in summary, summary
+
+
 def test_an_installed_package_adds_a_scenario_and_an_allocator_through_entry_points(tmp_path):
     dist = tmp_path / "pickup_plugin-0.1.dist-info"
     dist.mkdir()

@@ -2,15 +2,17 @@
 
 - ``scenario_summary.csv`` / ``.md``: per scenario and metric, n, mean, sd, median and the 95 %
   confidence interval of the mean (Student t).
-- MT-SR sweeps: SPACE Fig. 3 panels, one PNG per metric (mission time and time to 99 %: one value
-  per run; travel distance and workload per agent: one value per agent, pooled over the runs):
-  boxplots by communication range, one group per algorithm, one panel per agent count. Sweeps
-  without those factors get one box per scenario instead.
-- Search-and-rescue sweeps (CBBA-ETC Section 5.4): ``statistics.csv`` / ``.md`` (one-way ANOVA
-  across strategies, Dunnett's test and Cohen's d against a control strategy, cbba-etc by
-  default), mean rescued and expired per trial with 95 % CI bars, boxplots per trial, rescued
-  against messages sent; given several sweeps (e.g. the victim-count or robot-count series),
-  messages per trial on a log scale against victim count and robot count.
+- ``statistics.csv`` / ``.md``, where the scenario names a control allocator
+  (``Scenario.control_allocator``, cbba-etc for search and rescue) or ``--control`` does: one-way
+  ANOVA across allocators, Dunnett's test and Cohen's d against the control.
+- Figures: the ones each scenario names in ``Scenario.figures`` (``swarmbed.extension.figures``).
+  MT-SR: SPACE Fig. 3 panels, one PNG per metric (mission time and time to 99 %: one value per
+  run; travel distance and workload per agent: one value per agent, pooled over the runs), boxes
+  by communication range, one group per algorithm, one panel per agent count. Search and rescue
+  (CBBA-ETC Section 5.4): mean rescued and expired per trial with 95 % CI bars, boxplots per
+  trial, rescued against messages sent, and over several sweeps (the victim-count or robot-count
+  series) messages and rescues against victim count and robot count. A scenario that names none
+  gets one box per allocator for each of its outcome metrics.
 
 With several directories, the first one receives the outputs.
 """
@@ -18,6 +20,7 @@ With several directories, the first one receives the outputs.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -36,32 +39,15 @@ from swarmbed.experiments.folders import PARQUET, SPEC, TABLE, read_table  # noq
 from swarmbed.experiments.views.colours import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
 from swarmbed.experiments.views.pooling import mixed_configurations, mixed_versions  # noqa: E402
 from swarmbed.experiments.views.stats import compare  # noqa: E402
+from swarmbed.extension import Figure, Scenario  # noqa: E402
+from swarmbed.plugins.registry import PluginError, resolve_scenario  # noqa: E402
 
-METRICS = {
-    "mission_time": "mission completion time (s)",
-    "time_99": "time to 99 % of tasks (s)",
-    "distance_per_agent_mean": "average distance per agent",
-    "work_per_agent_mean": "average work per agent",
-    "tasks_completed": "tasks completed",
-    "network.messages_sent": "messages sent",
-    "network.bytes_sent": "payload bytes sent",
-}
-# SPACE's per-agent panels: one value per agent, pooled over a scenario's runs (read from each run's
-# summary.json). A run's mean work per agent is its total work over N, the same for every allocator
-# that completes the mission; how the work is shared out is what tells allocators apart.
-PER_AGENT = {"distance_per_agent": "travel distance per agent", "work_per_agent": "workload per agent"}
 AGENTS, RANGE, ALLOCATOR = "agents.count", "network.range", "allocator"
-SAR_METRICS = {
-    "rescued": "victims rescued per trial",
-    "expired": "victims expired per trial",
-    "failed_rescues": "failed rescues (mismatch found) per trial",
-    "negotiations": "negotiations per trial",
+#: what every scenario's runs send, tabulated beside the scenario's own metrics
+NETWORK_LABELS = {
     "network.messages_sent": "messages sent per trial",
     "network.bytes_sent": "payload bytes sent per trial",
 }
-
-
-DEFAULT_CONTROL = "cbba-etc"
 
 
 class AnalyzeError(ValueError):
@@ -91,7 +77,6 @@ def load(sweep_dirs: list[Path], mixed_versions_ok: bool = False) -> pd.DataFram
         meta = json.loads(spec.read_text())
         df["sweep"] = meta["name"]
         df["run_dir"] = [str(sweep_dir / str(sc) / f"run_{int(r):03d}") for sc, r in zip(df["scenario"], df["run"])]
-        _resolve_series_keys(df, sweep_dir)
         factors += [f for f in meta.get("factors", []) if f not in factors]
         frames.append(df)
     df = pd.concat(frames, ignore_index=True)
@@ -105,27 +90,25 @@ def load(sweep_dirs: list[Path], mixed_versions_ok: bool = False) -> pd.DataFram
     if df.empty:
         raise AnalyzeError(f"{', '.join(map(str, sweep_dirs))}: no completed run to analyze")
     df[ALLOCATOR] = df["allocator"].map(_allocator_label)  # every summary names its allocator
+    kinds = df["scenario_kind"].dropna().unique() if "scenario_kind" in df else []
+    _resolve_keys(
+        df, tuple(k for kind in kinds for f in figures_of(scenario_class(kind)) for k in f.over if k != AGENTS)
+    )
     if len(sweep_dirs) > 1:
         df["scenario"] = df["sweep"] + "/" + df["scenario"]
     df.attrs["factors"] = factors
     return df
 
 
-SERIES_KEYS = ("scenario.victims",)  # read from each run's config where a sweep does not vary them
-
-
-def _resolve_series_keys(df: pd.DataFrame, sweep_dir: Path) -> None:
-    """A sweep that leaves a series key at its base's value (the V100 of a victim-count series) gets
-    the value its runs used, from their resolved ``config.yaml``, so that series line up."""
-    for key in SERIES_KEYS:
+def _resolve_keys(df: pd.DataFrame, keys: tuple[str, ...]) -> None:
+    """A sweep that leaves a key at its base's value (the V100 of a victim-count series) gets the
+    value its runs used, from their resolved ``config.yaml``, so that series line up."""
+    for key in keys:
         if key in df and df[key].notna().all():
             continue
-        first_run = df.groupby("scenario")["run"].min()  # a scenario's runs differ only in their seed
-        used = {
-            scenario: _config_value(sweep_dir / str(scenario) / f"run_{int(run):03d}" / "config.yaml", key)
-            for scenario, run in first_run.items()
-        }
-        values = df["scenario"].map(used)
+        first = df.groupby(["sweep", "scenario"])["run_dir"].first()  # a scenario's runs differ only in their seed
+        used = {group: _config_value(Path(run_dir) / "config.yaml", key) for group, run_dir in first.items()}
+        values = pd.Series([used[(sw, sc)] for sw, sc in zip(df["sweep"], df["scenario"])], index=df.index)
         df[key] = df[key].fillna(values) if key in df else values
 
 
@@ -256,8 +239,8 @@ def _log_counts(ax, axis: str = "y") -> None:
 
 
 def _values(rows: pd.DataFrame, metric: str) -> pd.Series:
-    """One value per run, or for a :data:`PER_AGENT` metric one per agent of every run."""
-    if metric not in PER_AGENT:
+    """One value per run, or for a metric the summary holds per agent one per agent of every run."""
+    if metric in rows:
         return rows[metric].dropna()
     values: list[float] = []
     for run_dir in rows["run_dir"]:
@@ -265,10 +248,37 @@ def _values(rows: pd.DataFrame, metric: str) -> pd.Series:
     return pd.Series(values, dtype=float)
 
 
-def fig3(df: pd.DataFrame, metric: str, out: Path) -> Path | None:
-    if metric not in PER_AGENT and (metric not in df or df[metric].dropna().empty):
+@dataclass
+class Canvas:
+    """Where one scenario kind's figures go, and how to name them (prefixed by the kind when the
+    sweeps hold several), with the kind's metric labels."""
+
+    out: Path
+    prefix: str
+    labels: dict[str, str]
+    counts: tuple[str, ...] = ()  # the keys ``against_count`` figures plot against
+
+    def save(self, fig, stem: str) -> Path:
+        return _save(fig, self.out, self.prefix + stem)
+
+    def label(self, metric: str) -> str:
+        return self.labels.get(metric, metric.replace("_", " "))
+
+
+def _by_range(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
+    written = []
+    for metric in figure.metrics:
+        path = _by_range_one(df, metric, canvas)
+        if path:
+            written.append(path)
+    return written
+
+
+def _by_range_one(df: pd.DataFrame, metric: str, canvas: Canvas) -> Path | None:
+    per_agent = metric not in df and f"{metric}_mean" in df
+    if not per_agent and (metric not in df or df[metric].dropna().empty):
         return None
-    label = PER_AGENT.get(metric) or METRICS[metric]
+    label = canvas.label(metric)
     have = all(c in df for c in (AGENTS, RANGE)) and df[ALLOCATOR].notna().all()
     with plt.rc_context(STYLE):
         if not have:
@@ -302,31 +312,49 @@ def fig3(df: pd.DataFrame, metric: str, out: Path) -> Path | None:
                 ax.set_title(f"{n} agents")
             axes[0][0].set_ylabel(label)
             axes[0][-1].legend(frameon=False)
-        return _save(fig, out, f"fig_{metric.replace('.', '_')}")
+        return canvas.save(fig, f"fig_{metric.replace('.', '_')}")
 
 
-def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
-    written = []
+def _strategies(df: pd.DataFrame) -> tuple[list[str], list[str], list[str], dict[str, pd.DataFrame], np.ndarray]:
     strategies = _ordered(df[ALLOCATOR].unique())
-    labels = [strategy_label(g) for g in strategies]
-    colors = [strategy_color(g) for g in strategies]
     per = {g: df[df[ALLOCATOR] == g] for g in strategies}
-    x = np.arange(len(strategies))
+    return (
+        strategies,
+        [strategy_label(g) for g in strategies],
+        [strategy_color(g) for g in strategies],
+        per,
+        np.arange(len(strategies)),
+    )
+
+
+def _numeric(df: pd.DataFrame, metrics: tuple[str, ...]) -> list[str]:
+    return [
+        m for m in metrics if m in df and pd.api.types.is_numeric_dtype(df[m]) and not pd.api.types.is_bool_dtype(df[m])
+    ]
+
+
+def _means(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
+    """Means per allocator with 95 % CI bars, the first metric filled, the others hatched; one figure
+    per sweep where there are several (a failure level's trials are not pooled with another's)."""
+    metrics = _numeric(df, figure.metrics)
+    if not metrics:
+        return []
+    strategies, labels, colors, per, x = _strategies(df)
+    written = []
+    width = 0.8 / len(metrics)
     with plt.rc_context(STYLE):
-        # mean rescued and expired per trial with 95 % CI bars: rescued filled, expired hatched; one
-        # figure per sweep where there are several (a failure level's trials are not pooled with another's)
         sweeps = sorted(df["sweep"].unique()) if "sweep" in df and df["sweep"].nunique() > 1 else [None]
         for sweep in sweeps:
             chosen = per if sweep is None else {g: per[g][per[g]["sweep"] == sweep] for g in strategies}
             fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
-            for k, metric in enumerate(("rescued", "expired")):
+            for k, metric in enumerate(metrics):
                 means = np.array([chosen[g][metric].mean() for g in strategies])
                 cis = [_ci(chosen[g][metric]) for g in strategies]
                 err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
                 ax.bar(
-                    x + (k - 0.5) * 0.4,
+                    x + (k - (len(metrics) - 1) / 2) * width,
                     means,
-                    0.4,
+                    width,
                     yerr=np.nan_to_num(err),
                     capsize=2,
                     color=colors,
@@ -337,58 +365,91 @@ def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
                     error_kw={"elinewidth": 0.8},
                 )
             ax.set_xticks(x, labels, rotation=30, ha="right")
-            ax.set_ylabel("victims per trial (mean, 95 % CI)")
+            ax.set_ylabel(f"{figure.label or 'per trial'} (mean, 95 % CI)")
             ax.legend(
                 handles=[
-                    Patch(facecolor="0.5", alpha=0.85, edgecolor="0.2", linewidth=0.5, label="rescued"),
-                    Patch(facecolor="0.5", alpha=0.35, hatch="///", edgecolor="0.2", linewidth=0.5, label="expired"),
+                    Patch(
+                        facecolor="0.5",
+                        alpha=0.85 if k == 0 else 0.35,
+                        hatch=None if k == 0 else "///",
+                        edgecolor="0.2",
+                        linewidth=0.5,
+                        label=metric.replace("_", " "),
+                    )
+                    for k, metric in enumerate(metrics)
                 ],
                 frameon=False,
             )
             if sweep is not None:
                 ax.set_title(str(sweep))
-            written.append(_save(fig, out, "fig_rescued_expired" + ("" if sweep is None else f"_{sweep}")))
-        # boxplots per trial
-        shown = [m for m in SAR_METRICS if m in df]
+            stem = "fig_" + "_".join(m.replace(".", "_") for m in metrics)
+            written.append(canvas.save(fig, stem + ("" if sweep is None else f"_{sweep}")))
+    return written
+
+
+def _boxes_figure(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
+    shown = _numeric(df, figure.metrics)
+    if not shown:
+        return []
+    strategies, labels, colors, per, x = _strategies(df)
+    with plt.rc_context(STYLE):
         cols = min(3, len(shown))
         rows = -(-len(shown) // cols)
         fig, axes = plt.subplots(rows, cols, figsize=(PAGE_IN, 2.3 * rows), squeeze=False)
         for ax, metric in zip(axes.flat, shown):
             _boxes(ax, [per[g][metric].dropna() for g in strategies], x, 0.6, colors)
             ax.set_xticks(x, labels, rotation=30, ha="right")
-            ax.set_title(SAR_METRICS[metric])
+            ax.set_title(canvas.label(metric))
             if metric.startswith("network") or metric == "negotiations":
                 _log_counts(ax)
         for ax in list(axes.flat)[len(shown) :]:
             ax.set_visible(False)
         fig.tight_layout()
-        written.append(_save(fig, out, "fig_boxplots"))
-        # rescued against messages sent
+        return [canvas.save(fig, "fig_boxplots")]
+
+
+def _scatter(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
+    y, x_metric = figure.metrics[:2]
+    if not {y, x_metric} <= set(df.columns):
+        return []
+    strategies, *_ = _strategies(df)
+    with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.8))
         for g in strategies:
+            rows = df[df[ALLOCATOR] == g]
             ax.scatter(
-                per[g]["network.messages_sent"],
-                per[g]["rescued"],
+                rows[x_metric],
+                rows[y],
                 s=10,
                 color=strategy_color(g),
                 label=strategy_label(g),
                 alpha=0.8,
                 linewidths=0,
             )
-        _log_counts(ax, "x")
-        ax.set_xlabel("messages sent per trial (symlog: 0 shown)")
-        ax.set_ylabel("victims rescued per trial")
+        if x_metric.startswith("network"):
+            _log_counts(ax, "x")
+            ax.set_xlabel(canvas.label(x_metric) + " (symlog: 0 shown)")
+        else:
+            ax.set_xlabel(canvas.label(x_metric))
+        ax.set_ylabel(canvas.label(y))
         ax.legend(frameon=False, ncol=2)
-        written.append(_save(fig, out, "fig_rescued_vs_messages"))
-        # messages and rescues against victim count and robot count (when the sweeps vary them)
-        for key, label in (("scenario.victims", "victims"), (AGENTS, "robots")):
+        short = {"network.messages_sent": "messages", "network.bytes_sent": "bytes"}
+        return [canvas.save(fig, f"fig_{y}_vs_{short.get(x_metric, x_metric.replace('.', '_'))}")]
+
+
+def _against_count(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
+    """Each metric's mean per allocator against each count the sweeps vary, on log axes."""
+    written = []
+    strategies, *_ = _strategies(df)
+    with plt.rc_context(STYLE):
+        for key in figure.over:
             counts = df.get("agents" if key == AGENTS else key)
             if counts is None or counts.nunique() < 2:
                 continue
-            for metric, ylabel, stem in (
-                ("network.messages_sent", "messages sent per trial (symlog)", "messages"),
-                ("rescued", "victims rescued per trial (mean, 95 % CI)", "rescued"),
-            ):
+            name = key.split(".")[-1] if key != AGENTS else "robots"
+            for metric in figure.metrics:
+                if metric not in df:
+                    continue
                 fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
                 for g in strategies:
                     groups = df[df[ALLOCATOR] == g].groupby(counts)[metric]
@@ -405,98 +466,132 @@ def _sar_figures(df: pd.DataFrame, out: Path) -> list[Path]:
                         color=strategy_color(g),
                         label=strategy_label(g),
                     )
-                if stem == "messages":
+                counted = metric.startswith("network") or metric == "negotiations"
+                if counted:
                     _log_counts(ax)
                 ax.set_xscale("log")
                 ticks = sorted(counts.dropna().unique())
                 ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
                 ax.xaxis.set_minor_locator(NullLocator())
-                ax.set_xlabel(f"{label} (log)")
-                ax.set_ylabel(ylabel)
+                ax.set_xlabel(f"{name} (log)")
+                ax.set_ylabel(canvas.label(metric) + (" (symlog)" if counted else " (mean, 95 % CI)"))
                 ax.legend(frameon=False, ncol=2)
-                written.append(_save(fig, out, f"fig_{stem}_vs_{label}"))
-        written += _factor_figures(df, out, strategies)
+                short = {"network.messages_sent": "messages", "network.bytes_sent": "bytes"}
+                stem = short.get(metric, metric.replace(".", "_"))
+                written.append(canvas.save(fig, f"fig_{stem}_vs_{name}"))
     return written
 
 
-def _factor_figures(df: pd.DataFrame, out: Path, strategies: list[str]) -> list[Path]:
-    """For each numeric factor a sweep varies other than the agent and victim counts (the tick
-    length of the dt study, a failure rate): the outcome per strategy against it, mean and 95 % CI."""
+def _against_factor(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
+    """For each numeric factor a sweep varies other than the allocator and the counts (the tick
+    length of the dt study, a failure rate): the metric per allocator against it, mean and 95 % CI."""
+    metric = figure.metrics[0]
+    if metric not in df:
+        return []
+    strategies, *_ = _strategies(df)
     written = []
-    factors = [
-        f
-        for f in df.attrs.get("factors", [])
-        if f in df and f not in (ALLOCATOR, "allocator.name", AGENTS, "scenario.victims")
-    ]
-    for factor in factors:
-        values = pd.to_numeric(df[factor], errors="coerce")
-        if values.isna().any() or values.nunique() < 2:
-            continue
-        fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
-        for g in strategies:
-            sub = df[df[ALLOCATOR] == g]
-            xs = sorted(values[sub.index].unique())
-            means = [sub.loc[values[sub.index] == v, "rescued"].mean() for v in xs]
-            cis = [_ci(sub.loc[values[sub.index] == v, "rescued"]) for v in xs]
-            ax.errorbar(
-                xs,
-                means,
-                yerr=np.nan_to_num(
-                    [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
-                ),
-                marker="o",
-                ms=3,
-                capsize=2,
-                color=strategy_color(g),
-                label=strategy_label(g),
-            )
-        ax.set_xlabel(factor)
-        ax.set_ylabel("victims rescued per trial (mean, 95 % CI)")
-        ax.legend(frameon=False)
-        written.append(_save(fig, out, f"fig_rescued_vs_{factor.replace('.', '_')}"))
+    skip = (ALLOCATOR, "allocator.name", AGENTS, *canvas.counts)
+    factors = [f for f in df.attrs.get("factors", []) if f in df and f not in skip]
+    with plt.rc_context(STYLE):
+        for factor in factors:
+            values = pd.to_numeric(df[factor], errors="coerce")
+            if values.isna().any() or values.nunique() < 2:
+                continue
+            fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
+            for g in strategies:
+                sub = df[df[ALLOCATOR] == g]
+                xs = sorted(values[sub.index].unique())
+                means = [sub.loc[values[sub.index] == v, metric].mean() for v in xs]
+                cis = [_ci(sub.loc[values[sub.index] == v, metric]) for v in xs]
+                ax.errorbar(
+                    xs,
+                    means,
+                    yerr=np.nan_to_num(
+                        [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
+                    ),
+                    marker="o",
+                    ms=3,
+                    capsize=2,
+                    color=strategy_color(g),
+                    label=strategy_label(g),
+                )
+            ax.set_xlabel(factor)
+            ax.set_ylabel(canvas.label(metric) + " (mean, 95 % CI)")
+            ax.legend(frameon=False)
+            written.append(canvas.save(fig, f"fig_{metric}_vs_{factor.replace('.', '_')}"))
     return written
+
+
+DRAW = {
+    "by_range": _by_range,
+    "means": _means,
+    "boxes": _boxes_figure,
+    "scatter": _scatter,
+    "against_count": _against_count,
+    "against_factor": _against_factor,
+}
+
+
+def scenario_class(kind: Any) -> type[Scenario]:
+    """The registered class of a sweep's ``scenario_kind``; the base class for one not known here
+    (its runs still get the summary table and a box per allocator of each outcome metric)."""
+    try:
+        return resolve_scenario(str(kind))
+    except PluginError:
+        return Scenario
+
+
+def figures_of(cls: type[Scenario]) -> tuple[Figure, ...]:
+    """The figures a scenario names, or one box per allocator of each of its outcome metrics."""
+    return cls.figures or (Figure("boxes", tuple(cls.outcome_metrics)),)
 
 
 def analyze(sweep_dirs: list[Path] | Path, control: str | None = None, mixed_versions_ok: bool = False) -> list[Path]:
-    """Tables and figures from sweep directories, written to the first. ``control``: the strategy
-    the others are compared with (default: cbba-etc where the sweeps have it); one the sweeps do
-    not have is refused before anything is written. Runs of one scenario or allocator made in two
-    versions are refused unless ``mixed_versions_ok``."""
+    """Tables and figures from sweep directories, written to the first. The figures and the metric
+    labels are the ones each scenario names (``Scenario.figures``, ``Scenario.metric_labels``).
+    ``control``: the allocator the others are compared with (default: the scenario's
+    ``control_allocator`` where the sweeps have it); one the sweeps do not have is refused before
+    anything is written. Runs of one scenario or allocator made in two versions are refused unless
+    ``mixed_versions_ok``."""
     dirs = [sweep_dirs] if isinstance(sweep_dirs, Path) else list(sweep_dirs)
     out = dirs[0]
     df = load(dirs, mixed_versions_ok)
-    sar = "rescued" in df
     if control is not None and control not in set(df[ALLOCATOR]):
         raise AnalyzeError(
             f"--control {control}: no such strategy in these sweeps "
             f"(they have: {', '.join(sorted(set(df[ALLOCATOR])))})"
         )
-    control = control or DEFAULT_CONTROL
     for stale in ("statistics.csv", "statistics.md"):  # never leave an earlier analysis's statistics
         (out / stale).unlink(missing_ok=True)
-    written = []
-    summary = scenario_summary(df, SAR_METRICS if sar else METRICS)
+    if "scenario_kind" not in df:
+        df["scenario_kind"] = ""
+    kinds = sorted(df["scenario_kind"].fillna("").astype(str).unique())
+    summaries, tables, written = [], [], []
+    for kind in kinds:
+        rows = df[df["scenario_kind"].fillna("").astype(str) == kind].copy()
+        rows.attrs = df.attrs
+        cls = scenario_class(kind)
+        labels = {**(cls.metric_labels or {m: m.replace("_", " ") for m in cls.outcome_metrics}), **NETWORK_LABELS}
+        summaries.append(scenario_summary(rows, labels))
+        chosen = control or cls.control_allocator
+        if chosen is not None:
+            for sweep, group in rows.groupby("sweep", sort=True):
+                if group[ALLOCATOR].nunique() > 1 and chosen in set(group[ALLOCATOR]):
+                    t = compare(group, ALLOCATOR, _numeric(group, tuple(labels)), chosen)
+                    t.insert(0, "sweep", sweep)
+                    tables.append(t)
+        figures = figures_of(cls)
+        counts = tuple(k for f in figures for k in f.over)
+        canvas = Canvas(out, f"{kind}_" if len(kinds) > 1 else "", labels, counts)
+        for figure in figures:
+            written += DRAW[figure.kind](rows, figure, canvas)
+    summary = pd.concat(summaries, ignore_index=True)
     summary.to_csv(out / "scenario_summary.csv", index=False)
     (out / "scenario_summary.md").write_text(to_markdown(summary))
-    written += [out / "scenario_summary.csv", out / "scenario_summary.md"]
-    if sar:
-        if "scenario.victims" not in df:
-            df["scenario.victims"] = np.nan
-        tables = []
-        for sweep, group in df.groupby("sweep", sort=True):
-            if group[ALLOCATOR].nunique() > 1 and control in set(group[ALLOCATOR]):
-                t = compare(group, ALLOCATOR, [m for m in SAR_METRICS if m in group], control)
-                t.insert(0, "sweep", sweep)
-                tables.append(t)
-        if tables:
-            table = pd.concat(tables, ignore_index=True)
-            table.to_csv(out / "statistics.csv", index=False)
-            (out / "statistics.md").write_text(to_markdown(table))
-            written += [out / "statistics.csv", out / "statistics.md"]
-        written += _sar_figures(df, out)
-        return written
-    for metric in ("mission_time", "time_99", *PER_AGENT):
-        path = fig3(df, metric, out)
-        if path:
-            written.append(path)
-    return written
+    head = [out / "scenario_summary.csv", out / "scenario_summary.md"]
+    if tables:
+        table = pd.concat(tables, ignore_index=True)
+        table.to_csv(out / "statistics.csv", index=False)
+        (out / "statistics.md").write_text(to_markdown(table))
+        head += [out / "statistics.csv", out / "statistics.md"]
+    return head + written
