@@ -25,6 +25,7 @@ import zenoh
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.tickets import Tickets
+from swarmbed.extension.actions import admit
 from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.codec import (
     EMPTY_INBOX,
@@ -352,7 +353,8 @@ class Coordinator:
                     actions = {**{a: self.last_action[a] for a in step.late if a in self.last_action}, **actions}
             if self.realtime:
                 self.last_action.update(actions)
-            w.apply({a: act for a, act in actions.items() if w.alive[a]})
+            declared = self.scenario.actions  # a world sees only actions of the shapes its scenario declares
+            w.apply({a: admit(act, declared) for a, act in actions.items() if w.alive[a]})
             for name, n in step.events.items():
                 self.event_totals[name] = self.event_totals.get(name, 0) + n
             for j in doomed:

@@ -7,6 +7,7 @@ plugins import this package, and it imports none of them (only the wire contract
 a change to every plugin and scenario, so it is kept small.
 """
 
+from swarmbed.extension.actions import INVALID, MOVE_ACTIONS, ActionSpec, admit, conforms
 from swarmbed.extension.allocator import HOLD, Allocator, NoParams
 from swarmbed.extension.context import NodeContext
 from swarmbed.extension.figures import Figure
@@ -15,6 +16,9 @@ from swarmbed.extension.view import LocalView, Message, Outgoing, TaskInfo
 
 __all__ = [
     "HOLD",
+    "INVALID",
+    "MOVE_ACTIONS",
+    "ActionSpec",
     "Allocator",
     "Figure",
     "LocalView",
@@ -26,5 +30,7 @@ __all__ = [
     "Sensing",
     "TaskInfo",
     "World",
+    "admit",
+    "conforms",
     "within",
 ]

@@ -23,6 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel
 
+from swarmbed.extension.actions import MOVE_ACTIONS, ActionSpec
 from swarmbed.extension.figures import Figure
 from swarmbed.wire.observation import Observation as BaseObservation
 from swarmbed.wire.schema import AgentsSection, Experiment
@@ -120,6 +121,9 @@ class Scenario(abc.ABC):
     #: the typed observation its world sends each agent every tick
     Observation: ClassVar[type[BaseObservation]] = BaseObservation
     #: behavior-tree nodes its agents' trees may use, and the tree used when the allocator has none
+    #: the actions its agents may send (:mod:`swarmbed.extension.actions`); the coordinator hands
+    #: the world ``["invalid"]`` for any other
+    actions: ClassVar[ActionSpec] = MOVE_ACTIONS
     bt_nodes: ClassVar[tuple[type, ...]] = ()
     #: (None: SPACE's default tree, ``swarmbed.agent_runtime.nodes.SPACE_TREE``)
     default_tree: ClassVar[Path | None] = None

@@ -30,6 +30,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.agent_runtime.nodes import SPACE_NODES
+from swarmbed.extension.actions import MOVE_ACTIONS
 from swarmbed.extension.figures import Figure
 from swarmbed.extension.scenario import Scenario, Sensing, World
 from swarmbed.wire.codec import TASK_DTYPE
@@ -99,6 +100,7 @@ class SAR(Scenario):
     Params = SARParams
     Observation = SARObservation
     bt_nodes = SPACE_NODES
+    actions = {**MOVE_ACTIONS, "inspect": (int,), "rescue": (int,), "abandon": (int,)}
     outcome_metrics = ("rescued", "expired", "failed_rescues")
     benefit_metric = "rescued"
     metric_labels = {

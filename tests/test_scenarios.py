@@ -73,8 +73,8 @@ def test_the_checker_catches_lost_items_and_a_crash_on_bad_actions():
     class FragileWorld(ex.PickupWorld):
         def apply(self, actions):
             for a in actions.values():
-                if a and a[0] == "fly":
-                    a[5]  # IndexError on one of the malformed actions
+                if a[0] == "goto_task":
+                    self.ix[a[1]]  # IndexError on a well-shaped action naming an item that does not exist
             super().apply(actions)
 
     class Fragile(ex.PickupDelivery):
@@ -83,6 +83,22 @@ def test_the_checker_catches_lost_items_and_a_crash_on_bad_actions():
 
     with pytest.raises(ScenarioCheckError, match="raised IndexError"):
         check_scenario(Fragile, ticks=1)
+
+
+def test_an_action_the_scenario_does_not_declare_never_reaches_the_world(tmp_path):
+    """Agents whose exploration waypoints are NaN send ``["goto", nan, nan]``: the coordinator hands
+    the world ``["invalid"]`` instead (counted), and no position becomes NaN."""
+    hostile = Path(__file__).resolve().parent / "hostile_scenario.py"
+    path = tmp_path / "nan.yaml"
+    path.write_text(f"""name: nan-waypoints
+run: {{seed: 1, dt: 1.0, duration: 20}}
+scenario: {{kind: "{hostile}:NaNWaypoints", initial_tasks: 5}}
+agents: {{count: 3}}
+allocator: {{name: noop}}
+""")
+    result = run_experiment(cfg.load(path, []), tmp_path / "run", progress=False)
+    assert result.summary["invalid_actions"] == 3 * 20, result.summary["invalid_actions"]
+    assert np.isfinite(result.summary["distance_total"]) and result.summary["distance_total"] == 0.0
 
 
 def test_a_malformed_observation_is_a_wire_error_naming_the_field():

@@ -10,7 +10,6 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-
 DUNNETT_SEED = 20240521  # any fixed value; documented so that a reader can recompute the p-values
 
 

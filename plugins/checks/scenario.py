@@ -9,8 +9,10 @@ checks what the rest of swarmbed relies on:
 - results: the time-series row has the same keys every tick, the summary holds every declared
   ``summary_keys`` and ``outcome_metrics`` and is JSON, ``per_agent`` has one entry per agent;
 - conservation: the world's ``invariants()`` hold after every tick;
-- robustness: malformed actions are refused without raising, and a killed agent stops being
-  observed and positioned.
+- actions: every action ``random_action`` gives is one ``Scenario.actions`` declares;
+- robustness: malformed actions, handed to the world as the coordinator hands them (``["invalid"]``
+  for any shape the scenario does not declare, well-shaped ones naming what does not exist as
+  they are), are refused without raising, and a killed agent stops being observed and positioned.
 
     swarmbed check-scenario sar
     swarmbed check-scenario my_world.py:MyScenario
@@ -25,6 +27,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from swarmbed.extension.actions import admit, conforms
 from swarmbed.extension.scenario import Scenario, World
 from swarmbed.wire.codec import pack, unpack
 from swarmbed.wire.schema import AgentsSection
@@ -40,6 +43,8 @@ GARBAGE_ACTIONS: tuple[Any, ...] = (
     [7],
     ["inspect", -5],
     ["goto_task", 10**9],
+    ["goto", float("nan"), 1.0],
+    ["goto", float("inf"), 0.0],
 )
 
 
@@ -78,6 +83,11 @@ def _trace(scenario: Scenario, seed: int, ticks: int) -> tuple[list[bytes], dict
                 raise ScenarioCheckError(f"tick {k}: agent {i}'s observation changes when it crosses the wire")
             seen.append(wire)
             actions[i] = scenario.random_action(back, action_rng)
+            if not conforms(actions[i], cls.actions):
+                raise ScenarioCheckError(
+                    f"tick {k}: random_action gave {actions[i]!r}, which {cls.__name__}.actions does not "
+                    f"declare (declared: {', '.join(f'{n}{list(t)}' for n, t in cls.actions.items())})"
+                )
         try:
             world.apply(actions)
         except Exception as exc:
@@ -116,7 +126,7 @@ def _check_robustness(scenario: Scenario, seed: int) -> None:
     ids = world.positions()[0]
     for action in GARBAGE_ACTIONS:
         try:
-            world.apply(dict.fromkeys(ids, action))
+            world.apply(dict.fromkeys(ids, admit(action, scenario.actions)))  # as the coordinator hands them
         except Exception as exc:
             raise ScenarioCheckError(
                 f"apply() raised {type(exc).__name__} on the malformed action {action!r}; "
