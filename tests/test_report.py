@@ -110,6 +110,21 @@ def test_report_command_names_a_folder_that_is_neither_run_nor_sweep(tmp_path, c
     assert f"{tmp_path}: neither a completed run" in capsys.readouterr().err
 
 
+def test_every_run_writes_a_summary_its_model_accepts_and_a_crafted_one_is_named(runs, tmp_path, capsys):
+    """summary.json has a model (swarmbed.wire.summary): the coordinator checks it before writing,
+    and a report of a summary that does not fit it is one line that names the field."""
+    from swarmbed.wire.summary import read_summary
+
+    summary = read_summary(runs["a"] / "summary.json")
+    assert summary["network"]["per_kind"]["claim"]["delivered"] > 0
+    bad = tmp_path / "bad"
+    shutil.copytree(runs["a"], bad)
+    summary["network"]["per_kind"]["claim"]["loss"] = "many"
+    (bad / "summary.json").write_text(json.dumps(summary))
+    assert cli(["report", str(bad)]) == 2
+    assert "network.per_kind.claim.loss: Input should be a valid integer" in capsys.readouterr().err
+
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
 # Installed before the page's own scripts: records every uncaught error and console.error, then
 # writes them into the page once it has loaded, where --dump-dom shows them.

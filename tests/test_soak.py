@@ -122,7 +122,7 @@ def test_faults_are_scheduled_only_where_their_window_ends_in_the_run_and_one_cu
     assert [t for t in caps if t <= 70] == [d.at for d in long if d.event.action == "rate_cap"]  # the same draws
     assert max(caps) > 70  # some were left out of the long-window plan
     chaos = Chaos(plan(1), 100, 0)
-    chaos.run = SimpleNamespace(coordinator=SimpleNamespace(restart_log=[], lost={}))
+    chaos.run = SimpleNamespace(coordinator=SimpleNamespace(agents=SimpleNamespace(restart_log=[], lost={})))
     chaos.table = RowFile(tmp_path / "chaos.csv", CHAOS_COLUMNS, chunk_rows=1)
     for give_up in (time.monotonic() + 20, time.monotonic() - 1):
         chaos._pending.append(

@@ -219,7 +219,7 @@ class Chaos:
             else:
                 self._radio(NetemControl(coord.last_tick + 2, {}, f"end of {event.action}"))
                 due.data["record"]["end_tick"] = coord.last_tick + 2
-                due.data["record"]["drops_end"] = dict(coord.drops_cum)
+                due.data["record"]["drops_end"] = dict(coord.recorder.drops_cum)
             due.data["record"]["ended"] = True
             return None
         if event.action in ("kill_agent", "stop_agent"):
@@ -251,7 +251,7 @@ class Chaos:
             due,
             "netem",
             detail,
-            {"kind": "radio", "start_tick": start, "ended": False, "drops_start": dict(coord.drops_cum)},
+            {"kind": "radio", "start_tick": start, "ended": False, "drops_start": dict(coord.recorder.drops_cum)},
         )
         return {"record": record}
 
@@ -259,9 +259,9 @@ class Chaos:
         coord, procs = self.run.coordinator, self.run.children.procs
         candidates = []
         for agent in event.agents if event.agents is not None else range(coord.n):
-            if agent in coord.lost or agent in coord.down or not coord.world.alive[agent]:
+            if agent in coord.agents.lost or agent in coord.agents.down or not coord.world.alive[agent]:
                 continue
-            proc = procs.get(process_name(agent, coord.incarnation.get(agent, 0)))
+            proc = procs.get(process_name(agent, coord.agents.incarnation.get(agent, 0)))
             if proc is not None and proc.poll() is None and proc.pid not in self._stopped:
                 candidates.append((agent, proc.pid))
         if not candidates:
@@ -282,7 +282,7 @@ class Chaos:
         host, ns = candidates[int(self.rng.integers(len(candidates)))]
         cut = netns.cut_off(ns)
         self._cut[host] = cut
-        agents = sorted(a for a, h in coord.hosts.items() if h == host)
+        agents = sorted(a for a, h in coord.agents.hosts.items() if h == host)
         record = self._pend(
             due,
             host,
@@ -292,7 +292,7 @@ class Chaos:
                 "tick": coord.last_tick,
                 "agents": agents,
                 "ended": False,
-                "restarts_before": len(coord.restart_log),
+                "restarts_before": len(coord.agents.restart_log),
             },
         )
         return {"cut": cut, "record": record}
@@ -319,11 +319,11 @@ class Chaos:
     def _cut_outcome(self, record: dict[str, Any]) -> str | None:
         """Once ticks go on after the window: what became of the host's agents."""
         coord = self.run.coordinator
-        if coord.last_tick <= record["end_tick"] + 1 or any(a in coord.down for a in record["agents"]):
+        if coord.last_tick <= record["end_tick"] + 1 or any(a in coord.agents.down for a in record["agents"]):
             return None
-        restarts = [r for r in coord.restart_log[record["restarts_before"] :] if r["agent"] in record["agents"]]
+        restarts = [r for r in coord.agents.restart_log[record["restarts_before"] :] if r["agent"] in record["agents"]]
         ok = sorted({r["agent"] for r in restarts if r["outcome"] == "ok"})
-        lost = sorted(a for a in record["agents"] if coord.lost.get(a, -1) >= record["tick"])
+        lost = sorted(a for a in record["agents"] if coord.agents.lost.get(a, -1) >= record["tick"])
         went = f"ticks {record['tick']}-{record['end_tick']} during the cut"
         if not ok and not lost:
             return f"reconnected, every agent kept its session ({went})"
@@ -371,21 +371,21 @@ class Chaos:
         coord = self.run.coordinator
         if record["kind"] == "kill":
             agent = record["agent"]
-            for r in coord.restart_log:
+            for r in coord.agents.restart_log:
                 if r["agent"] == agent and r["lost_at_tick"] >= record["tick"] and r["outcome"] != "retrying":
                     if r["outcome"] != "ok":
                         return f"restart failed: {r['reason']}"
                     source = f"checkpoint of tick {r['checkpoint_tick']}" if r["checkpoint_tick"] != "" else "fresh"
                     return f"restarted before tick {r['tick']} ({source}, {r['wait_ms']:.0f} ms)"
-            if agent in coord.lost:
-                return f"lost at tick {coord.lost[agent]} (on_agent_loss: {coord.exp.run.agent_loss})"
+            if agent in coord.agents.lost:
+                return f"lost at tick {coord.agents.lost[agent]} (on_agent_loss: {coord.exp.run.agent_loss})"
             return None
         if not record["ended"]:
             return None
         if record["kind"] == "stop":
             agent = record["agent"]
-            if agent in coord.lost:
-                return f"lost at tick {coord.lost[agent]}"
+            if agent in coord.agents.lost:
+                return f"lost at tick {coord.agents.lost[agent]}"
             if coord.last_tick <= record["resumed_tick"] + 1:
                 return None  # resumed: wait until it answered a tick again
             late = coord.late_ticks.get(agent, 0) - record["late_before"]

@@ -179,7 +179,7 @@ class Monitor:
             self.processes.write(row)
         last_time, last_tick, last_net, lag_index = self._last
         span = max(now - last_time, 1e-9)
-        net = list(coord.net_cum)
+        net = list(coord.recorder.net_cum)
         lags = coord.start_lags[lag_index:]
         slowest, coord.slowest_in_interval = coord.slowest_in_interval, 0.0
         alive = int(np.count_nonzero(coord.world.alive))
@@ -198,9 +198,9 @@ class Monitor:
                 net[4],
                 net[2] - net[3] - net[4],
                 alive,
-                len(coord.down),
-                len(coord.lost),
-                sum(r["outcome"] == "ok" for r in coord.restart_log),
+                len(coord.agents.down),
+                len(coord.agents.lost),
+                sum(r["outcome"] == "ok" for r in coord.agents.restart_log),
             ]
         )
         self._last = (now, tick, net, lag_index + len(lags))

@@ -21,15 +21,8 @@ from tqdm import tqdm
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import Coordinator, RunError
-from swarmbed.experiments.hosts.daemon import (
-    HostError,
-    host_info,
-    process_name,
-    start_agents,
-    stop_agents,
-    wait_for_hosts,
-)
-from swarmbed.experiments.launch.access import RunAccess, agent_user
+from swarmbed.experiments.hosts.daemon import HostError, host_info, wait_for_hosts
+from swarmbed.experiments.launch.access import RunAccess
 from swarmbed.experiments.launch.config import Experiment, resolve_experiment, to_yaml
 from swarmbed.experiments.launch.launcher import (
     ChildExited,
@@ -39,6 +32,7 @@ from swarmbed.experiments.launch.launcher import (
     peak_rss_mb,
     reset_peak_rss,
 )
+from swarmbed.experiments.launch.placement import AgentPlacement
 from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
 from swarmbed.experiments.launch.provenance import provenance
 from swarmbed.wire.credentials import Identity
@@ -158,6 +152,22 @@ def run_experiment(
             listen, settings={**capacity, **(access.hub_settings() if access else {}), **(tls or {})}
         )
         undo.callback(session.close)
+        logs = ["--log-max-mb", str(exp.run.log_max_mb), "--log-backups", str(exp.run.log_backups)]
+
+        def identity(process: str) -> list[str]:
+            return ["--credentials", access.credentials(process)] if access else []
+
+        placement = AgentPlacement(
+            children,
+            session,
+            keys,
+            common=["--run-id", keys.run_id, "--connect", endpoint, *logs],
+            logs=logs,
+            identity=identity,
+            hub=listen[0] if listen else endpoint,
+            auth=access is not None,
+            join_timeout=exp.run.join_timeout,
+        )
         coord = Coordinator(
             exp,
             resolved.scenario(),
@@ -168,68 +178,28 @@ def run_experiment(
             out_dir,
             where,
             carriers(exp) if auth else None,
+            placement,
         )
         undo.pop_all()
-    started: list[str] = []
     try:
         coord.declare()
-        logs = ["--log-max-mb", str(exp.run.log_max_mb), "--log-backups", str(exp.run.log_backups)]
-        common = ["--run-id", keys.run_id, "--connect", endpoint, *logs]
-
-        def identity(process: str) -> list[str]:
-            return ["--credentials", access.credentials(process)] if access else []
-
         try:
-            children.spawn("netem", "swarmbed.netem", [*common, *identity("netem"), "--out", str(out_dir)])
+            children.spawn("netem", "swarmbed.netem", [*placement.common, *identity("netem"), "--out", str(out_dir)])
             for i in range(exp.agents.count):
                 if where[i] == LOCAL:
-                    children.spawn(
-                        f"agent_{i}", "swarmbed.agent_runtime", [*common, *identity(agent_user(i)), "--id", str(i)]
-                    )
+                    placement.first(i, LOCAL)
         except ForkServerError as exc:
             raise RunError(str(exc)) from None
         hosts = {}
         if remote:
             try:
-                wait_for_hosts(
-                    session, remote, exp.run.join_timeout, listen[0] if listen else endpoint, auth=access is not None
-                )
+                wait_for_hosts(session, remote, exp.run.join_timeout, placement.hub, auth=access is not None)
                 for host in remote:
                     hosts[host] = host_info(session, host)
-                    start_agents(session, host, keys.run_id, [i for i, h in where.items() if h == host], args=logs)
-                    started.append(host)
+                    placement.on_host(host, [i for i, h in where.items() if h == host])
             except HostError as exc:
                 raise RunError(str(exc)) from None
 
-        def place(agent: int, host: str, incarnation: int, restore: bool = True) -> None:
-            args = ["--id", str(agent), "--incarnation", str(incarnation), *(["--restore"] if restore else [])]
-            if host == LOCAL:
-                children.spawn(
-                    process_name(agent, incarnation),
-                    "swarmbed.agent_runtime",
-                    [*common, *identity(agent_user(agent)), *args],
-                )
-                return
-            wait_for_hosts(
-                session,
-                [host],
-                min(5.0, exp.run.join_timeout),
-                listen[0] if listen else endpoint,
-                auth=access is not None,
-            )
-            start_agents(session, host, keys.run_id, [agent], args=[*args[2:], *logs])
-            if host not in started:
-                started.append(host)
-
-        def unplace(agent: int, host: str, incarnation: int) -> None:
-            if host == LOCAL:
-                proc = children.procs.get(process_name(agent, incarnation))
-                if proc is not None and proc.poll() is None:
-                    proc.kill()
-            else:
-                stop_agents(session, host, keys.run_id, [agent], incarnation)
-
-        coord.place, coord.unplace, coord.exit_status = place, unplace, children.exit_status
         t_spawned = time.perf_counter()
         deployment = {
             "run_id": keys.run_id,
@@ -268,15 +238,15 @@ def run_experiment(
                 observer.start(live)
                 running.append(observer)
             coord.run(on_tick)
-            if coord.swap_log:  # where agents ran at the end, and what each host ran then
-                for host in sorted({h for h in coord.hosts.values() if h != LOCAL}):
+            if coord.agents.swap_log:  # where agents ran at the end, and what each host ran then
+                for host in sorted({h for h in coord.agents.hosts.values() if h != LOCAL}):
                     hosts[host] = host_info(session, host) or hosts.get(host)
                 results.write_json(
                     out_dir / DEPLOYMENT,
                     {
                         **deployment,
                         "hosts": hosts,
-                        "placement_at_end": {str(i): coord.hosts.get(i, LOCAL) for i in range(exp.agents.count)},
+                        "placement_at_end": {str(i): coord.agents.hosts.get(i, LOCAL) for i in range(exp.agents.count)},
                     },
                 )
         finally:
@@ -324,8 +294,7 @@ def run_experiment(
     except TableWriteError as exc:  # a full disk: one line, the first error, not what clean-up meets next
         raise RunError(str(exc)) from None
     finally:
-        for host in started:  # agents still running there after a failure
-            stop_agents(session, host, keys.run_id)
+        placement.stop_all()
         children.kill_all()
         coord.close()
         session.close()

@@ -29,6 +29,9 @@ from swarmbed.experiments.views.page import Page, _fmt
 from swarmbed.experiments.views.pooling import mixed_configurations
 from swarmbed.experiments.views.soak_page import soak_report
 from swarmbed.plugins.registry import PluginError, resolve_scenario
+from swarmbed.wire.errors import WireError
+from swarmbed.wire.rundir import SUMMARY
+from swarmbed.wire.summary import read_summary
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
 
@@ -65,7 +68,10 @@ def _binned(frame: pd.DataFrame, ticks: int, dt: float, by: str, value: str) -> 
 
 def run_report(run: Path) -> tuple[str, int]:
     """The HTML of one run's report and how many figures it has."""
-    summary = json.loads((run / "summary.json").read_text())
+    try:
+        summary = read_summary(run / SUMMARY)
+    except (WireError, ValueError) as exc:
+        raise ReportError(str(exc)) from None
     config = yaml.safe_load((run / "config.yaml").read_text())
     ledger = pd.read_csv(run / "network_ledger.csv")
     agents = pd.read_csv(run / "agents.csv")
