@@ -241,12 +241,14 @@ def cmd_params(args: argparse.Namespace) -> int:
             for n, k in registry.entries()
         ]
         groups.append(("allocators (swarmbed params NAME):", allocators))
+    elif args.name in cfg.SECTIONS:
+        groups = [(f"{args.name}:", cfg.describe(cfg.SECTIONS[args.name], f"{args.name}."))]
     else:
         groups = _param_groups(args.name)
         if not groups:
             print(
-                f"error: {args.name!r} is neither a scenario ({', '.join(registry.scenario_names())}) nor an "
-                f"allocator ({', '.join(registry.names())})",
+                f"error: {args.name!r} is neither a section ({', '.join(cfg.SECTIONS)}), a scenario "
+                f"({', '.join(registry.scenario_names())}) nor an allocator ({', '.join(registry.names())})",
                 file=sys.stderr,
             )
             return 2
@@ -673,7 +675,9 @@ def main(argv: list[str] | None = None) -> int:
     par = sub.add_parser(
         "params", help="every key of an experiment, a scenario or an allocator: type, default, meaning"
     )
-    par.add_argument("name", nargs="?", help="a scenario or allocator name (or module:Class); none: the sections")
+    par.add_argument(
+        "name", nargs="?", help="a section (network, run, ...), a scenario or an allocator; none: every section"
+    )
     par.set_defaults(func=cmd_params)
 
     sw = sub.add_parser("sweep", help="Monte Carlo runs over scenarios, in parallel and resumable")

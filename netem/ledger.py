@@ -15,7 +15,7 @@ it is written in row groups as ticks close and only on request.
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -76,7 +76,11 @@ class Ledger:
     """Accumulates rows tick by tick and streams finished ticks to a :class:`RowFile` (whose
     columns are :data:`LEDGER_COLUMNS`)."""
 
-    def __init__(self, sink: RowFile | None = None, receivers: ReceiverLog | None = None) -> None:
+    def __init__(
+        self, sink: RowFile | None = None, receivers: ReceiverLog | None = None, reasons: Sequence[str] = DROP_REASONS
+    ) -> None:
+        """``reasons``: every reason a copy may be dropped for (the radio's ``drop_reasons``): each
+        is counted, from zero, in ``dropped``; booking any other is an error."""
         self.receivers = receivers
         self._open: dict[tuple[int, int, str, str], list[int]] = defaultdict(lambda: [0, 0])
         self._sink = sink
@@ -85,7 +89,7 @@ class Ledger:
         self.copies = 0
         self.delivered = 0
         self.delivered_bytes = 0
-        self.dropped: dict[str, int] = dict.fromkeys(DROP_REASONS, 0)
+        self.dropped: dict[str, int] = dict.fromkeys(reasons, 0)
         self.by_sender: dict[int, dict[str, int]] = defaultdict(lambda: defaultdict(int))
         self.by_kind: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
 

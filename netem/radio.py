@@ -10,15 +10,26 @@ Order of the checks for one message sent at tick k (a copy gets the first reason
 2. sender queue (tc-netem ``limit``): if ``limit`` messages already wait behind the rate cap, the
    whole message is tail-dropped -> ``queue_full`` for every copy.
 3. range: distance between sender and receiver at tick k greater than ``range`` -> ``out_of_range``.
-4. loss: an independent Bernoulli draw per copy -> ``loss``.
+4. propagation (``network.propagation``, :mod:`.propagation`): received power under the
+   sensitivity -> ``below_sensitivity``; a bit error in the copy -> ``packet_error``.
+5. bursts (``network.burst``, Gilbert-Elliott, :mod:`.bursts`) -> ``burst``.
+6. loss: an independent Bernoulli draw per copy -> ``loss``.
 
 On the real-time clock a sample that reaches the proxy after its tick's deadline is not routed:
 every copy of its messages is ``late`` (:meth:`Radio.late`).
 
 A message that survives is scheduled. With a ``rate`` cap it is transmitted after the ones queued
-before it, taking ``size / rate`` seconds; idle time earns no credit (tc-netem ``rate``). It is
-delivered at the first tick at or after the end of its transmission, never before k+1, plus
+before it, taking ``size / rate`` seconds; idle time earns no credit (tc-netem ``rate``). A copy
+arrives at the end of its transmission plus its added delay (``network.delay``, :mod:`.delay`;
+none by default) and is delivered at the first tick at or after that, never before k+1, plus
 ``latency`` ticks. At delivery, a receiver that died meanwhile -> ``receiver_dead``.
+
+Random numbers: the independent loss draws come from the radio's generator, one per copy that
+reached step 6, in copy order (messages in sender order, then receivers in id order). Each other
+model draws from its own stream, spawned from the radio's seed sequence in this order:
+shadowing, fading, reception, bursts, delay; so turning one model on never changes another's draws,
+and a run with none of them draws exactly what it drew before they existed. Shadowing, fading and
+time-based bursts advance once per tick, whether anything was sent or not.
 """
 
 from __future__ import annotations
@@ -30,17 +41,28 @@ from typing import NamedTuple
 
 import numpy as np
 
-from swarmbed.netem.ledger import DELIVERED, Ledger
+from swarmbed.netem.bursts import BURST, Bursts
+from swarmbed.netem.delay import Delays
+from swarmbed.netem.ledger import DELIVERED, DROP_REASONS, Ledger
+from swarmbed.netem.propagation import BELOW_SENSITIVITY, PACKET_ERROR, Propagation
 from swarmbed.wire.codec import BROADCAST, RadioMessage
 from swarmbed.wire.schema import NetworkSection
 
 _EPS = 1e-9
 
 
-def _per_segment(flags: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-    """How many of ``flags[bounds[i]:bounds[i + 1]]`` are set, for every i (empty segments too)."""
-    total = np.concatenate(([0], np.cumsum(flags, dtype=np.int64)))
-    return total[bounds[1:]] - total[bounds[:-1]]
+def _seed_sequence(rng: np.random.Generator) -> np.random.SeedSequence:
+    """The seed sequence ``rng`` was made from (spawning children draws nothing from ``rng``)."""
+    seq = getattr(rng.bit_generator, "seed_seq", None) or rng.bit_generator._seed_seq  # type: ignore[attr-defined]
+    assert isinstance(seq, np.random.SeedSequence)
+    return seq
+
+
+def drop_reasons(params: NetworkSection) -> tuple[str, ...]:
+    """Every reason a copy may be dropped for under ``params``: the disk's, and those of the models
+    it turns on (a run's summary lists these, each with its count)."""
+    extra = ((BELOW_SENSITIVITY, PACKET_ERROR) if params.propagation else ()) + ((BURST,) if params.burst else ())
+    return DROP_REASONS + extra
 
 
 class _Send(NamedTuple):
@@ -63,13 +85,18 @@ class Radio:
         self.n_agents = n_agents
         self.dt = dt
         self.rng = rng
-        self.ledger = ledger if ledger is not None else Ledger()
+        self.ledger = ledger if ledger is not None else Ledger(reasons=drop_reasons(params))
         self._busy_until: dict[int, float] = defaultdict(float)
         self._in_queue: dict[int, deque[float]] = defaultdict(deque)  # transmission end times
         # delivery tick -> [(receivers, sender, kind, payload, send_tick)]
         self._pending: dict[int, list[tuple[np.ndarray, int, str, bytes, int]]] = defaultdict(list)
         # (tick, sender, kind, size, receivers delivered to, receivers found dead)
         self._unconfirmed: list[tuple[int, int, str, int, np.ndarray, np.ndarray]] = []
+        # the models beyond the disk, each with its own stream (see the module's docstring)
+        streams = [np.random.default_rng(s) for s in _seed_sequence(rng).spawn(5)]
+        self.propagation = Propagation(params.propagation, n_agents, dt, *streams[:3]) if params.propagation else None
+        self.bursts = Bursts(params.burst, n_agents, dt, streams[3]) if params.burst else None
+        self.delays = Delays(params.delay, n_agents, streams[4]) if params.delay else None
 
     @property
     def pending_copies(self) -> int:
@@ -87,14 +114,19 @@ class Radio:
     ) -> None:
         """Take every message sent at ``tick``. ``ids``/``xs``/``ys``: agents alive at ``tick``.
 
-        Three passes: each message is addressed and queued (Python, per message); range and loss
-        are decided for every copy of the tick at once (arrays; the loss draws come from ``rng``
-        in message order, then receiver order, as one message at a time would draw them); then
-        each message is booked, in order, and what survives is scheduled."""
+        Three passes: each message is addressed and queued (Python, per message); range, the models
+        and loss are decided for every copy of the tick at once (arrays, in the order of the
+        module's docstring); then each message is booked, in order, and what survives is scheduled."""
         order = np.argsort(np.asarray(ids, dtype=np.int64), kind="stable")
         alive = np.asarray(ids, dtype=np.int64)[order]
         every_row = np.arange(len(alive))
         row_of = dict(zip(alive.tolist(), every_row.tolist()))
+        x = np.asarray(xs, dtype=float)[order]
+        y = np.asarray(ys, dtype=float)[order]
+        if self.propagation is not None:
+            self.propagation.advance(tick, alive, x, y)
+        if self.bursts is not None:
+            self.bursts.advance()
         sends: list[_Send] = []
         for sender in sorted(outs):
             sender_row = row_of.get(sender)
@@ -106,17 +138,43 @@ class Radio:
             return
         counts = np.fromiter((len(s.rows) for s in sends), dtype=np.int64, count=len(sends))
         rows = np.concatenate([s.rows for s in sends])
-        in_range = np.ones(len(rows), dtype=bool)
+        from_rows = np.repeat(np.fromiter((s.sender_row for s in sends), dtype=np.int64, count=len(sends)), counts)
+        in_play = np.ones(len(rows), dtype=bool)
+        drops: list[tuple[str, np.ndarray]] = []  # (reason, which copies), in booking order
+        distance: np.ndarray | None = None
+        if (self.params.range is not None or self.propagation is not None) and len(rows):
+            distance = np.hypot(x[from_rows] - x[rows], y[from_rows] - y[rows])
         if self.params.range is not None and len(rows):
-            x = np.asarray(xs, dtype=float)[order]
-            y = np.asarray(ys, dtype=float)[order]
-            from_rows = np.repeat(np.fromiter((s.sender_row for s in sends), dtype=np.int64, count=len(sends)), counts)
-            reach = self.params.range + _EPS
-            in_range = np.hypot(x[from_rows] - x[rows], y[from_rows] - y[rows]) <= reach
-        kept = in_range.copy()
+            assert distance is not None
+            far = distance > self.params.range + _EPS
+            in_play &= ~far
+            drops.append(("out_of_range", far))
+        if self.propagation is not None and len(rows):
+            assert distance is not None
+            at = np.flatnonzero(in_play)
+            sizes = np.repeat(
+                np.fromiter((len(s.msg.payload) for s in sends), dtype=np.int64, count=len(sends)), counts
+            )
+            power = self.propagation.received_dbm(alive[from_rows[at]], alive[rows[at]], distance[at])
+            outcome = self.propagation.receive(power, sizes[at])
+            for code, reason in ((1, BELOW_SENSITIVITY), (2, PACKET_ERROR)):
+                hit = np.zeros(len(rows), dtype=bool)
+                hit[at[outcome == code]] = True
+                in_play &= ~hit
+                drops.append((reason, hit))
+        if self.bursts is not None and len(rows):
+            at = np.flatnonzero(in_play)
+            hit = np.zeros(len(rows), dtype=bool)
+            hit[at[self.bursts.lose(alive[from_rows[at]], alive[rows[at]])]] = True
+            in_play &= ~hit
+            drops.append((BURST, hit))
         if self.params.loss > 0.0:
-            kept[in_range] = self.rng.random(int(np.count_nonzero(in_range))) >= self.params.loss
-        self._book_and_schedule(tick, sends, counts, alive, rows, in_range, kept)
+            at = np.flatnonzero(in_play)
+            hit = np.zeros(len(rows), dtype=bool)
+            hit[at] = self.rng.random(len(at)) < self.params.loss
+            in_play &= ~hit
+            drops.append(("loss", hit))
+        self._book_and_schedule(tick, sends, counts, alive, rows, from_rows, drops, in_play)
 
     def _address(
         self,
@@ -168,14 +226,41 @@ class Radio:
         counts: np.ndarray,
         alive: np.ndarray,
         rows: np.ndarray,
-        in_range: np.ndarray,
+        from_rows: np.ndarray,
+        drops: list[tuple[str, np.ndarray]],
         kept: np.ndarray,
     ) -> None:
         ledger, per_receiver = self.ledger, self.ledger.per_receiver
         bounds = np.concatenate(([0], np.cumsum(counts)))
-        n_far, n_kept = _per_segment(~in_range, bounds), _per_segment(kept, bounds)
-        kept_ids = np.split(alive[rows[kept]], np.cumsum(n_kept)[:-1])
-        starts, copies, fars, keeps = bounds.tolist(), counts.tolist(), n_far.tolist(), n_kept.tolist()
+        # copies per message and outcome in one pass: column 0 kept, column r the r-th drop reason
+        outcome = np.zeros(len(rows), dtype=np.int64)
+        for r, (_reason, which) in enumerate(drops, 1):
+            outcome[which] = r
+        width = len(drops) + 1
+        message = np.repeat(np.arange(len(sends)), counts)
+        table = np.bincount(message * width + outcome, minlength=len(sends) * width).reshape(len(sends), width)
+        n_dropped = [(reason, which, table[:, r].tolist()) for r, (reason, which) in enumerate(drops, 1)]
+        n_kept = table[:, 0]
+        kept_at = np.flatnonzero(kept)
+        kept_ids = np.split(alive[rows[kept_at]], np.cumsum(n_kept)[:-1])
+        starts, copies, keeps = bounds.tolist(), counts.tolist(), n_kept.tolist()
+        latency = self.params.latency
+        # with a delay model, each kept copy's own delivery tick (in copy order): the first tick at
+        # or after the end of its message's transmission plus its delay
+        dues: list[np.ndarray] | None = None
+        spread: list[bool] = []  # whether a message's copies fall on more than one tick
+        if self.delays is not None and len(kept_at):
+            ends = np.repeat(np.fromiter((s.end for s in sends), dtype=float, count=len(sends)), n_kept)
+            added = self.delays.draw(alive[from_rows[kept_at]], alive[rows[kept_at]])
+            due_all = np.maximum(tick + 1, np.ceil((ends + added) / self.dt - _EPS).astype(np.int64)) + latency
+            dues = np.split(due_all, np.cumsum(n_kept)[:-1])
+            first = np.cumsum(n_kept) - n_kept
+            has = n_kept > 0
+            lo = np.zeros(len(sends), dtype=np.int64)
+            hi = np.zeros(len(sends), dtype=np.int64)
+            lo[has] = np.minimum.reduceat(due_all, first[has])
+            hi[has] = np.maximum.reduceat(due_all, first[has])
+            spread = (lo != hi).tolist()
         for i, send in enumerate(sends):
             kind, size = send.msg.kind, len(send.msg.payload)
             ledger.sent(tick, send.sender, kind, size, send.intended)
@@ -183,31 +268,21 @@ class Radio:
                 ledger.book(tick, send.sender, kind, size, reason, len(to), to)
             if not copies[i]:
                 continue
-            far, lost = fars[i], copies[i] - fars[i] - keeps[i]
             a, b = starts[i], starts[i + 1]
-            if far:
-                ledger.book(
-                    tick,
-                    send.sender,
-                    kind,
-                    size,
-                    "out_of_range",
-                    far,
-                    alive[rows[a:b][~in_range[a:b]]] if per_receiver else None,
-                )
-            if lost:
-                ledger.book(
-                    tick,
-                    send.sender,
-                    kind,
-                    size,
-                    "loss",
-                    lost,
-                    alive[rows[a:b][in_range[a:b] & ~kept[a:b]]] if per_receiver else None,
-                )
-            if keeps[i]:
-                due = max(tick + 1, math.ceil(send.end / self.dt - _EPS)) + self.params.latency
+            for reason, which, per_message in n_dropped:
+                if per_message[i]:
+                    receivers = alive[rows[a:b][which[a:b]]] if per_receiver else None
+                    ledger.book(tick, send.sender, kind, size, reason, per_message[i], receivers)
+            if not keeps[i]:
+                continue
+            if dues is None:
+                due = max(tick + 1, math.ceil(send.end / self.dt - _EPS)) + latency
                 self._pending[due].append((kept_ids[i], send.sender, kind, send.msg.payload, tick))
+            elif not spread[i]:
+                self._pending[int(dues[i][0])].append((kept_ids[i], send.sender, kind, send.msg.payload, tick))
+            else:
+                for due in np.unique(dues[i]).tolist():  # earliest first; receivers stay in id order
+                    self._pending[due].append((kept_ids[i][dues[i] == due], send.sender, kind, send.msg.payload, tick))
 
     def late(self, book_at: int, sender: int, messages: Iterable[RadioMessage], alive: Sequence[int]) -> None:
         """Messages of a sample that reached the proxy after its tick's deadline (real-time clock):

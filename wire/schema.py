@@ -16,7 +16,9 @@ from __future__ import annotations
 import re
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer, model_validator
+
+from swarmbed.wire.radio import BurstSection, DelaySection, PropagationSection
 
 #: a name that becomes a folder (experiments, sweeps, their scenarios): no path separators, no ``..``
 SAFE_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.+=-]{0,99}$"
@@ -122,6 +124,22 @@ class NetworkSection(Strict):
     ledger: Literal["per_sender", "per_receiver"] = Field(
         "per_sender", description="per_receiver adds network_ledger_receivers.parquet: one row per copy"
     )
+    # the models beyond the disk (docs/radio.md); left out, the radio is the disk above
+    propagation: PropagationSection | None = Field(
+        None, description="log-distance path loss, shadowing, fading and SNR-based reception"
+    )
+    burst: BurstSection | None = Field(None, description="Gilbert-Elliott burst loss per link or receiver")
+    delay: DelaySection | None = Field(None, description="seconds added to each copy's arrival, with jitter")
+
+    @model_serializer(mode="wrap")
+    def _models_left_out_stay_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """A resolved config names only the models it turns on: an experiment that uses none
+        writes the config.yaml it wrote before they existed."""
+        data = handler(self)
+        for key in ("propagation", "burst", "delay"):
+            if data.get(key) is None:
+                data.pop(key, None)
+        return data
 
 
 HOST_NAME = r"^[A-Za-z0-9_.-]+$"

@@ -325,6 +325,11 @@ def describe(model: type[BaseModel], prefix: str = "") -> list[tuple[str, str, s
         if isinstance(ann, type) and issubclass(ann, BaseModel):
             rows += describe(ann, f"{prefix}{name}.")
             continue
+        section = [a for a in get_args(ann) if isinstance(a, type) and issubclass(a, BaseModel)]
+        if section:  # an optional section (network.propagation): off unless given, its keys below
+            rows.append((f"{prefix}{name}", "section | null", "null", field.description or ""))
+            rows += describe(section[0], f"{prefix}{name}.")
+            continue
         if field.is_required():
             default = "required"
         else:

@@ -9,6 +9,9 @@ DROP_COLORS = {
     "no_such_receiver": "#8c564b",
     "run_ended": "#bcbd22",
     "late": "#17becf",
+    "below_sensitivity": "#e377c2",
+    "packet_error": "#f781bf",
+    "burst": "#1f3b73",
 }
 LABEL_COLORS = {"red": "#d62728", "green": "#2ca02c", "blue": "#1f77b4"}  # SAR's robot and victim colours
 

@@ -1,0 +1,305 @@
+"""The radio's models beyond the disk, checked against their formulas on long synthetic streams driven
+through the real radio code (swarmbed.netem.Radio), with tolerances from the sample size; and
+determinism and conservation with every model on at once."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import special, stats
+
+from swarmbed.netem import Radio
+from swarmbed.netem.delay import Delays
+from swarmbed.netem.ledger import Ledger
+from swarmbed.netem.normal import erfc
+from swarmbed.netem.radio import drop_reasons
+from swarmbed.wire.codec import BROADCAST, RadioMessage
+from swarmbed.wire.radio import BurstSection, DelaySection
+from swarmbed.wire.schema import NetworkSection
+
+SIGMAS = 4.5  # an empirical figure may stray this many standard errors from its formula
+
+
+def binomial_tolerance(p: float, n: int) -> float:
+    return SIGMAS * math.sqrt(max(p * (1 - p), 1e-4) / n) + 1e-9
+
+
+def drive(
+    network: dict, xs, ys, ticks: int, payload: int = 50, senders=(0,), every: int = 1, seed: int = 7, dt: float = 1.0
+):
+    """A stream of one broadcast per sender per ``every`` ticks among static agents; returns the
+    radio and, per tick, who received from whom."""
+    params = NetworkSection(**network)
+    n = len(xs)
+    radio = Radio(params, n, dt, np.random.default_rng(seed), Ledger(reasons=drop_reasons(params)))
+    ids = list(range(n))
+    got = []
+    msg = RadioMessage(BROADCAST, "x", b"p" * payload)
+    for k in range(ticks):
+        outs = {s: [msg] for s in senders} if k % every == 0 else {}
+        radio.route(k, ids, xs, ys, outs)
+        got.append(radio.deliver(k + 1, ids))
+        radio.confirm()
+    return radio, got
+
+
+def test_erfc_agrees_with_scipy_to_seven_digits():
+    x = np.linspace(-6, 9, 20001)
+    assert np.max(np.abs(erfc(x) / special.erfc(x) - 1)) < 2e-7
+
+
+LOG_DISTANCE = {"reference_loss_db": 46.6777, "exponent": 3.0, "tx_power_dbm": 16.0206, "noise_floor_dbm": -93.97}
+
+
+def formula_delivery(d: np.ndarray, payload: int, modulation: str = "bpsk") -> np.ndarray:
+    """(1 - BER)^bits at distance d, from the textbook formulas (scipy's erfc)."""
+    p = LOG_DISTANCE
+    snr_db = (
+        p["tx_power_dbm"]
+        - (p["reference_loss_db"] + 10 * p["exponent"] * np.log10(np.maximum(d, 1.0)))
+        - (p["noise_floor_dbm"])
+    )
+    snr = 10 ** (snr_db / 10)
+    ber = 0.5 * special.erfc(np.sqrt(snr if modulation == "bpsk" else snr / 2))
+    below = snr_db + p["noise_floor_dbm"] < -101.0
+    return np.where(below, 0.0, (1 - ber) ** (8 * payload))
+
+
+@pytest.mark.parametrize("modulation", ["bpsk", "qpsk"])
+def test_delivery_ratio_against_distance_follows_the_snr_and_bit_count(modulation):
+    distances = np.linspace(40, 110, 29)
+    xs, ys = [0.0, *distances], [0.0] * (len(distances) + 1)
+    ticks, payload = 1500, 60
+    radio, got = drive({"propagation": {**LOG_DISTANCE, "modulation": modulation}}, xs, ys, ticks, payload)
+    received = np.zeros(len(distances))
+    for inbox in got:
+        for r in inbox:
+            received[r - 1] += 1
+    empirical = received / ticks
+    expected = formula_delivery(distances, payload, modulation)
+    assert expected.max() > 0.99 and expected.min() < 0.01, "the distances must cross the whole curve"
+    for d, e, f in zip(distances, empirical, expected):
+        assert abs(e - f) <= binomial_tolerance(f, ticks), f"at {d:.1f} m: delivered {e:.4f}, formula {f:.4f}"
+    dropped = radio.ledger.dropped
+    assert dropped["packet_error"] > 0 and radio.ledger.copies == radio.ledger.delivered + radio.ledger.dropped_total
+
+
+def test_rayleigh_fading_with_a_threshold_receiver_delivers_with_probability_exp_minus_x():
+    distances = np.linspace(80, 200, 13)
+    xs, ys = [0.0, *distances], [0.0] * (len(distances) + 1)
+    ticks = 3000
+    network = {"propagation": {**LOG_DISTANCE, "fading": "rayleigh", "reception": "threshold"}}
+    _, got = drive(network, xs, ys, ticks)
+    received = np.zeros(len(distances))
+    for inbox in got:
+        for r in inbox:
+            received[r - 1] += 1
+    mean_power = LOG_DISTANCE["tx_power_dbm"] - (46.6777 + 30 * np.log10(distances))
+    expected = np.exp(-(10 ** ((-101.0 - mean_power) / 10)))  # P(gain >= threshold / mean power)
+    for d, e, f in zip(distances, received / ticks, expected):
+        assert abs(e - f) <= binomial_tolerance(f, ticks), f"at {d:.0f} m: {e:.4f} vs {f:.4f}"
+
+
+def test_nakagami_fading_follows_the_gamma_survival_function():
+    distances = np.linspace(100, 200, 6)
+    xs, ys = [0.0, *distances], [0.0] * (len(distances) + 1)
+    ticks, m = 3000, 2.5
+    network = {"propagation": {**LOG_DISTANCE, "fading": "nakagami", "nakagami_m": m, "reception": "threshold"}}
+    _, got = drive(network, xs, ys, ticks)
+    received = np.zeros(len(distances))
+    for inbox in got:
+        for r in inbox:
+            received[r - 1] += 1
+    mean_power = LOG_DISTANCE["tx_power_dbm"] - (46.6777 + 30 * np.log10(distances))
+    expected = stats.gamma.sf(10 ** ((-101.0 - mean_power) / 10), a=m, scale=1 / m)
+    for d, e, f in zip(distances, received / ticks, expected):
+        assert abs(e - f) <= binomial_tolerance(f, ticks), f"at {d:.0f} m: {e:.4f} vs {f:.4f}"
+
+
+def test_shadowing_is_normal_with_its_sigma_and_decorrelates_over_the_distance_the_pair_moves():
+    n, sigma, dcorr, step = 60, 6.0, 20.0, 2.5
+    params = NetworkSection(propagation={"shadowing_db": sigma, "decorrelation_distance": dcorr})
+    radio = Radio(params, n, 1.0, np.random.default_rng(3))
+    prop = radio.propagation
+    i, j = np.triu_indices(n, 1)
+    first = prop.shadow[i, j].copy()
+    assert np.allclose(prop.shadow, prop.shadow.T)
+    assert stats.kstest(first / sigma, "norm").pvalue > 1e-3
+    ids = list(range(n))
+    xs = np.zeros(n)
+    radio.route(0, ids, xs, np.zeros(n), {})
+    before = prop.shadow[i, j].copy()
+    radio.route(1, ids, xs, np.zeros(n), {})  # nobody moved: nothing changes
+    assert np.array_equal(prop.shadow[i, j], before)
+    radio.route(2, ids, xs + step, np.zeros(n), {})  # everyone moved 2.5: each pair moved 5 in sum
+    after = prop.shadow[i, j]
+    rho = math.exp(-2 * step / dcorr)
+    r = np.corrcoef(before, after)[0, 1]
+    se = (1 - rho**2) / math.sqrt(len(i))
+    assert abs(r - rho) < SIGMAS * se, (r, rho)
+    assert abs(after.std() - sigma) < SIGMAS * sigma / math.sqrt(2 * len(i))
+
+
+def _runs(lost: np.ndarray) -> np.ndarray:
+    """Lengths of the runs of consecutive True."""
+    edges = np.diff(np.r_[0, lost.astype(np.int8), 0])
+    return np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)
+
+
+@pytest.mark.parametrize("every", [1, 4])
+def test_gilbert_elliott_in_time_keeps_its_stationary_loss_and_burst_length_in_seconds(every):
+    """Advanced once per tick for every link: a sender that speaks every 4th tick sees the same loss
+    and the same bursts in seconds as one that speaks every tick."""
+    dt, mean_loss, mean_burst = 0.5, 0.2, 3.0  # seconds
+    ticks = 120000
+    network = {"burst": {"mean_loss": mean_loss, "mean_burst": mean_burst}}
+    radio, got = drive(network, [0.0, 1.0], [0.0, 0.0], ticks, every=every, dt=dt)
+    lost = np.array([1 not in got[k] for k in range(0, ticks, every)])
+    n = len(lost)
+    assert abs(lost.mean() - mean_loss) <= SIGMAS * math.sqrt(mean_loss * (1 - mean_loss) / n) * 4  # correlated draws
+    r_tick = 1 - math.exp(-dt / mean_burst)  # P(bad -> good) per tick
+    p_tick = 1 - math.exp(-dt / (mean_burst * (1 - mean_loss) / mean_loss))
+    # seen every `every` ticks, a loss follows a loss with P(bad after `every` ticks | bad now)
+    stay = mean_loss + (1 - mean_loss) * (1 - p_tick - r_tick) ** every
+    runs = _runs(lost)
+    expected = 1 / (1 - stay)
+    se = math.sqrt(stay / (1 - stay) ** 2 / len(runs))
+    assert abs(runs.mean() - expected) <= SIGMAS * se, (runs.mean(), expected)
+    if every == 1:
+        assert abs(runs.mean() * dt - mean_burst) < 0.2 * mean_burst
+    assert radio.ledger.dropped["burst"] == int(lost.sum())
+
+
+def test_gilbert_elliott_per_packet_matches_tc_netem_gemodel():
+    p, r, ticks = 0.05, 0.25, 100000
+    radio, got = drive({"burst": {"advance": "packet", "p": p, "r": r}}, [0.0, 1.0], [0.0, 0.0], ticks)
+    lost = np.array([1 not in g for g in got])
+    pi_bad = p / (p + r)
+    assert abs(lost.mean() - pi_bad) <= SIGMAS * 3 * math.sqrt(pi_bad * (1 - pi_bad) / ticks)
+    runs = _runs(lost)
+    assert abs(runs.mean() - 1 / r) <= SIGMAS * math.sqrt((1 - r) / r**2 / len(runs))
+
+
+@pytest.mark.parametrize(
+    ("distribution", "mean", "sd"),
+    [
+        ("normal", 0.5, 0.05),
+        ("uniform", 0.5, 0.05 / math.sqrt(3)),
+        ("pareto", 0.5, 0.05),
+        ("paretonormal", 0.5, 0.05),
+    ],
+)
+def test_delay_draws_have_the_distribution_moments(distribution, mean, sd):
+    n = 200000
+    delays = Delays(DelaySection(mean=0.5, jitter=0.05, distribution=distribution), 2, np.random.default_rng(1))
+    x = delays.draw(np.zeros(n, dtype=np.int64), np.ones(n, dtype=np.int64))
+    assert abs(x.mean() - mean) < SIGMAS * sd / math.sqrt(n) * (3 if "pareto" in distribution else 1)
+    assert abs(x.std() - sd) < 0.03 * sd * (3 if "pareto" in distribution else 1)
+    if distribution == "uniform":
+        assert x.min() >= 0.45 - 1e-12 and x.max() <= 0.55 + 1e-12
+
+
+def test_delay_correlation_is_the_lag_one_correlation_of_a_links_delays():
+    n, c = 100000, 0.6
+    delays = Delays(DelaySection(mean=1.0, jitter=0.1, correlation=c), 2, np.random.default_rng(2))
+    x = np.concatenate([delays.draw(np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.int64)) for _ in range(n // 10)])
+    r = np.corrcoef(x[:-1], x[1:])[0, 1]
+    assert abs(r - c) < SIGMAS * (1 - c**2) / math.sqrt(len(x))
+
+
+def test_delay_through_the_radio_delivers_at_the_tick_its_arrival_falls_in():
+    """Normal delay of mean 0.25 s and jitter 0.05 s, ticks of 0.1 s: the copy sent at tick k is
+    delivered at k + max(1, ceil(D / 0.1)); the share delivered m ticks later follows the normal CDF."""
+    dt, ticks = 0.1, 20000
+    radio = Radio(NetworkSection(delay={"mean": 0.25, "jitter": 0.05}), 2, dt, np.random.default_rng(5))
+    lags: list[int] = []
+    for k in range(ticks + 10):
+        outs = {0: [RadioMessage(BROADCAST, "x", k.to_bytes(4, "big"))]} if k < ticks else {}
+        radio.route(k, [0, 1], [0.0, 1.0], [0.0, 0.0], outs)
+        for _sender, _kind, payload in radio.deliver(k + 1, [0, 1]).get(1, []):
+            lags.append(k + 1 - int.from_bytes(payload, "big"))
+        radio.confirm()
+    assert len(lags) == ticks == radio.ledger.delivered
+    cdf = stats.norm(0.25, 0.05).cdf
+    counts = np.bincount(lags, minlength=8)
+    for m in range(1, 6):
+        expected = cdf(m * dt) - (cdf((m - 1) * dt) if m > 1 else 0.0)
+        got = counts[m] / ticks
+        assert abs(got - expected) <= binomial_tolerance(expected, ticks), (m, got, expected)
+    assert sorted(lags) != lags  # copies overtake one another
+
+
+def _inboxes_of(network: dict, seed: int):
+    rng = np.random.default_rng(99)
+    n = 12
+    xs, ys = rng.uniform(0, 150, n), rng.uniform(0, 150, n)
+    radio = Radio(
+        NetworkSection(**network),
+        n,
+        0.5,
+        np.random.default_rng(seed),
+        Ledger(reasons=drop_reasons(NetworkSection(**network))),
+    )
+    seen = []
+    for k in range(400):
+        xs, ys = xs + rng.normal(0, 1, n), ys + rng.normal(0, 1, n)
+        outs = {s: [RadioMessage(BROADCAST, "b", bytes([s, k % 256]) * (1 + s))] for s in range(n) if (s + k) % 3 == 0}
+        outs.setdefault(0, []).append(RadioMessage((3, 4, 40), "u", b"u" * 9))
+        radio.route(k, list(range(n)), xs.tolist(), ys.tolist(), outs)
+        inbox = radio.deliver(k + 1, list(range(n)))
+        radio.confirm()
+        seen.append({r: [(m[0], m[1], bytes(m[2])) for m in v] for r, v in sorted(inbox.items())})
+    radio.finish(400)
+    return radio, seen
+
+
+EVERYTHING = {
+    "range": 140.0,
+    "loss": 0.05,
+    "rate": 2000.0,
+    "propagation": {"shadowing_db": 4.0, "fading": "nakagami", "nakagami_m": 1.5, "coherence_time": 1.0},
+    "burst": {"mean_loss": 0.1, "mean_burst": 2.0},
+    "delay": {"mean": 0.3, "jitter": 0.2, "distribution": "paretonormal", "correlation": 0.3},
+}
+
+
+def test_every_model_at_once_is_deterministic_under_its_seed_and_accounts_for_every_copy():
+    a, seen_a = _inboxes_of(EVERYTHING, seed=11)
+    b, seen_b = _inboxes_of(EVERYTHING, seed=11)
+    c, seen_c = _inboxes_of(EVERYTHING, seed=12)
+    assert seen_a == seen_b and seen_a != seen_c
+    assert a.ledger.totals() == b.ledger.totals()
+    for radio in (a, b, c):
+        led = radio.ledger
+        led.check()  # copies = delivered + dropped, exactly
+        for reason in ("below_sensitivity", "packet_error", "burst", "loss", "out_of_range", "no_such_receiver"):
+            assert led.dropped[reason] > 0, reason
+
+
+def test_turning_one_model_on_leaves_the_independent_loss_draws_as_they_were():
+    """Each model draws from its own stream: with bursts off and on, the copies the bursts let
+    through meet the very same loss draws... as far as the draws line up: with nothing else on,
+    adding a zero-effect delay (jitter 0) changes nothing at all."""
+    base = {"range": 140.0, "loss": 0.2}
+    _, plain = _inboxes_of(base, seed=4)
+    _, delayed = _inboxes_of({**base, "delay": {"mean": 0.0, "jitter": 0.0}}, seed=4)
+    assert plain == delayed
+
+
+def test_a_burst_section_with_two_parametrisations_is_one_line_naming_it():
+    with pytest.raises(ValueError, match="give mean_loss and mean_burst, or good_s and bad_s"):
+        BurstSection(mean_loss=0.1, mean_burst=2.0, good_s=3.0, bad_s=1.0)
+    with pytest.raises(ValueError, match="p and r belong to advance: packet"):
+        BurstSection(p=0.1, r=0.5)
+
+
+def test_params_network_lists_every_key_of_every_model_and_a_bad_one_is_named(capsys, tmp_path):
+    from swarmbed.experiments.cli import main as cli
+    from tests.conftest import QUICKSTART
+
+    assert cli(["params", "network"]) == 0
+    out = capsys.readouterr().out
+    for key in ("network.propagation.shadowing_db", "network.burst.mean_burst", "network.delay.correlation"):
+        assert key in out, key
+    assert cli(["run", str(QUICKSTART), "--out", str(tmp_path), "--set", "network.burst={mean_loss: 0.1}"]) == 2
+    assert "network.burst" in capsys.readouterr().err
