@@ -11,6 +11,7 @@ import logging
 import traceback
 
 import zenoh
+from pydantic import BaseModel
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
 from swarmbed.wire.codec import (
@@ -20,12 +21,20 @@ from swarmbed.wire.codec import (
     decode_agent_in,
     encode_agent_out,
     encode_handover,
-    encode_report,
     encode_stop,
 )
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.lifecycle import child_args
 from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_over, is_alive
+from swarmbed.wire.reports import (
+    Checkpoint,
+    Fatal,
+    Restored,
+    RestoreFailed,
+    SnapshotFailed,
+    Transport,
+    encode_report,
+)
 from swarmbed.wire.schema import AgentSpec
 from swarmbed.wire.session import open_from_args
 from swarmbed.wire.state import StateError
@@ -61,13 +70,13 @@ def serve(
     watch = session.liveliness().declare_subscriber(keys.alive_coordinator, on_coordinator)
     out = session.declare_publisher(keys.agent_out(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
 
-    def report(data: dict) -> None:
+    def report(data: BaseModel) -> None:
         if not hand_over(session, keys.agent_report(agent_id), encode_report(data)):
-            log.error("agent %d: the coordinator did not take the %s report", agent_id, data["kind"])
+            log.error("agent %d: the coordinator did not take the %s report", agent_id, getattr(data, "kind", "?"))
 
     token = session.liveliness().declare_token(keys.alive_agent(agent_id, incarnation))
     if restored:  # subscribed and announced: the coordinator may retire the old process and go on
-        report({"kind": "restored", "agent": agent_id, "incarnation": incarnation})
+        report(Restored(kind="restored", agent=agent_id, incarnation=incarnation))
     frozen = False
     sample_bytes = {"in": 0, "out": 0}  # this process's per-tick samples, for the wire-bytes accounting
     try:
@@ -98,10 +107,8 @@ def serve(
                 if msg.reason == COORDINATOR_GONE:
                     log.error("agent %d: the coordinator went away; exiting", agent_id)
                     return EXIT_COORDINATOR_GONE
-                final = runtime.report()
-                final["malformed"] += malformed
-                final["transport"] = {"tcp": tcp_counters(), "samples": sample_bytes}
-                report(final)
+                transport = Transport.model_validate({"tcp": tcp_counters(), "samples": sample_bytes})
+                report(runtime.report(extra_malformed=malformed, transport=transport))
                 return EXIT_OK
             if frozen:
                 continue  # its successor answers this tick
@@ -117,15 +124,8 @@ def serve(
             except Exception as exc:  # a plugin or node raised: stop this agent, loudly
                 tb = traceback.format_exc()
                 log.error("agent %d: failed at tick %d:\n%s", agent_id, msg.tick, tb)
-                report(
-                    {
-                        "kind": "fatal",
-                        "agent": agent_id,
-                        "tick": msg.tick,
-                        "error": f"{type(exc).__name__}: {exc}",
-                        "traceback": tb,
-                    }
-                )
+                error = f"{type(exc).__name__}: {exc}"
+                report(Fatal(kind="fatal", agent=agent_id, tick=msg.tick, error=error, traceback=tb))
                 return EXIT_PLUGIN_ERROR
             answer = encode_agent_out(msg.tick, agent_id, action, messages, events)
             sample_bytes["out"] += len(answer)
@@ -148,7 +148,7 @@ def _hand_over_state(
         state = runtime.snapshot({"malformed": malformed})
     except StateError as exc:
         log.error("agent %d: cannot snapshot its state: %s", agent_id, exc)
-        report({"kind": "snapshot_failed", "agent": agent_id, "incarnation": incarnation, "error": str(exc)})
+        report(SnapshotFailed(kind="snapshot_failed", agent=agent_id, incarnation=incarnation, error=str(exc)))
         return False
     if not hand_over(session, keys.agent_snapshot(agent_id), encode_handover(ticket, state)):
         log.error("agent %d: the coordinator did not take the snapshot", agent_id)
@@ -165,14 +165,14 @@ def _checkpoint(runtime: AgentRuntime, incarnation: int, malformed: int, report,
         log.warning("agent %d: no checkpoint: %s", runtime.agent_id, exc)
         return
     report(
-        {
-            "kind": "checkpoint",
-            "agent": runtime.agent_id,
-            "incarnation": incarnation,
-            "ticks": runtime.ticks,
-            "state": state,
-            "ticket": ticket,
-        }
+        Checkpoint(
+            kind="checkpoint",
+            agent=runtime.agent_id,
+            incarnation=incarnation,
+            ticks=runtime.ticks,
+            state=state,
+            ticket=ticket,
+        )
     )
 
 
@@ -210,12 +210,9 @@ def main(argv: list[str] | None = None) -> int:
                         session,
                         keys.agent_report(args.id),
                         encode_report(
-                            {
-                                "kind": "restore_failed",
-                                "agent": args.id,
-                                "incarnation": args.incarnation,
-                                "error": str(exc),
-                            }
+                            RestoreFailed(
+                                kind="restore_failed", agent=args.id, incarnation=args.incarnation, error=str(exc)
+                            )
                         ),
                     ):
                         log.error("agent %d: the coordinator did not take the restore_failed report", args.id)

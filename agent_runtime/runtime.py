@@ -22,6 +22,7 @@ from swarmbed.extension.view import LocalView, Message, TaskInfo
 from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, unpack
 from swarmbed.wire.lifecycle import agent_seeds
 from swarmbed.wire.observation import Observation
+from swarmbed.wire.reports import Final, Transport
 from swarmbed.wire.schema import AgentSpec
 from swarmbed.wire.state import StateError, pack_state, unpack_state
 from swarmbed.wire.targets import load_target
@@ -176,11 +177,14 @@ class AgentRuntime:
             bb._store = store
         return state["extra"]
 
-    def report(self) -> dict:
-        return {
-            "kind": "final",
-            "agent": self.agent_id,
-            "ticks": self.ticks,
-            "sent": {k: list(v) for k, v in sorted(self.sent.items())},
-            "malformed": self.malformed,
-        }
+    def report(self, extra_malformed: int = 0, transport: Transport | None = None) -> Final:
+        """The agent's final report: what it sent per kind, and the samples it dropped as malformed
+        (its runtime's and ``extra_malformed`` of its process)."""
+        return Final(
+            kind="final",
+            agent=self.agent_id,
+            ticks=self.ticks,
+            sent={k: list(v) for k, v in sorted(self.sent.items())},
+            malformed=self.malformed + extra_malformed,
+            transport=transport,
+        )

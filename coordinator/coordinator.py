@@ -35,7 +35,6 @@ from swarmbed.wire.codec import (
     WireError,
     WorldSample,
     decode_netem_step,
-    decode_report,
     encode_netem_stop,
     encode_status,
     encode_stop,
@@ -45,6 +44,16 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of
 from swarmbed.wire.lifecycle import WORLD, component_rng
 from swarmbed.wire.membership import accept_handovers, serve_text
+from swarmbed.wire.reports import (
+    AgentReport,
+    Checkpoint,
+    Fatal,
+    Final,
+    NetemFatal,
+    NetemFinal,
+    decode_agent_report,
+    decode_netem_report,
+)
 from swarmbed.wire.schema import LOCAL, Experiment, Targets, agent_spec, netem_spec
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -86,8 +95,8 @@ class Coordinator:
         )
         self.recorder = Recorder(exp, self.world, out_dir, list(getattr(allocator, "event_names", ())))
         self.joined: set[str] = set()
-        self.reports: dict[int, dict] = {}
-        self.netem_report: dict | None = None
+        self.reports: dict[int, Final] = {}
+        self.netem_report: NetemFinal | None = None
         self.malformed = 0
         self.realtime = exp.run.clock == "realtime"
         # the real-time clock's own accounting (wall-clock facts: never part of a lock-step run's files)
@@ -300,12 +309,12 @@ class Coordinator:
     def _proxy_failed(self, k: int, data: bytes) -> None:
         """A report from the proxy while ticks go on: only a failing proxy sends one (its error)."""
         try:
-            rep = decode_report(data)
+            rep = decode_netem_report(data)
         except WireError as exc:
             self._malformed(self.keys.netem_report, exc)
             return
-        if rep["kind"] == "fatal":
-            raise RunError(f"tick {k}: the netem proxy failed: {rep.get('error')}; see logs/netem.log")
+        if isinstance(rep, NetemFatal):
+            raise RunError(f"tick {k}: the netem proxy failed: {rep.error}; see logs/netem.log")
 
     def _proxy_gone(self, k: int, grace: float = 0.5) -> None:
         """The proxy's token went: raise with its own error if it reported one (it reports before it
@@ -344,16 +353,15 @@ class Coordinator:
         if agent not in self.agents.fatal:
             self.events.wait_for(grace, take)
 
-    def _decode_report(self, key: str, data: bytes) -> dict | None:
+    def _decode_report(self, key: str, data: bytes) -> AgentReport | None:
         """An agent's report, if it is well formed and names the agent whose key it came on
         (else dropped and counted)."""
         try:
-            rep = decode_report(data)
-            agent = rep.get("agent")
-            if not isinstance(agent, int) or not 0 <= agent < self.n:
-                raise WireError(f"report names no agent of this run: {agent!r}")
-            if agent != agent_id_of(key):
-                raise WireError(f"report of agent {agent} on another agent's key")
+            rep = decode_agent_report(data)
+            if rep.agent >= self.n:
+                raise WireError(f"report names no agent of this run: {rep.agent}")
+            if rep.agent != agent_id_of(key):
+                raise WireError(f"report of agent {rep.agent} on another agent's key")
         except WireError as exc:
             self._malformed(key, exc)
             return None
@@ -363,13 +371,13 @@ class Coordinator:
         rep = self._decode_report(*sample)
         if rep is None:
             return
-        agent = rep["agent"]
-        if rep["kind"] == "fatal":
+        agent = rep.agent
+        if isinstance(rep, Fatal):
             self.agents.fatal[agent] = rep
-            self.agents.lose(agent, rep.get("tick", tick), "it raised an exception")
-        elif rep["kind"] == "final":
+            self.agents.lose(agent, rep.tick, "it raised an exception")
+        elif isinstance(rep, Final):
             self.reports[agent] = rep
-        elif rep["kind"] == "checkpoint":
+        elif isinstance(rep, Checkpoint):
             self.agents.on_checkpoint(agent, rep)
 
     def _malformed(self, key: str, exc: Exception) -> None:
@@ -400,9 +408,13 @@ class Coordinator:
                 self._on_report(data, self.last_tick)
             elif what == "netem_report":
                 try:
-                    self.netem_report = decode_report(data)
+                    report = decode_netem_report(data)
                 except WireError as exc:
                     self._malformed(self.keys.netem_report, exc)
+                    continue
+                if isinstance(report, NetemFatal):
+                    raise RunError(f"the netem proxy failed at the end of the run: {report.error}; see logs/netem.log")
+                self.netem_report = report
 
     def summary(self) -> dict:
         assert self.netem_report is not None, "summary() before the proxy's final report"

@@ -37,6 +37,7 @@ from swarmbed.wire.codec import (
     encode_stop,
 )
 from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
+from swarmbed.wire.reports import AgentReport, Checkpoint, Fatal, SwapQuery, decode_swap
 from swarmbed.wire.schema import LOCAL, Experiment
 
 log = logging.getLogger("swarmbed.coordinator")
@@ -67,7 +68,7 @@ class AgentLifecycle:
         hosts: dict[int, str],
         carriers: Mapping[str, frozenset[int]] | None,
         placement: Placement | None,
-        decode_report: Callable[[str, bytes], dict | None],
+        decode_report: Callable[[str, bytes], AgentReport | None],
         malformed: Callable[[str, Exception], None],
     ) -> None:
         self.exp = exp
@@ -84,7 +85,7 @@ class AgentLifecycle:
         self.agent_pubs: list[zenoh.Publisher] = []  # set once the coordinator declared them
         self.lost: dict[int, int] = {}  # agent -> tick at which it was lost
         self.retired: set[int] = set()  # lost by the scenario (agent loss), not by a crash
-        self.fatal: dict[int, dict] = {}  # agent -> the report of the exception its plugin raised
+        self.fatal: dict[int, Fatal] = {}  # agent -> the report of the exception its plugin raised
         # moving agents between processes (swaps)
         self.incarnation: dict[int, int] = {}  # agent -> its current process, where not the first (0)
         self.snapshots: dict[int, bytes] = {}  # agent -> the snapshot its old process handed over
@@ -128,7 +129,7 @@ class AgentLifecycle:
         if agent in self.lost or agent in self.down:
             return
         fatal = self.fatal.get(agent)
-        detail = f"\n{fatal['error']}\n{fatal.get('traceback', '')}" if fatal else ""
+        detail = f"\n{fatal.error}\n{fatal.traceback}" if fatal else ""
         policy = self.exp.run.agent_loss
         if policy == "fail":
             raise RunError(
@@ -156,13 +157,12 @@ class AgentLifecycle:
             self.lost[agent] = tick
         self.down.clear()
 
-    def on_checkpoint(self, agent: int, rep: dict) -> None:
-        state = rep.get("state")
-        if not self.tickets.redeem("checkpoint", agent, rep.get("ticket")):
+    def on_checkpoint(self, agent: int, rep: Checkpoint) -> None:
+        if not self.tickets.redeem("checkpoint", agent, rep.ticket):
             # late (a newer checkpoint was asked since) or not asked for at all: never kept
             log.warning("coordinator: refused a checkpoint of agent %d that was not asked for", agent)
-        elif rep.get("incarnation") == self.incarnation.get(agent, 0) and isinstance(state, bytes):
-            self.checkpoints[agent] = (self.checkpoint_tick, state)
+        elif rep.incarnation == self.incarnation.get(agent, 0):
+            self.checkpoints[agent] = (self.checkpoint_tick, rep.state)
 
     # -- Zenoh callbacks (they only put events) ------------------------------------------------------
     def on_snapshot_query(self, query: zenoh.Query) -> None:
@@ -195,25 +195,19 @@ class AgentLifecycle:
         """``{"agent": I, "to": HOST}`` queues a swap before the next tick and answers its number;
         ``{"swap": N}`` answers swap N's record once it is done (``{"pending": true}`` before)."""
         try:
-            req = json.loads(query.payload.to_bytes()) if query.payload is not None else None
-            if isinstance(req, dict) and isinstance(req.get("swap"), int):
-                record = self.requested_swaps.get(req["swap"])
+            req = decode_swap(query.payload.to_bytes() if query.payload is not None else None)
+            if isinstance(req, SwapQuery):
+                record = self.requested_swaps.get(req.swap)
                 answer: dict[str, Any] = record if record is not None else {"pending": True}
-            elif (
-                isinstance(req, dict)
-                and isinstance(req.get("agent"), int)
-                and 0 <= req["agent"] < self.n
-                and isinstance(req.get("to"), str)
-                and req["to"]
-            ):
+            elif req.agent < self.n:
                 number = len(self.requested_swaps)
                 self.requested_swaps[number] = None
-                self.swap_requests.put((req["agent"], req["to"], number))
+                self.swap_requests.put((req.agent, req.to, number))
                 answer = {"queued": number}
             else:
-                answer = {"error": f'a swap request is {{"agent": 0..{self.n - 1}, "to": HOST}}'}
-        except ValueError as exc:
-            answer = {"error": f"not JSON: {exc}"}
+                raise WireError(f"agent {req.agent} is not one of this run's 0..{self.n - 1}")
+        except WireError as exc:
+            answer = {"error": f'{exc} (a swap request is {{"agent": 0..{self.n - 1}, "to": HOST}})'}
         query.reply(query.key_expr, json.dumps(answer))
 
     # -- checkpoints and restarts (run.on_agent_loss: restart) ---------------------------------------
@@ -378,8 +372,8 @@ class AgentLifecycle:
                 rep = self.decode_report(*data)
                 if rep is None:
                     return CONSUMED
-                if rep["agent"] == agent and rep.get("kind") in wanted:
-                    return "restored" if rep["kind"] == "restored" else f"{rep['kind']}: {rep.get('error')}"
+                if rep.agent == agent and rep.kind in wanted:
+                    return "restored" if rep.kind == "restored" else f"{rep.kind}: {getattr(rep, 'error', '')}"
             if what == "leave" and not data.endswith(("/coordinator", "/netem")) and agent_id_of(data) == agent:
                 gone = incarnation_of(data)
                 if gone in (old, new):

@@ -17,6 +17,7 @@ from swarmbed.coordinator import results
 from swarmbed.coordinator.lifecycle import RESTART_COLUMNS, SWAP_COLUMNS, AgentLifecycle
 from swarmbed.extension.scenario import World
 from swarmbed.wire.codec import NetemStep
+from swarmbed.wire.reports import Final, NetemFinal, Transport
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.rundir import RESTARTS, SWAPS
 from swarmbed.wire.schema import Experiment
@@ -97,15 +98,15 @@ class Recorder:
         self,
         ticks: int,
         agents: AgentLifecycle,
-        reports: dict[int, dict],
-        netem_report: dict,
+        reports: dict[int, Final],
+        netem_report: NetemFinal,
         malformed: int,
         clock: dict | None,
     ) -> dict:
         """The content of ``summary.json``."""
         exp, n = self.exp, self.exp.agents.count
-        net = netem_report["totals"]
-        agent_bytes = sum(b for r in reports.values() for _, b in r["sent"].values())
+        net = netem_report.totals
+        agent_bytes = sum(b for r in reports.values() for _, b in r.sent.values())
         # a restarted agent's own counters begin again (or at its checkpoint): only the ledger has them all
         all_reported = len(reports) == n and not agents.restart_log
         return {
@@ -123,28 +124,32 @@ class Recorder:
             **({"realtime": clock} if clock is not None else {}),
             "network": {
                 **net,
-                "per_kind": netem_report["per_kind"],
+                "per_kind": netem_report.per_kind,
                 "bytes_sent_by_agents": agent_bytes if all_reported else None,
                 "bytes_agree": (agent_bytes == net["bytes_sent"]) if all_reported else None,
                 "malformed": {
                     "coordinator": malformed,
-                    "netem": netem_report["malformed"],
-                    "agents": sum(r["malformed"] for r in reports.values()),
+                    "netem": netem_report.malformed,
+                    "agents": sum(r.malformed for r in reports.values()),
                 },
             },
         }
 
     @staticmethod
-    def transport(summary: dict, reports: dict[int, dict], netem_report: dict) -> dict:
+    def transport(summary: dict, reports: dict[int, Final], netem_report: NetemFinal) -> dict:
         """TCP bytes each process of the run measured on its own sockets, beside the radio payload
         bytes of the ledger (see :mod:`swarmbed.wire.transport` for what they count).
 
         Every link of a run has the hub (the coordinator's router) at one end, so measuring each
         client's end counts every byte once: what the clients sent is what the hub received, and
         the other way round; the hub's own sockets are not read (they would count it all twice)."""
-        processes: dict[str, dict] = {"netem": netem_report.get("transport", {})}
+
+        def measured(transport: Transport | None) -> dict:
+            return transport.model_dump(by_alias=True, exclude_none=True) if transport is not None else {}
+
+        processes: dict[str, dict] = {"netem": measured(netem_report.transport)}
         for i in sorted(reports):
-            processes[f"agent_{i}"] = reports[i].get("transport", {})
+            processes[f"agent_{i}"] = measured(reports[i].transport)
         agents = [p for name, p in processes.items() if name.startswith("agent_")]
         payload = summary["network"]["bytes_sent"]
 
@@ -169,12 +174,12 @@ class Recorder:
         return {"totals": totals, "processes": processes}
 
     def write(
-        self, summary: dict, timings: dict, agents: AgentLifecycle, reports: dict[int, dict], netem_report: dict
+        self, summary: dict, timings: dict, agents: AgentLifecycle, reports: dict[int, Final], netem_report: NetemFinal
     ) -> None:
         """Close the streamed tables and write the rest, ``summary.json`` last."""
         check_summary(summary)  # never complete a run with a summary its readers refuse
         out, n = self.out_dir, self.exp.agents.count
-        per_sender = netem_report["per_sender"]
+        per_sender = netem_report.per_sender
         for table in self.tables.values():
             table.finish()
         self.tables.clear()

@@ -31,11 +31,11 @@ from swarmbed.wire.codec import (
     decode_world,
     encode_inbox,
     encode_netem_step,
-    encode_report,
 )
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
 from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
 from swarmbed.wire.membership import fetch_spec, hand_over
+from swarmbed.wire.reports import NetemFatal, NetemFinal, Transport, encode_report
 from swarmbed.wire.rowfile import RowFile, TableWriteError
 from swarmbed.wire.rundir import LEDGER, RECEIVER_LEDGER
 from swarmbed.wire.schema import NetemSpec
@@ -311,15 +311,15 @@ class Proxy:
             self.receivers.close()
             os.replace(self.out_dir / (RECEIVER_LEDGER_FILE + ".part"), self.out_dir / RECEIVER_LEDGER_FILE)
             files.append(RECEIVER_LEDGER_FILE)
-        report = {
-            "kind": "netem",
-            "totals": self.ledger.totals(),
-            "per_sender": {str(k): v for k, v in self.ledger.per_sender().items()},
-            "per_kind": self.ledger.per_kind(),
-            "malformed": self.malformed,
-            "ledger": files,
-            "transport": {"tcp": tcp_counters()},
-        }
+        report = NetemFinal(
+            kind="netem",
+            totals=self.ledger.totals(),
+            per_sender={str(k): v for k, v in self.ledger.per_sender().items()},
+            per_kind=self.ledger.per_kind(),
+            malformed=self.malformed,
+            ledger=files,
+            transport=Transport.model_validate({"tcp": tcp_counters()}),
+        )
         if not hand_over(self.session, self.keys.netem_report, encode_report(report)):
             log.error("netem: the coordinator did not take the final report")
 
@@ -341,5 +341,5 @@ def main(argv: list[str] | None = None) -> int:
             # held: the launcher stops every child once the token goes, which could cut it off
             log.exception("netem: failed")
             why = str(exc) if isinstance(exc, TableWriteError) else f"{type(exc).__name__}: {exc}"
-            hand_over(session, keys.netem_report, encode_report({"kind": "fatal", "error": why}), timeout=5)
+            hand_over(session, keys.netem_report, encode_report(NetemFatal(kind="fatal", error=why)), timeout=5)
             return 1

@@ -397,7 +397,7 @@ def test_state_nobody_asked_for_is_refused_even_from_the_agent_itself(tmp_path):
     """Agent 3's own identity hands the coordinator a snapshot and a checkpoint it never asked for,
     then its process is killed: the snapshot is refused, and the restart starts agent 3 fresh
     instead of restoring the planted checkpoint."""
-    from swarmbed.wire.codec import encode_handover, encode_report
+    from swarmbed.wire.codec import encode_handover, pack
 
     seen = {}
 
@@ -411,7 +411,7 @@ def test_state_nobody_asked_for_is_refused_even_from_the_agent_itself(tmp_path):
                 hand_over(
                     s,
                     keys.agent_report(3),
-                    encode_report(
+                    pack(
                         {
                             "kind": "checkpoint",
                             "agent": 3,

@@ -152,3 +152,50 @@ def test_state_type_refuses_local_classes_and_two_classes_under_one_name():
     impostor = type("Declared", (), {"__module__": __name__, "__qualname__": "Declared"})
     with pytest.raises(TypeError, match="declared twice"):
         state_type(impostor)
+
+
+@pytest.mark.parametrize(
+    ("report", "named"),
+    [
+        ({"kind": "final", "agent": 1, "ticks": 3, "sent": {"bid": [1]}, "malformed": 0}, "sent.bid"),
+        ({"kind": "fatal", "agent": "1", "tick": 0, "error": "x"}, "agent"),
+        ({"kind": "fatal", "agent": -1, "tick": 0, "error": "x"}, "agent"),
+        ({"kind": "checkpoint", "agent": 1, "incarnation": 0, "ticks": 1, "state": "s", "ticket": b""}, "state"),
+        ({"kind": "restored", "agent": 1, "incarnation": 0, "call": "os.system"}, "call"),
+        ({"kind": "launch", "agent": 1}, "kind"),
+        (["final"], "agent report"),
+    ],
+)
+def test_a_crafted_agent_report_is_a_wire_error_naming_its_field(report, named):
+    from swarmbed.wire.codec import WireError, pack
+    from swarmbed.wire.reports import decode_agent_report
+
+    with pytest.raises(WireError, match=named):
+        decode_agent_report(pack(report))
+
+
+def test_every_report_a_process_writes_decodes_to_its_model():
+    from swarmbed.wire.reports import (
+        Final,
+        NetemFatal,
+        Transport,
+        decode_agent_report,
+        decode_netem_report,
+        decode_swap,
+        encode_report,
+    )
+
+    final = Final(
+        kind="final",
+        agent=2,
+        ticks=5,
+        sent={"bid": [3, 120]},
+        malformed=0,
+        transport=Transport.model_validate({"tcp": None, "samples": {"in": 10, "out": 20}}),
+    )
+    assert decode_agent_report(encode_report(final)) == final
+    assert decode_netem_report(encode_report(NetemFatal(kind="fatal", error="disk full"))).error == "disk full"
+    assert decode_swap(b'{"agent": 3, "to": "b"}').to == "b" and decode_swap(b'{"swap": 0}').swap == 0
+    for bad in (b'{"agent": 3}', b'{"agent": "3", "to": "b"}', b"[1]", b"nope", None):
+        with pytest.raises(ValueError):
+            decode_swap(bad)

@@ -381,13 +381,3 @@ def decode_handover(data: bytes) -> tuple[bytes, bytes]:
         "a snapshot handover must be [ticket, state]",
     )
     return msg[0], msg[1]
-
-
-def encode_report(report: dict) -> bytes:
-    return pack(report)
-
-
-def decode_report(data: bytes) -> dict:
-    msg = unpack(data)
-    _expect(isinstance(msg, dict) and isinstance(msg.get("kind"), str), "report must be a map with a kind")
-    return msg

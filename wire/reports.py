@@ -1,0 +1,183 @@
+"""The control plane, typed: the reports agents and the proxy hand the coordinator, and the swap
+requests operators send it.
+
+Reports travel as msgpack maps (rare, and read by people too) and swap requests as JSON; both are
+decoded into these models only, with strict types and no unknown keys, so a crafted report is a
+:class:`~swarmbed.wire.errors.WireError` that names the field, never a ``KeyError`` deep inside the
+coordinator. An agent report's ``kind`` selects its model.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+
+from swarmbed.wire.codec import pack, unpack
+from swarmbed.wire.errors import WireError
+
+AgentId = Annotated[int, Field(ge=0)]
+
+
+class _Message(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+class TcpCounters(_Message):
+    sent: int
+    received: int
+    segments_out: int
+    segments_in: int
+    sockets: int
+
+
+class SampleBytes(_Message):
+    """Bytes of this process's per-tick samples, in and out."""
+
+    in_: int = Field(alias="in")
+    out: int
+
+
+class Transport(_Message):
+    """What a process measured on its own sockets (None where the kernel's counters cannot be read)."""
+
+    tcp: TcpCounters | None = None
+    samples: SampleBytes | None = None
+
+
+# -- agent -> coordinator ---------------------------------------------------------------------------
+class Fatal(_Message):
+    """The agent's plugin or a node raised: the agent stops."""
+
+    kind: Literal["fatal"]
+    agent: AgentId
+    tick: int
+    error: str
+    traceback: str = ""
+
+
+class Final(_Message):
+    """The run is over: what the agent sent (per kind: messages, bytes) and dropped as malformed."""
+
+    kind: Literal["final"]
+    agent: AgentId
+    ticks: int = Field(ge=0)
+    sent: dict[str, Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=2, max_length=2)]]
+    malformed: int = Field(ge=0)
+    transport: Transport | None = None
+
+
+class Checkpoint(_Message):
+    """The agent's state, asked for with ``ticket``, to restart it from."""
+
+    kind: Literal["checkpoint"]
+    agent: AgentId
+    incarnation: int = Field(ge=0)
+    ticks: int = Field(ge=0)
+    state: bytes
+    ticket: bytes
+
+
+class Restored(_Message):
+    """A new process of the agent restored its snapshot and is subscribed."""
+
+    kind: Literal["restored"]
+    agent: AgentId
+    incarnation: int = Field(ge=0)
+
+
+class SnapshotFailed(_Message):
+    kind: Literal["snapshot_failed"]
+    agent: AgentId
+    incarnation: int = Field(ge=0)
+    error: str
+
+
+class RestoreFailed(_Message):
+    kind: Literal["restore_failed"]
+    agent: AgentId
+    incarnation: int = Field(ge=0)
+    error: str
+
+
+AgentReport = Annotated[
+    Fatal | Final | Checkpoint | Restored | SnapshotFailed | RestoreFailed, Field(discriminator="kind")
+]
+
+
+# -- netem proxy -> coordinator ---------------------------------------------------------------------
+class NetemFinal(_Message):
+    """The proxy's ledger at the end of the run."""
+
+    kind: Literal["netem"]
+    totals: dict[str, Any]  # checked with the summary that carries it (swarmbed.wire.summary)
+    per_sender: dict[str, dict[str, int]]
+    per_kind: dict[str, dict[str, int]]
+    malformed: int = Field(ge=0)
+    ledger: list[str]
+    transport: Transport | None = None
+
+
+class NetemFatal(_Message):
+    """The proxy failed; its error."""
+
+    kind: Literal["fatal"]
+    error: str
+
+
+NetemReport = Annotated[NetemFinal | NetemFatal, Field(discriminator="kind")]
+
+_AGENT = TypeAdapter(AgentReport)
+_NETEM = TypeAdapter(NetemReport)
+
+
+def _why(exc: ValidationError, what: str) -> WireError:
+    err = exc.errors()[0]
+    where = ".".join(str(p) for p in err["loc"]) or what
+    return WireError(f"{what}: {where}: {err['msg']}")
+
+
+def encode_report(report: BaseModel) -> bytes:
+    return pack(report.model_dump(by_alias=True, exclude_none=True))
+
+
+def decode_agent_report(data: bytes) -> Fatal | Final | Checkpoint | Restored | SnapshotFailed | RestoreFailed:
+    try:
+        return _AGENT.validate_python(unpack(data))
+    except ValidationError as exc:
+        raise _why(exc, "agent report") from None
+
+
+def decode_netem_report(data: bytes) -> NetemFinal | NetemFatal:
+    try:
+        return _NETEM.validate_python(unpack(data))
+    except ValidationError as exc:
+        raise _why(exc, "netem report") from None
+
+
+# -- operator -> coordinator: swaps -----------------------------------------------------------------
+class SwapRequest(_Message):
+    """Move ``agent`` to host ``to`` before the next tick."""
+
+    agent: AgentId
+    to: str = Field(min_length=1)
+
+
+class SwapQuery(_Message):
+    """What became of swap number ``swap``."""
+
+    swap: int = Field(ge=0)
+
+
+_SWAP = TypeAdapter(SwapRequest | SwapQuery)
+
+
+def decode_swap(data: bytes | None) -> SwapRequest | SwapQuery:
+    """A swap request or a query of one, from its JSON; WireError names what is wrong."""
+    try:
+        return _SWAP.validate_python(json.loads(data) if data is not None else None)
+    except ValueError as exc:  # ValidationError is a ValueError too
+        if isinstance(exc, ValidationError):
+            raise WireError('a swap request is {"agent": I, "to": HOST}, a query {"swap": N}') from None
+        raise WireError(f"not JSON: {exc}") from None
