@@ -24,8 +24,8 @@ from swarmbed.wire.codec import (
     encode_stop,
 )
 from swarmbed.wire.keys import Keys
-from swarmbed.wire.lifecycle import child_args
 from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_over, is_alive
+from swarmbed.wire.process import child_args
 from swarmbed.wire.reports import (
     Checkpoint,
     Fatal,

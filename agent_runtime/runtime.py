@@ -20,10 +20,10 @@ from swarmbed.extension.context import NodeContext
 from swarmbed.extension.scenario import Scenario
 from swarmbed.extension.view import LocalView, Message, TaskInfo
 from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, unpack
-from swarmbed.wire.lifecycle import agent_seeds
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.reports import Final, Transport
 from swarmbed.wire.schema import AgentSpec
+from swarmbed.wire.seeds import agent_seeds
 from swarmbed.wire.state import StateError, pack_state, unpack_state
 from swarmbed.wire.targets import load_target
 

@@ -42,7 +42,6 @@ from swarmbed.wire.codec import (
     encode_world,
 )
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of
-from swarmbed.wire.lifecycle import WORLD, component_rng
 from swarmbed.wire.membership import accept_handovers, serve_text
 from swarmbed.wire.reports import (
     AgentReport,
@@ -55,6 +54,7 @@ from swarmbed.wire.reports import (
     decode_netem_report,
 )
 from swarmbed.wire.schema import LOCAL, Experiment, Targets, agent_spec, netem_spec
+from swarmbed.wire.seeds import WORLD, component_rng
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")

@@ -37,6 +37,7 @@ from swarmbed.wire.codec import (
     encode_stop,
 )
 from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
+from swarmbed.wire.process import process_name
 from swarmbed.wire.reports import AgentReport, Checkpoint, Fatal, SwapQuery, decode_swap
 from swarmbed.wire.schema import LOCAL, Experiment
 
@@ -114,8 +115,7 @@ class AgentLifecycle:
             self._ask_checkpoints(k)
 
     def process_name(self, agent: int) -> str:
-        incarnation = self.incarnation.get(agent, 0)
-        return f"agent_{agent}" if incarnation == 0 else f"agent_{agent}.{incarnation}"
+        return process_name(agent, self.incarnation.get(agent, 0))
 
     def log_of(self, agent: int) -> str:
         host = self.hosts.get(agent, "local")

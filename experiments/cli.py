@@ -431,9 +431,10 @@ def cmd_check_scenario(args: argparse.Namespace) -> int:
 
 
 def cmd_host(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.hosts.daemon import HostError, serve
+    from swarmbed.experiments.hosts.client import HostError
+    from swarmbed.experiments.hosts.daemon import serve
     from swarmbed.wire.credentials import CredentialsError
-    from swarmbed.wire.lifecycle import LOG_FORMAT
+    from swarmbed.wire.logs import LOG_FORMAT
     from swarmbed.wire.session import tls_from_args
 
     logging.basicConfig(level=logging.INFO, format=LOG_FORMAT)
@@ -488,7 +489,7 @@ def _client_session(args: argparse.Namespace, connect_timeout_s: float | None = 
 
 
 def cmd_hosts(args: argparse.Namespace) -> int:
-    from swarmbed.experiments.hosts.daemon import host_info, visible_hosts
+    from swarmbed.experiments.hosts.client import host_info, visible_hosts
 
     session = _client_session(args)
     if session is None:

@@ -33,12 +33,13 @@ from swarmbed.wire.codec import (
     encode_netem_step,
 )
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
-from swarmbed.wire.lifecycle import NETEM, child_args, component_rng
 from swarmbed.wire.membership import fetch_spec, hand_over
+from swarmbed.wire.process import child_args
 from swarmbed.wire.reports import NetemFatal, NetemFinal, Transport, encode_report
 from swarmbed.wire.rowfile import RowFile, TableWriteError
 from swarmbed.wire.rundir import LEDGER, RECEIVER_LEDGER
 from swarmbed.wire.schema import NetemSpec
+from swarmbed.wire.seeds import NETEM, component_rng
 from swarmbed.wire.session import open_from_args
 from swarmbed.wire.transport import tcp_counters
 

@@ -59,10 +59,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from swarmbed.experiments.folders import CHAOS as CHAOS_FILE
 from swarmbed.experiments.hosts import netns
-from swarmbed.experiments.hosts.daemon import process_name
 from swarmbed.experiments.launch.runner import LiveRun
 from swarmbed.experiments.launch.yamlfile import YamlFileError, read_yaml
 from swarmbed.wire.codec import NetemControl, encode_netem_control
+from swarmbed.wire.process import process_name
 from swarmbed.wire.rowfile import RowFile
 
 log = logging.getLogger("swarmbed.chaos")

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import psutil
 
-from swarmbed.wire.lifecycle import process_alive
+from swarmbed.wire.process import process_alive
 
 CLAIM = "claim.json"
 LOCK = "claim.lock"

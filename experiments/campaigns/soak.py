@@ -45,8 +45,8 @@ from swarmbed.experiments.campaigns.chaos import Chaos, ChaosPlan
 from swarmbed.experiments.folders import SOAK_PROCESSES as PROCESSES
 from swarmbed.experiments.folders import SOAK_RUN as RUN
 from swarmbed.experiments.folders import SOAK_VERDICT as VERDICT
-from swarmbed.experiments.hosts.daemon import process_name
 from swarmbed.experiments.launch.runner import LiveRun, RunObserver, run_experiment
+from swarmbed.wire.process import process_name
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.schema import Experiment
 

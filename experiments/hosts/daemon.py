@@ -11,7 +11,8 @@ with it (the kernel's parent-death signal), so a host that dies takes its agents
 run sees agent loss. Ctrl-C or SIGTERM stops its agents and leaves no orphan.
 
     swarmbed host --name labpc2 --connect tcp/192.0.2.10:7447
-    swarmbed hosts --connect tcp/192.0.2.10:7447
+
+The launcher's and the operators' side of the conversation is :mod:`.client`.
 """
 
 from __future__ import annotations
@@ -24,35 +25,26 @@ import shutil
 import signal
 import tempfile
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
 import psutil
 import zenoh
 
+from swarmbed.experiments.hosts.client import HostError
 from swarmbed.experiments.launch.access import EVERY_MESSAGE
 from swarmbed.experiments.launch.launcher import AGENT_MODULE, Children, ForkServerError
 from swarmbed.wire.credentials import Identity, read_credentials, write_credentials, write_dictionary
-from swarmbed.wire.keys import HOSTS, HostKeys, Keys, host_name_of
-from swarmbed.wire.lifecycle import tune_malloc
+from swarmbed.wire.keys import HOSTS, HostKeys, Keys
 from swarmbed.wire.membership import is_alive
+from swarmbed.wire.process import process_name, tune_malloc
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 log = logging.getLogger("swarmbed.host")
 
 
-def process_name(agent: int, incarnation: int = 0) -> str:
-    """An agent process's name (and log file): ``agent_3``, or ``agent_3.1`` for its second process."""
-    return f"agent_{agent}" if incarnation == 0 else f"agent_{agent}.{incarnation}"
-
-
 def _agent_of(name: str) -> int:
     return int(name.split("_")[1].split(".")[0])
-
-
-class HostError(RuntimeError):
-    """A host that cannot be reached or refuses a request; the message says which and why."""
 
 
 class Host:
@@ -315,91 +307,3 @@ def serve(
                 shutil.rmtree(private, ignore_errors=True)
     log.info("host %s: stopped", name)
     return 0
-
-
-def _get_json(session: zenoh.Session, key: str, payload: dict | None, timeout: float) -> dict | None:
-    """The JSON object a host's queryable answers, or None after ``timeout``. A query that finds
-    no queryable ends at once: just after a host's token is seen, its queryables may not have
-    reached this session's routing yet, so such a query is asked again (a query that reached the
-    host and went unanswered took the whole timeout, and is not)."""
-    body = json.dumps(payload) if payload is not None else None
-    deadline = time.monotonic() + timeout
-    while True:
-        for reply in session.get(key, payload=body, timeout=max(0.1, deadline - time.monotonic())):
-            if reply.ok is not None:
-                answer = json.loads(reply.ok.payload.to_bytes())
-                return answer if isinstance(answer, dict) else None
-        if time.monotonic() + 0.1 >= deadline:
-            return None
-        time.sleep(0.1)
-
-
-def visible_hosts(session: zenoh.Session, timeout: float = 2.0) -> list[str]:
-    """Names of the hosts whose liveliness token this session can see."""
-    names = set()
-    for reply in session.liveliness().get(f"{HOSTS}/*", timeout=timeout):
-        if reply.ok is not None:
-            names.add(host_name_of(str(reply.ok.key_expr)))
-    return sorted(names)
-
-
-def host_info(session: zenoh.Session, name: str, timeout: float = 5.0) -> dict | None:
-    return _get_json(session, HostKeys(name).info, None, timeout)
-
-
-def wait_for_hosts(
-    session: zenoh.Session, names: list[str], timeout: float, endpoint_hint: str, auth: bool = True
-) -> None:
-    """Until every named host holds its token; else a HostError naming the missing ones and the
-    command that starts each (``auth``: with the credentials a hub that requires them admits)."""
-    deadline = time.monotonic() + timeout
-    missing = sorted(set(names))
-    while missing:
-        missing = sorted(set(names) - set(visible_hosts(session, timeout=1.0)))
-        if missing and time.monotonic() > deadline:
-            creds = " --credentials FILE" if auth else ""
-            commands = "\n".join(f"    swarmbed host --name {h} --connect {endpoint_hint}{creds}" for h in missing)
-            admit = (
-                (
-                    "\nwhere FILE is a host credentials file (swarmbed credentials FILE --user NAME --role host) "
-                    "this run admits (swarmbed run --admit FILE)"
-                )
-                if auth
-                else ""
-            )
-            raise HostError(
-                f"hosts not reachable after {timeout:.0f} s: {', '.join(missing)}; start each on its "
-                f"machine with:\n{commands}{admit}"
-            )
-
-
-def start_agents(
-    session: zenoh.Session,
-    host: str,
-    run_id: str,
-    agents: list[int],
-    args: list[str] | None = None,
-    timeout: float = 30.0,
-) -> None:
-    """Ask ``host`` to start ``agents`` of ``run_id`` (with ``args``: ``--incarnation N --restore``
-    for a swap); a HostError says why it did not."""
-    answer = _get_json(session, HostKeys(host).start, {"run_id": run_id, "agents": agents, "args": args or []}, timeout)
-    if answer is None:
-        raise HostError(f"host {host} did not answer the request to start agents {agents}")
-    if "error" in answer:
-        raise HostError(f"host {host} refused to start agents {agents}: {answer['error']}")
-
-
-def stop_agents(
-    session: zenoh.Session,
-    host: str,
-    run_id: str,
-    agents: list[int] | None = None,
-    incarnation: int = 0,
-    timeout: float = 10.0,
-) -> None:
-    """Ask ``host`` to stop ``agents`` (every agent of the run where None) of ``run_id``."""
-    request: dict[str, Any] = {"run_id": run_id, "incarnation": incarnation}
-    if agents is not None:
-        request["agents"] = agents
-    _get_json(session, HostKeys(host).stop, request, timeout)

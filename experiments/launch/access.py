@@ -39,7 +39,7 @@ import psutil
 
 from swarmbed.wire.credentials import Identity, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, PREFIX, Keys
-from swarmbed.wire.lifecycle import process_alive
+from swarmbed.wire.process import process_alive
 
 log = logging.getLogger("swarmbed.access")
 OWNER = "owner.json"  # in a run's private folder: the launcher that made it (pid, start time)

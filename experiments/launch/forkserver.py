@@ -103,7 +103,7 @@ def _reap(children: set[int]) -> None:
 
 
 def serve() -> int:
-    from swarmbed.wire.lifecycle import die_with_parent
+    from swarmbed.wire.process import die_with_parent
 
     parent = int(sys.argv[1]) if len(sys.argv) > 1 else None
     die_with_parent(parent)

@@ -13,10 +13,11 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from swarmbed.experiments.hosts.daemon import process_name, start_agents, stop_agents, wait_for_hosts
+from swarmbed.experiments.hosts.client import start_agents, stop_agents, wait_for_hosts
 from swarmbed.experiments.launch.access import agent_user
 from swarmbed.experiments.launch.launcher import Children
 from swarmbed.wire.keys import Keys
+from swarmbed.wire.process import process_name
 from swarmbed.wire.schema import LOCAL
 
 

@@ -21,7 +21,7 @@ from tqdm import tqdm
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import Coordinator, RunError
-from swarmbed.experiments.hosts.daemon import HostError, host_info, wait_for_hosts
+from swarmbed.experiments.hosts.client import HostError, host_info, wait_for_hosts
 from swarmbed.experiments.launch.access import RunAccess
 from swarmbed.experiments.launch.config import Experiment, resolve_experiment, to_yaml
 from swarmbed.experiments.launch.launcher import (
@@ -37,7 +37,7 @@ from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
 from swarmbed.experiments.launch.provenance import provenance
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
-from swarmbed.wire.lifecycle import tune_malloc
+from swarmbed.wire.process import tune_malloc
 from swarmbed.wire.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
 from swarmbed.wire.rundir import DEPLOYMENT, RESULT_FILES
 from swarmbed.wire.schema import LOCAL, carriers, hosts_of

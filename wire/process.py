@@ -1,34 +1,23 @@
-"""Process lifecycle shared by swarmbed's child processes: die with the parent, seeds per
-component, and a log that rotates (hours-long soaks must not fill the disk with one agent's
-warnings)."""
+"""What it is to be one of a run's child processes: its command line, tied to its parent's life,
+its memory kept from creeping over hours, its log set up; and whether another process still runs."""
 
 from __future__ import annotations
 
 import argparse
 import ctypes
-import logging
-import logging.handlers
 import os
 import signal
 import sys
 from collections.abc import Callable
 
-import numpy as np
+from swarmbed.wire.logs import setup_logging
 
 PR_SET_PDEATHSIG = 1
 
-# SeedSequence children of the run seed, one per component; agents get their own sub-tree.
-WORLD, NETEM, AGENTS = range(3)
 
-
-def component_rng(seed: int, component: int) -> np.random.Generator:
-    return np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[component])
-
-
-def agent_seeds(seed: int, agent_id: int, n_agents: int, parts: int) -> list[np.random.SeedSequence]:
-    """``parts`` independent seed sequences for one agent (runtime, allocator, ...)."""
-    agents = np.random.SeedSequence(seed).spawn(3)[AGENTS]
-    return agents.spawn(n_agents)[agent_id].spawn(parts)
+def process_name(agent: int, incarnation: int = 0) -> str:
+    """An agent process's name (and log file): ``agent_3``, or ``agent_3.1`` for its second process."""
+    return f"agent_{agent}" if incarnation == 0 else f"agent_{agent}.{incarnation}"
 
 
 def die_with_parent(parent_pid: int | None, sig: int = signal.SIGTERM) -> None:
@@ -67,9 +56,6 @@ def tune_malloc(mmap_threshold: int = MMAP_THRESHOLD) -> bool:
     return bool(mallopt(M_MMAP_THRESHOLD, mmap_threshold))
 
 
-LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
-
-
 def process_alive(pid: int, started: float) -> bool:
     """Whether process ``pid`` on this machine is still the one that started at ``started``
     (psutil's create time): a pid the kernel gave to another process since reads as gone."""
@@ -79,43 +65,6 @@ def process_alive(pid: int, started: float) -> bool:
         return abs(psutil.Process(pid).create_time() - started) <= 1.0
     except psutil.Error:
         return False
-
-
-class RotatingStderr(logging.handlers.RotatingFileHandler):
-    """Logging into the file this process's stdout and stderr were sent to, rotated at
-    ``max_bytes`` into ``name.log.1`` .. ``name.log.<backups>``. The process's own stdout and
-    stderr follow the file to each new one (``dup2``), so prints and tracebacks land in the
-    current file too, and everything is appended through one open file."""
-
-    def __init__(self, path: str, max_bytes: int, backups: int) -> None:
-        super().__init__(path, mode="a", maxBytes=max_bytes, backupCount=backups)
-        self._follow()
-
-    def _follow(self) -> None:
-        if self.stream is not None:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os.dup2(self.stream.fileno(), 1)
-            os.dup2(self.stream.fileno(), 2)
-
-    def doRollover(self) -> None:
-        super().doRollover()
-        self._follow()
-
-
-def setup_logging(max_mb: int | None, backups: int) -> None:
-    """Log to stderr; where stderr is a file (as the launcher starts children) and ``max_mb`` is
-    set, rotate it at that size keeping ``backups`` older files."""
-    try:
-        path = os.readlink("/proc/self/fd/2") if max_mb else ""
-    except OSError:
-        path = ""
-    if max_mb and path.startswith("/") and os.path.isfile(path):
-        handler = RotatingStderr(path, max_mb * 2**20, backups)
-        handler.setFormatter(logging.Formatter(LOG_FORMAT))
-        logging.basicConfig(level=logging.INFO, handlers=[handler])
-    else:
-        logging.basicConfig(level=logging.INFO, format=LOG_FORMAT, stream=sys.stderr)
 
 
 def child_args(
