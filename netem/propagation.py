@@ -117,14 +117,15 @@ class Propagation:
             power += self.fade_db[senders, receivers]
         return power
 
-    def receive(self, power_dbm: np.ndarray, payload_bytes: np.ndarray) -> np.ndarray:
-        """Per copy: 0 received, 1 below sensitivity, 2 packet error."""
-        outcome = np.where(power_dbm < self.p.sensitivity_dbm, 1, 0).astype(np.int8)
-        if self.p.reception == "per":
-            detected = outcome == 0
-            bits = 8.0 * (payload_bytes[detected] + self.p.overhead_bytes)
-            ber = bit_error_rate(self.p, power_dbm[detected] - self.p.noise_floor_dbm)
-            survive = np.exp(bits * np.log1p(-np.minimum(ber, 0.5)))
-            draws = self.reception_rng.random(int(np.count_nonzero(detected)))
-            outcome[np.flatnonzero(detected)[draws >= survive]] = 2
-        return outcome
+    def detected(self, power_dbm: np.ndarray) -> np.ndarray:
+        """Which copies arrive at or above the sensitivity (the others: ``below_sensitivity``)."""
+        return power_dbm >= self.p.sensitivity_dbm
+
+    def errors(self, power_dbm: np.ndarray, payload_bytes: np.ndarray) -> np.ndarray:
+        """Which detected copies a bit error spoils (``reception: per``; none with ``threshold``)."""
+        if self.p.reception != "per":
+            return np.zeros(len(power_dbm), dtype=bool)
+        bits = 8.0 * (payload_bytes + self.p.overhead_bytes)
+        ber = bit_error_rate(self.p, power_dbm - self.p.noise_floor_dbm)
+        survive = np.exp(bits * np.log1p(-np.minimum(ber, 0.5)))
+        return self.reception_rng.random(len(power_dbm)) >= survive

@@ -11,9 +11,12 @@ Order of the checks for one message sent at tick k (a copy gets the first reason
    whole message is tail-dropped -> ``queue_full`` for every copy.
 3. range: distance between sender and receiver at tick k greater than ``range`` -> ``out_of_range``.
 4. propagation (``network.propagation``, :mod:`.propagation`): received power under the
-   sensitivity -> ``below_sensitivity``; a bit error in the copy -> ``packet_error``.
-5. bursts (``network.burst``, Gilbert-Elliott, :mod:`.bursts`) -> ``burst``.
-6. loss: an independent Bernoulli draw per copy -> ``loss``.
+   sensitivity -> ``below_sensitivity``.
+5. the shared channel (``network.channel``, :mod:`.channel`): the receiver's airtime for the tick
+   is spent -> ``channel_busy``.
+6. propagation again: a bit error in the copy -> ``packet_error``.
+7. bursts (``network.burst``, Gilbert-Elliott, :mod:`.bursts`) -> ``burst``.
+8. loss: an independent Bernoulli draw per copy -> ``loss``.
 
 On the real-time clock a sample that reaches the proxy after its tick's deadline is not routed:
 every copy of its messages is ``late`` (:meth:`Radio.late`).
@@ -25,7 +28,7 @@ none by default) and is delivered at the first tick at or after that, never befo
 ``latency`` ticks. At delivery, a receiver that died meanwhile -> ``receiver_dead``.
 
 Random numbers: the independent loss draws come from the radio's generator, one per copy that
-reached step 6, in copy order (messages in sender order, then receivers in id order). Each other
+reached step 8, in copy order (messages in sender order, then receivers in id order). Each other
 model draws from its own stream, spawned from the radio's seed sequence in this order:
 shadowing, fading, reception, bursts, delay; so turning one model on never changes another's draws,
 and a run with none of them draws exactly what it drew before they existed. Shadowing, fading and
@@ -42,6 +45,7 @@ from typing import NamedTuple
 import numpy as np
 
 from swarmbed.netem.bursts import BURST, Bursts
+from swarmbed.netem.channel import CHANNEL_BUSY, SharedChannel
 from swarmbed.netem.delay import Delays
 from swarmbed.netem.ledger import DELIVERED, DROP_REASONS, Ledger
 from swarmbed.netem.propagation import BELOW_SENSITIVITY, PACKET_ERROR, Propagation
@@ -61,7 +65,12 @@ def _seed_sequence(rng: np.random.Generator) -> np.random.SeedSequence:
 def drop_reasons(params: NetworkSection) -> tuple[str, ...]:
     """Every reason a copy may be dropped for under ``params``: the disk's, and those of the models
     it turns on (a run's summary lists these, each with its count)."""
-    extra = ((BELOW_SENSITIVITY, PACKET_ERROR) if params.propagation else ()) + ((BURST,) if params.burst else ())
+    extra = (
+        ((BELOW_SENSITIVITY,) if params.propagation else ())
+        + ((CHANNEL_BUSY,) if params.channel else ())
+        + ((PACKET_ERROR,) if params.propagation else ())
+        + ((BURST,) if params.burst else ())
+    )
     return DROP_REASONS + extra
 
 
@@ -97,6 +106,7 @@ class Radio:
         self.propagation = Propagation(params.propagation, n_agents, dt, *streams[:3]) if params.propagation else None
         self.bursts = Bursts(params.burst, n_agents, dt, streams[3]) if params.burst else None
         self.delays = Delays(params.delay, n_agents, streams[4]) if params.delay else None
+        self.channel = SharedChannel(params.channel, dt) if params.channel else None
 
     @property
     def pending_copies(self) -> int:
@@ -149,19 +159,29 @@ class Radio:
             far = distance > self.params.range + _EPS
             in_play &= ~far
             drops.append(("out_of_range", far))
+        sizes = np.repeat(np.fromiter((len(s.msg.payload) for s in sends), dtype=np.int64, count=len(sends)), counts)
+        power = np.zeros(0)
         if self.propagation is not None and len(rows):
             assert distance is not None
+            power = np.full(len(rows), np.nan)
             at = np.flatnonzero(in_play)
-            sizes = np.repeat(
-                np.fromiter((len(s.msg.payload) for s in sends), dtype=np.int64, count=len(sends)), counts
-            )
-            power = self.propagation.received_dbm(alive[from_rows[at]], alive[rows[at]], distance[at])
-            outcome = self.propagation.receive(power, sizes[at])
-            for code, reason in ((1, BELOW_SENSITIVITY), (2, PACKET_ERROR)):
-                hit = np.zeros(len(rows), dtype=bool)
-                hit[at[outcome == code]] = True
-                in_play &= ~hit
-                drops.append((reason, hit))
+            power[at] = self.propagation.received_dbm(alive[from_rows[at]], alive[rows[at]], distance[at])
+            hit = np.zeros(len(rows), dtype=bool)
+            hit[at[~self.propagation.detected(power[at])]] = True
+            in_play &= ~hit
+            drops.append((BELOW_SENSITIVITY, hit))
+        if self.channel is not None and len(rows):
+            at = np.flatnonzero(in_play)
+            hit = np.zeros(len(rows), dtype=bool)
+            hit[at[self.channel.busy(alive[rows[at]], sizes[at])]] = True
+            in_play &= ~hit
+            drops.append((CHANNEL_BUSY, hit))
+        if self.propagation is not None and len(rows):
+            at = np.flatnonzero(in_play)
+            hit = np.zeros(len(rows), dtype=bool)
+            hit[at[self.propagation.errors(power[at], sizes[at])]] = True
+            in_play &= ~hit
+            drops.append((PACKET_ERROR, hit))
         if self.bursts is not None and len(rows):
             at = np.flatnonzero(in_play)
             hit = np.zeros(len(rows), dtype=bool)

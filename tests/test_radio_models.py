@@ -260,6 +260,7 @@ EVERYTHING = {
     "propagation": {"shadowing_db": 4.0, "fading": "nakagami", "nakagami_m": 1.5, "coherence_time": 1.0},
     "burst": {"mean_loss": 0.1, "mean_burst": 2.0},
     "delay": {"mean": 0.3, "jitter": 0.2, "distribution": "paretonormal", "correlation": 0.3},
+    "channel": {"capacity": 60.0},
 }
 
 
@@ -272,7 +273,15 @@ def test_every_model_at_once_is_deterministic_under_its_seed_and_accounts_for_ev
     for radio in (a, b, c):
         led = radio.ledger
         led.check()  # copies = delivered + dropped, exactly
-        for reason in ("below_sensitivity", "packet_error", "burst", "loss", "out_of_range", "no_such_receiver"):
+        for reason in (
+            "below_sensitivity",
+            "channel_busy",
+            "packet_error",
+            "burst",
+            "loss",
+            "out_of_range",
+            "no_such_receiver",
+        ):
             assert led.dropped[reason] > 0, reason
 
 
@@ -303,3 +312,29 @@ def test_params_network_lists_every_key_of_every_model_and_a_bad_one_is_named(ca
         assert key in out, key
     assert cli(["run", str(QUICKSTART), "--out", str(tmp_path), "--set", "network.burst={mean_loss: 0.1}"]) == 2
     assert "network.burst" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("senders", [2, 6])
+def test_a_shared_channel_gives_each_receiver_its_capacity_at_saturation_first_come_first_served(senders):
+    """Every robot broadcasts one 100-byte message per 0.5 s tick; a receiver hears 500 B/s, so 250
+    bytes a tick: two messages. Below saturation everything arrives; at saturation each receiver
+    gets exactly two a tick, from the lowest sender ids (copy order), the rest are channel_busy."""
+    n, ticks, size = senders + 1, 200, 100
+    params = NetworkSection(channel={"capacity": 500.0})
+    radio = Radio(params, n, 0.5, np.random.default_rng(1), Ledger(reasons=drop_reasons(params)))
+    heard: dict[int, list[int]] = {r: [] for r in range(n)}
+    msg = RadioMessage(BROADCAST, "x", bytes(size))
+    for k in range(ticks):
+        radio.route(k, list(range(n)), [0.0] * n, [0.0] * n, {s: [msg] for s in range(n)})
+        for r, inbox in radio.deliver(k + 1, list(range(n))).items():
+            heard[r].append(len(inbox))
+            if k == 0:
+                assert [m[0] for m in inbox] == [s for s in range(n) if s != r][:2], inbox
+        radio.confirm()
+    offered = n - 1
+    per_tick = min(offered, int(500.0 * 0.5 // size))
+    for r in range(n):
+        assert heard[r] == [per_tick] * (ticks - 1) or heard[r] == [per_tick] * ticks, (r, heard[r][:5])
+    led = radio.ledger
+    assert led.dropped["channel_busy"] == ticks * n * (offered - per_tick)
+    led.check()

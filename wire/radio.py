@@ -1,4 +1,5 @@
-"""The radio's parameters beyond the disk: propagation, burst loss and delay (``network:`` sections).
+"""The radio's parameters beyond the disk: propagation, burst loss, delay and a shared channel
+(``network:`` sections).
 
 Each is optional: left out (the default), the radio is today's disk with independent loss, and an
 experiment that names none gives the same result files, byte for byte, as before they existed.
@@ -150,3 +151,9 @@ class DelaySection(_Section):
     correlation: float = Field(
         0.0, ge=0, lt=1, description="how much a link's next delay follows its last (AR(1) on the normal score)"
     )
+
+
+class ChannelSection(_Section):
+    """A receiver's airtime per tick, shared by the copies it hears (``swarmbed.netem.channel``)."""
+
+    capacity: float = Field(gt=0, description="bytes per second a receiver hears, all senders together")

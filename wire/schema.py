@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer, model_validator
 
-from swarmbed.wire.radio import BurstSection, DelaySection, PropagationSection
+from swarmbed.wire.radio import BurstSection, ChannelSection, DelaySection, PropagationSection
 
 #: a name that becomes a folder (experiments, sweeps, their scenarios): no path separators, no ``..``
 SAFE_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.+=-]{0,99}$"
@@ -130,13 +130,14 @@ class NetworkSection(Strict):
     )
     burst: BurstSection | None = Field(None, description="Gilbert-Elliott burst loss per link or receiver")
     delay: DelaySection | None = Field(None, description="seconds added to each copy's arrival, with jitter")
+    channel: ChannelSection | None = Field(None, description="a receiver's airtime per tick, shared by what it hears")
 
     @model_serializer(mode="wrap")
     def _models_left_out_stay_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
         """A resolved config names only the models it turns on: an experiment that uses none
         writes the config.yaml it wrote before they existed."""
         data = handler(self)
-        for key in ("propagation", "burst", "delay"):
+        for key in ("propagation", "burst", "delay", "channel"):
             if data.get(key) is None:
                 data.pop(key, None)
         return data
