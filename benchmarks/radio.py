@@ -7,7 +7,8 @@ arena, 10 % loss. No process and no network: this is the Python work inside the 
     python benchmarks/radio.py --n 1000 --ticks 10
 
 A second table sets the disk against the full model chain of ``network:`` (log-distance path loss
-with shadowing and Rayleigh fading, Gilbert-Elliott bursts, delay with jitter and correlation) at
+with shadowing and Rayleigh fading, Gilbert-Elliott bursts, delay with jitter and correlation, a
+shared channel) at
 200 and 500 agents, moving at random, one 120-byte broadcast each per tick: milliseconds per tick
 (median) and the chain's cost as a multiple of the disk's measured in the same run. They run
 interleaved (disk, chain, disk); the disk's two figures are printed, and if they differ by more
@@ -52,6 +53,7 @@ CHAIN = {
     "propagation": {"shadowing_db": 4.0, "fading": "rayleigh", "coherence_time": 1.0},
     "burst": {"mean_loss": 0.05, "mean_burst": 2.0},
     "delay": {"mean": 0.05, "jitter": 0.02, "distribution": "normal", "correlation": 0.25},
+    "channel": {"capacity": 50000.0},
 }
 
 

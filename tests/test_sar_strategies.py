@@ -200,3 +200,36 @@ def test_cbba_wins_of_a_silent_robot_lapse():
     assert not b.build_bundle(view(0, 0, 0, victims, agent=1))  # outbid by robot 0's 50.0
     b.observe(view(101, 0, 0, victims, agent=1))
     assert b.build_bundle(view(101, 0, 0, victims, agent=1)) and b.state.bundle == [7]
+
+
+# -- Algorithm 3's two readings (issue 31 item 3) -----------------------------------------------------
+
+
+def test_rebuild_starts_each_build_from_an_empty_bundle_and_top_up_keeps_the_old_order():
+    """A robot that moved: its old first victim is now the farther one. Topping up keeps the bundle
+    as built; B_i <- empty builds it again, nearest first."""
+    victims = {1: (10, 0, 0), 2: (20, 0, 0)}
+    for build, expected in (("top_up", [1, 2]), ("rebuild", [2, 1])):
+        s = make("cbba", {"max_tasks": 2, "bundle_build": build}, 0, np.random.default_rng(0), 0, "sar")
+        first = view(0, 0, 0, victims)
+        s.observe(first)
+        s.build_bundle(first)
+        assert s.state.bundle == [1, 2]
+        moved = view(1, 19, 0, victims)
+        s.observe(moved)
+        s.build_bundle(moved)
+        assert s.state.bundle == expected, build
+        assert all(s.state.z[v] == 0 for v in expected)
+
+
+def test_available_known_never_bids_on_a_victim_another_robot_is_known_to_win():
+    """T_available = T minus the tasks in any bundle the robot knows of: robot 3's weak claim on the
+    nearest victim is outbid under 'own' and left alone under 'known'."""
+    victims = {1: (2, 0, 0), 2: (30, 0, 0)}
+    for available, expected in (("own", [1]), ("known", [2])):
+        s = make("cbba", {"max_tasks": 1, "available": available}, 0, np.random.default_rng(0), 0, "sar")
+        s.state.z[1], s.state.y[1], s.state.s[3] = 3, 0.01, 0.0  # robot 3, heard at time 0, claims victim 1 low
+        v = view(0, 0, 0, victims)
+        s.observe(v)
+        s.build_bundle(v)
+        assert s.state.bundle == expected, available

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 from pydantic import Field
 
@@ -44,6 +44,16 @@ class ConsensusParams(StrategyParams):
         ge=1,
         description="every n-th round's message carries the whole state, those between "
         "only what changed (1, the paper's rounds: always whole)",
+    )
+    bundle_build: Literal["top_up", "rebuild"] = Field(
+        "top_up",
+        description="Algorithm 3: top_up keeps the bundle and adds to it each build; rebuild starts each "
+        "build from B_i <- empty, as the algorithm is written (docs/reproduction.md, issue 31 item 3)",
+    )
+    available: Literal["own", "known"] = Field(
+        "own",
+        description="Algorithm 3's T_available = T minus the tasks already in a bundle: own (this robot's) or "
+        "known (any bundle it knows of, which forbids outbidding a known winner)",
     )
 
 
@@ -102,10 +112,17 @@ class SARConsensus(SARStrategy):
 
     def build_bundle(self, view: LocalView) -> bool:
         st = self.state
+        if self.params.bundle_build == "rebuild":  # B_i <- empty: this robot's claims go with it
+            for v in list(st.bundle):
+                if st.z.get(v) == self.agent_id:
+                    st.reset(v)
+            st.bundle.clear()
+            st.path.clear()
+        known_elsewhere = self.params.available == "known"
         while len(st.bundle) < self.params.max_tasks:
             best, best_u = None, 0.0
             for v in self.candidates():
-                if v in st.bundle:
+                if v in st.bundle or (known_elsewhere and st.z.get(v, self.agent_id) != self.agent_id):
                     continue
                 u = self.utility(view, v)
                 if u > best_u and st.eligible(v, u):
