@@ -45,7 +45,8 @@ from swarmbed.plugins.registry import PluginError, resolve_scenario  # noqa: E40
 AGENTS, RANGE, ALLOCATOR = "agents.count", "network.range", "allocator"
 #: what every scenario's runs send, tabulated beside the scenario's own metrics
 NETWORK_LABELS = {
-    "network.messages_sent": "messages sent per trial",
+    "network.messages_sent": "messages sent per trial",  # one per broadcast, however many hear it
+    "network.delivered": "copies delivered per trial",  # one per receiver that got it
     "network.bytes_sent": "payload bytes sent per trial",
 }
 
