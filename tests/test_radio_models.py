@@ -146,22 +146,31 @@ def _runs(lost: np.ndarray) -> np.ndarray:
     return np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)
 
 
+LINKS = 30  # one sender, this many receivers: as many independent chains (bursts per link)
+
+
+def _lost_per_link(got: list[dict], ticks: range) -> list[np.ndarray]:
+    return [np.array([r not in got[k] for k in ticks]) for r in range(1, LINKS + 1)]
+
+
 @pytest.mark.parametrize("every", [1, 4])
 def test_gilbert_elliott_in_time_keeps_its_stationary_loss_and_burst_length_in_seconds(every):
     """Advanced once per tick for every link: a sender that speaks every 4th tick sees the same loss
     and the same bursts in seconds as one that speaks every tick."""
     dt, mean_loss, mean_burst = 0.5, 0.2, 3.0  # seconds
-    ticks = 120000
+    ticks = 4000
     network = {"burst": {"mean_loss": mean_loss, "mean_burst": mean_burst}}
-    radio, got = drive(network, [0.0, 1.0], [0.0, 0.0], ticks, every=every, dt=dt)
-    lost = np.array([1 not in got[k] for k in range(0, ticks, every)])
+    xs = [0.0] + [1.0] * LINKS
+    radio, got = drive(network, xs, [0.0] * (LINKS + 1), ticks, every=every, dt=dt)
+    links = _lost_per_link(got, range(0, ticks, every))
+    lost = np.concatenate(links)
     n = len(lost)
     assert abs(lost.mean() - mean_loss) <= SIGMAS * math.sqrt(mean_loss * (1 - mean_loss) / n) * 4  # correlated draws
     r_tick = 1 - math.exp(-dt / mean_burst)  # P(bad -> good) per tick
     p_tick = 1 - math.exp(-dt / (mean_burst * (1 - mean_loss) / mean_loss))
     # seen every `every` ticks, a loss follows a loss with P(bad after `every` ticks | bad now)
     stay = mean_loss + (1 - mean_loss) * (1 - p_tick - r_tick) ** every
-    runs = _runs(lost)
+    runs = np.concatenate([_runs(link) for link in links])
     expected = 1 / (1 - stay)
     se = math.sqrt(stay / (1 - stay) ** 2 / len(runs))
     assert abs(runs.mean() - expected) <= SIGMAS * se, (runs.mean(), expected)
@@ -171,12 +180,14 @@ def test_gilbert_elliott_in_time_keeps_its_stationary_loss_and_burst_length_in_s
 
 
 def test_gilbert_elliott_per_packet_matches_tc_netem_gemodel():
-    p, r, ticks = 0.05, 0.25, 100000
-    radio, got = drive({"burst": {"advance": "packet", "p": p, "r": r}}, [0.0, 1.0], [0.0, 0.0], ticks)
-    lost = np.array([1 not in g for g in got])
+    p, r, ticks = 0.05, 0.25, 3000
+    xs = [0.0] + [1.0] * LINKS
+    radio, got = drive({"burst": {"advance": "packet", "p": p, "r": r}}, xs, [0.0] * (LINKS + 1), ticks)
+    links = _lost_per_link(got, range(ticks))
+    lost = np.concatenate(links)
     pi_bad = p / (p + r)
-    assert abs(lost.mean() - pi_bad) <= SIGMAS * 3 * math.sqrt(pi_bad * (1 - pi_bad) / ticks)
-    runs = _runs(lost)
+    assert abs(lost.mean() - pi_bad) <= SIGMAS * 3 * math.sqrt(pi_bad * (1 - pi_bad) / len(lost))
+    runs = np.concatenate([_runs(link) for link in links])
     assert abs(runs.mean() - 1 / r) <= SIGMAS * math.sqrt((1 - r) / r**2 / len(runs))
 
 
