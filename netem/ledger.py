@@ -19,6 +19,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from swarmbed.wire.rowfile import RowFile
 
 SENT = "sent"
@@ -27,26 +29,46 @@ DROP_REASONS = ("out_of_range", "loss", "queue_full", "receiver_dead", "no_such_
 OUTCOMES = (SENT, DELIVERED) + DROP_REASONS
 LEDGER_COLUMNS = ("tick", "sender", "kind", "outcome", "messages", "bytes")
 RECEIVER_COLUMNS = ("tick", "sender", "receiver", "kind", "outcome", "bytes")
+#: per-copy figures the radio's models compute, in the receiver ledger when a model is on
+MEASURE_COLUMNS = ["distance", "power_dbm", "snr_db", "delay_s"]
 
 
 class ReceiverLog:
-    """One row per copy, streamed to a Parquet file in row groups of about ``group`` rows."""
+    """One row per copy, streamed to a Parquet file in row groups of about ``group`` rows.
 
-    def __init__(self, path: Path, group: int = 1 << 16) -> None:
+    ``measured``: the radio's models compute per-copy figures (:data:`MEASURE_COLUMNS`: distance,
+    received power, SNR, added delay), one more column each, NaN where a copy never reached the
+    step that computes it."""
+
+    def __init__(self, path: Path, group: int = 1 << 16, measured: bool = False) -> None:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
         self._pa = pa
         # strings stay strings here: Parquet dictionary-encodes the few kinds and outcomes itself
-        types = (pa.int64(), pa.int32(), pa.int32(), pa.string(), pa.string(), pa.int32())
-        self.schema = pa.schema(list(zip(RECEIVER_COLUMNS, types)))
+        types = [pa.int64(), pa.int32(), pa.int32(), pa.string(), pa.string(), pa.int32()]
+        names = list(RECEIVER_COLUMNS)
+        if measured:
+            types += [pa.float64()] * len(MEASURE_COLUMNS)
+            names += MEASURE_COLUMNS
+        self.measured = measured
+        self.schema = pa.schema(list(zip(names, types)))
         self._writer: Any = pq.ParquetWriter(path, self.schema)
         self.group = group
         self.rows = 0
-        self._cols: tuple[list, ...] = ([], [], [], [], [], [])
+        self._cols: tuple[list, ...] = tuple([] for _ in names)
 
-    def add(self, tick: int, sender: int, receivers: Iterable[int], kind: str, outcome: str, size: int) -> int:
-        ticks, senders, recv, kinds, outcomes, sizes = self._cols
+    def add(
+        self,
+        tick: int,
+        sender: int,
+        receivers: Iterable[int],
+        kind: str,
+        outcome: str,
+        size: int,
+        measures: np.ndarray | None = None,
+    ) -> int:
+        ticks, senders, recv, kinds, outcomes, sizes = self._cols[:6]
         before = len(recv)
         recv.extend(int(r) for r in receivers)
         n = len(recv) - before
@@ -55,6 +77,10 @@ class ReceiverLog:
         kinds.extend([kind] * n)
         outcomes.extend([outcome] * n)
         sizes.extend([size] * n)
+        if self.measured:
+            values = measures if measures is not None else np.full((n, len(MEASURE_COLUMNS)), np.nan)
+            for col, column in zip(self._cols[6:], values.T):
+                col.extend(column.tolist())
         return n
 
     def flush(self, force: bool = False) -> None:
@@ -118,6 +144,7 @@ class Ledger:
         outcome: str,
         copies: int = 1,
         to: Iterable[int] | None = None,
+        measures: np.ndarray | None = None,
     ) -> None:
         """Book ``copies`` copies of one message (``size`` payload bytes each) with ``outcome``.
 
@@ -127,7 +154,7 @@ class Ledger:
         if self.receivers is not None:
             if to is None:
                 raise ValueError(f"ledger kept per receiver, but {outcome!r} was booked without its receivers")
-            n = self.receivers.add(tick, sender, to, kind, outcome, size)
+            n = self.receivers.add(tick, sender, to, kind, outcome, size, measures)
             if n != copies:
                 raise ValueError(f"{copies} {outcome!r} copies booked with {n} receivers")
         row = self._open[(tick, sender, kind, outcome)]

@@ -18,7 +18,7 @@ from pathlib import Path
 import zenoh
 
 from swarmbed.netem.ledger import LEDGER_COLUMNS, Ledger, ReceiverLog
-from swarmbed.netem.radio import Radio, drop_reasons
+from swarmbed.netem.radio import Radio, drop_reasons, measured
 from swarmbed.wire.codec import (
     AgentOut,
     NetemControl,
@@ -57,7 +57,7 @@ class Proxy:
         self.sink = RowFile(out_dir / LEDGER_FILE, LEDGER_COLUMNS)
         self.receivers: ReceiverLog | None = None
         if spec.network.ledger == "per_receiver":
-            self.receivers = ReceiverLog(out_dir / (RECEIVER_LEDGER_FILE + ".part"))
+            self.receivers = ReceiverLog(out_dir / (RECEIVER_LEDGER_FILE + ".part"), measured=measured(spec.network))
         self.ledger = Ledger(self.sink, self.receivers, drop_reasons(spec.network))
         self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger)
         self.events: queue.SimpleQueue = queue.SimpleQueue()

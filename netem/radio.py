@@ -47,7 +47,7 @@ import numpy as np
 from swarmbed.netem.bursts import BURST, Bursts
 from swarmbed.netem.channel import CHANNEL_BUSY, SharedChannel
 from swarmbed.netem.delay import Delays
-from swarmbed.netem.ledger import DELIVERED, DROP_REASONS, Ledger
+from swarmbed.netem.ledger import DELIVERED, DROP_REASONS, MEASURE_COLUMNS, Ledger
 from swarmbed.netem.propagation import BELOW_SENSITIVITY, PACKET_ERROR, Propagation
 from swarmbed.wire.codec import BROADCAST, RadioMessage
 from swarmbed.wire.schema import NetworkSection
@@ -60,6 +60,12 @@ def _seed_sequence(rng: np.random.Generator) -> np.random.SeedSequence:
     seq = getattr(rng.bit_generator, "seed_seq", None) or rng.bit_generator._seed_seq  # type: ignore[attr-defined]
     assert isinstance(seq, np.random.SeedSequence)
     return seq
+
+
+def measured(params: NetworkSection) -> bool:
+    """Whether ``params`` turn on a model that computes per-copy figures (the receiver ledger's
+    distance, power_dbm, snr_db and delay_s columns)."""
+    return params.propagation is not None or params.delay is not None
 
 
 def drop_reasons(params: NetworkSection) -> tuple[str, ...]:
@@ -97,22 +103,24 @@ class Radio:
         self.ledger = ledger if ledger is not None else Ledger(reasons=drop_reasons(params))
         self._busy_until: dict[int, float] = defaultdict(float)
         self._in_queue: dict[int, deque[float]] = defaultdict(deque)  # transmission end times
-        # delivery tick -> [(receivers, sender, kind, payload, send_tick)]
-        self._pending: dict[int, list[tuple[np.ndarray, int, str, bytes, int]]] = defaultdict(list)
-        # (tick, sender, kind, size, receivers delivered to, receivers found dead)
-        self._unconfirmed: list[tuple[int, int, str, int, np.ndarray, np.ndarray]] = []
+        # delivery tick -> [(receivers, sender, kind, payload, send_tick, their measures or None)]
+        self._pending: dict[int, list[tuple[np.ndarray, int, str, bytes, int, np.ndarray | None]]] = defaultdict(list)
+        # (tick, sender, kind, size, receivers delivered to, receivers found dead, their measures or None)
+        self._unconfirmed: list[tuple[int, int, str, int, np.ndarray, np.ndarray, np.ndarray | None]] = []
         # the models beyond the disk, each with its own stream (see the module's docstring)
         streams = [np.random.default_rng(s) for s in _seed_sequence(rng).spawn(5)]
         self.propagation = Propagation(params.propagation, n_agents, dt, *streams[:3]) if params.propagation else None
         self.bursts = Bursts(params.burst, n_agents, dt, streams[3]) if params.burst else None
         self.delays = Delays(params.delay, n_agents, streams[4]) if params.delay else None
         self.channel = SharedChannel(params.channel, dt) if params.channel else None
+        # per-copy distance, power, SNR and delay in the receiver ledger, where a model computes them
+        self.measuring = self.ledger.per_receiver and measured(params)
 
     @property
     def pending_copies(self) -> int:
         """Copies scheduled or handed out but not yet booked."""
         scheduled = sum(len(r) for entries in self._pending.values() for r, *_ in entries)
-        return scheduled + sum(len(d) + len(x) for *_, d, x in self._unconfirmed)
+        return scheduled + sum(len(u[4]) + len(u[5]) for u in self._unconfirmed)
 
     def route(
         self,
@@ -152,7 +160,7 @@ class Radio:
         in_play = np.ones(len(rows), dtype=bool)
         drops: list[tuple[str, np.ndarray]] = []  # (reason, which copies), in booking order
         distance: np.ndarray | None = None
-        if (self.params.range is not None or self.propagation is not None) and len(rows):
+        if (self.params.range is not None or self.propagation is not None or self.measuring) and len(rows):
             distance = np.hypot(x[from_rows] - x[rows], y[from_rows] - y[rows])
         if self.params.range is not None and len(rows):
             assert distance is not None
@@ -194,7 +202,14 @@ class Radio:
             hit[at] = self.rng.random(len(at)) < self.params.loss
             in_play &= ~hit
             drops.append(("loss", hit))
-        self._book_and_schedule(tick, sends, counts, alive, rows, from_rows, drops, in_play)
+        measures = None
+        if self.measuring and len(rows):
+            measures = np.full((len(rows), len(MEASURE_COLUMNS)), np.nan)
+            measures[:, 0] = distance
+            if len(power):
+                measures[:, 1] = power
+                measures[:, 2] = power - self.propagation.p.noise_floor_dbm  # type: ignore[union-attr]
+        self._book_and_schedule(tick, sends, counts, alive, rows, from_rows, drops, in_play, measures)
 
     def _address(
         self,
@@ -249,7 +264,10 @@ class Radio:
         from_rows: np.ndarray,
         drops: list[tuple[str, np.ndarray]],
         kept: np.ndarray,
+        measures: np.ndarray | None = None,
     ) -> None:
+        """Book every copy of the tick and schedule the kept ones. ``measures``: per copy, the
+        receiver ledger's figures (:data:`MEASURE_COLUMNS`), or None when none are kept."""
         ledger, per_receiver = self.ledger, self.ledger.per_receiver
         bounds = np.concatenate(([0], np.cumsum(counts)))
         # copies per message and outcome in one pass: column 0 kept, column r the r-th drop reason
@@ -272,6 +290,8 @@ class Radio:
         if self.delays is not None and len(kept_at):
             ends = np.repeat(np.fromiter((s.end for s in sends), dtype=float, count=len(sends)), n_kept)
             added = self.delays.draw(alive[from_rows[kept_at]], alive[rows[kept_at]])
+            if measures is not None:
+                measures[kept_at, 3] = added
             due_all = np.maximum(tick + 1, np.ceil((ends + added) / self.dt - _EPS).astype(np.int64)) + latency
             dues = np.split(due_all, np.cumsum(n_kept)[:-1])
             first = np.cumsum(n_kept) - n_kept
@@ -292,17 +312,22 @@ class Radio:
             for reason, which, per_message in n_dropped:
                 if per_message[i]:
                     receivers = alive[rows[a:b][which[a:b]]] if per_receiver else None
-                    ledger.book(tick, send.sender, kind, size, reason, per_message[i], receivers)
+                    figures = measures[a:b][which[a:b]] if measures is not None else None
+                    ledger.book(tick, send.sender, kind, size, reason, per_message[i], receivers, figures)
             if not keeps[i]:
                 continue
+            kept_figures = measures[a:b][kept[a:b]] if measures is not None else None
             if dues is None:
                 due = max(tick + 1, math.ceil(send.end / self.dt - _EPS)) + latency
-                self._pending[due].append((kept_ids[i], send.sender, kind, send.msg.payload, tick))
+                self._pending[due].append((kept_ids[i], send.sender, kind, send.msg.payload, tick, kept_figures))
             elif not spread[i]:
-                self._pending[int(dues[i][0])].append((kept_ids[i], send.sender, kind, send.msg.payload, tick))
+                entry = (kept_ids[i], send.sender, kind, send.msg.payload, tick, kept_figures)
+                self._pending[int(dues[i][0])].append(entry)
             else:
                 for due in np.unique(dues[i]).tolist():  # earliest first; receivers stay in id order
-                    self._pending[due].append((kept_ids[i][dues[i] == due], send.sender, kind, send.msg.payload, tick))
+                    on = dues[i] == due
+                    figures = kept_figures[on] if kept_figures is not None else None
+                    self._pending[due].append((kept_ids[i][on], send.sender, kind, send.msg.payload, tick, figures))
 
     def late(self, book_at: int, sender: int, messages: Iterable[RadioMessage], alive: Sequence[int]) -> None:
         """Messages of a sample that reached the proxy after its tick's deadline (real-time clock):
@@ -328,25 +353,29 @@ class Radio:
         alive_ids = np.fromiter(alive, dtype=np.int64)
         is_alive[alive_ids[(alive_ids >= 0) & (alive_ids < self.n_agents)]] = True
         inboxes: dict[int, list[list]] = {}
-        for receivers, sender, kind, payload, _sent in self._pending.pop(tick, ()):
+        for receivers, sender, kind, payload, _sent, figures in self._pending.pop(tick, ()):
             there = is_alive[receivers]
             reached, dead = receivers[there], receivers[~there]
             item = [sender, kind, payload]
             for r in reached.tolist():
                 inboxes.setdefault(r, []).append(item)
-            self._unconfirmed.append((tick, sender, kind, len(payload), reached, dead))
+            if figures is not None:  # delivered copies first, then the dead ones, as they are booked
+                figures = np.concatenate([figures[there], figures[~there]])
+            self._unconfirmed.append((tick, sender, kind, len(payload), reached, dead, figures))
         return inboxes
 
     def confirm(self) -> None:
         """The inboxes handed out by :meth:`deliver` reached their tick: book them."""
-        for tick, sender, kind, size, delivered, dead in self._unconfirmed:
-            self.ledger.book(tick, sender, kind, size, DELIVERED, len(delivered), delivered)
-            self.ledger.book(tick, sender, kind, size, "receiver_dead", len(dead), dead)
+        for tick, sender, kind, size, delivered, dead, figures in self._unconfirmed:
+            n = len(delivered)
+            first, rest = (figures[:n], figures[n:]) if figures is not None else (None, None)
+            self.ledger.book(tick, sender, kind, size, DELIVERED, n, delivered, first)
+            self.ledger.book(tick, sender, kind, size, "receiver_dead", len(dead), dead, rest)
         self._unconfirmed.clear()
 
     def finish(self, last_tick: int) -> None:
         """The run is over after ``last_tick``: every copy not yet delivered is booked ``run_ended``."""
-        for _tick, sender, kind, size, delivered, dead in self._unconfirmed:
+        for _tick, sender, kind, size, delivered, dead, figures in self._unconfirmed:
             self.ledger.book(
                 last_tick,
                 sender,
@@ -355,9 +384,10 @@ class Radio:
                 "run_ended",
                 len(delivered) + len(dead),
                 np.concatenate([delivered, dead]),
+                figures,
             )
         self._unconfirmed.clear()
         for due in sorted(self._pending):
-            for receivers, sender, kind, payload, _sent in self._pending[due]:
-                self.ledger.book(last_tick, sender, kind, len(payload), "run_ended", len(receivers), receivers)
+            for receivers, sender, kind, payload, _sent, figures in self._pending[due]:
+                self.ledger.book(last_tick, sender, kind, len(payload), "run_ended", len(receivers), receivers, figures)
         self._pending.clear()

@@ -349,3 +349,32 @@ def test_a_shared_channel_gives_each_receiver_its_capacity_at_saturation_first_c
     led = radio.ledger
     assert led.dropped["channel_busy"] == ticks * n * (offered - per_tick)
     led.check()
+
+
+def test_the_receiver_ledger_records_each_copys_distance_power_snr_and_delay(tmp_path):
+    import pandas as pd
+
+    from swarmbed.netem.ledger import ReceiverLog
+
+    params = NetworkSection(propagation=LOG_DISTANCE, delay={"mean": 0.4, "jitter": 0.1})
+    log = ReceiverLog(tmp_path / "copies.parquet", measured=True)
+    radio = Radio(params, 6, 0.5, np.random.default_rng(2), Ledger(receivers=log, reasons=drop_reasons(params)))
+    xs = [0.0, 30.0, 60.0, 75.0, 90.0, 250.0]
+    for k in range(200):
+        radio.route(k, list(range(6)), xs, [0.0] * 6, {0: [RadioMessage(BROADCAST, "x", bytes(60))]})
+        radio.deliver(k + 1, list(range(6)))
+        radio.confirm()
+    radio.finish(200)
+    log.close()
+    rows = pd.read_parquet(tmp_path / "copies.parquet")
+    copies = rows[rows["outcome"] != "sent"]
+    assert len(copies) == 200 * 5
+    expected_power = 16.0206 - (46.6777 + 30 * np.log10(copies["distance"]))
+    assert np.allclose(copies["power_dbm"], expected_power)
+    assert np.allclose(copies["snr_db"], copies["power_dbm"] + 93.97)
+    assert np.allclose(copies["distance"], np.array(xs)[copies["receiver"]])
+    delivered = copies[copies["outcome"] == "delivered"]
+    assert delivered["delay_s"].notna().all() and abs(delivered["delay_s"].mean() - 0.4) < 0.02
+    lost = copies[~copies["outcome"].isin(["delivered", "run_ended"])]  # in flight at the end: delayed too
+    assert lost["delay_s"].isna().all() and copies[copies["outcome"] == "run_ended"]["delay_s"].notna().all()
+    assert set(copies["outcome"]) >= {"delivered", "below_sensitivity", "packet_error"}
