@@ -74,3 +74,18 @@ def test_sar_analysis_of_two_sweeps(tmp_path):
     assert set(stats["sweep"]) == {"v10", "v20"} and set(stats["strategy"]) == {"tree"}
     row = stats[(stats["sweep"] == "v10") & (stats["metric"] == "network.messages_sent")].iloc[0]
     assert row["mean"] == 0 and row["control_mean"] > 0 and row["cohens_d"] < 0
+
+
+def test_strategies_are_compared_within_each_setting_of_a_sweeps_other_factors(tmp_path):
+    """A sweep over strategies and a loss level: the statistics and the per-strategy bars are made
+    per loss level, never over both pooled."""
+    base = ROOT / "experiments" / "sar" / "_base.yaml"
+    spec = tmp_path / "levels.yaml"
+    grid = "{allocator.name: [tree, cbba-etc], network.loss: [0.0, 0.5]}"
+    spec.write_text(f"name: levels\nbase: {base}\nruns: 2\ngrid: {grid}\n")
+    run_sweep(load_sweep(spec, extra=["agents.count=4", "run.duration=15"]), tmp_path / "out", jobs=2, progress=False)
+    names = {p.name for p in analyze(tmp_path / "out", control="cbba-etc")}
+    assert {"fig_rescued_expired_levels_loss-0.png", "fig_rescued_expired_levels_loss-0.5.png"} <= names, names
+    table = pd.read_csv(tmp_path / "out" / "statistics.csv")
+    assert set(table["sweep"]) == {"levels_loss-0", "levels_loss-0.5"}
+    assert (table["n"] == 2).all()  # two runs per strategy in each setting, not four pooled

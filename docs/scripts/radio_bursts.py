@@ -6,8 +6,8 @@ a markdown table from the sweep of experiments/radio/sar_bursts.yaml.
 
 Per strategy and loss model: victims rescued per trial (mean and 95 % CI, Student t), messages and
 copies delivered per trial, the strategy's rank by rescues under each model, and Welch's t-test of
-rescues between the two models. ``swarmbed analyze`` pools a strategy's runs across the sweep's
-scenarios, which would mix the two loss models here; this script keeps them apart.
+rescues between the two models, side by side (``swarmbed analyze`` gives each model's statistics
+and bars on their own).
 """
 
 from __future__ import annotations

@@ -20,6 +20,7 @@ With several directories, the first one receives the outputs.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -111,6 +112,28 @@ def _resolve_keys(df: pd.DataFrame, keys: tuple[str, ...]) -> None:
         used = {group: _config_value(Path(run_dir) / "config.yaml", key) for group, run_dir in first.items()}
         values = pd.Series([used[(sw, sc)] for sw, sc in zip(df["sweep"], df["scenario"])], index=df.index)
         df[key] = df[key].fillna(values) if key in df else values
+
+
+ALLOCATOR_KEYS = (ALLOCATOR, "allocator.name")
+
+
+def _short(value: Any) -> str:
+    if value is None or (isinstance(value, float) and np.isnan(value)):
+        return "none"
+    text = f"{value:g}" if isinstance(value, float) else str(value)
+    return re.sub(r"[^A-Za-z0-9.]+", "-", text).strip("-")[:40] or "none"
+
+
+def _group_by_setting(df: pd.DataFrame) -> None:
+    """``df["group"]``: the sweep, and where a sweep varies factors besides the allocator (a loss
+    model, a tick length), the setting of those factors too. Strategies are compared, and their
+    means drawn, within one group: runs made under different settings are never pooled."""
+    others = [f for f in df.attrs.get("factors", []) if f in df and f not in ALLOCATOR_KEYS]
+    if not others:
+        df["group"] = df["sweep"]
+        return
+    settings = df[others].apply(lambda row: "_".join(f"{k.split('.')[-1]}-{_short(row[k])}" for k in others), axis=1)
+    df["group"] = df["sweep"] + "_" + settings
 
 
 def _config_value(config: Path, key: str) -> Any:
@@ -336,7 +359,8 @@ def _numeric(df: pd.DataFrame, metrics: tuple[str, ...]) -> list[str]:
 
 def _means(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
     """Means per allocator with 95 % CI bars, the first metric filled, the others hatched; one figure
-    per sweep where there are several (a failure level's trials are not pooled with another's)."""
+    per group (sweep, and setting of its other factors) where there are several: a failure level's
+    trials are not pooled with another's."""
     metrics = _numeric(df, figure.metrics)
     if not metrics:
         return []
@@ -344,9 +368,9 @@ def _means(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
     written = []
     width = 0.8 / len(metrics)
     with plt.rc_context(STYLE):
-        sweeps = sorted(df["sweep"].unique()) if "sweep" in df and df["sweep"].nunique() > 1 else [None]
+        sweeps = sorted(df["group"].unique()) if "group" in df and df["group"].nunique() > 1 else [None]
         for sweep in sweeps:
-            chosen = per if sweep is None else {g: per[g][per[g]["sweep"] == sweep] for g in strategies}
+            chosen = per if sweep is None else {g: per[g][per[g]["group"] == sweep] for g in strategies}
             fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
             for k, metric in enumerate(metrics):
                 means = np.array([chosen[g][metric].mean() for g in strategies])
@@ -566,6 +590,7 @@ def analyze(sweep_dirs: list[Path] | Path, control: str | None = None, mixed_ver
         (out / stale).unlink(missing_ok=True)
     if "scenario_kind" not in df:
         df["scenario_kind"] = ""
+    _group_by_setting(df)
     kinds = sorted(df["scenario_kind"].fillna("").astype(str).unique())
     summaries, tables, written = [], [], []
     for kind in kinds:
@@ -576,7 +601,7 @@ def analyze(sweep_dirs: list[Path] | Path, control: str | None = None, mixed_ver
         summaries.append(scenario_summary(rows, labels))
         chosen = control or cls.control_allocator
         if chosen is not None:
-            for sweep, group in rows.groupby("sweep", sort=True):
+            for sweep, group in rows.groupby("group", sort=True):
                 if group[ALLOCATOR].nunique() > 1 and chosen in set(group[ALLOCATOR]):
                     t = compare(group, ALLOCATOR, _numeric(group, tuple(labels)), chosen)
                     t.insert(0, "sweep", sweep)
