@@ -297,12 +297,13 @@ def test_every_model_at_once_is_deterministic_under_its_seed_and_accounts_for_ev
 
 
 def test_turning_one_model_on_leaves_the_independent_loss_draws_as_they_were():
-    """Each model draws from its own stream: with bursts off and on, the copies the bursts let
-    through meet the very same loss draws... as far as the draws line up: with nothing else on,
-    adding a zero-effect delay (jitter 0) changes nothing at all."""
+    """Each model draws from its own stream: a delay that draws a normal for every copy but never
+    moves one out of the next 0.5 s tick (10 ms +- 1 ms) leaves every loss draw, and so every
+    inbox, as it was. Were the delay drawn from the radio's own generator, the next tick's loss
+    draws would shift."""
     base = {"range": 140.0, "loss": 0.2}
     _, plain = _inboxes_of(base, seed=4)
-    _, delayed = _inboxes_of({**base, "delay": {"mean": 0.0, "jitter": 0.0}}, seed=4)
+    _, delayed = _inboxes_of({**base, "delay": {"mean": 0.01, "jitter": 0.001}}, seed=4)
     assert plain == delayed
 
 
