@@ -49,8 +49,9 @@ class Delays:
         self.d = d
         self.n = n_agents
         self.rng = rng
-        self.score = np.zeros(n_agents * n_agents) if d.correlation > 0 else None  # last z per link
-        self.seen = np.zeros(n_agents * n_agents, dtype=bool)
+        correlated = d.correlation > 0
+        self.score = np.zeros(n_agents * n_agents) if correlated else None  # last z per link
+        self.seen = np.zeros(n_agents * n_agents if correlated else 0, dtype=bool)  # links with a last z
 
     def draw(self, senders: np.ndarray, receivers: np.ndarray) -> np.ndarray:
         """Added seconds for these copies (ids, in copy order)."""

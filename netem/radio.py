@@ -167,7 +167,10 @@ class Radio:
             far = distance > self.params.range + _EPS
             in_play &= ~far
             drops.append(("out_of_range", far))
-        sizes = np.repeat(np.fromiter((len(s.msg.payload) for s in sends), dtype=np.int64, count=len(sends)), counts)
+        sizes = np.zeros(0, dtype=np.int64)
+        if self.propagation is not None or self.channel is not None:  # per-copy payload sizes
+            sizes = np.fromiter((len(s.msg.payload) for s in sends), dtype=np.int64, count=len(sends))
+            sizes = np.repeat(sizes, counts)
         power = np.zeros(0)
         if self.propagation is not None and len(rows):
             assert distance is not None

@@ -16,20 +16,12 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 from scipy import stats
 
 from swarmbed.experiments.folders import read_table
+from swarmbed.experiments.views.analyze import ci95
 
 ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
-
-
-def ci(values: pd.Series) -> tuple[float, float]:
-    v = values.dropna().to_numpy(dtype=float)
-    if len(v) < 2:
-        return (float("nan"), float("nan"))
-    half = stats.t.ppf(0.975, len(v) - 1) * v.std(ddof=1) / np.sqrt(len(v))
-    return float(v.mean() - half), float(v.mean() + half)
 
 
 def main() -> None:
@@ -53,7 +45,7 @@ def main() -> None:
         if a.empty or b.empty:
             continue
         p = stats.ttest_ind(a["rescued"], b["rescued"], equal_var=False).pvalue if len(a) > 1 and len(b) > 1 else np.nan
-        (la, ha), (lb, hb) = ci(a["rescued"]), ci(b["rescued"])
+        (la, ha), (lb, hb) = ci95(a["rescued"]), ci95(b["rescued"])
         print(
             f"| {s} | {len(a)} / {len(b)} | {a['rescued'].mean():.1f} ({la:.1f}-{ha:.1f}) "
             f"| {b['rescued'].mean():.1f} ({lb:.1f}-{hb:.1f}) | {b['rescued'].mean() - a['rescued'].mean():+.1f} "

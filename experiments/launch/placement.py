@@ -38,9 +38,8 @@ class AgentPlacement:
     join_timeout: float
     started: list[str] = field(default_factory=list)  # hosts this run started agents on
 
-    def first(self, agent: int, host: str) -> None:
+    def first(self, agent: int) -> None:
         """The first process of ``agent`` on this machine (hosts start theirs through :meth:`on_host`)."""
-        assert host == LOCAL
         self.children.spawn(
             f"agent_{agent}",
             "swarmbed.agent_runtime",

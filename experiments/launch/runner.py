@@ -187,7 +187,7 @@ def run_experiment(
             children.spawn("netem", "swarmbed.netem", [*placement.common, *identity("netem"), "--out", str(out_dir)])
             for i in range(exp.agents.count):
                 if where[i] == LOCAL:
-                    placement.first(i, LOCAL)
+                    placement.first(i)
         except ForkServerError as exc:
             raise RunError(str(exc)) from None
         hosts = {}

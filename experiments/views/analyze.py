@@ -147,7 +147,8 @@ def _config_value(config: Path, key: str) -> Any:
     return value
 
 
-def _ci(values: pd.Series) -> tuple[float, float]:
+def ci95(values: pd.Series) -> tuple[float, float]:
+    """The 95 % confidence interval of the mean (Student t); NaN with fewer than two values."""
     v = values.dropna().to_numpy(dtype=float)
     if len(v) < 2:
         return (float("nan"), float("nan"))
@@ -162,7 +163,7 @@ def scenario_summary(df: pd.DataFrame, metrics: dict) -> pd.DataFrame:
             if metric not in group:
                 continue
             v = group[metric].dropna().astype(float)
-            lo, hi = _ci(v)
+            lo, hi = ci95(v)
             rows.append(
                 {
                     "scenario": scenario,
@@ -374,7 +375,7 @@ def _means(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
             fig, ax = plt.subplots(figsize=(COLUMN_IN, 2.6))
             for k, metric in enumerate(metrics):
                 means = np.array([chosen[g][metric].mean() for g in strategies])
-                cis = [_ci(chosen[g][metric]) for g in strategies]
+                cis = [ci95(chosen[g][metric]) for g in strategies]
                 err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
                 ax.bar(
                     x + (k - (len(metrics) - 1) / 2) * width,
@@ -479,7 +480,7 @@ def _against_count(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Pat
                 for g in strategies:
                     groups = df[df[ALLOCATOR] == g].groupby(counts)[metric]
                     means = groups.mean()
-                    cis = [_ci(v) for _, v in groups]
+                    cis = [ci95(v) for _, v in groups]
                     err = [[m - lo for m, (lo, _) in zip(means, cis)], [hi - m for m, (_, hi) in zip(means, cis)]]
                     ax.errorbar(
                         means.index,
@@ -527,7 +528,7 @@ def _against_factor(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Pa
                 sub = df[df[ALLOCATOR] == g]
                 xs = sorted(values[sub.index].unique())
                 means = [sub.loc[values[sub.index] == v, metric].mean() for v in xs]
-                cis = [_ci(sub.loc[values[sub.index] == v, metric]) for v in xs]
+                cis = [ci95(sub.loc[values[sub.index] == v, metric]) for v in xs]
                 ax.errorbar(
                     xs,
                     means,
