@@ -21,28 +21,32 @@ def test_interval_shrinks_slowly_under_high_conflict():
     lost = 5
     expected = P.kappa * sigmoid(lost - P.theta_high, P.mu) * (1 + P.gamma)  # rising conflict
     assert omega(lost, +2, P) == pytest.approx(expected)
-    assert next_interval(60.0, lost, +2, P) == pytest.approx(60.0 * (P.rho_base - expected))
+    mid = P.base_interval * 6  # inside [phi_min, phi_max] x I_base
+    assert next_interval(mid, lost, +2, P) == pytest.approx(mid * (P.rho_base - expected))
     falling = P.kappa * sigmoid(lost - P.theta_high, P.mu) * (1 - P.gamma)
     assert omega(lost, -1, P) == pytest.approx(falling)
 
 
 def test_interval_holds_in_the_dead_zone():
     assert omega(2, 1, P) == 0.0
-    assert next_interval(50.0, 2, 1, P) == 50.0
+    mid = P.base_interval * 5
+    assert next_interval(mid, 2, 1, P) == mid
 
 
 def test_interval_stretches_fast_when_calm():
     expected = -P.lam * sigmoid(P.theta_low - 0, P.mu) * (1 + P.gamma)  # sign(-dLc) = +1 for dLc < 0
     assert omega(0, -1, P) == pytest.approx(expected)
-    assert next_interval(35.0, 0, -1, P) == pytest.approx(min(35.0 * (1 - expected), 80.0))
+    start = P.base_interval * 3.5
+    stretched = min(start * (1 - expected), P.base_interval * P.phi_max)
+    assert next_interval(start, 0, -1, P) == pytest.approx(stretched)
 
 
 def test_interval_is_clipped_to_both_bounds():
     low, high = P.base_interval * P.phi_min, P.base_interval * P.phi_max
     assert next_interval(high, 0, 0, P) == high  # calm would stretch it past phi_max
     assert next_interval(low, 10, 5, P) == low  # conflict would shrink it below phi_min
-    assert next_interval(1000.0, 2, 0, P) == high
-    assert next_interval(0.1, 2, 0, P) == low
+    assert next_interval(high * 10, 2, 0, P) == high
+    assert next_interval(low / 100, 2, 0, P) == low
 
 
 # -- event triggers ------------------------------------------------------------------------------

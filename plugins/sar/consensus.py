@@ -46,9 +46,9 @@ class ConsensusParams(StrategyParams):
         "only what changed (1, the paper's rounds: always whole)",
     )
     bundle_build: Literal["top_up", "rebuild"] = Field(
-        "top_up",
-        description="Algorithm 3: top_up keeps the bundle and adds to it each build; rebuild starts each "
-        "build from B_i <- empty, as the algorithm is written (docs/reproduction.md, issue 31 item 3)",
+        "rebuild",
+        description="Algorithm 3: rebuild starts each build from B_i <- empty, as the algorithm is written; "
+        "top_up keeps the bundle and adds to it (the default until 2026-11; docs/reproduction.md section 4)",
     )
     available: Literal["own", "known"] = Field(
         "own",

@@ -21,9 +21,10 @@ from pydantic import BaseModel, ConfigDict, Field
 class IntervalParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
     base_interval: float = Field(
-        10.0,
+        100.0,
         gt=0,
-        description="I_base, seconds: the adaptive interval lies in [I_base x phi_min, I_base x phi_max] (Eq. 2)",
+        description="I_base, seconds: the adaptive interval lies in [I_base x phi_min, I_base x phi_max] (Eq. 2); "
+        "100 s, the only time-based consensus period the text states (docs/reproduction.md section 4)",
     )
     rho_base: float = Field(1.0, description="rho_base, Eq. 3: the interval's factor per round in the dead zone")
     theta_high: float = Field(
