@@ -35,7 +35,7 @@ def _exp(*sets: str) -> cfg.Experiment:
 def _pair(lab: Lab, out: Path, sets: list[str], placed: list[str]) -> tuple[dict, dict]:
     """The same experiment all local and placed over the lab's hosts; (local, placed) timings."""
     local = run_experiment(_exp(*sets), out / "local", progress=False)
-    spread = run_experiment(_exp(*sets, *placed), out / "spread", progress=False, listen=[lab.hub])
+    spread = run_experiment(_exp(*sets, *placed), out / "spread", progress=False, hub=lab.hub_options())
     same = all((out / "local" / f).read_bytes() == (out / "spread" / f).read_bytes() for f in RESULTS)
     return {**local.timings, "same": same}, {**spread.timings, "same": same}
 

@@ -24,7 +24,8 @@ from pathlib import Path
 import zenoh
 
 from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.runner import open_hub, run_experiment
+from swarmbed.experiments.launch.hub import HubOptions, open_hub
+from swarmbed.experiments.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -94,7 +95,7 @@ def swarmbed_run(n: int, ticks: int, auth: bool = True) -> dict:
         ],
     )
     with tempfile.TemporaryDirectory() as out:
-        result = run_experiment(exp, Path(out), progress=False, auth=auth)
+        result = run_experiment(exp, Path(out), progress=False, hub=HubOptions(auth=auth))
     t = result.timings
     return {
         "ticks_per_s": t["ticks_per_s"],

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
 from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.experiments.views.report import report
 from swarmbed.wire.session import free_loopback_endpoint
@@ -72,7 +73,7 @@ def watched(out: Path, sets: list[str], watch: bool) -> dict:
     if watch:
         thread.start()
     try:
-        run = run_experiment(cfg.load(QUICKSTART, sets), out, progress=False, listen=[endpoint])
+        run = run_experiment(cfg.load(QUICKSTART, sets), out, progress=False, hub=HubOptions(listen=[endpoint]))
     finally:
         stop.set()
         if watch:

@@ -77,6 +77,7 @@ def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> 
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from swarmbed.experiments.launch.hub import HubOptions
     from swarmbed.experiments.launch.runner import run_experiment
     from swarmbed.wire.credentials import CredentialsError, read_credentials
     from swarmbed.wire.session import tls_from_args
@@ -90,9 +91,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 2
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
-    result = run_experiment(
-        exp, out, progress=not args.no_progress, listen=args.listen, auth=not args.no_auth, admit=admitted, tls=tls
-    )
+    hub = HubOptions(listen=args.listen, auth=not args.no_auth, admit=admitted, tls=tls)
+    result = run_experiment(exp, out, progress=not args.no_progress, hub=hub)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
 
@@ -100,6 +100,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_soak(args: argparse.Namespace) -> int:
     from swarmbed.experiments.campaigns.chaos import ChaosError, load_chaos
     from swarmbed.experiments.campaigns.soak import Thresholds, format_verdict, parse_duration, soak
+    from swarmbed.experiments.launch.hub import HubOptions
 
     try:
         duration = parse_duration(args.duration)
@@ -116,7 +117,7 @@ def cmd_soak(args: argparse.Namespace) -> int:
         f"{f', chaos from {args.chaos}' if plan else ''}; files in {out}",
         flush=True,
     )
-    result = soak(exp, out, duration, plan, args.interval, limits, auth=not args.no_auth)
+    result = soak(exp, out, duration, plan, args.interval, limits, hub=HubOptions(auth=not args.no_auth))
     print(format_verdict(result))
     return 0 if result["passed"] else 1
 

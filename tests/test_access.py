@@ -17,6 +17,7 @@ import pytest
 import zenoh
 
 from swarmbed.experiments.launch.access import RunAccess, access_rules
+from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.codec import encode_agent_out, pack
 from swarmbed.wire.credentials import CredentialsError, Identity, read_credentials, write_credentials
@@ -176,7 +177,7 @@ def test_an_operator_watches_and_asks_but_cannot_publish(tmp_path, operator):
         tmp_path / "run",
         progress=False,
         on_ready=look,
-        admit=[operator.identity],
+        hub=HubOptions(admit=[operator.identity]),
     )
     assert seen["outs"] > 0  # it reads what agents send
     assert result.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}
@@ -242,7 +243,11 @@ def test_junk_at_every_key_is_refused_or_counted_and_changes_nothing(tmp_path, o
         "run.duration=3000",
     ]
     attacked = run_experiment(
-        experiment(*sets), tmp_path / "attacked", progress=False, on_ready=in_the_background, admit=[operator.identity]
+        experiment(*sets),
+        tmp_path / "attacked",
+        progress=False,
+        on_ready=in_the_background,
+        hub=HubOptions(admit=[operator.identity]),
     )
     assert done.is_set(), "the run ended before all junk was sent"
     run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
@@ -331,7 +336,7 @@ def test_a_host_identity_may_carry_only_its_own_agents_and_act_only_as_its_own_h
         tmp_path / "attacked",
         progress=False,
         on_ready=in_the_background,
-        admit=[host, operator.identity],
+        hub=HubOptions(admit=[host, operator.identity]),
     )
     threads[0].join(timeout=30)
     run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
@@ -386,8 +391,8 @@ def test_a_swap_to_a_host_that_may_not_carry_the_agent_is_refused_before_anythin
         experiment(*sets),
         tmp_path / "run",
         progress=False,
-        admit=[host, operator.identity],
         on_ready=from_another_terminal,
+        hub=HubOptions(admit=[host, operator.identity]),
     )
     threads[0].join(timeout=60)
     assert "host h9 may not carry agent 1" in asked["out"] + asked["err"], asked
@@ -476,7 +481,7 @@ def test_on_an_open_hub_malformed_keys_and_control_samples_are_counted_not_fatal
         "run.duration=3000",
     ]
     attacked = run_experiment(
-        experiment(*sets), tmp_path / "attacked", progress=False, auth=False, on_ready=in_the_background
+        experiment(*sets), tmp_path / "attacked", progress=False, on_ready=in_the_background, hub=HubOptions(auth=False)
     )
     assert done.is_set(), "the run ended before all junk was sent"
     run_experiment(experiment(*sets), tmp_path / "clean", progress=False)

@@ -12,6 +12,7 @@ import pytest
 import zenoh
 
 from swarmbed.coordinator.coordinator import RunError
+from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.codec import EMPTY_INBOX, MAX_AGENT_SAMPLE_BYTES, encode_tick, pack
 from swarmbed.wire.keys import Keys
@@ -200,7 +201,7 @@ def test_malformed_samples_are_dropped_counted_and_survived(tmp_path):
     )
     # an open hub: these samples test our own decoding, behind the hub's access control (which
     # refuses most of them before they reach us; see test_access.py)
-    result = run_experiment(exp, tmp_path, progress=False, on_ready=inject, auth=False)
+    result = run_experiment(exp, tmp_path, progress=False, on_ready=inject, hub=HubOptions(auth=False))
     bad = result.summary["network"]["malformed"]
     assert bad["coordinator"] >= 6 and bad["netem"] >= 6 + 1 and bad["agents"] >= 3 + 4 + 1
     assert "oversized: 16,777,2" in (tmp_path / "logs" / "netem.log").read_text()
@@ -223,7 +224,8 @@ def test_a_second_agent_with_a_taken_id_is_refused(tmp_path):
         refused["rc"], refused["err"] = proc.returncode, proc.stderr
 
     exp = experiment("run.duration=50")
-    result = run_experiment(exp, tmp_path, progress=False, on_ready=second, auth=False)  # with auth: test_access.py
+    open_hub = HubOptions(auth=False)  # with auth: test_access.py
+    result = run_experiment(exp, tmp_path, progress=False, on_ready=second, hub=open_hub)
     assert refused["rc"] == 2 and "agent 1 of run" in refused["err"] and "already running" in refused["err"]
     assert result.summary["ticks"] > 0 and not result.summary["agents_lost"]
 

@@ -2,6 +2,7 @@
 changes results, a host that dies is agent loss, a missing host is named with the command to start it."""
 
 import csv
+import json
 import signal
 import subprocess
 import sys
@@ -9,6 +10,7 @@ import threading
 import time
 
 import numpy as np
+import psutil
 import pytest
 
 from swarmbed.coordinator.coordinator import RunError
@@ -35,12 +37,7 @@ def test_agents_split_over_three_hosts_give_the_all_local_results(lab, tmp_path,
         ).stdout
 
     spread = run_experiment(
-        placed,
-        tmp_path / "spread",
-        progress=False,
-        listen=[lab.hub],
-        admit=[*lab.admitted, operator.identity],
-        on_ready=look,
+        placed, tmp_path / "spread", progress=False, on_ready=look, hub=lab.hub_options(operator.identity)
     )
     same_results(tmp_path / "local", tmp_path / "spread")
     assert spread.summary["network"]["messages_sent"] == local.summary["network"]["messages_sent"] > 0
@@ -60,8 +57,7 @@ def test_search_and_rescue_over_two_hosts_gives_the_all_local_results(lab, tmp_p
         experiment(*sets, "placement={a: '0-9', b: '10-19'}", base=SAR),
         tmp_path / "spread",
         progress=False,
-        listen=[lab.hub],
-        admit=lab.admitted,
+        hub=lab.hub_options(),
     )
     same_results(tmp_path / "local", tmp_path / "spread")
 
@@ -87,9 +83,8 @@ def test_a_host_that_dies_takes_its_agents_and_the_run_accounts_for_them(lab, tm
         experiment(*long, "run.duration=3000", "run.allow_agent_failures=true"),
         tmp_path / "allowed",
         progress=False,
-        listen=[lab.hub],
-        admit=lab.admitted,
         on_ready=_kill_when_running(lab, "doomed", 1.0),
+        hub=lab.hub_options(),
     )
     assert set(result.summary["agents_lost"]) == {"0", "1"}
     net = result.summary["network"]
@@ -102,9 +97,8 @@ def test_a_host_that_dies_takes_its_agents_and_the_run_accounts_for_them(lab, tm
             experiment(*long, "run.duration=1000000"),
             tmp_path / "strict",
             progress=False,
-            listen=[lab.hub],
-            admit=lab.admitted,
             on_ready=_kill_when_running(lab, "doomed", 1.0),
+            hub=lab.hub_options(),
         )
 
 
@@ -116,8 +110,7 @@ def test_a_missing_host_is_named_with_the_command_that_starts_it(lab, tmp_path):
             experiment("placement={here: 0, gone: '1-2'}", "run.join_timeout=3"),
             tmp_path,
             progress=False,
-            listen=[lab.hub],
-            admit=lab.admitted,
+            hub=lab.hub_options(),
         )
     msg = str(info.value)
     assert "hosts not reachable after 3 s: gone" in msg and f"swarmbed host --name gone --connect {lab.hub}" in msg
@@ -140,8 +133,7 @@ def test_ten_swaps_between_hosts_give_the_all_local_results(lab, tmp_path):
         experiment(*sets, "placement={h1: '0-2', h2: '3-5'}", f"swaps=[{swaps}]"),
         tmp_path / "moved",
         progress=False,
-        listen=[lab.hub],
-        admit=lab.admitted,
+        hub=lab.hub_options(),
     )
     same_results(tmp_path / "local", tmp_path / "moved")
     with open(tmp_path / "moved" / "swaps.csv") as f:
@@ -170,8 +162,7 @@ def test_a_swap_to_a_dead_host_fails_and_the_agent_goes_on_where_it_was(lab, tmp
         experiment(*sets, "placement={alive: '0-1'}", "swaps=[{agent: 1, tick: 10, to: dead}]"),
         tmp_path / "tried",
         progress=False,
-        listen=[lab.hub],
-        admit=lab.admitted,
+        hub=lab.hub_options(),
     )
     same_results(tmp_path / "local", tmp_path / "tried")
     with open(tmp_path / "tried" / "swaps.csv") as f:
@@ -193,9 +184,51 @@ def test_sigterm_on_a_host_daemon_stops_its_agents_and_leaves_nothing(lab, tmp_p
         "run.allow_agent_failures=true",
         "placement={h: '0-1'}",
     )
-    result = run_experiment(
-        exp, tmp_path, progress=False, listen=[lab.hub], admit=lab.admitted, on_ready=stop_the_daemon_soon
-    )
+    result = run_experiment(exp, tmp_path, progress=False, on_ready=stop_the_daemon_soon, hub=lab.hub_options())
     assert set(result.summary["agents_lost"]) == {"0", "1"}
     assert lab.daemons["h"].wait(timeout=20) == 0
     assert lab.pids("h") == []
+
+
+def test_a_host_daemon_answers_crafted_start_and_stop_requests_with_why_and_starts_nothing(tmp_path):
+    """The start and stop requests decode into their declared types only (wire.reports): a request
+    with an unknown key, a run id that is not alphanumeric, a number as text, or no JSON at all is
+    answered with one line naming the field, and no process starts."""
+    import zenoh
+
+    from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
+
+    endpoint = free_loopback_endpoint()
+    daemon = subprocess.Popen(
+        [sys.executable, "-m", "swarmbed", "host", "--name", "h", "--insecure", "--listen", endpoint],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
+    )
+    try:
+        assert "host h up" in daemon.stdout.readline()
+        crafted = {
+            b'{"run_id": "abc", "agents": [1], "args": ["--config", "/tmp/x.py"]}': "args: Extra inputs",
+            b'{"run_id": "a;rm -rf", "agents": [1]}': "run_id: String should match pattern",
+            b'{"run_id": "abc", "agents": [1], "log_max_mb": "20; sh"}': "log_max_mb: Input should be a valid int",
+            b'{"run_id": "abc", "agents": []}': "agents: List should have at least 1 item",
+            b'{"run_id": "abc", "agents": [1], "incarnation": -1}': "incarnation: Input should be greater",
+            b"[1, 2]": "start request: Input should be a valid dictionary",
+            b"\xc1 not json": "start request: not JSON",
+            b'{"run_id": "abc", "agents": [1]}': "run abc has no coordinator reachable from host h",
+        }
+        with zenoh.open(zenoh_config("client", [endpoint])) as s:
+            answers = {}
+            for request in crafted:
+                replies = [r.ok for r in s.get("swarmbed/hosts/h/start", payload=request, timeout=5) if r.ok]
+                answers[request] = json.loads(replies[0].payload.to_bytes())["error"]
+            stop = [r.ok for r in s.get("swarmbed/hosts/h/stop", payload=b'{"run_id": "../etc"}', timeout=5) if r.ok]
+            info = [r.ok for r in s.get("swarmbed/hosts/h/info", timeout=5) if r.ok]
+        for request, why in crafted.items():
+            assert why in answers[request] and "\n" not in answers[request], (request, answers[request])
+        assert "stop request: run_id: String should match pattern" in json.loads(stop[0].payload.to_bytes())["error"]
+        assert json.loads(info[0].payload.to_bytes())["agents"] == {}
+        assert not psutil.Process(daemon.pid).children(recursive=True)
+    finally:
+        daemon.terminate()
+        daemon.wait(timeout=10)

@@ -397,7 +397,7 @@ def test_host_daemons_on_this_machine_and_their_agents_are_watched(lab, tmp_path
     exp = experiment(
         "agents.count=4", "allocator={name: noop, peers: 2}", "run.stop_when_done=false", "placement={h1: '0-1'}"
     )
-    v = soak(exp, tmp_path / "soak", 8, interval=0.5, limits=SHORT, listen=[lab.hub], admit=lab.admitted)
+    v = soak(exp, tmp_path / "soak", 8, interval=0.5, limits=SHORT, hub=lab.hub_options())
     assert v["passed"], v["breaches"]
     procs = pd.read_csv(tmp_path / "soak" / PROCESSES)
     assert {"host_h1", "agent_0@h1", "agent_1@h1", "agent_2", "agent_3"} <= set(procs["process"])
@@ -412,7 +412,7 @@ def test_a_host_cut_off_for_a_window_stalls_the_ticks_and_its_agents_come_back(l
         "agents.count=4", "allocator={name: noop, peers: 3}", "run.stop_when_done=false", "placement={h1: '0-1'}"
     )
     plan = ChaosPlan.model_validate({"events": [{"action": "cut_host", "at": [2], "for": 3}]})
-    v = soak(exp, tmp_path / "soak", 10, chaos=plan, interval=0.5, limits=SHORT, listen=[lab.hub], admit=lab.admitted)
+    v = soak(exp, tmp_path / "soak", 10, chaos=plan, interval=0.5, limits=SHORT, hub=lab.hub_options())
     assert v["passed"], v["breaches"]
     (fault,) = v["faults"]
     assert (fault["action"], fault["target"]) == ("cut_host", "h1")
@@ -439,7 +439,7 @@ def test_a_restart_that_finds_its_host_away_is_tried_again_once_the_host_is_back
     )
     plan = ChaosPlan.model_validate({"events": [{"action": "cut_host", "at": [2], "for": 20}]})
     limits = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=30.0)
-    v = soak(exp, tmp_path / "soak", 45, chaos=plan, interval=1.0, limits=limits, listen=[lab.hub], admit=lab.admitted)
+    v = soak(exp, tmp_path / "soak", 45, chaos=plan, interval=1.0, limits=limits, hub=lab.hub_options())
     assert v["passed"], v["breaches"]
     restarts = pd.read_csv(tmp_path / "soak" / "restarts.csv")
     assert "retrying" in set(restarts["outcome"]) and "failed" not in set(restarts["outcome"]), restarts
@@ -462,7 +462,7 @@ def test_sessions_map_no_shared_memory_pools():
     when an agent restarts. Our sessions send large payloads as bytes on the link."""
     import zenoh
 
-    from swarmbed.experiments.launch.runner import open_hub
+    from swarmbed.experiments.launch.hub import open_hub
     from swarmbed.wire.membership import accept_handovers, hand_over
     from swarmbed.wire.session import zenoh_config
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.plugins.checks.allocator import ConformanceError, check_snapshot
 from swarmbed.plugins.registry import register
@@ -100,7 +101,11 @@ def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path, operator):
         threads[-1].start()
 
     run_experiment(
-        experiment(*sets), tmp_path / "moved", progress=False, on_ready=from_another_terminal, admit=[operator.identity]
+        experiment(*sets),
+        tmp_path / "moved",
+        progress=False,
+        on_ready=from_another_terminal,
+        hub=HubOptions(admit=[operator.identity]),
     )
     threads[0].join(timeout=60)
     assert asked["rc"] == 0, asked["err"]

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import CredentialsError, Identity, write_credentials
 from swarmbed.wire.session import free_loopback_endpoint, tls_settings, zenoh_config
@@ -106,10 +107,8 @@ def test_a_host_over_tls_gives_the_all_local_results_and_strangers_are_refused(t
             experiment(*sets, "placement={h1: '1-2'}"),
             tmp_path / "tls",
             progress=False,
-            listen=[hub],
-            tls=tls_settings(lab, "hub"),
-            admit=[host_id, insider],
             on_ready=strangers,
+            hub=HubOptions(listen=[hub], admit=[host_id, insider], tls=tls_settings(lab, "hub")),
         )
     finally:
         daemon.send_signal(signal.SIGTERM)

@@ -12,6 +12,7 @@ import termios
 import threading
 import time
 
+from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.session import free_loopback_endpoint
 from tests.conftest import experiment
@@ -21,7 +22,9 @@ ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
 
 def _run_in_background(tmp_path, endpoint, results, operator):
     exp = experiment("agents.count=6", "run.stop_when_done=false", "run.duration=2500", "run.seed=9")
-    results["run"] = run_experiment(exp, tmp_path / "run", progress=False, listen=[endpoint], admit=[operator.identity])
+    results["run"] = run_experiment(
+        exp, tmp_path / "run", progress=False, hub=HubOptions(listen=[endpoint], admit=[operator.identity])
+    )
 
 
 def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(tmp_path, operator):

@@ -1,8 +1,8 @@
-"""The control plane, typed: the reports agents and the proxy hand the coordinator, and the swap
-requests operators send it.
+"""The control plane, typed: the reports agents and the proxy hand the coordinator, the swap
+requests operators send it, and what a run's hub asks a host daemon (start, stop) and hears back.
 
-Reports travel as msgpack maps (rare, and read by people too) and swap requests as JSON; both are
-decoded into these models only, with strict types and no unknown keys, so a crafted report is a
+Reports travel as msgpack maps (rare, and read by people too), swap and host requests as JSON; all
+are decoded into these models only, with strict types and no unknown keys, so a crafted report is a
 :class:`~swarmbed.wire.errors.WireError` that names the field, never a ``KeyError`` deep inside the
 coordinator. An agent report's ``kind`` selects its model.
 """
@@ -10,7 +10,7 @@ coordinator. An agent report's ``kind`` selects its model.
 from __future__ import annotations
 
 import json
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
@@ -22,6 +22,9 @@ AgentId = Annotated[int, Field(ge=0)]
 
 class _Message(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+_M = TypeVar("_M", bound=_Message)
 
 
 class TcpCounters(_Message):
@@ -134,8 +137,8 @@ _NETEM = TypeAdapter(NetemReport)
 
 def _why(exc: ValidationError, what: str) -> WireError:
     err = exc.errors()[0]
-    where = ".".join(str(p) for p in err["loc"]) or what
-    return WireError(f"{what}: {where}: {err['msg']}")
+    where = ".".join(str(p) for p in err["loc"])
+    return WireError(f"{what}: {where}: {err['msg']}" if where else f"{what}: {err['msg']}")
 
 
 def encode_report(report: BaseModel) -> bytes:
@@ -181,3 +184,70 @@ def decode_swap(data: bytes | None) -> SwapRequest | SwapQuery:
         if isinstance(exc, ValidationError):
             raise WireError('a swap request is {"agent": I, "to": HOST}, a query {"swap": N}') from None
         raise WireError(f"not JSON: {exc}") from None
+
+
+# -- hub -> host daemon: agent processes ------------------------------------------------------------
+RunId = Annotated[str, Field(pattern=r"^[A-Za-z0-9]{1,64}$")]
+HostAgentId = Annotated[int, Field(ge=0, lt=10**6)]
+
+
+class StartAgents(_Message):
+    """Start ``agents`` of run ``run_id`` on the host. A swap or restart starts one agent at a later
+    ``incarnation``, restored from the checkpoint the coordinator hands it. The daemon builds the
+    agents' command lines from these fields alone: nothing in a request reaches an argv as text."""
+
+    run_id: RunId
+    agents: Annotated[list[HostAgentId], Field(min_length=1, max_length=1000)]
+    incarnation: int = Field(0, ge=0)
+    restore: bool = False
+    log_max_mb: int = Field(20, ge=1)
+    log_backups: int = Field(2, ge=0)
+
+    def agent_args(self) -> list[str]:
+        restore = ["--restore"] if self.restore else []
+        rotation = ["--log-max-mb", str(self.log_max_mb), "--log-backups", str(self.log_backups)]
+        return ["--incarnation", str(self.incarnation), *restore, *rotation]
+
+
+class StopAgents(_Message):
+    """Stop ``agents`` (every agent of the run where None) of ``run_id`` at ``incarnation``."""
+
+    run_id: RunId
+    agents: Annotated[list[HostAgentId], Field(max_length=1000)] | None = None
+    incarnation: int = Field(0, ge=0)
+
+
+class HostAnswer(_Message):
+    """A host daemon's answer: what it started or stopped, where their logs are, or why it refused."""
+
+    started: list[HostAgentId] = []
+    stopped: list[HostAgentId] = []
+    logs: str | None = None
+    error: str | None = None
+
+
+def _decode_json(model: type[_M], data: bytes | None, what: str) -> _M:
+    try:
+        value = json.loads(data) if data is not None else None
+    except ValueError as exc:
+        raise WireError(f"{what}: not JSON: {exc}") from None
+    try:
+        return model.model_validate(value)
+    except ValidationError as exc:
+        raise _why(exc, what) from None
+
+
+def decode_start(data: bytes | None) -> StartAgents:
+    return _decode_json(StartAgents, data, "start request")
+
+
+def decode_stop(data: bytes | None) -> StopAgents:
+    return _decode_json(StopAgents, data, "stop request")
+
+
+def decode_host_answer(data: bytes | None) -> HostAnswer:
+    return _decode_json(HostAnswer, data, "host answer")
+
+
+def encode_json(message: BaseModel) -> str:
+    return message.model_dump_json(exclude_defaults=True)

@@ -45,6 +45,7 @@ from swarmbed.experiments.campaigns.chaos import Chaos, ChaosPlan
 from swarmbed.experiments.folders import SOAK_PROCESSES as PROCESSES
 from swarmbed.experiments.folders import SOAK_RUN as RUN
 from swarmbed.experiments.folders import SOAK_VERDICT as VERDICT
+from swarmbed.experiments.launch.hub import LOOPBACK_ONLY, HubOptions
 from swarmbed.experiments.launch.runner import LiveRun, RunObserver, run_experiment
 from swarmbed.wire.process import process_name
 from swarmbed.wire.rowfile import RowFile
@@ -394,9 +395,10 @@ def soak(
     interval: float = 5.0,
     limits: Thresholds | None = None,
     progress: bool = True,
-    **run_options: Any,
+    hub: HubOptions = LOOPBACK_ONLY,
 ) -> dict[str, Any]:
-    """Run ``exp`` for ``duration_s`` wall seconds under ``chaos``; write and return the verdict."""
+    """Run ``exp`` for ``duration_s`` wall seconds under ``chaos``; write and return the verdict.
+    ``hub``: where the run's hub listens and whom it admits (a soak across hosts, an operator)."""
     from swarmbed.coordinator.coordinator import RunError
 
     exp = exp.model_copy(update={"run": exp.run.model_copy(update={"duration": UNBOUNDED_S, "stop_when_done": False})})
@@ -405,7 +407,7 @@ def soak(
     observers: list[RunObserver] = [monitor, *([injector] if injector else [])]
     summary, failure = None, None
     try:
-        summary = run_experiment(exp, out_dir, progress=False, observers=observers, **run_options).summary
+        summary = run_experiment(exp, out_dir, progress=False, observers=observers, hub=hub).summary
     except RunError as exc:
         failure = str(exc)
     if not (out_dir / PROCESSES).exists():

@@ -1,6 +1,7 @@
 """Talking to host daemons (:mod:`.daemon`): which hosts are up, what each runs, and asking one to
 start or stop a run's agents. The launcher (``swarmbed run``) and the operators' commands
-(``swarmbed hosts``) use it; requests and answers are JSON objects on the host's own keys.
+(``swarmbed hosts``) use it; requests and answers are JSON objects on the host's own keys, typed
+in :mod:`swarmbed.wire.reports`.
 
     swarmbed hosts --connect tcp/192.0.2.10:7447
 """
@@ -9,32 +10,43 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Any
 
 import zenoh
 
+from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import HOSTS, HostKeys, host_name_of
+from swarmbed.wire.reports import HostAnswer, StartAgents, StopAgents, decode_host_answer, encode_json
 
 
 class HostError(RuntimeError):
     """A host that cannot be reached or refuses a request; the message says which and why."""
 
 
-def _get_json(session: zenoh.Session, key: str, payload: dict | None, timeout: float) -> dict | None:
-    """The JSON object a host's queryable answers, or None after ``timeout``. A query that finds
-    no queryable ends at once: just after a host's token is seen, its queryables may not have
-    reached this session's routing yet, so such a query is asked again (a query that reached the
-    host and went unanswered took the whole timeout, and is not)."""
-    body = json.dumps(payload) if payload is not None else None
+def _ask(session: zenoh.Session, key: str, body: str | None, timeout: float) -> bytes | None:
+    """The bytes a host's queryable answers, or None after ``timeout``. A query that finds no
+    queryable ends at once: just after a host's token is seen, its queryables may not have reached
+    this session's routing yet, so such a query is asked again (a query that reached the host and
+    went unanswered took the whole timeout, and is not)."""
     deadline = time.monotonic() + timeout
     while True:
         for reply in session.get(key, payload=body, timeout=max(0.1, deadline - time.monotonic())):
             if reply.ok is not None:
-                answer = json.loads(reply.ok.payload.to_bytes())
-                return answer if isinstance(answer, dict) else None
+                return reply.ok.payload.to_bytes()
         if time.monotonic() + 0.1 >= deadline:
             return None
         time.sleep(0.1)
+
+
+def _request(
+    session: zenoh.Session, host: str, key: str, request: StartAgents | StopAgents, timeout: float
+) -> HostAnswer | None:
+    data = _ask(session, key, encode_json(request), timeout)
+    if data is None:
+        return None
+    try:
+        return decode_host_answer(data)
+    except WireError as exc:
+        raise HostError(f"host {host} answered nonsense: {exc}") from None
 
 
 def visible_hosts(session: zenoh.Session, timeout: float = 2.0) -> list[str]:
@@ -47,7 +59,14 @@ def visible_hosts(session: zenoh.Session, timeout: float = 2.0) -> list[str]:
 
 
 def host_info(session: zenoh.Session, name: str, timeout: float = 5.0) -> dict | None:
-    return _get_json(session, HostKeys(name).info, None, timeout)
+    """What host ``name`` says of itself (cores, free memory, its agents), for people and the
+    deployment file; None if it does not answer or answers other than a JSON object."""
+    data = _ask(session, HostKeys(name).info, None, timeout)
+    try:
+        answer = json.loads(data) if data is not None else None
+    except ValueError:
+        return None
+    return answer if isinstance(answer, dict) else None
 
 
 def wait_for_hosts(
@@ -76,33 +95,15 @@ def wait_for_hosts(
             )
 
 
-def start_agents(
-    session: zenoh.Session,
-    host: str,
-    run_id: str,
-    agents: list[int],
-    args: list[str] | None = None,
-    timeout: float = 30.0,
-) -> None:
-    """Ask ``host`` to start ``agents`` of ``run_id`` (with ``args``: ``--incarnation N --restore``
-    for a swap); a HostError says why it did not."""
-    answer = _get_json(session, HostKeys(host).start, {"run_id": run_id, "agents": agents, "args": args or []}, timeout)
+def start_agents(session: zenoh.Session, host: str, request: StartAgents, timeout: float = 30.0) -> None:
+    """Ask ``host`` to start agents; a HostError says why it did not."""
+    answer = _request(session, host, HostKeys(host).start, request, timeout)
     if answer is None:
-        raise HostError(f"host {host} did not answer the request to start agents {agents}")
-    if "error" in answer:
-        raise HostError(f"host {host} refused to start agents {agents}: {answer['error']}")
+        raise HostError(f"host {host} did not answer the request to start agents {request.agents}")
+    if answer.error is not None:
+        raise HostError(f"host {host} refused to start agents {request.agents}: {answer.error}")
 
 
-def stop_agents(
-    session: zenoh.Session,
-    host: str,
-    run_id: str,
-    agents: list[int] | None = None,
-    incarnation: int = 0,
-    timeout: float = 10.0,
-) -> None:
-    """Ask ``host`` to stop ``agents`` (every agent of the run where None) of ``run_id``."""
-    request: dict[str, Any] = {"run_id": run_id, "incarnation": incarnation}
-    if agents is not None:
-        request["agents"] = agents
-    _get_json(session, HostKeys(host).stop, request, timeout)
+def stop_agents(session: zenoh.Session, host: str, request: StopAgents, timeout: float = 10.0) -> None:
+    """Ask ``host`` to stop agents of a run (best effort: a host that is gone has stopped them)."""
+    _request(session, host, HostKeys(host).stop, request, timeout)

@@ -4,7 +4,8 @@ It runs the machine's Zenoh router (the rmw_zenoh convention: one router per hos
 processes connect to it, routers connect to each other), announces itself with a liveliness token
 (``swarmbed/hosts/<name>``; its queryable ``.../info`` answers with its cores, free memory and
 agents), and starts or stops agent processes when a run's launcher asks (``.../start``,
-``.../stop``: JSON in, JSON out, the answer says what started or why not).
+``.../stop``: JSON in, JSON out, typed in :mod:`swarmbed.wire.reports`; the answer says what
+started or why not).
 
 Agents it starts are its children: they connect to its router, log to ``<logs>/<run-id>/``, and die
 with it (the kernel's parent-death signal), so a host that dies takes its agents with it and the
@@ -25,6 +26,7 @@ import shutil
 import signal
 import tempfile
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -35,9 +37,11 @@ from swarmbed.experiments.hosts.client import HostError
 from swarmbed.experiments.launch.access import EVERY_MESSAGE
 from swarmbed.experiments.launch.launcher import AGENT_MODULE, Children, ForkServerError
 from swarmbed.wire.credentials import Identity, read_credentials, write_credentials, write_dictionary
+from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import HOSTS, HostKeys, Keys
 from swarmbed.wire.membership import is_alive
 from swarmbed.wire.process import process_name, tune_malloc
+from swarmbed.wire.reports import HostAnswer, StartAgents, StopAgents, decode_start, decode_stop, encode_json
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 log = logging.getLogger("swarmbed.host")
@@ -76,27 +80,11 @@ class Host:
             "agents": {r: a for r, a in agents.items() if a},
         }
 
-    def start_agents(self, request: dict[str, Any]) -> dict[str, Any]:
-        run_id, ids = request.get("run_id"), request.get("agents")
-        if not isinstance(run_id, str) or not (run_id.isascii() and run_id.isalnum() and len(run_id) <= 64):
-            return {"error": f"start: run_id must be alphanumeric, got {run_id!r}"}
-        if (
-            not isinstance(ids, list)
-            or not all(isinstance(i, int) and 0 <= i < 10**6 for i in ids)
-            or not 0 < len(ids) <= 1000
-        ):
-            return {"error": f"start: agents must be a list of 1 to 1000 ids, got {str(ids)[:100]}"}
+    def start_agents(self, request: StartAgents) -> HostAnswer:
+        run_id, ids, incarnation = request.run_id, request.agents, request.incarnation
         if not is_alive(self.session, Keys(run_id).alive_coordinator):
             # the hub's access rules let only the hub ask; a run that is not there is not its run
-            return {"error": f"start: run {run_id} has no coordinator reachable from host {self.name}"}
-        extra = request.get("args", [])
-        allowed = ("--restore", "--incarnation", "--log-max-mb", "--log-backups")
-        if not (isinstance(extra, list) and all(a in allowed or str(a).isdigit() for a in extra)):
-            return {
-                "error": f"start: args may be --incarnation N, --restore, --log-max-mb N and --log-backups N, "
-                f"got {extra!r}"
-            }
-        incarnation = int(extra[extra.index("--incarnation") + 1]) if "--incarnation" in extra else 0
+            return HostAnswer(error=f"start: run {run_id} has no coordinator reachable from host {self.name}")
         with self.lock:
             children = self.runs.get(run_id)
             if children is None:
@@ -104,37 +92,35 @@ class Host:
                 try:
                     log_dir.mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
-                    return {"error": f"cannot write logs to {log_dir}: {exc.strerror}"}
+                    return HostAnswer(error=f"cannot write logs to {log_dir}: {exc.strerror}")
                 try:
                     children = self.runs[run_id] = Children(log_dir, fork_agents=True)
                 except ForkServerError as exc:
-                    return {"error": str(exc)}
+                    return HostAnswer(error=str(exc))
             busy = [
                 i
                 for i in ids
                 if (p := children.procs.get(process_name(i, incarnation))) is not None and p.poll() is None
             ]
             if busy:
-                return {"error": f"agents {busy} of run {run_id} already run on host {self.name}"}
+                return HostAnswer(error=f"agents {busy} of run {run_id} already run on host {self.name}")
             identity = ["--credentials", self.agent_credentials] if self.agent_credentials else []
             for i in ids:
                 children.spawn(
                     process_name(i, incarnation),
                     AGENT_MODULE,
-                    ["--run-id", run_id, "--connect", self.endpoint, *identity, "--id", str(i), *map(str, extra)],
+                    ["--run-id", run_id, "--connect", self.endpoint, *identity, "--id", str(i), *request.agent_args()],
                 )
         log.info("host %s: started agents %s of run %s", self.name, ids, run_id)
-        return {"started": ids, "logs": str(self.logs / run_id)}
+        return HostAnswer(started=ids, logs=str(self.logs / run_id))
 
-    def stop_agents(self, request: dict[str, Any]) -> dict[str, Any]:
-        run_id, ids = request.get("run_id"), request.get("agents")
+    def stop_agents(self, request: StopAgents) -> HostAnswer:
         with self.lock:
-            children = self.runs.get(run_id) if isinstance(run_id, str) else None
+            children = self.runs.get(request.run_id)
             if children is None:
-                return {"stopped": []}
-            incarnation = request.get("incarnation", 0)
-            if isinstance(ids, list) and isinstance(incarnation, int):
-                names = [process_name(i, incarnation) for i in ids]
+                return HostAnswer()
+            if request.agents is not None:
+                names = [process_name(i, request.incarnation) for i in request.agents]
             else:
                 names = list(children.procs)
             procs = [children.procs[n] for n in names if n in children.procs]
@@ -146,29 +132,33 @@ class Host:
                 p.wait(timeout=5)
             except Exception:
                 p.kill()
-        return {"stopped": [_agent_of(n) for n in names]}
+        return HostAnswer(stopped=[_agent_of(n) for n in names])
 
-    def _serve(self, key: str, handler):
-        """Answer queries on ``key`` with ``handler(request)``, replying on ``key`` itself: a query
-        on ``swarmbed/hosts/*/info`` gets its answer under this host's own name, the only one the
-        hub lets this host reply on."""
+    def _serve(self, key: str, answer: Callable[[bytes | None], str]) -> Callable[[zenoh.Query], None]:
+        """Answer queries on ``key`` with ``answer(request bytes)``, replying on ``key`` itself: a
+        query on ``swarmbed/hosts/*/info`` gets its answer under this host's own name, the only one
+        the hub lets this host reply on. A request that does not decode is answered with why."""
 
         def on_query(query: zenoh.Query) -> None:
+            data = query.payload.to_bytes() if query.payload is not None else None
             try:
-                request = json.loads(query.payload.to_bytes()) if query.payload is not None else {}
-                answer = handler(request) if isinstance(request, dict) else {"error": "request must be a JSON object"}
-            except (ValueError, UnicodeDecodeError) as exc:
-                answer = {"error": f"request is not JSON: {exc}"}
-            query.reply(key, json.dumps(answer))
+                text = answer(data)
+            except WireError as exc:
+                text = encode_json(HostAnswer(error=str(exc)))
+            query.reply(key, text)
 
         return on_query
 
     def declare(self) -> None:
         s, k = self.session, self.keys
         self._entities += [
-            s.declare_queryable(k.info, self._serve(k.info, lambda _req: self.info())),
-            s.declare_queryable(k.start, self._serve(k.start, self.start_agents)),
-            s.declare_queryable(k.stop, self._serve(k.stop, self.stop_agents)),
+            s.declare_queryable(k.info, self._serve(k.info, lambda _data: json.dumps(self.info()))),
+            s.declare_queryable(
+                k.start, self._serve(k.start, lambda data: encode_json(self.start_agents(decode_start(data))))
+            ),
+            s.declare_queryable(
+                k.stop, self._serve(k.stop, lambda data: encode_json(self.stop_agents(decode_stop(data))))
+            ),
             s.liveliness().declare_token(k.alive),
         ]
 

@@ -23,6 +23,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
 
@@ -66,8 +67,13 @@ class Lab:
 
     @property
     def admitted(self) -> list[Identity]:
-        """The hosts' credentials, for ``run_experiment(..., admit=lab.admitted)``."""
+        """The hosts' credentials."""
         return list(self.identities.values())
+
+    def hub_options(self, *more: Identity) -> HubOptions:
+        """A run's hub for this lab: listening where the hosts' routers connect, admitting their
+        daemons and ``more`` (operators)."""
+        return HubOptions(listen=(self.hub,), admit=(*self.admitted, *more))
 
     @property
     def hub(self) -> str:

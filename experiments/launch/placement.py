@@ -18,6 +18,7 @@ from swarmbed.experiments.launch.access import agent_user
 from swarmbed.experiments.launch.launcher import Children
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.process import process_name
+from swarmbed.wire.reports import StartAgents, StopAgents
 from swarmbed.wire.schema import LOCAL
 
 
@@ -31,7 +32,7 @@ class AgentPlacement:
     session: zenoh.Session
     keys: Keys
     common: Sequence[str]
-    logs: Sequence[str]
+    log_rotation: tuple[int, int]  # (MB per file, backups kept), for agents started on hosts
     identity: Callable[[str], list[str]]
     hub: str
     auth: bool
@@ -48,13 +49,24 @@ class AgentPlacement:
 
     def on_host(self, host: str, agents: list[int]) -> None:
         """The first processes of ``agents`` on ``host`` (waited for and introduced already)."""
-        start_agents(self.session, host, self.keys.run_id, agents, args=list(self.logs))
+        start_agents(self.session, host, self._start(agents))
         if host not in self.started:
             self.started.append(host)
 
+    def _start(self, agents: list[int], incarnation: int = 0, restore: bool = False) -> StartAgents:
+        max_mb, backups = self.log_rotation
+        return StartAgents(
+            run_id=self.keys.run_id,
+            agents=agents,
+            incarnation=incarnation,
+            restore=restore,
+            log_max_mb=max_mb,
+            log_backups=backups,
+        )
+
     def place(self, agent: int, host: str, incarnation: int, restore: bool = True) -> None:
-        args = ["--id", str(agent), "--incarnation", str(incarnation), *(["--restore"] if restore else [])]
         if host == LOCAL:
+            args = ["--id", str(agent), "--incarnation", str(incarnation), *(["--restore"] if restore else [])]
             self.children.spawn(
                 process_name(agent, incarnation),
                 "swarmbed.agent_runtime",
@@ -62,7 +74,7 @@ class AgentPlacement:
             )
             return
         wait_for_hosts(self.session, [host], min(5.0, self.join_timeout), self.hub, auth=self.auth)
-        start_agents(self.session, host, self.keys.run_id, [agent], args=[*args[2:], *self.logs])
+        start_agents(self.session, host, self._start([agent], incarnation, restore))
         if host not in self.started:
             self.started.append(host)
 
@@ -72,7 +84,9 @@ class AgentPlacement:
             if proc is not None and proc.poll() is None:
                 proc.kill()
         else:
-            stop_agents(self.session, host, self.keys.run_id, [agent], incarnation)
+            stop_agents(
+                self.session, host, StopAgents(run_id=self.keys.run_id, agents=[agent], incarnation=incarnation)
+            )
 
     def exit_status(self, process: str) -> str:
         return self.children.exit_status(process)
@@ -80,4 +94,4 @@ class AgentPlacement:
     def stop_all(self) -> None:
         """Agents still running on the hosts after a failure."""
         for host in self.started:
-            stop_agents(self.session, host, self.keys.run_id)
+            stop_agents(self.session, host, StopAgents(run_id=self.keys.run_id))

@@ -23,7 +23,8 @@ from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import Coordinator, RunError
 from swarmbed.experiments.hosts.client import HostError, host_info, wait_for_hosts
 from swarmbed.experiments.launch.access import RunAccess
-from swarmbed.experiments.launch.config import Experiment, resolve_experiment, to_yaml
+from swarmbed.experiments.launch.config import Experiment, Resolved, resolve_experiment, to_yaml
+from swarmbed.experiments.launch.hub import LOOPBACK_ONLY, HubOptions, open_hub
 from swarmbed.experiments.launch.launcher import (
     ChildExited,
     Children,
@@ -35,13 +36,10 @@ from swarmbed.experiments.launch.launcher import (
 from swarmbed.experiments.launch.placement import AgentPlacement
 from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
 from swarmbed.experiments.launch.provenance import provenance
-from swarmbed.wire.credentials import Identity
 from swarmbed.wire.keys import Keys
-from swarmbed.wire.process import tune_malloc
 from swarmbed.wire.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
 from swarmbed.wire.rundir import DEPLOYMENT, RESULT_FILES
 from swarmbed.wire.schema import LOCAL, carriers, hosts_of
-from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 
 
 @dataclass
@@ -72,52 +70,41 @@ class RunResult:
     timings: dict
 
 
-def open_hub(
-    listen: Sequence[str] = (), attempts: int = 5, settings: dict[str, object] | None = None
-) -> tuple[zenoh.Session, str]:
-    """A router session listening on a free loopback TCP port (the run's own processes connect
-    there) and on ``listen`` (where other hosts' routers connect); ``settings``: e.g. the run's
-    authentication and access control (:meth:`RunAccess.hub_settings`)."""
-    tune_malloc()  # the hub handles every tick's messages for as long as the run goes
-    last: Exception | None = None
-    for _ in range(attempts):
-        endpoint = free_loopback_endpoint()
-        try:
-            return zenoh.open(zenoh_config("router", listen=[endpoint, *listen], settings=settings)), endpoint
-        except zenoh.ZError as exc:  # the port was taken between probe and bind
-            last = exc
-    raise RunError(f"could not listen on a loopback port: {last}")
+@dataclass(frozen=True)
+class RunPlan:
+    """What a run is, decided before any process starts: the experiment with the classes its names
+    resolved to, the run's keys (a fresh run id), where every agent runs, and how its hub is
+    reached. A bad plugin name or placement fails here, with nothing started and no file touched."""
+
+    exp: Experiment
+    resolved: Resolved
+    out_dir: Path
+    keys: Keys
+    where: dict[int, str]  # agent id -> host name, LOCAL for this machine
+    hub: HubOptions
+
+    @property
+    def remote_hosts(self) -> list[str]:
+        return sorted({h for h in self.where.values() if h != LOCAL})
 
 
-def run_experiment(
-    exp: Experiment,
-    out_dir: Path,
-    progress: bool = True,
-    on_ready: Callable[[Keys, str], None] | None = None,
-    listen: Sequence[str] = (),
-    auth: bool = True,
-    admit: Sequence[Identity] = (),
-    tls: dict[str, object] | None = None,
-    fork_agents: bool = True,
-    observers: Sequence[RunObserver] = (),
-) -> RunResult:
-    """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
-    (tests use it to reach the run's keys from outside). ``listen``: endpoints where the hub also
-    listens, for the routers of the hosts in ``exp.placement``. ``auth``: the hub admits only
-    processes with the run's credentials and holds each to its own keys (:mod:`.access`), plus the
-    operators and hosts in ``admit``; without it, anyone who reaches the hub may do anything.
-    ``tls``: the hub's certificates (:func:`~swarmbed.wire.session.tls_settings`) for ``tls/``
-    endpoints in ``listen``. ``fork_agents``: local agents come from a fork server that imported
-    everything once (:mod:`.forkserver`); without it each is a fresh interpreter. ``observers``
-    are started once everyone joined and stopped when the ticks are over (:mod:`.soak`)."""
+def plan_run(exp: Experiment, out_dir: Path, hub: HubOptions = LOOPBACK_ONLY) -> RunPlan:
+    """The plan of a validated experiment (:func:`swarmbed.experiments.launch.config.load` checked
+    its placement and names)."""
+    where = hosts_of(exp.placement, exp.agents.count)
+    return RunPlan(exp, resolve_experiment(exp), out_dir, Keys(secrets.token_hex(6)), where, hub)
+
+
+def _start_result_dir(plan: RunPlan) -> None:
+    """The run's folder with its configuration and provenance, and no result of an earlier run in it:
+    a stale summary must never vouch for a new, unfinished run."""
+    out_dir, resolved = plan.out_dir, plan.resolved
     out_dir.mkdir(parents=True, exist_ok=True)
-    for name in RESULT_FILES:  # a stale summary must never vouch for a new, unfinished run
+    for name in RESULT_FILES:
         (out_dir / name).unlink(missing_ok=True)
         (out_dir / (PARTIAL_PREFIX + name)).unlink(missing_ok=True)
-    log_dir = out_dir / "logs"
-    log_dir.mkdir(exist_ok=True)
-    resolved = resolve_experiment(exp)
-    results.write_atomic(out_dir / results.CONFIG, to_yaml(exp))
+    (out_dir / "logs").mkdir(exist_ok=True)
+    results.write_atomic(out_dir / results.CONFIG, to_yaml(plan.exp))
     results.write_json(
         out_dir / PROVENANCE,
         provenance(
@@ -125,14 +112,42 @@ def run_experiment(
         ),
     )
 
+
+def run_experiment(
+    exp: Experiment,
+    out_dir: Path,
+    progress: bool = True,
+    on_ready: Callable[[Keys, str], None] | None = None,
+    hub: HubOptions = LOOPBACK_ONLY,
+    fork_agents: bool = True,
+    observers: Sequence[RunObserver] = (),
+) -> RunResult:
+    """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
+    (tests use it to reach the run's keys from outside). ``hub``: where the hub listens and whom it
+    admits (:class:`HubOptions`; by default loopback only, the run's own processes, each held to its
+    own keys by :mod:`.access`). ``fork_agents``: local agents come from a fork server that imported
+    everything once (:mod:`.forkserver`); without it each is a fresh interpreter. ``observers``
+    are started once everyone joined and stopped when the ticks are over (:mod:`.soak`)."""
+    plan = plan_run(exp, out_dir, hub)
+    _start_result_dir(plan)
+    return _execute(plan, progress, on_ready, fork_agents, observers)
+
+
+def _execute(
+    plan: RunPlan,
+    progress: bool,
+    on_ready: Callable[[Keys, str], None] | None,
+    fork_agents: bool,
+    observers: Sequence[RunObserver],
+) -> RunResult:
+    exp, out_dir, resolved, keys, where = plan.exp, plan.out_dir, plan.resolved, plan.keys, plan.where
+    options = plan.hub
+    listen, log_dir, remote = list(options.listen), out_dir / "logs", plan.remote_hosts
     t_start = time.perf_counter()
     hub_cpu_before = own_cpu_s()  # a sweep's pool worker hosts one run after another: count this one's
     reset_peak_rss()
-    keys = Keys(secrets.token_hex(6))
-    where = hosts_of(exp.placement, exp.agents.count)
-    remote = sorted({h for h in where.values() if h != LOCAL})
     with ExitStack() as undo:  # what is set up before the run's own try: undone if a later step fails
-        access = RunAccess(keys, range(exp.agents.count), admit, carriers(exp)) if auth else None
+        access = RunAccess(keys, range(exp.agents.count), options.admit, carriers(exp)) if options.auth else None
         if access:
             undo.callback(access.close)
         # the fork server first: it is spawned, never forked, but it needs no session of ours
@@ -149,7 +164,7 @@ def run_experiment(
             "transport/unicast/max_sessions": max(1000, exp.agents.count + 64),
         }
         session, endpoint = open_hub(
-            listen, settings={**capacity, **(access.hub_settings() if access else {}), **(tls or {})}
+            listen, settings={**capacity, **(access.hub_settings() if access else {}), **(options.tls or {})}
         )
         undo.callback(session.close)
         logs = ["--log-max-mb", str(exp.run.log_max_mb), "--log-backups", str(exp.run.log_backups)]
@@ -162,7 +177,7 @@ def run_experiment(
             session,
             keys,
             common=["--run-id", keys.run_id, "--connect", endpoint, *logs],
-            logs=logs,
+            log_rotation=(exp.run.log_max_mb, exp.run.log_backups),
             identity=identity,
             hub=listen[0] if listen else endpoint,
             auth=access is not None,
@@ -177,7 +192,7 @@ def run_experiment(
             session,
             out_dir,
             where,
-            carriers(exp) if auth else None,
+            carriers(exp) if access else None,
             placement,
         )
         undo.pop_all()
