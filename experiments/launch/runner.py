@@ -268,42 +268,12 @@ def _execute(
             bar.close()
             for observer in reversed(running):
                 observer.stop()
-        rss = children.rss_mb()
-        shared = {k: v for k, v in children.shared_mb().items() if k.startswith("agent_")}
-        peak = children.peak_rss_mb()
-        peak["coordinator"] = peak_rss_mb(os.getpid())
-        cpu = children.cpu_s()
-        agent_cpu = [v for k, v in cpu.items() if k.startswith("agent_")]
+        marks = {"start": t_start, "server": t_server, "spawned": t_spawned, "joined": t_joined}
+        usage = _usage(children)  # read while the agents still run
         coord.stop_and_collect()
         exit_codes = children.wait(timeout=15.0)
-        agent_rss = [v for k, v in rss.items() if k.startswith("agent_")]
-        run_s = coord.wall["run_s"]
-        timings = {
-            "run_s": run_s,
-            "ticks_per_s": (coord.last_tick + 1) / run_s if run_s > 0 else None,
-            "run_id": keys.run_id,
-            "endpoint": endpoint,
-            "auth": access is not None,
-            "startup_s": t_joined - t_start,
-            "total_s": time.perf_counter() - t_start,
-            "rss_mb": rss,
-            "peak_rss_mb": peak,
-            "cpu_s": {
-                "coordinator": own_cpu_s() - hub_cpu_before,
-                "netem": cpu.get("netem"),
-                "agents_total": sum(agent_cpu),
-                "agent_max": max(agent_cpu, default=None),
-            },
-            "agent_rss_mb_mean": sum(agent_rss) / len(agent_rss) if agent_rss else None,
-            "agent_pss_mb_mean": sum(p for p, _ in shared.values()) / len(shared) if shared else None,
-            "agent_uss_mb_mean": sum(u for _, u in shared.values()) / len(shared) if shared else None,
-            "startup": {
-                "fork_server_s": t_server - t_start if children.forked else None,
-                "spawn_s": t_spawned - t_server,
-                "join_s": t_joined - t_spawned,
-            },
-            "exit_codes": exit_codes,
-        }
+        timings = _timings(usage, coord, marks, hub_cpu_before, children.forked, exit_codes)
+        timings.update(run_id=keys.run_id, endpoint=endpoint, auth=access is not None)
         summary = coord.write_results(timings)
         return RunResult(out_dir, summary, timings)
     except TableWriteError as exc:  # a full disk: one line, the first error, not what clean-up meets next
@@ -315,15 +285,65 @@ def _execute(
         session.close()
         if access:
             access.close()
-        # a run that did not complete leaves no half-written file under a result's name: the rows it
-        # streamed are kept as partial_<name> once ticks ran (readable, for a post-mortem)
-        coord.abandon_tables()
-        for partial in out_dir.glob("*.part"):
-            if coord.last_tick >= 0:
-                keep_partial(partial)
-            else:
-                partial.unlink(missing_ok=True)
-        if not (out_dir / results.SUMMARY).exists():  # results written before a failure at the very end
-            for name in RESULT_FILES:
-                if name != DEPLOYMENT and (out_dir / name).exists():
-                    os.replace(out_dir / name, out_dir / (PARTIAL_PREFIX + name))
+        _keep_no_torn_result(coord, out_dir)
+
+
+def _usage(children: Children) -> dict[str, dict]:
+    """Memory and CPU of every child process (and the coordinator's peak), by process name."""
+    peak = children.peak_rss_mb()
+    peak["coordinator"] = peak_rss_mb(os.getpid())
+    return {"rss": children.rss_mb(), "shared": children.shared_mb(), "peak": peak, "cpu": children.cpu_s()}
+
+
+def _timings(
+    usage: dict[str, dict],
+    coord: Coordinator,
+    marks: dict[str, float],
+    hub_cpu_before: float,
+    forked: bool,
+    exit_codes: dict[str, int | None],
+) -> dict:
+    """What the run cost: wall time by phase, memory and CPU by process kind (timings.json)."""
+    rss, peak, cpu = usage["rss"], usage["peak"], usage["cpu"]
+    shared = {k: v for k, v in usage["shared"].items() if k.startswith("agent_")}
+    agent_cpu = [v for k, v in cpu.items() if k.startswith("agent_")]
+    agent_rss = [v for k, v in rss.items() if k.startswith("agent_")]
+    run_s = coord.wall["run_s"]
+    return {
+        "run_s": run_s,
+        "ticks_per_s": (coord.last_tick + 1) / run_s if run_s > 0 else None,
+        "startup_s": marks["joined"] - marks["start"],
+        "total_s": time.perf_counter() - marks["start"],
+        "rss_mb": rss,
+        "peak_rss_mb": peak,
+        "cpu_s": {
+            "coordinator": own_cpu_s() - hub_cpu_before,
+            "netem": cpu.get("netem"),
+            "agents_total": sum(agent_cpu),
+            "agent_max": max(agent_cpu, default=None),
+        },
+        "agent_rss_mb_mean": sum(agent_rss) / len(agent_rss) if agent_rss else None,
+        "agent_pss_mb_mean": sum(p for p, _ in shared.values()) / len(shared) if shared else None,
+        "agent_uss_mb_mean": sum(u for _, u in shared.values()) / len(shared) if shared else None,
+        "startup": {
+            "fork_server_s": marks["server"] - marks["start"] if forked else None,
+            "spawn_s": marks["spawned"] - marks["server"],
+            "join_s": marks["joined"] - marks["spawned"],
+        },
+        "exit_codes": exit_codes,
+    }
+
+
+def _keep_no_torn_result(coord: Coordinator, out_dir: Path) -> None:
+    """A run that did not complete leaves no half-written file under a result's name: the rows it
+    streamed are kept as partial_<name> once ticks ran (readable, for a post-mortem)."""
+    coord.abandon_tables()
+    for partial in out_dir.glob("*.part"):
+        if coord.last_tick >= 0:
+            keep_partial(partial)
+        else:
+            partial.unlink(missing_ok=True)
+    if not (out_dir / results.SUMMARY).exists():  # results written before a failure at the very end
+        for name in RESULT_FILES:
+            if name != DEPLOYMENT and (out_dir / name).exists():
+                os.replace(out_dir / name, out_dir / (PARTIAL_PREFIX + name))
