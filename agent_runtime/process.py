@@ -14,6 +14,7 @@ import zenoh
 from pydantic import BaseModel
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
+from swarmbed.wire.btlog import encode_tree_changes
 from swarmbed.wire.codec import (
     ControlIn,
     StopIn,
@@ -69,6 +70,8 @@ def serve(
 
     watch = session.liveliness().declare_subscriber(keys.alive_coordinator, on_coordinator)
     out = session.declare_publisher(keys.agent_out(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
+    # before each answer, on the same session: the coordinator has a tick's changes before its end
+    bt = session.declare_publisher(keys.agent_bt(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
 
     def report(data: BaseModel) -> None:
         if not hand_over(session, keys.agent_report(agent_id), encode_report(data)):
@@ -127,6 +130,9 @@ def serve(
                 error = f"{type(exc).__name__}: {exc}"
                 report(Fatal(kind="fatal", agent=agent_id, tick=msg.tick, error=error, traceback=tb))
                 return EXIT_PLUGIN_ERROR
+            changes = runtime.tree_changes(msg.tick)
+            if changes is not None:
+                bt.put(encode_tree_changes(changes))
             answer = encode_agent_out(msg.tick, agent_id, action, messages, events)
             sample_bytes["out"] += len(answer)
             out.put(answer)
@@ -135,7 +141,7 @@ def serve(
         return EXIT_PLUGIN_ERROR
     finally:
         token.undeclare()
-        for entity in (sub, watch, out):
+        for entity in (sub, watch, out, bt):
             entity.undeclare()
 
 

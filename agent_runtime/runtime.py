@@ -14,11 +14,13 @@ from collections import defaultdict
 import numpy as np
 
 from swarmbed.agent_runtime.bt import Blackboard, load_tree
+from swarmbed.agent_runtime.bt.btlog import ChangeRecorder, tree_xml
 from swarmbed.agent_runtime.node_sets import node_registry, tree_path
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.context import NodeContext
 from swarmbed.extension.scenario import Scenario
 from swarmbed.extension.view import LocalView, Message, TaskInfo
+from swarmbed.wire.btlog import TreeChanges
 from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, unpack
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.reports import Final, Transport
@@ -29,7 +31,7 @@ from swarmbed.wire.targets import load_target
 
 log = logging.getLogger("swarmbed.agent")
 
-SNAPSHOT_VERSION = 1
+SNAPSHOT_VERSION = 2  # 2: a node's status is kept as _status (it became a watched property)
 
 
 def build_scenario(spec: AgentSpec) -> Scenario:
@@ -63,6 +65,8 @@ class AgentRuntime:
             blackboard=bb,
             context=self.context,
         )
+        self.changes = ChangeRecorder(self.tree) if spec.record_bt else None
+        self._tree_sent = False  # this process has not yet told the coordinator its tree's XML
         self.sent: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # kind -> [messages, payload bytes]
         self.malformed = 0
         self.ticks = 0
@@ -125,9 +129,20 @@ class AgentRuntime:
         events, self.allocator.events = self.allocator.events, {}
         return ctx.action, messages, events
 
+    def tree_changes(self, tick: int) -> TreeChanges | None:
+        """The status changes of the tick just stepped (with the tree's XML the first time), when
+        the run records them."""
+        if self.changes is None:
+            return None
+        xml = None if self._tree_sent else tree_xml(self.tree)
+        self._tree_sent = True
+        return TreeChanges(tick, self.changes.take(), xml)
+
     # -- moving to another process ----------------------------------------------------------------
-    #: node attributes the tree loader sets: not state
-    STRUCTURE = frozenset({"name", "config", "_literals", "_children", "child"})
+    #: node attributes the tree loader sets, and who watches a node's status: not state
+    STRUCTURE = frozenset(
+        {"name", "config", "_literals", "_children", "child", "uid", "tree_id", "fullpath", "_watcher"}
+    )
 
     def _blackboards(self) -> list[Blackboard]:
         seen: dict[int, Blackboard] = {}

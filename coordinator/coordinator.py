@@ -27,6 +27,7 @@ from swarmbed.coordinator.events import CONSUMED, EventQueue
 from swarmbed.coordinator.lifecycle import AgentLifecycle
 from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.recorder import Recorder
+from swarmbed.coordinator.trees import TreeRecorder
 from swarmbed.extension.actions import admit
 from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.codec import (
@@ -94,6 +95,7 @@ class Coordinator:
             exp, keys, self.world, self.events, hosts or {}, carriers, placement, self._decode_report, self._malformed
         )
         self.recorder = Recorder(exp, self.world, out_dir, list(getattr(allocator, "event_names", ())))
+        self.trees = TreeRecorder(out_dir, self.n, exp.run.dt, self._malformed) if exp.run.record_bt else None
         self.joined: set[str] = set()
         self.reports: dict[int, Final] = {}
         self.netem_report: NetemFinal | None = None
@@ -125,6 +127,8 @@ class Coordinator:
             s.declare_queryable(k.agent_snapshot_all, self.agents.on_snapshot_query),
             s.declare_queryable(k.swap, self.agents.on_swap_query),
         ]
+        if self.trees is not None:
+            self._entities.append(s.declare_subscriber(k.agent_bt_all, self.trees.on_sample))
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
         self.agents.agent_pubs = self.agent_pubs
         self.world_pub = s.declare_publisher(k.world, congestion_control=BLOCK)
@@ -182,6 +186,8 @@ class Coordinator:
     # -- the tick loop (lock-step, or paced by the wall on the real-time clock) -----------------------
     def abandon_tables(self) -> list[Path]:
         """The run did not complete: keep the rows streamed so far as ``partial_*`` files."""
+        if self.trees is not None:
+            self.trees.abandon()
         return self.recorder.abandon()
 
     def run(self, on_tick: Callable[[int, float], None] | None = None) -> None:
@@ -444,4 +450,6 @@ class Coordinator:
         summary = self.summary()
         assert self.netem_report is not None
         self.recorder.write(summary, timings, self.agents, self.reports, self.netem_report)
+        if self.trees is not None:
+            self.trees.finish(self.last_tick, set(self.agents.lost))
         return summary

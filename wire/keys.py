@@ -89,6 +89,14 @@ class Keys:
     def alive_agents(self) -> str:
         return f"{self.root}/alive/agent/*/*"
 
+    # agent -> coordinator (and operators): each tick's behavior tree status changes, when recorded
+    def agent_bt(self, agent_id: int) -> str:
+        return f"{self.root}/agent/{agent_id}/bt"
+
+    @property
+    def agent_bt_all(self) -> str:
+        return f"{self.root}/agent/*/bt"
+
     # coordinator queryable: an agent's snapshot, handed over by the old process during a swap
     # (query with payload) and fetched by the new one (query without)
     def agent_snapshot(self, agent_id: int) -> str:

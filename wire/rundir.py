@@ -23,6 +23,13 @@ TIMINGS = "timings.json"  # wall-clock figures: of this machine and moment
 TRANSPORT = "transport.json"  # measured bytes on the wire: of this machine and moment
 DEPLOYMENT = "deployment.json"  # where each agent ran
 LOGS = "logs"
+BT = "bt"  # with run.record_bt: one Groot2-replayable file per agent
+
+
+def btlog_name(agent: int) -> str:
+    """An agent's behavior tree log in :data:`BT` (BehaviorTree.CPP's file-logger format)."""
+    return f"agent_{agent}.btlog"
+
 
 PART_SUFFIX = ".part"
 PARTIAL_PREFIX = "partial_"

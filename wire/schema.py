@@ -71,6 +71,11 @@ class RunSection(Strict):
     log_backups: int = Field(2, ge=0, description="rotated log files kept per process (name.log.1, ...)")
     record_every: int = Field(1, ge=1, description="ticks between time-series rows")
     record_trajectories: bool = Field(False, description="write trajectories.csv and markers.csv (for swarmbed replay)")
+    record_bt: bool = Field(
+        False,
+        description="write bt/agent_<id>.btlog, each agent's behavior tree run as Groot2 replays it "
+        "(BehaviorTree.CPP's file-logger format, stamped in simulated time)",
+    )
     stop_when_done: bool = Field(True, description="end the run once every task there will be is done")
 
     @property
@@ -272,6 +277,7 @@ class AgentSpec(Strict):
     scenario: ScenarioSection
     allocator: AllocatorSection
     targets: Targets
+    record_bt: bool = False  # hand the coordinator every tick's tree status changes
 
 
 class NetemSpec(Strict):
@@ -293,6 +299,7 @@ def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
         scenario=exp.scenario,
         allocator=exp.allocator,
         targets=targets,
+        record_bt=exp.run.record_bt,
     )
 
 

@@ -7,11 +7,16 @@ Controls and decorators live in ``composites`` and ``decorators``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from swarmbed.agent_runtime.bt.blackboard import Blackboard
 from swarmbed.agent_runtime.bt.status import Status
+
+StatusWatcher = Callable[["TreeNode", Status, Status], None]
+"""Called with (node, previous status, new status) on every change, as BehaviorTree.CPP's
+StatusChangeLogger hears them (transitions to IDLE included)."""
 
 
 class BTError(Exception):
@@ -72,10 +77,15 @@ class TreeNode:
     ID: ClassVar[str] = ""
     KIND: ClassVar[str] = "Action"  # Action | Condition | Control | Decorator | SubTree
 
+    # who hears every change of a node's status (a .btlog recorder, a Groot2 monitor): set per node
+    # by :meth:`Tree.watch`; None costs one attribute check per change
+    _watcher: StatusWatcher | None = None
+
     def __init__(self, name: str, config: NodeConfig) -> None:
         self.name = name
         self.config = config
-        self.status = Status.IDLE
+        self._status = Status.IDLE
+        self.uid = 0  # BehaviorTree.CPP's UID: 1, 2, ... in the order the tree's nodes were built
         self._literals: dict[str, Any] = {}
         # a port's blackboard key, resolved once: the ports are fixed when the tree is built, and
         # resolving them (``provided_ports`` builds its Port objects) each tick was ~10 % of an idle agent's CPU
@@ -129,6 +139,19 @@ class TreeNode:
                 raise BTError(f"{self.config.path}: output port '{port}' must name a blackboard key, not {raw!r}")
             self._keys[port] = key
         self.config.blackboard.set(key, value)
+
+    # -- status ------------------------------------------------------------------------------
+    @property
+    def status(self) -> Status:
+        return self._status
+
+    @status.setter
+    def status(self, new: Status) -> None:
+        prev = self._status
+        if new is not prev:
+            self._status = new
+            if self._watcher is not None:
+                self._watcher(self, prev, new)
 
     # -- ticking -----------------------------------------------------------------------------
     def execute_tick(self) -> Status:

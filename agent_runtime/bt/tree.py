@@ -12,7 +12,15 @@ from typing import Any
 from xml.parsers import expat
 
 from swarmbed.agent_runtime.bt.blackboard import Blackboard
-from swarmbed.agent_runtime.bt.node import BTError, ControlNode, DecoratorNode, NodeConfig, TreeNode, blackboard_key
+from swarmbed.agent_runtime.bt.node import (
+    BTError,
+    ControlNode,
+    DecoratorNode,
+    NodeConfig,
+    StatusWatcher,
+    TreeNode,
+    blackboard_key,
+)
 from swarmbed.agent_runtime.bt.registry import NodeRegistry
 from swarmbed.agent_runtime.bt.status import Status
 
@@ -25,6 +33,8 @@ class SubTree(DecoratorNode):
 
     ID = "SubTree"
     KIND = "SubTree"
+    tree_id = ""  # the BehaviorTree it runs
+    fullpath = ""  # Groot2's name of this instance: parent instances' paths, then its name or ID::uid
 
     def tick(self) -> Status:
         if self.status == Status.IDLE:
@@ -36,10 +46,11 @@ class SubTree(DecoratorNode):
 
 
 class Tree:
-    def __init__(self, root: TreeNode, blackboard: Blackboard, nodes: list[TreeNode]) -> None:
+    def __init__(self, root: TreeNode, blackboard: Blackboard, nodes: list[TreeNode], main_id: str = "") -> None:
         self.root = root
         self.blackboard = blackboard
-        self.nodes = nodes
+        self.nodes = nodes  # in the order they were built: node.uid is its place here, from 1
+        self.main_id = main_id  # the BehaviorTree ID it runs
 
     def tick_once(self) -> Status:
         """Tick the root exactly once (BT.CPP ``tickExactlyOnce``)."""
@@ -50,6 +61,11 @@ class Tree:
 
     def halt(self) -> None:
         self.root.halt()
+
+    def watch(self, watcher: StatusWatcher | None) -> None:
+        """Hand every node's status changes to ``watcher`` (None: to no one)."""
+        for node in self.nodes:
+            node._watcher = watcher
 
 
 @dataclass
@@ -91,6 +107,7 @@ class _Builder:
         self.registry = registry
         self.context = context
         self.nodes: list[TreeNode] = []
+        self.path = ""  # the SubTree instance being built (its fullpath), "" in the main tree
 
     def here(self, el: _Element, node_id: str | None = None) -> str:
         name = el.attrs.get("name")
@@ -129,7 +146,7 @@ class _Builder:
             if pname not in raw and spec.required:
                 raise BTError(f"{where}: required port '{pname}' is missing")
         node = node_type(el.attrs.get("name", node_id), NodeConfig(bb, raw, where, self.context))
-        self.nodes.append(node)
+        self._add(node)
         n = len(el.children)
         if isinstance(node, ControlNode):
             if n < node.MIN_CHILDREN:
@@ -174,9 +191,20 @@ class _Builder:
         for k, v in literals.items():
             bb.set(k, v)
         node = SubTree(el.attrs.get("name", tree_id), NodeConfig(bb, {}, where, self.context))
-        self.nodes.append(node)
-        node.add_child(self.build_tree(tree_id, bb, chain))
+        self._add(node)
+        outer = self.path
+        own = el.attrs.get("name", f"{tree_id}::{node.uid}")
+        node.tree_id, node.fullpath = tree_id, f"{outer}/{own}" if outer else own
+        self.path = node.fullpath
+        try:
+            node.add_child(self.build_tree(tree_id, bb, chain))
+        finally:
+            self.path = outer
         return node
+
+    def _add(self, node: TreeNode) -> None:
+        self.nodes.append(node)
+        node.uid = len(self.nodes)
 
 
 def load_tree(
@@ -224,4 +252,4 @@ def load_tree(
     bb = blackboard if blackboard is not None else Blackboard()
     builder = _Builder(where, trees, registry, context)
     root_node = builder.build_tree(main, bb, ())
-    return Tree(root_node, bb, builder.nodes)
+    return Tree(root_node, bb, builder.nodes, main)

@@ -72,7 +72,7 @@ def _agent_rules(k: Keys, user: str, ids: Iterable[int]) -> list[dict]:
     if not ids:
         return []
     return [
-        _allow(f"{user}-put", ["put"], [k.agent_out(i) for i in ids]),
+        _allow(f"{user}-put", ["put"], [key for i in ids for key in (k.agent_out(i), k.agent_bt(i))]),
         _allow(f"{user}-subscribe", ["declare_subscriber"], [k.agent_in(i) for i in ids]),
         _allow(
             f"{user}-query",

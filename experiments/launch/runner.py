@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import shutil
 import time
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
@@ -38,7 +39,7 @@ from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
 from swarmbed.experiments.launch.provenance import provenance
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
-from swarmbed.wire.rundir import DEPLOYMENT, RESULT_FILES
+from swarmbed.wire.rundir import BT, DEPLOYMENT, RESULT_FILES
 from swarmbed.wire.schema import LOCAL, carriers, hosts_of
 
 
@@ -103,6 +104,7 @@ def _start_result_dir(plan: RunPlan) -> None:
     for name in RESULT_FILES:
         (out_dir / name).unlink(missing_ok=True)
         (out_dir / (PARTIAL_PREFIX + name)).unlink(missing_ok=True)
+    shutil.rmtree(out_dir / BT, ignore_errors=True)
     (out_dir / "logs").mkdir(exist_ok=True)
     results.write_atomic(out_dir / results.CONFIG, to_yaml(plan.exp))
     results.write_json(

@@ -1,0 +1,93 @@
+"""The agents' behavior trees, recorded: ``bt/agent_<id>.btlog`` per agent (``run.record_bt``), in
+BehaviorTree.CPP's file-logger format so Groot2 replays them (:mod:`swarmbed.wire.btlog`).
+
+Every agent hands over each tick's status changes on its own key, on the session that carries its
+answer of the tick, so they are here before the run's end; its first sample carries its tree. Records
+are stamped with the tick's simulated time, so a lock-step run's files are byte-identical on every
+rerun and placement. A process that starts again from a checkpoint sends its tree again (ignored)
+and ticks already recorded (ignored: the first account of a tick stands).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import BinaryIO
+
+import zenoh
+
+from swarmbed.wire.btlog import decode_tree_changes, file_head, records
+from swarmbed.wire.errors import WireError
+from swarmbed.wire.keys import agent_id_of
+from swarmbed.wire.rundir import BT, PART_SUFFIX, PARTIAL_PREFIX, btlog_name
+
+log = logging.getLogger("swarmbed.coordinator")
+_UID = re.compile(r'_uid="(\d+)"')
+
+
+class _AgentLog:
+    def __init__(self, path: Path, xml: str) -> None:
+        self.path = path
+        self.n_nodes = max((int(u) for u in _UID.findall(xml)), default=0)
+        self.last_tick = -1
+        self.file: BinaryIO = open(path, "wb")  # noqa: SIM115 - open for the run, closed by the recorder
+        self.file.write(file_head(xml))
+
+
+class TreeRecorder:
+    """Writes each agent's ``.btlog`` as its samples arrive (on Zenoh's callback thread)."""
+
+    def __init__(self, out_dir: Path, n_agents: int, dt: float, malformed: Callable[[str, Exception], None]) -> None:
+        self.folder = out_dir / BT
+        self.n = n_agents
+        self.dt_us = dt * 1_000_000
+        self.malformed = malformed
+        self.logs: dict[int, _AgentLog] = {}
+        self.lock = threading.Lock()
+        self.folder.mkdir(exist_ok=True)  # the launcher emptied it: no earlier run's file passes for ours
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        try:
+            agent = agent_id_of(key)
+            if not 0 <= agent < self.n:
+                raise WireError(f"no agent {agent} in this run")
+            with self.lock:
+                known = self.logs.get(agent)
+                changes = decode_tree_changes(sample.payload.to_bytes(), known.n_nodes if known else None)
+                if known is None:
+                    if changes.xml is None:
+                        raise WireError("tree changes before the agent's tree")
+                    known = self.logs[agent] = _AgentLog(self.folder / (btlog_name(agent) + PART_SUFFIX), changes.xml)
+                    if any(uid > known.n_nodes for uid, _ in changes.changes):
+                        raise WireError(f"tree changes of nodes beyond the {known.n_nodes} of agent {agent}'s tree")
+                if changes.tick <= known.last_tick:
+                    return  # a process restarted from a checkpoint: the first account of a tick stands
+                known.last_tick = changes.tick
+                known.file.write(records(round(changes.tick * self.dt_us), changes.changes))
+        except WireError as exc:
+            self.malformed(key, exc)
+
+    def finish(self, last_tick: int, lost: set[int]) -> None:
+        """The run completed: close every file under its name."""
+        with self.lock:
+            for agent, entry in sorted(self.logs.items()):
+                entry.file.close()
+                if entry.last_tick != last_tick and agent not in lost:
+                    log.warning(
+                        "coordinator: agent %d's tree log ends at tick %d of %d", agent, entry.last_tick, last_tick
+                    )
+                os.replace(entry.path, self.folder / btlog_name(agent))
+            self.logs.clear()
+
+    def abandon(self) -> None:
+        """The run did not complete: keep what was recorded as ``partial_agent_<id>.btlog``."""
+        with self.lock:
+            for agent, entry in self.logs.items():
+                entry.file.close()
+                os.replace(entry.path, self.folder / (PARTIAL_PREFIX + btlog_name(agent)))
+            self.logs.clear()

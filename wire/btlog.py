@@ -1,0 +1,114 @@
+"""BehaviorTree.CPP's ``.btlog`` file (its FileLogger2), which Groot2 opens to replay a tree's run,
+and the per-tick sample in which an agent hands its tree's status changes to the coordinator.
+
+The file's layout, little-endian, as BehaviorTree.CPP v4 writes it:
+
+- the 19-byte header ``BTCPP4-FileLogger2`` and a byte 1;
+- a uint32 N, then N bytes of the tree as XML: every node with its ``_uid``, each SubTree instance
+  as a ``<BehaviorTree ID=... _fullpath=...>`` of its own after the main tree, then the node models
+  (:func:`swarmbed.agent_runtime.bt.btlog.tree_xml` writes it);
+- an int64: the first timestamp, in microseconds since the Unix epoch;
+- then one 9-byte record per status change: 6 bytes of microseconds since the first timestamp,
+  the node's uint16 uid, and its uint8 status (IDLE 0, RUNNING 1, SUCCESS 2, FAILURE 3).
+
+BehaviorTree.CPP stamps records with the wall clock. Ours are stamped in simulated time from a
+fixed epoch (:data:`EPOCH_US`), so a lock-step run's files are byte-identical on every rerun and
+placement. ``tests/test_btlog.py`` runs the same trees through BehaviorTree.CPP's own FileLogger
+and compares the trees, uids and status changes.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from swarmbed.wire.codec import pack, unpack
+from swarmbed.wire.errors import WireError
+
+HEADER = b"BTCPP4-FileLogger2\x01"
+EPOCH_US = 946_684_800_000_000  # simulated time 0 is 2000-01-01T00:00:00Z
+STATUS_CODES = 4  # IDLE, RUNNING, SUCCESS, FAILURE: BehaviorTree.CPP's NodeStatus values 0 to 3
+_RECORD = 9
+_MAX_OFFSET_US = 2**48 - 1
+MAX_TREE_XML = 1 << 20  # bytes: a tree a person drew is far smaller
+MAX_CHANGES = 1 << 16  # status changes of one agent in one tick
+
+
+class BtLogError(ValueError):
+    """A .btlog that cannot be read; the message says where it stops making sense."""
+
+
+def file_head(xml: str, first_us: int = EPOCH_US) -> bytes:
+    """What a .btlog starts with: the header, the tree and the first timestamp."""
+    data = xml.encode()
+    return HEADER + struct.pack("<I", len(data)) + data + struct.pack("<q", first_us)
+
+
+def records(offset_us: int, changes: Iterable[tuple[int, int]]) -> bytes:
+    """The 9-byte records of status changes ``(uid, status code)`` at ``offset_us`` after the first
+    timestamp."""
+    if not 0 <= offset_us <= _MAX_OFFSET_US:
+        raise BtLogError(f"a .btlog record's time must be 0 to {_MAX_OFFSET_US} us after the first, got {offset_us}")
+    stamp = offset_us.to_bytes(6, "little")
+    return b"".join(stamp + struct.pack("<HB", uid, code) for uid, code in changes)
+
+
+def read_btlog(data: bytes) -> tuple[str, int, list[tuple[int, int, int]]]:
+    """(tree XML, first timestamp in us, [(us after the first, uid, status code)]) of a .btlog."""
+    if not data.startswith(HEADER):
+        raise BtLogError("not a .btlog: it does not start with BTCPP4-FileLogger2")
+    at = len(HEADER)
+    if len(data) < at + 4:
+        raise BtLogError(f"the file ends at byte {len(data)}, inside the tree's length")
+    (n,) = struct.unpack_from("<I", data, at)
+    at += 4
+    if len(data) < at + n + 8:
+        raise BtLogError(f"the file ends at byte {len(data)}, inside the tree ({n} bytes from byte {at})")
+    xml = data[at : at + n].decode()
+    at += n
+    (first,) = struct.unpack_from("<q", data, at)
+    at += 8
+    if (len(data) - at) % _RECORD:
+        raise BtLogError(f"{len(data) - at} bytes of records is not a whole number of {_RECORD}-byte records")
+    out = []
+    for i in range(at, len(data), _RECORD):
+        uid, code = struct.unpack_from("<HB", data, i + 6)
+        out.append((int.from_bytes(data[i : i + 6], "little"), uid, code))
+    return xml, first, out
+
+
+# -- agent -> coordinator: one tick's status changes -------------------------------------------------
+@dataclass(frozen=True)
+class TreeChanges:
+    """An agent's status changes in one tick, ``(uid, status code)`` in the order they happened;
+    ``xml``: its tree (:func:`file_head`'s XML), in the first sample a process sends."""
+
+    tick: int
+    changes: list[tuple[int, int]]
+    xml: str | None = None
+
+
+def encode_tree_changes(sample: TreeChanges) -> bytes:
+    flat = b"".join(struct.pack("<HB", uid, code) for uid, code in sample.changes)
+    return pack([sample.tick, flat, sample.xml])
+
+
+def decode_tree_changes(data: bytes, n_nodes: int | None = None) -> TreeChanges:
+    """A sample of :func:`encode_tree_changes`; WireError names what is wrong. ``n_nodes``: the
+    tree's size, once known (uids run from 1 to it)."""
+    raw = unpack(data, max_bytes=MAX_TREE_XML + 3 * MAX_CHANGES + 64)
+    if not (isinstance(raw, list) and len(raw) == 3):
+        raise WireError("tree changes: not [tick, changes, xml]")
+    tick, flat, xml = raw
+    if not (isinstance(tick, int) and not isinstance(tick, bool) and 0 <= tick < 2**40):
+        raise WireError(f"tree changes: tick must be a count, got {tick!r}")
+    if not (isinstance(flat, bytes) and len(flat) % 3 == 0 and len(flat) <= 3 * MAX_CHANGES):
+        raise WireError("tree changes: changes must be whole 3-byte (uid, status) records")
+    if not (xml is None or (isinstance(xml, str) and xml.startswith("<root") and len(xml) <= MAX_TREE_XML)):
+        raise WireError("tree changes: xml must be a tree's <root> element or nil")
+    changes = [struct.unpack_from("<HB", flat, i) for i in range(0, len(flat), 3)]
+    for uid, code in changes:
+        if code >= STATUS_CODES or uid == 0 or (n_nodes is not None and uid > n_nodes):
+            raise WireError(f"tree changes: no node {uid} with status {code}")
+    return TreeChanges(tick, changes, xml)
