@@ -399,6 +399,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     from swarmbed.experiments.views.replay import ReplayError, replay
 
+    if args.mcap:
+        return _replay_mcap(Path(args.run_dir), Path(args.mcap))
     try:
         t0 = time.perf_counter()
         path, frames = replay(
@@ -413,6 +415,19 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"{path}  ({frames} frames, {path.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def _replay_mcap(run: Path, out: Path) -> int:
+    from swarmbed.experiments.views.recording import RecordingError, write_mcap
+
+    try:
+        written = write_mcap(run, out)
+    except RecordingError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    topics = ", ".join(f"{topic} {n}" for topic, n in written["messages"].items() if n)
+    print(f"{out}  ({written['bytes'] / 1e6:.1f} MB, {written['seconds']:.1f} s; messages: {topics})")
     return 0
 
 
@@ -752,6 +767,11 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--to", type=float, help="simulated second to end at")
     rp.add_argument("--fps", type=_positive, default=10, help="frames per second of the movie (default 10)")
     rp.add_argument("--every", type=_positive, help="ticks per frame (default: at most 600 frames)")
+    rp.add_argument(
+        "--mcap",
+        metavar="FILE.mcap",
+        help="write an MCAP recording for Foxglove-class viewers instead of a movie (needs swarmbed[viewers])",
+    )
     rp.set_defaults(func=cmd_replay)
 
     chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")

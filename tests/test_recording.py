@@ -1,0 +1,109 @@
+"""``swarmbed replay RUN --mcap``: a recorded run as MCAP, read back with the mcap library and
+protobuf (not with the SDK that wrote it) and compared with the run's own files."""
+
+import json
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.wire.btlog import EPOCH_US, read_btlog
+from tests.conftest import experiment
+
+pytest.importorskip("foxglove", reason="recordings need Foxglove's SDK (swarmbed[viewers])")
+reader = pytest.importorskip("mcap.reader", reason="reading recordings back needs mcap")
+protobuf_decoder = pytest.importorskip("mcap_protobuf.decoder", reason="decoding Foxglove's schemas needs protobuf")
+
+RECORDED = [
+    "run.duration=40",
+    "run.stop_when_done=false",
+    "run.record_trajectories=true",
+    "run.record_bt=true",
+    "network.ledger=per_receiver",
+    "network.loss=0.2",
+]
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    run = tmp_path_factory.mktemp("recorded") / "run"
+    run_experiment(experiment(*RECORDED), run, progress=False)
+    return run
+
+
+def replay_mcap(run, out):
+    return subprocess.run(
+        [sys.executable, "-m", "swarmbed", "replay", str(run), "--mcap", str(out)], capture_output=True, text=True
+    )
+
+
+class JsonDecoder:
+    def decoder_for(self, message_encoding, schema):
+        return json.loads if message_encoding == "json" else None
+
+
+def read_back(path):
+    """{topic: [(log_time, schema name, decoded message)]}"""
+    out: dict[str, list] = {}
+    decoders = [protobuf_decoder.DecoderFactory(), JsonDecoder()]
+    with open(path, "rb") as f:
+        for schema, channel, message, decoded in reader.make_reader(
+            f, decoder_factories=decoders
+        ).iter_decoded_messages():
+            out.setdefault(channel.topic, []).append((message.log_time, schema.name, decoded))
+    return out
+
+
+def test_the_recording_holds_the_runs_poses_counters_copies_markers_and_trees(recorded, tmp_path):
+    done = replay_mcap(recorded, tmp_path / "run.mcap")
+    assert done.returncode == 0, done.stderr
+    again = replay_mcap(recorded, tmp_path / "again.mcap")
+    assert again.returncode == 0 and (tmp_path / "run.mcap").read_bytes() == (tmp_path / "again.mcap").read_bytes()
+    topics = read_back(tmp_path / "run.mcap")
+    dt = 1.0  # quickstart's tick
+    stamp = {tick: EPOCH_US * 1000 + round(tick * dt * 1e9) for tick in range(100)}
+
+    traj = pd.read_csv(recorded / "trajectories.csv", keep_default_na=False)
+    poses = topics["/agents/poses"]
+    assert {name for _, name, _ in poses} == {"foxglove.PosesInFrame"} and len(poses) == traj["tick"].nunique()
+    for (time, _, msg), (tick, rows) in zip(poses, traj.groupby("tick")):
+        assert time == stamp[tick] and msg.frame_id == "world"
+        assert [(p.position.x, p.position.y) for p in msg.poses] == list(zip(rows["x"], rows["y"]))
+    assert {name for _, name, _ in topics["/agents"]} == {"foxglove.SceneUpdate"}
+
+    counters = pd.read_csv(recorded / "timeseries.csv")
+    assert [m for _, _, m in topics["/counters"]] == counters.to_dict("records")
+
+    copies = pd.read_parquet(recorded / "network_ledger_receivers.parquet")
+    for time, _, update in topics["/radio"]:
+        tick = round((time - stamp[0]) / 1e9 / dt)
+        drawn = {}
+        for line in update.entities[0].lines:
+            drawn[len(drawn)] = len(line.points) // 2
+        assert sum(drawn.values()) == (copies["tick"] == tick).sum()
+    assert len({line.color.r for _, _, u in topics["/radio"] for line in u.entities[0].lines}) >= 2  # outcomes
+
+    markers = pd.read_csv(recorded / "markers.csv", keep_default_na=False)
+    appeared = sum(len(u.entities) for _, _, u in topics["/markers"])
+    vanished = sum(len(u.deletions) for _, _, u in topics["/markers"])
+    assert (appeared, vanished) == ((markers["event"] == "appear").sum(), (markers["event"] != "appear").sum())
+
+    statuses = ("IDLE", "RUNNING", "SUCCESS", "FAILURE")
+    for agent in range(5):
+        _, _, records = read_btlog((recorded / "bt" / f"agent_{agent}.btlog").read_bytes())
+        logged = [
+            (round((time - stamp[0]) / 1000), c["uid"], statuses.index(c["status"]))
+            for time, _, m in topics["/agents/tree"]
+            if m["agent"] == agent
+            for c in m["changes"]
+        ]
+        assert logged == records
+
+
+def test_a_run_without_trajectories_is_refused_with_the_flag_to_set(tmp_path):
+    run_experiment(experiment("run.duration=5"), tmp_path / "run", progress=False)
+    done = replay_mcap(tmp_path / "run", tmp_path / "run.mcap")
+    assert done.returncode == 2 and "--set run.record_trajectories=true" in done.stderr
+    assert not (tmp_path / "run.mcap").exists()
