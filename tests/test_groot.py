@@ -1,0 +1,136 @@
+"""Our Groot2 monitoring answers against BehaviorTree.CPP's own Groot2Publisher: the same trees
+ticked with the same leaf results, asked the same requests over ZeroMQ after every tick, give the
+same status buffers, the same recorded status changes and the same tree shape."""
+
+import socket
+import struct
+import threading
+import time
+
+import pytest
+
+from swarmbed.agent_runtime.bt import NodeRegistry, Status, load_tree
+from swarmbed.agent_runtime.bt.btlog import STATUS_CODE, ChangeRecorder, tree_xml
+from swarmbed.experiments.views.groot2 import MonitoredTree, serve, tree_identity
+from tests.bt_harness import Act, Cond, Script
+from tests.test_btlog import CASES, TICKS, shape
+
+bt = pytest.importorskip("behaviortreepy", reason="the reference needs the BehaviorTree.CPP bindings")
+zmq = pytest.importorskip("zmq", reason="Groot2's protocol runs over ZeroMQ")
+
+
+def free_port() -> int:
+    """A port whose next one is free too (Groot2 uses both)."""
+    while True:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port + 1))
+                return port
+            except OSError:
+                continue
+
+
+class Groot:
+    """Groot2's side: a request socket."""
+
+    def __init__(self, port: int) -> None:
+        self.context = zmq.Context()
+        self.socket = self.context.socket(zmq.REQ)
+        self.socket.setsockopt(zmq.RCVTIMEO, 5000)
+        self.socket.setsockopt(zmq.LINGER, 0)
+        self.socket.connect(f"tcp://127.0.0.1:{port}")
+        self.next_id = 0
+
+    def ask(self, kind: str, payload: bytes | None = None) -> tuple[bytes, list[bytes]]:
+        self.next_id += 1
+        head = struct.pack("<BBI", 2, ord(kind), self.next_id)
+        self.socket.send_multipart([head] + ([payload] if payload is not None else []))
+        reply = self.socket.recv_multipart()
+        if reply[0] != b"error":
+            assert reply[0][:6] == head and len(reply[0]) == 22
+        return reply[0], reply[1:]
+
+    def close(self) -> None:
+        self.socket.close()
+        self.context.term()
+
+
+def changes_of(recorded: bytes) -> list[tuple[int, int]]:
+    return [struct.unpack_from("<HB", recorded, i + 6) for i in range(0, len(recorded), 9)]
+
+
+def ask_both(mine: Groot, theirs: Groot, kind: str, payload: bytes | None = None):
+    return mine.ask(kind, payload)[1], theirs.ask(kind, payload)[1]
+
+
+@pytest.mark.parametrize("name", ["subtrees", *(f"random {s}" for s in range(0, 40, 3))])
+def test_groot2_hears_from_us_what_btcpps_publisher_answers(name):
+    xml, scripts = CASES[name]
+    # BehaviorTree.CPP's publisher
+    their_script = Script(scripts)
+    factory = bt.BehaviorTreeFactory()
+
+    def status(node):
+        return getattr(bt.NodeStatus, their_script.next(node.name()))
+
+    factory.register_simple_stateful_action("Act", status, status, lambda node: None)
+    factory.register_simple_condition("Cond", status)
+    factory.register_behavior_tree_from_text(xml)
+    main = "Main"
+    their_tree = factory.create_tree(main)
+    their_port = free_port()
+    publisher = bt.Groot2Publisher(their_tree, their_port)
+    # ours: our engine's status changes into the gateway's monitored tree, served over ZeroMQ
+    registry = NodeRegistry()
+    registry.register(Act)
+    registry.register(Cond)
+    our_tree = load_tree("<test>", registry, text=xml, context=Script(scripts))
+    recorder = ChangeRecorder(our_tree)
+    monitored = MonitoredTree()
+    monitored.reset(tree_xml(our_tree), tree_identity("test", name), len(our_tree.nodes))
+    our_port, stop = free_port(), threading.Event()
+    server = threading.Thread(target=serve, args=(monitored, our_port, stop), daemon=True)
+    server.start()
+    mine, theirs = Groot(our_port), Groot(their_port)
+    try:
+        time.sleep(0.2)
+        ours_xml, their_xml = ask_both(mine, theirs, "T")
+        assert shape(ours_xml[0].decode()) == shape(their_xml[0].decode())
+        ours_s, their_s = ask_both(mine, theirs, "S")
+        assert ours_s == their_s
+        ask_both(mine, theirs, "r", b"start")
+        for tick in range(TICKS):
+            their_tree.tick_exactly_once()
+            our_tree.tick_once()
+            monitored.apply(tick * 250_000, recorder.take())
+            ours_s, their_s = ask_both(mine, theirs, "S")
+            assert ours_s == their_s, f"status buffers differ after tick {tick}"
+            ours_t, their_t = ask_both(mine, theirs, "t")
+            assert changes_of(ours_t[0]) == changes_of(their_t[0]), f"changes differ at tick {tick}"
+        assert ask_both(mine, theirs, "D") == ([b"[]"], [b"[]"])
+        head, body = mine.ask("Z")
+        assert (head, body) == (b"error", [b"Request not recognized"])
+        assert mine.socket.send(b"abc") is None and mine.socket.recv_multipart() == [b"error", b"wrong request header"]
+    finally:
+        mine.close()
+        theirs.close()
+        stop.set()
+        server.join(timeout=5)
+        del publisher
+
+
+def test_a_tree_from_another_agent_has_another_identity_and_idle_nodes():
+    xml = (
+        '<root><BehaviorTree ID="M" _fullpath="">'
+        '<Sequence _uid="1"><A _uid="2"/><A _uid="3"/></Sequence></BehaviorTree></root>'
+    )
+    monitored = MonitoredTree()
+    monitored.reset(xml, tree_identity("run", 0), 3)
+    monitored.apply(0, [(1, STATUS_CODE[Status.RUNNING]), (2, STATUS_CODE[Status.SUCCESS])])
+    before = monitored.answer([struct.pack("<BBI", 2, ord("S"), 1)])
+    monitored.reset(xml, tree_identity("run", 1), 3)
+    after = monitored.answer([struct.pack("<BBI", 2, ord("S"), 1)])
+    assert before[0][6:] != after[0][6:] and before[1] != after[1] == bytes.fromhex("010000020000030000")
