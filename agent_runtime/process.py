@@ -77,6 +77,14 @@ def serve(
         if not hand_over(session, keys.agent_report(agent_id), encode_report(data)):
             log.error("agent %d: the coordinator did not take the %s report", agent_id, getattr(data, "kind", "?"))
 
+    # monitors (swarmbed groot) announce themselves with a token; the loop starts or stops handing
+    # over the tree's changes between ticks, never inside one
+    monitors: set[str] = set()
+
+    def on_monitor(sample: zenoh.Sample) -> None:
+        (monitors.add if sample.kind == zenoh.SampleKind.PUT else monitors.discard)(str(sample.key_expr))
+
+    watched = session.liveliness().declare_subscriber(keys.monitor(agent_id), on_monitor, history=True)
     token = session.liveliness().declare_token(keys.alive_agent(agent_id, incarnation))
     if restored:  # subscribed and announced: the coordinator may retire the old process and go on
         report(Restored(kind="restored", agent=agent_id, incarnation=incarnation))
@@ -122,6 +130,8 @@ def serve(
                 log.warning("agent %d: malformed observation of tick %d dropped: %s", agent_id, msg.tick, exc)
                 out.put(encode_agent_out(msg.tick, agent_id, ["stop"], []))
                 continue
+            if bool(monitors) != runtime.watched:
+                runtime.monitored(bool(monitors))
             try:
                 action, messages, events = runtime.step(msg.tick, obs, msg.inbox)
             except Exception as exc:  # a plugin or node raised: stop this agent, loudly
@@ -130,7 +140,7 @@ def serve(
                 error = f"{type(exc).__name__}: {exc}"
                 report(Fatal(kind="fatal", agent=agent_id, tick=msg.tick, error=error, traceback=tb))
                 return EXIT_PLUGIN_ERROR
-            changes = runtime.tree_changes(msg.tick)
+            changes = runtime.tree_changes(msg.tick, obs.time)
             if changes is not None:
                 bt.put(encode_tree_changes(changes))
             answer = encode_agent_out(msg.tick, agent_id, action, messages, events)
@@ -141,7 +151,7 @@ def serve(
         return EXIT_PLUGIN_ERROR
     finally:
         token.undeclare()
-        for entity in (sub, watch, out, bt):
+        for entity in (sub, watch, watched, out, bt):
             entity.undeclare()
 
 

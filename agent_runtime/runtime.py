@@ -13,8 +13,8 @@ from collections import defaultdict
 
 import numpy as np
 
-from swarmbed.agent_runtime.bt import Blackboard, load_tree
-from swarmbed.agent_runtime.bt.btlog import ChangeRecorder, tree_xml
+from swarmbed.agent_runtime.bt import Blackboard, Status, load_tree
+from swarmbed.agent_runtime.bt.btlog import STATUS_CODE, ChangeRecorder, tree_xml
 from swarmbed.agent_runtime.node_sets import node_registry, tree_path
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.context import NodeContext
@@ -66,7 +66,8 @@ class AgentRuntime:
             context=self.context,
         )
         self.changes = ChangeRecorder(self.tree) if spec.record_bt else None
-        self._tree_sent = False  # this process has not yet told the coordinator its tree's XML
+        self._tree_sent = False  # this process has not yet handed over its tree's XML
+        self.watched = False  # a monitor (swarmbed groot) is looking
         self.sent: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # kind -> [messages, payload bytes]
         self.malformed = 0
         self.ticks = 0
@@ -129,14 +130,31 @@ class AgentRuntime:
         events, self.allocator.events = self.allocator.events, {}
         return ctx.action, messages, events
 
-    def tree_changes(self, tick: int) -> TreeChanges | None:
-        """The status changes of the tick just stepped (with the tree's XML the first time), when
-        the run records them."""
+    def tree_changes(self, tick: int, time: float) -> TreeChanges | None:
+        """The status changes of the tick just stepped, when the run records them or someone
+        monitors this agent; with the tree and every node's status the first time (for a monitor
+        that joins now, a start)."""
         if self.changes is None:
             return None
-        xml = None if self._tree_sent else tree_xml(self.tree)
+        changes = self.changes.take()
+        time_us = round(time * 1_000_000)
+        if self._tree_sent:
+            return TreeChanges(tick, time_us, changes)
         self._tree_sent = True
-        return TreeChanges(tick, self.changes.take(), xml)
+        statuses = [(n.uid, STATUS_CODE[n.status]) for n in self.tree.nodes if n.status is not Status.IDLE]
+        return TreeChanges(tick, time_us, changes, tree_xml(self.tree), statuses)
+
+    def monitored(self, watched: bool) -> None:
+        """Someone began (or stopped) monitoring this agent's tree: hand over its changes from the
+        next tick (with the tree), or stop unless the run records them."""
+        self.watched = watched
+        if watched:
+            if self.changes is None:
+                self.changes = ChangeRecorder(self.tree)
+            self._tree_sent = False
+        elif not self.spec.record_bt and self.changes is not None:
+            self.tree.watch(None)
+            self.changes = None
 
     # -- moving to another process ----------------------------------------------------------------
     #: node attributes the tree loader sets, and who watches a node's status: not state

@@ -540,6 +540,26 @@ def cmd_watch(args: argparse.Namespace) -> int:
             return 2
 
 
+def cmd_groot(args: argparse.Namespace) -> int:
+    from swarmbed.experiments.views.groot import run_gateway
+    from swarmbed.experiments.views.watch import WatchError
+
+    try:
+        import zmq  # noqa: F401
+    except ImportError:
+        print("error: swarmbed groot needs pyzmq: pip install 'swarmbed[viewers]'", file=sys.stderr)
+        return 2
+    session = _client_session(args)
+    if session is None:
+        return 2
+    with session:
+        try:
+            return run_gateway(session, args.run, args.agent, args.port, args.bind)
+        except WatchError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+
+
 def cmd_swap(args: argparse.Namespace) -> int:
     """Ask a running run to move one agent to another host before its next tick; wait for the outcome."""
     import json
@@ -823,6 +843,14 @@ def main(argv: list[str] | None = None) -> int:
     wat.add_argument("--map", metavar="FILE.html", help="also keep a map of the run in FILE.html (reloads itself)")
     add_zenoh_args(wat)
     wat.set_defaults(func=cmd_watch)
+
+    gr = sub.add_parser("groot", help="watch an agent's behavior tree of a running run in Groot2, live")
+    gr.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
+    gr.add_argument("--agent", type=int, default=0, help="the agent to show first (type another id to switch)")
+    gr.add_argument("--port", type=int, default=1667, help="Groot2's port (and the next one), as BehaviorTree.CPP")
+    gr.add_argument("--bind", default="127.0.0.1", help="the address Groot2 connects to (default: this machine only)")
+    add_zenoh_args(gr)
+    gr.set_defaults(func=cmd_groot)
 
     swap = sub.add_parser("swap", help="move a running agent to another host, with its state")
     swap.add_argument("--run", required=True, help="the run id (timings.json and deployment.json name it)")

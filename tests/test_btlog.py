@@ -192,15 +192,16 @@ def test_crafted_tree_change_samples_are_named():
     from swarmbed.wire.codec import pack
     from swarmbed.wire.errors import WireError
 
-    good = TreeChanges(4, [(1, 1), (3, 2)], "<root/>")
+    good = TreeChanges(4, 1_000_000, [(1, 1), (3, 2)], "<root/>", [(1, 1)])
     assert decode_tree_changes(encode_tree_changes(good), n_nodes=3) == good
     crafted = {
-        pack([4, b"\x01\x00", None]): "whole 3-byte",
-        pack([-1, b"", None]): "tick must be a count",
-        pack([4, b"\x01\x00\x07", None]): "no node 1 with status 7",
-        pack([4, b"\x09\x00\x01", None]): "no node 9",
-        pack([4, b"", "import os"]): "xml must be",
-        pack({"tick": 4}): "not [tick, changes, xml]",
+        pack([4, 0, b"\x01\x00", None, b""]): "changes must be whole 3-byte",
+        pack([-1, 0, b"", None, b""]): "tick must be a count",
+        pack([4, True, b"", None, b""]): "time_us must be a count",
+        pack([4, 0, b"\x01\x00\x07", None, b""]): "no node 1 with status 7",
+        pack([4, 0, b"", None, b"\x09\x00\x01"]): "no node 9",
+        pack([4, 0, b"", "import os", b""]): "xml must be",
+        pack({"tick": 4}): "not [tick, time_us, changes, xml, statuses]",
     }
     for data, why in crafted.items():
         with pytest.raises(WireError, match=re.escape(why)):

@@ -134,3 +134,59 @@ def test_a_tree_from_another_agent_has_another_identity_and_idle_nodes():
     monitored.reset(xml, tree_identity("run", 1), 3)
     after = monitored.answer([struct.pack("<BBI", 2, ord("S"), 1)])
     assert before[0][6:] != after[0][6:] and before[1] != after[1] == bytes.fromhex("010000020000030000")
+
+
+# -- the gateway, against a real run ---------------------------------------------------------------
+@pytest.mark.slow
+def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_result(tmp_path, operator):
+    import subprocess
+    import sys
+
+    from swarmbed.experiments.launch.hub import HubOptions
+    from swarmbed.experiments.launch.runner import run_experiment
+    from swarmbed.wire.session import free_loopback_endpoint
+    from tests.conftest import experiment, same_results
+
+    sets = ["agents.count=6", "allocator.name=cbba", "run.stop_when_done=false", "run.duration=3000", "run.seed=5"]
+    endpoint, port = free_loopback_endpoint(), free_port()
+    hub = HubOptions(listen=[endpoint], admit=[operator.identity])
+    runner = threading.Thread(
+        target=run_experiment, args=(experiment(*sets), tmp_path / "watched"), kwargs={"progress": False, "hub": hub}
+    )
+    runner.start()
+    time.sleep(1.0)  # the hub listens once the run has started its processes
+    gateway = subprocess.Popen(
+        [sys.executable, "-m", "swarmbed", "groot", "--connect", endpoint, *operator.args, "--port", str(port)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    groot = Groot(port)
+    seen: dict[int, tuple[bytes, str, set[bytes]]] = {}
+    try:
+        assert "groot: run" in gateway.stdout.readline()
+        for agent in (0, 4):
+            if agent:
+                gateway.stdin.write(f"{agent}\n")
+                gateway.stdin.flush()
+            deadline, buffers = time.monotonic() + 60, set()
+            while time.monotonic() < deadline and len(buffers) < 3:
+                head, body = groot.ask("T")
+                if body[0]:
+                    buffers.add(groot.ask("S")[1][0])
+                    seen[agent] = (head[6:], body[0].decode(), buffers)
+                time.sleep(0.05)
+        assert groot.ask("I", b'{"uid": 2}')[0] == b"error"  # no breakpoints: agents never pause
+    finally:
+        groot.close()
+        gateway.stdin.close()
+        gateway.wait(timeout=20)
+        runner.join(timeout=300)
+    assert set(seen) == {0, 4} and seen[0][0] != seen[4][0]  # another agent: another tree identity
+    for _identity, xml, buffers in seen.values():
+        assert len(buffers) == 3 and shape(xml)[0][0] == "BehaviorTree"  # its tree, ticking
+        uids = [u for u, *_ in (struct.unpack_from("<HB", b, 0) for b in buffers)]
+        assert uids and all(u == 1 for u in uids)
+    run_experiment(experiment(*sets), tmp_path / "alone", progress=False)
+    same_results(tmp_path / "watched", tmp_path / "alone")

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from swarmbed.wire.codec import pack, unpack
 from swarmbed.wire.errors import WireError
@@ -78,37 +78,49 @@ def read_btlog(data: bytes) -> tuple[str, int, list[tuple[int, int, int]]]:
     return xml, first, out
 
 
-# -- agent -> coordinator: one tick's status changes -------------------------------------------------
+# -- agent -> coordinator and monitors: one tick's status changes ----------------------------------
 @dataclass(frozen=True)
 class TreeChanges:
-    """An agent's status changes in one tick, ``(uid, status code)`` in the order they happened;
-    ``xml``: its tree (:func:`file_head`'s XML), in the first sample a process sends."""
+    """An agent's status changes in one tick, ``(uid, status code)`` in the order they happened, at
+    simulated time ``time_us``. The first sample a process sends, and the first after a monitor
+    appears, carry its tree (``xml``, as :func:`file_head` takes it) and every node's status at the
+    tick's end (``statuses``, the nodes not IDLE), from which a monitor starts."""
 
     tick: int
+    time_us: int
     changes: list[tuple[int, int]]
     xml: str | None = None
+    statuses: list[tuple[int, int]] = field(default_factory=list)
+
+
+def _flat(pairs: list[tuple[int, int]]) -> bytes:
+    return b"".join(struct.pack("<HB", uid, code) for uid, code in pairs)
+
+
+def _pairs(flat: object, what: str, n_nodes: int | None) -> list[tuple[int, int]]:
+    if not (isinstance(flat, bytes) and len(flat) % 3 == 0 and len(flat) <= 3 * MAX_CHANGES):
+        raise WireError(f"tree changes: {what} must be whole 3-byte (uid, status) records")
+    pairs = [struct.unpack_from("<HB", flat, i) for i in range(0, len(flat), 3)]
+    for uid, code in pairs:
+        if code >= STATUS_CODES or uid == 0 or (n_nodes is not None and uid > n_nodes):
+            raise WireError(f"tree changes: no node {uid} with status {code}")
+    return pairs
 
 
 def encode_tree_changes(sample: TreeChanges) -> bytes:
-    flat = b"".join(struct.pack("<HB", uid, code) for uid, code in sample.changes)
-    return pack([sample.tick, flat, sample.xml])
+    return pack([sample.tick, sample.time_us, _flat(sample.changes), sample.xml, _flat(sample.statuses)])
 
 
 def decode_tree_changes(data: bytes, n_nodes: int | None = None) -> TreeChanges:
     """A sample of :func:`encode_tree_changes`; WireError names what is wrong. ``n_nodes``: the
     tree's size, once known (uids run from 1 to it)."""
-    raw = unpack(data, max_bytes=MAX_TREE_XML + 3 * MAX_CHANGES + 64)
-    if not (isinstance(raw, list) and len(raw) == 3):
-        raise WireError("tree changes: not [tick, changes, xml]")
-    tick, flat, xml = raw
-    if not (isinstance(tick, int) and not isinstance(tick, bool) and 0 <= tick < 2**40):
-        raise WireError(f"tree changes: tick must be a count, got {tick!r}")
-    if not (isinstance(flat, bytes) and len(flat) % 3 == 0 and len(flat) <= 3 * MAX_CHANGES):
-        raise WireError("tree changes: changes must be whole 3-byte (uid, status) records")
+    raw = unpack(data, max_bytes=MAX_TREE_XML + 6 * MAX_CHANGES + 64)
+    if not (isinstance(raw, list) and len(raw) == 5):
+        raise WireError("tree changes: not [tick, time_us, changes, xml, statuses]")
+    tick, time_us, changes, xml, statuses = raw
+    for name, value in (("tick", tick), ("time_us", time_us)):
+        if not (isinstance(value, int) and not isinstance(value, bool) and 0 <= value < 2**48):
+            raise WireError(f"tree changes: {name} must be a count, got {value!r}")
     if not (xml is None or (isinstance(xml, str) and xml.startswith("<root") and len(xml) <= MAX_TREE_XML)):
         raise WireError("tree changes: xml must be a tree's <root> element or nil")
-    changes = [struct.unpack_from("<HB", flat, i) for i in range(0, len(flat), 3)]
-    for uid, code in changes:
-        if code >= STATUS_CODES or uid == 0 or (n_nodes is not None and uid > n_nodes):
-            raise WireError(f"tree changes: no node {uid} with status {code}")
-    return TreeChanges(tick, changes, xml)
+    return TreeChanges(tick, time_us, _pairs(changes, "changes", n_nodes), xml, _pairs(statuses, "statuses", n_nodes))

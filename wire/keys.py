@@ -97,6 +97,14 @@ class Keys:
     def agent_bt_all(self) -> str:
         return f"{self.root}/agent/*/bt"
 
+    # a monitor's liveliness token (swarmbed groot): while one is alive, the agent hands over its tree's changes
+    def monitor(self, agent_id: int) -> str:
+        return f"{self.root}/monitor/agent/{agent_id}"
+
+    @property
+    def monitor_all(self) -> str:
+        return f"{self.root}/monitor/**"
+
     # coordinator queryable: an agent's snapshot, handed over by the old process during a swap
     # (query with payload) and fetched by the new one (query without)
     def agent_snapshot(self, agent_id: int) -> str:

@@ -80,6 +80,7 @@ def _agent_rules(k: Keys, user: str, ids: Iterable[int]) -> list[dict]:
             [k.agent_config, *(key for i in ids for key in (k.agent_report(i), k.agent_snapshot(i)))],
         ),
         _allow(f"{user}-alive", ["liveliness_token"], [k.alive_agent_any(i) for i in ids]),
+        _allow(f"{user}-monitored", ["declare_liveliness_subscriber", "liveliness_query"], [k.monitor(i) for i in ids]),
     ]
 
 
@@ -104,6 +105,7 @@ def access_rules(
             [f"{root}/**", f"{HOSTS}/**"],
         ),
         _allow("operator-ask", ["query"], [k.swap, f"{HOSTS}/*/info"]),
+        _allow("operator-monitor", ["liveliness_token"], [k.monitor_all]),
         _allow("operator-find", ["liveliness_query"], [f"{PREFIX}/*/alive/coordinator"]),
         _allow("host-watch", ["declare_liveliness_subscriber", "liveliness_query"], [alive, f"{HOSTS}/**"]),
     ]
@@ -124,7 +126,10 @@ def access_rules(
     if operators:
         subjects.append({"id": "operators", "usernames": operators})
         policies.append(
-            {"subjects": ["operators"], "rules": ["deliver", "operator-read", "operator-ask", "operator-find"]}
+            {
+                "subjects": ["operators"],
+                "rules": ["deliver", "operator-read", "operator-ask", "operator-find", "operator-monitor"],
+            }
         )
     for user, (host, ids) in sorted(hosts.items()):
         subject = f"host-{user}"

@@ -25,6 +25,7 @@ from __future__ import annotations
 import hashlib
 import struct
 import threading
+from collections.abc import Sequence
 from xml.etree import ElementTree
 
 import msgpack
@@ -68,7 +69,7 @@ class MonitoredTree:
         self.recording_from: int | None = None
         self.recorded = bytearray()
 
-    def reset(self, xml: str, identity: bytes, n_nodes: int, statuses: list[tuple[int, int]] = ()) -> None:
+    def reset(self, xml: str, identity: bytes, n_nodes: int, statuses: Sequence[tuple[int, int]] = ()) -> None:
         """Show another tree (or the same tree's state afresh): every node IDLE unless ``statuses``."""
         with self.lock:
             self.xml, self.identity = xml, identity

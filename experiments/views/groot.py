@@ -1,0 +1,133 @@
+"""``swarmbed groot``: watch any agent's behavior tree of a running run in Groot2, live.
+
+Groot2 monitors one tree per port (BehaviorTree.CPP issue 662, Groot2 issue 44); this gateway is
+that one tree, for whichever agent you pick, and lets you switch agents while Groot2 stays
+connected (a new tree identity makes Groot2 load the new tree). It speaks BehaviorTree.CPP's Groot2
+protocol on ``--port`` (:mod:`.groot2`) and reads the run over Zenoh as an operator: it announces
+itself with a liveliness token on the agent's monitor key, which makes that agent (and only while a
+monitor is there) hand over its tree and each tick's status changes on its own key. Monitoring never
+changes a run's results: the agent's tree ticks the same, it only reports.
+
+    swarmbed groot --connect tcp/192.0.2.10:7447 --credentials operator.json --agent 3
+
+Type another agent's id and Enter to switch; Ctrl-C to stop.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import threading
+from collections.abc import Iterable
+
+import zenoh
+
+from swarmbed.experiments.views.groot2 import MonitoredTree, serve, tree_identity
+from swarmbed.experiments.views.watch import WatchError, running_runs
+from swarmbed.wire.btlog import decode_tree_changes
+from swarmbed.wire.errors import WireError
+from swarmbed.wire.keys import Keys
+
+_UID = re.compile(r'_uid="(\d+)"')
+
+
+class Gateway:
+    """One monitored agent at a time: its monitor token, its subscriber, and the tree Groot2 sees."""
+
+    def __init__(self, session: zenoh.Session, run_id: str, tree: MonitoredTree | None = None) -> None:
+        self.session = session
+        self.keys = Keys(run_id)
+        self.tree = tree or MonitoredTree()
+        self.agent: int | None = None
+        self.samples = 0
+        self.malformed = 0
+        self._entities: list = []
+        self._n_nodes: int | None = None
+        self.lock = threading.Lock()
+
+    def show(self, agent: int) -> None:
+        """Monitor ``agent`` instead: Groot2 sees an empty tree until its first sample."""
+        with self.lock:
+            self._drop()
+            self.agent, self._n_nodes = agent, None
+            self.tree.reset("", tree_identity(self.keys.run_id, agent, "waiting"), 0)
+            sub = self.session.declare_subscriber(self.keys.agent_bt(agent), self._on_sample)
+            token = self.session.liveliness().declare_token(self.keys.monitor(agent))
+            self._entities = [sub, token]
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            changes = decode_tree_changes(sample.payload.to_bytes(), self._n_nodes)
+        except WireError:
+            self.malformed += 1
+            return
+        with self.lock:
+            if changes.xml is not None:
+                self._n_nodes = max((int(u) for u in _UID.findall(changes.xml)), default=0)
+                if any(uid > self._n_nodes for uid, _ in changes.changes + changes.statuses):
+                    self.malformed += 1
+                    return
+                identity = tree_identity(self.keys.run_id, self.agent, changes.xml)
+                self.tree.reset(changes.xml, identity, self._n_nodes, changes.statuses)
+                self.tree.now_us = changes.time_us
+            elif self._n_nodes is not None:
+                self.tree.apply(changes.time_us, changes.changes)
+            self.samples += 1
+
+    def _drop(self) -> None:
+        for entity in reversed(self._entities):
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+        self._entities = []
+
+    def close(self) -> None:
+        with self.lock:
+            self._drop()
+
+
+def find_run(session: zenoh.Session, run_id: str | None) -> str:
+    runs = running_runs(session)
+    if run_id is not None:
+        if run_id not in runs:
+            raise WatchError(f"no run {run_id} is running where this session reaches (running: {runs or 'none'})")
+        return run_id
+    if len(runs) != 1:
+        raise WatchError(f"{len(runs)} runs are running ({', '.join(runs) or 'none'}): name one with --run")
+    return runs[0]
+
+
+def run_gateway(
+    session: zenoh.Session,
+    run_id: str | None,
+    agent: int,
+    port: int,
+    bind: str = "127.0.0.1",
+    commands: Iterable[str] | None = None,
+) -> int:
+    """Serve Groot2 until ``commands`` (default: stdin lines, an agent id each) ends or Ctrl-C."""
+    run = find_run(session, run_id)
+    gateway = Gateway(session, run)
+    stop = threading.Event()
+    server = threading.Thread(target=serve, args=(gateway.tree, port, stop, bind), daemon=True)
+    server.start()
+    gateway.show(agent)
+    print(f"groot: run {run}, agent {agent}; Groot2 connects to {bind}:{port}. Type an agent id to switch.", flush=True)
+    try:
+        for line in commands if commands is not None else sys.stdin:
+            text = line.strip()
+            if not text:
+                continue
+            if not text.isdigit():
+                print(f"groot: {text!r} is not an agent id", flush=True)
+                continue
+            gateway.show(int(text))
+            print(f"groot: agent {text}", flush=True)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        gateway.close()
+        stop.set()
+        server.join(timeout=5)
+    return 0
