@@ -31,7 +31,7 @@ from swarmbed.wire.targets import load_target
 
 log = logging.getLogger("swarmbed.agent")
 
-SNAPSHOT_VERSION = 2  # 2: a node's status is kept as _status (it became a watched property)
+SNAPSHOT_VERSION = 1
 
 
 def build_scenario(spec: AgentSpec) -> Scenario:

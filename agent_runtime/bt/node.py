@@ -19,6 +19,41 @@ StatusWatcher = Callable[["TreeNode", Status, Status], None]
 StatusChangeLogger hears them (transitions to IDLE included)."""
 
 
+_WATCHED: dict[type, type] = {}  # a node class -> the same class with its status watched
+_PLAIN: dict[type, type] = {}  # and back
+
+
+def watch_node(node: TreeNode, watcher: StatusWatcher | None) -> None:
+    """Hand ``node``'s status changes to ``watcher`` (None: to no one).
+
+    A watched node becomes an instance of a subclass of its own class whose ``status`` is a property
+    that tells the watcher; an unwatched node is an instance of its own class again, where ``status``
+    is a plain attribute. So a tree nobody watches pays nothing per change, and the attribute stays
+    ``status`` in the node's ``__dict__`` either way (snapshots do not see the difference)."""
+    plain = _PLAIN.get(type(node), type(node))
+    if watcher is None:
+        node.__class__ = plain
+        node.__dict__.pop("_watcher", None)
+        return
+    watched = _WATCHED.get(plain)
+    if watched is None:
+
+        def get(self: TreeNode) -> Status:
+            return self.__dict__["status"]
+
+        def put(self: TreeNode, new: Status) -> None:
+            prev = self.__dict__["status"]
+            if new is not prev:
+                self.__dict__["status"] = new
+                self.__dict__["_watcher"](self, prev, new)
+
+        namespace = {"status": property(get, put), "__module__": plain.__module__, "__qualname__": plain.__qualname__}
+        watched = _WATCHED[plain] = type(plain.__name__, (plain,), namespace)
+        _PLAIN[watched] = plain
+    node.__dict__["_watcher"] = watcher
+    node.__class__ = watched
+
+
 class BTError(Exception):
     """A tree that cannot be loaded or ticked; the message names the file, line and node."""
 
@@ -77,14 +112,10 @@ class TreeNode:
     ID: ClassVar[str] = ""
     KIND: ClassVar[str] = "Action"  # Action | Condition | Control | Decorator | SubTree
 
-    # who hears every change of a node's status (a .btlog recorder, a Groot2 monitor): set per node
-    # by :meth:`Tree.watch`; None costs one attribute check per change
-    _watcher: StatusWatcher | None = None
-
     def __init__(self, name: str, config: NodeConfig) -> None:
         self.name = name
         self.config = config
-        self._status = Status.IDLE
+        self.status = Status.IDLE
         self.uid = 0  # BehaviorTree.CPP's UID: 1, 2, ... in the order the tree's nodes were built
         self._literals: dict[str, Any] = {}
         # a port's blackboard key, resolved once: the ports are fixed when the tree is built, and
@@ -139,19 +170,6 @@ class TreeNode:
                 raise BTError(f"{self.config.path}: output port '{port}' must name a blackboard key, not {raw!r}")
             self._keys[port] = key
         self.config.blackboard.set(key, value)
-
-    # -- status ------------------------------------------------------------------------------
-    @property
-    def status(self) -> Status:
-        return self._status
-
-    @status.setter
-    def status(self, new: Status) -> None:
-        prev = self._status
-        if new is not prev:
-            self._status = new
-            if self._watcher is not None:
-                self._watcher(self, prev, new)
 
     # -- ticking -----------------------------------------------------------------------------
     def execute_tick(self) -> Status:

@@ -20,6 +20,7 @@ from swarmbed.agent_runtime.bt.node import (
     StatusWatcher,
     TreeNode,
     blackboard_key,
+    watch_node,
 )
 from swarmbed.agent_runtime.bt.registry import NodeRegistry
 from swarmbed.agent_runtime.bt.status import Status
@@ -65,7 +66,7 @@ class Tree:
     def watch(self, watcher: StatusWatcher | None) -> None:
         """Hand every node's status changes to ``watcher`` (None: to no one)."""
         for node in self.nodes:
-            node._watcher = watcher
+            watch_node(node, watcher)
 
 
 @dataclass
