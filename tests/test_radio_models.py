@@ -379,3 +379,34 @@ def test_the_receiver_ledger_records_each_copys_distance_power_snr_and_delay(tmp
     lost = copies[~copies["outcome"].isin(["delivered", "run_ended"])]  # in flight at the end: delayed too
     assert lost["delay_s"].isna().all() and copies[copies["outcome"] == "run_ended"]["delay_s"].notna().all()
     assert set(copies["outcome"]) >= {"delivered", "below_sensitivity", "packet_error"}
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [{}, {"fading": "rayleigh"}, {"shadowing_db": 6.0}, {"fading": "nakagami", "nakagami_m": 2.5, "shadowing_db": 4.0}],
+    ids=["plain", "rayleigh", "shadowing", "nakagami+shadowing"],
+)
+def test_the_model_curve_is_the_delivery_ratio_the_radio_draws(extra):
+    """netem.propagation.delivery_probability (the report's curve) against copies drawn through the
+    radio: static pairs, shadowing redrawn by moving the pair far between ticks is not needed, as
+    many independent receivers at each distance average the shadowing instead."""
+    from swarmbed.netem.propagation import delivery_probability
+
+    distances = np.repeat(np.linspace(60, 140, 9), 40)  # 40 receivers per distance: 40 shadowing draws
+    angles = np.linspace(0, 2 * np.pi, len(distances), endpoint=False)
+    xs, ys = [0.0, *(distances * np.cos(angles))], [0.0, *(distances * np.sin(angles))]
+    ticks, payload = 300, 60
+    network = {"propagation": {**LOG_DISTANCE, **extra}}
+    _, got = drive(network, xs, ys, ticks, payload)
+    received = np.zeros(len(distances))
+    for inbox in got:
+        for r in inbox:
+            received[r - 1] += 1
+    params = NetworkSection(**network).propagation
+    expected = delivery_probability(params, distances, payload)
+    for d in np.unique(distances):
+        at = distances == d
+        e, f = received[at].sum() / (ticks * at.sum()), expected[at][0]
+        # shadowing draws are shared per pair across ticks: the spread is of 40 pairs, not of all copies
+        n = at.sum() if params.shadowing_db > 0 else ticks * at.sum()
+        assert abs(e - f) <= binomial_tolerance(f, n) + 0.01, f"at {d:.0f} m: {e:.4f} vs {f:.4f}"

@@ -265,3 +265,46 @@ def test_charts_order_agents_by_number_and_draw_paired_bars_side_by_side(tmp_pat
         assert len(left) == len(right) > 0
         for (l0, l1), (r0, r1) in zip(left, right):
             assert l1 <= r0 + 0.5 or r1 <= l0 + 0.5, f"{title}: bars overlap ({l0}-{l1} and {r0}-{r1})"
+
+
+def test_a_run_with_the_radio_models_gets_the_radio_pages_and_outages_are_counted_between_deliveries(tmp_path):
+    from swarmbed.experiments.views.radio_pages import loss_runs
+
+    radio = [
+        "agents.count=12",
+        "run.duration=60",
+        "run.stop_when_done=false",
+        "network.range=null",
+        "network.ledger=per_receiver",
+        "network.propagation={shadowing_db: 6.0, tx_power_dbm: 40.0, fading: rayleigh}",
+        "network.burst={mean_loss: 0.2, mean_burst: 3.0}",
+        "network.delay={mean: 0.05, jitter: 0.02}",
+    ]
+    run = run_experiment(experiment(*radio), tmp_path / "radio", progress=False).out_dir
+    html, _ = run_report(run)
+    for title in ("Delivery ratio against distance", "Outages of working links", "Delay of delivered copies"):
+        assert title in html
+    plain, _ = run_report(run_experiment(experiment("run.duration=20"), tmp_path / "disk", progress=False).out_dir)
+    assert "Delivery ratio against distance" not in plain  # no per-copy figures: no radio pages
+    toy = pd.DataFrame(
+        {
+            "sender": [0] * 9 + [1] * 3,
+            "receiver": [1] * 9 + [0] * 3,
+            "tick": [*range(9), 0, 1, 2],
+            "outcome": [
+                "burst",
+                "delivered",
+                "burst",
+                "burst",
+                "delivered",
+                "loss",
+                "delivered",
+                "burst",
+                "burst",
+                "delivered",
+                "loss",
+                "delivered",
+            ],
+        }
+    )
+    assert loss_runs(toy).tolist() == [2, 1, 1]  # the trailing run of link 0->1 never ended: not an outage

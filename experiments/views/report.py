@@ -5,9 +5,11 @@ interactive (hover, zoom), and every number on it names the file of the run dire
 from. For a run: totals with the ledger's conservation re-checked from ``network_ledger.csv``,
 bytes and messages per agent and per message kind, bytes per second over simulated time per kind
 and per sending agent, drops by reason over time, copies by sender and outcome, message sizes per
-kind, and the run's outcome beside its traffic (outcome per kilobyte). For a sweep: the same per
-scenario with 95 % confidence intervals, and the cost-benefit plots (outcome against messages and
-against bytes, one point per run, one colour per scenario).
+kind, the radio copy by copy where its models computed per-copy figures (delivery against
+distance with the model's curve, runs of lost copies, delays: :mod:`.radio_pages`), and the run's
+outcome beside its traffic. For a sweep: the same per scenario with 95 % confidence intervals,
+and the cost-benefit plots (outcome against messages and against bytes, one point per run, one
+colour per scenario).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from swarmbed.experiments.folders import PARQUET, SOAK_PROCESSES, TABLE, read_ta
 from swarmbed.experiments.views.colours import DROP_COLORS
 from swarmbed.experiments.views.page import Page, _fmt
 from swarmbed.experiments.views.pooling import mixed_configurations
+from swarmbed.experiments.views.radio_pages import radio_pages
 from swarmbed.experiments.views.soak_page import soak_report
 from swarmbed.plugins.registry import PluginError, resolve_scenario
 from swarmbed.wire.errors import WireError
@@ -275,6 +278,8 @@ def run_report(run: Path) -> tuple[str, int]:
         )
         fig.update_layout(title="Copies by sender and outcome", xaxis_title="sender")
         page.figure(fig, "network_ledger.csv")
+
+    radio_pages(page, run, config)
 
     if benefit and (run / "timeseries.csv").exists():
         series = pd.read_csv(run / "timeseries.csv")
