@@ -8,7 +8,7 @@ from importlib import resources
 from pathlib import Path
 
 from swarmbed.agent_runtime.bt import InputPort, NodeRegistry, OutputPort, StatefulAction, Status, SyncAction
-from swarmbed.extension.allocator import HOLD
+from swarmbed.extension.allocator import HALT, HOLD
 
 
 class LocalSensingNode(SyncAction):
@@ -42,8 +42,10 @@ class DecisionMakingNode(SyncAction):
     def tick(self):
         ctx = self.config.context
         task = ctx.allocator.decide(ctx.view)
-        if task == HOLD:  # stay put: no task to execute, and no exploring either
+        if task in (HOLD, HALT):  # stay put: no task to execute, and no exploring either
             self.set_output("task_id", None)
+            if task == HALT:
+                ctx.act(["halt"])  # and stop at once (the executing node, with no task, leaves it)
             return Status.SUCCESS
         self.set_output("task_id", task)
         return Status.FAILURE if task is None else Status.SUCCESS

@@ -8,13 +8,14 @@ a change to every plugin and scenario, so it is kept small.
 """
 
 from swarmbed.extension.actions import INVALID, MOVE_ACTIONS, ActionSpec, admit, conforms
-from swarmbed.extension.allocator import HOLD, Allocator, NoParams
+from swarmbed.extension.allocator import HALT, HOLD, Allocator, NoParams
 from swarmbed.extension.context import NodeContext
 from swarmbed.extension.figures import Figure
 from swarmbed.extension.scenario import Scenario, Sensing, World, within
 from swarmbed.extension.view import LocalView, Message, Outgoing, TaskInfo
 
 __all__ = [
+    "HALT",
     "HOLD",
     "INVALID",
     "MOVE_ACTIONS",

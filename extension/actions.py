@@ -19,7 +19,7 @@ from typing import Any
 ActionSpec = Mapping[str, tuple[type, ...]]
 
 #: moving and choosing a task: what SPACE's nodes send (``stop``, ``goto x y``, ``goto_task id``)
-MOVE_ACTIONS: ActionSpec = {"stop": (), "goto": (float, float), "goto_task": (int,)}
+MOVE_ACTIONS: ActionSpec = {"stop": (), "halt": (), "goto": (float, float), "goto_task": (int,)}
 
 #: what a world is given in place of an action that does not conform to its scenario's declaration
 INVALID: list = ["invalid"]

@@ -13,6 +13,9 @@ from swarmbed.extension.view import LocalView
 #: what :meth:`Allocator.decide` returns to keep the agent still this tick (no task, no exploring):
 #: SPACE's GRAPE holds its agents while their partition converges. Task ids are never negative.
 HOLD = -2
+#: the same, and stop at once (speed to zero this tick), as SPACE's GRAPE resets an agent's movement
+#: on every tick its partition has not converged; a scenario without the ``halt`` action brakes instead.
+HALT = -3
 
 
 class NoParams(BaseModel):
@@ -72,4 +75,5 @@ class Allocator(abc.ABC):
 
     @abc.abstractmethod
     def decide(self, view: LocalView) -> int | None:
-        """Return the task to work on now, None (the tree then explores) or :data:`HOLD` (stay put)."""
+        """Return the task to work on now, None (the tree then explores), :data:`HOLD` (stay put) or
+        :data:`HALT` (stay put, stopping at once)."""

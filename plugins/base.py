@@ -4,7 +4,7 @@ Defined in ``swarmbed.agent_runtime`` (plugins build on the agent runtime, not t
 gathered here, where plugin authors look for it.
 """
 
-from swarmbed.extension.allocator import HOLD, Allocator, NoParams
+from swarmbed.extension.allocator import HALT, HOLD, Allocator, NoParams
 from swarmbed.extension.view import LocalView, Message, Outgoing, TaskInfo
 
-__all__ = ["HOLD", "Allocator", "LocalView", "Message", "NoParams", "Outgoing", "TaskInfo"]
+__all__ = ["HALT", "HOLD", "Allocator", "LocalView", "Message", "NoParams", "Outgoing", "TaskInfo"]

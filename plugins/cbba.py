@@ -16,6 +16,12 @@ simulated time. Equal bids go to the lower agent id.
 
 SPACE's addition: when the bundle has stayed empty for ``reset_after`` seconds, the agent resets
 every winning bid and winner it knows, so that tasks left with stale high bids can be bid on again.
+
+What an agent works on: SPACE's code (``plugins/cbba/cbba.py``) alternates building a bundle and a
+consensus round, and hands its agent the first task of its path only after a consensus round that
+left the bundle as it was; on the other ticks the agent has no task and its tree explores
+(``execute: settled``, the default). ``execute: first`` heads for the first task of the path on
+every tick, as swarmbed's published section 7 did.
 """
 
 from __future__ import annotations
@@ -39,6 +45,11 @@ class CBBAParams(BaseModel):
     discount: float = Field(0.999, gt=0, le=1, description="lambda of the time-discounted reward")
     score: Literal["time_discounted", "distance_discounted"] = "time_discounted"
     reset_after: float | None = Field(500.0, gt=0, description="seconds of empty bundle before resetting bids")
+    execute: Literal["settled", "first"] = Field(
+        "settled",
+        description="settled: work on the path's first task only on a tick whose consensus left a non-empty "
+        "bundle as it was (SPACE's code), else explore; first: on every tick (the published section 7)",
+    )
     full_every: int = Field(
         10,
         ge=1,
@@ -69,14 +80,18 @@ class CBBA(Allocator):
         st.now = view.time
         for task in self.book.update(view):
             st.forget(task)
+        before = list(st.bundle)
         for msg in view.inbox:
             if msg.kind == KIND:
                 st.receive(msg.sender, msg.data, ignore=self.book.done)
         st.release()
+        settled = bool(before) and st.bundle == before
         self.build_bundle(view)
         self._reset_if_idle(view.time)
         view.broadcast(KIND, st.message())
-        return st.path[0] if st.path else None
+        if not st.path or (self.params.execute == "settled" and not settled):
+            return None
+        return st.path[0]
 
     # -- bundle building (Algorithm 3) -----------------------------------------------------------
     def _task(self, view: LocalView, task: int) -> TaskInfo:

@@ -2,16 +2,22 @@
 
 Each agent picks a task among those it sees that no neighbour has claimed (the nearest, a random
 one, or the one of highest utility) and broadcasts its claim every tick: the task and the tick at
-which it claimed it. When it hears that another agent claimed the same task first (earlier claim
-tick; ties to the lower agent id), it abandons the task and chooses again at the next tick. The
-first claim on a task is therefore the one that stands.
+which it claimed it.
+
+What it does on hearing that another agent claimed the same task first (earlier claim tick; ties
+to the lower agent id) is where SPACE's paper and SPACE's code read differently. The paper: "If the
+agent realizes that the chosen task has already been assigned to another agent, it abandons that
+task and tries the task selection process again in the next game loop" (``on_earlier_claim:
+abandon``). SPACE's code (``plugins/greedy/greedy.py``) checks claims only when it chooses, and an
+agent keeps its task until the task is done (``keep``, the default: the Fig. 3 results come from
+that code). Either way the choice itself skips tasks a neighbour claims.
 """
 
 from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.plugins.base import Allocator, LocalView, TaskInfo
 
@@ -22,6 +28,11 @@ class FCGParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
     mode: Literal["MinDist", "Random", "MaxUtil"] = "MinDist"
     cost_weight: float = 1.0  # MaxUtil: utility = remaining workload - cost_weight * distance
+    on_earlier_claim: Literal["keep", "abandon"] = Field(
+        "keep",
+        description="on hearing an earlier claim on its task: keep it until done (SPACE's code) or abandon "
+        "it and choose again at the next tick (SPACE's Section IV-D, as written)",
+    )
 
 
 class FirstClaimedGreedy(Allocator):
@@ -46,7 +57,8 @@ class FirstClaimedGreedy(Allocator):
             key = (tick, msg.sender)
             if task not in claims or key < claims[task]:
                 claims[task] = key
-        if self.task is not None and self.task in claims and claims[self.task] < (self.claimed_at, self.agent_id):
+        earlier = self.task is not None and self.task in claims and claims[self.task] < (self.claimed_at, self.agent_id)
+        if earlier and self.params.on_earlier_claim == "abandon":
             self.task = None
             self.abandoned += 1
             return None  # choose again at the next tick, as the paper describes

@@ -12,9 +12,14 @@ broadcast its (evolution number, timestamp, partition).
 As SPACE's MT-SR plugin does (the defaults): there is no void task, so an agent joins the visible
 task of highest utility even when that utility is negative (with Eq. 1, R_j in [6, 60] and
 distances in the hundreds, it mostly is), and an agent holds still on a tick where its partition
-was not converged (the mutex changed it, or it decided). ``void_task: true`` offers the original
-GRAPE's void task (utility 0: an agent farther from every task than their workloads are worth
-wanders instead); ``hold_while_converging: false`` lets agents move toward their task meanwhile.
+was not converged (the mutex changed it, or it decided), stopping at once (SPACE's code resets its
+movement: ``converging_stop: halt``; ``brake`` slows it within its acceleration limit, as swarmbed
+did before). ``void_task: true`` offers the original GRAPE's void task (utility 0: an agent farther
+from every task than their workloads are worth wanders instead); ``hold_while_converging: false``
+lets agents move toward their task meanwhile. Restarting at the nearest task after a completion
+is not a move of the agent's own (no new evolution number, as in SPACE's code; the published
+section 7 had one: ``restart_bumps_evolution: true``). One difference stays: SPACE's code decides
+and runs the mutex on alternate ticks, ours does both in one tick.
 
 Utility (SPACE Eq. 1): ``u_i(t_j, |S_j|) = R_j / |S_j| - cost_weight * d_ij * |S_j| ** social_inhibition``
 with R_j the task's remaining workload and d_ij the distance to it. SPACE's additions: the initial
@@ -38,10 +43,11 @@ SPACE's: (evolution number, timestamp, partition).
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.plugins.base import HOLD, Allocator, LocalView
+from swarmbed.plugins.base import HALT, HOLD, Allocator, LocalView
 from swarmbed.plugins.taskbook import TaskBook
 
 KIND = "grape"
@@ -58,6 +64,16 @@ class GRAPEParams(BaseModel):
     )
     hold_while_converging: bool = Field(
         True, description="stay still on a tick where the partition was not converged (SPACE's MT-SR behaviour)"
+    )
+    converging_stop: Literal["halt", "brake"] = Field(
+        "halt",
+        description="how a held agent stops: halt (speed to zero at once, as SPACE's code resets an agent's "
+        "movement) or brake (within its acceleration limit; swarmbed's published section 7)",
+    )
+    restart_bumps_evolution: bool = Field(
+        False,
+        description="whether restarting at the nearest task after a completion counts as a move (a new "
+        "evolution number); SPACE's code edits the partition without one (True: the published section 7)",
     )
     full_every: int = Field(
         1,
@@ -115,10 +131,11 @@ class GRAPE(Allocator):
         if mine_done:
             self.satisfied = False  # SPACE: an agent whose task completed decides afresh
         if not self.started or (mine_done and self.params.nearest_start):
+            restart = self.started
             self.started = True
             if self.params.nearest_start and view.tasks:
                 nearest = min(view.tasks.values(), key=lambda t: (view.distance_to(t), t.id))
-                self._move(nearest.id)
+                self._move(nearest.id, bump=not restart or self.params.restart_bumps_evolution)
         self.mutex(view)
         converging = not self.satisfied
         if converging and view.tasks:  # with no task in sight it stays unsatisfied and decides on the first it sees
@@ -129,15 +146,20 @@ class GRAPE(Allocator):
         task = self.partition.get(me, VOID)
         if task == VOID or task not in view.tasks:
             return None
-        return HOLD if converging and self.params.hold_while_converging else task
+        if converging and self.params.hold_while_converging:
+            return HALT if self.params.converging_stop == "halt" else HOLD
+        return task
 
-    def _move(self, task: int) -> None:
+    def _move(self, task: int, bump: bool = True) -> None:
+        """This agent joins ``task``'s coalition; a move of its own (``bump``) is a new partition:
+        a new evolution number and timestamp."""
         if task == VOID:
             self.partition.pop(self.agent_id, None)
         else:
             self.partition[self.agent_id] = task
-        self.evolution += 1
-        self.stamp = float(self.rng.random())
+        if bump:
+            self.evolution += 1
+            self.stamp = float(self.rng.random())
 
     # -- messages -------------------------------------------------------------------------------
     def message(self) -> list | None:

@@ -251,7 +251,9 @@ class MTSRWorld(World):
                 return (float(self.tx[t]), float(self.ty[t])), (t if np.isnan(self.done_at[t]) else None)
         elif name == "goto" and len(action) == 3 and all(isinstance(v, (int, float)) for v in action[1:]):
             return (float(action[1]), float(action[2])), None
-        elif name == "stop" and len(action) == 1:
+        elif name in ("stop", "halt") and len(action) == 1:
+            if name == "halt":
+                self.speed[i] = 0.0  # SPACE's reset_movement: no braking distance
             return None, None
         self.invalid_actions[i] += 1
         return None, None

@@ -456,7 +456,7 @@ class SARWorld(World):
                 name in ("inspect", "rescue", "goto_task") and v is not None and (r is None or self.vstatus[r] != ALIVE)
             ):
                 self.stale_actions[i] += 1  # someone was faster, or it expired: not the robot's fault
-            elif name != "stop":
+            elif name not in ("stop", "halt"):  # robots here move at a set speed: halting is stopping
                 self.invalid_actions[i] += 1
         self.tick += 1
         expired = (self.vstatus == ALIVE) & (self.vspawn + self.sc.lifetime <= self.time + 1e-9)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.plugins.base import HOLD, LocalView, Message, TaskInfo
+from swarmbed.plugins.base import HALT, HOLD, LocalView, Message, TaskInfo
 from swarmbed.plugins.cbba import CBBA
 from swarmbed.plugins.checks.allocator import CLEAN_NETWORK as CLEAN
 from swarmbed.plugins.checks.allocator import random_instance, run_all, simulate
@@ -186,15 +186,50 @@ def test_grape_ends_in_a_nash_stable_partition(params, full_every, lossy):
                     assert u <= u_now + 1e-9, f"case {case}: agent {i} prefers {other} ({u}) to {mine} ({u_now})"
 
 
-@pytest.mark.parametrize("hold", [True, False])
-def test_grape_holds_its_agents_still_while_the_partition_converges(hold):
+@pytest.mark.parametrize(("hold", "stop", "held"), [(True, "halt", HALT), (True, "brake", HOLD), (False, "halt", None)])
+def test_grape_holds_its_agents_still_while_the_partition_converges(hold, stop, held):
     """SPACE's MT-SR GRAPE (the default): on a tick where an agent's partition changed it returns
-    HOLD (stay put); once converged, its task. Without holding it heads for its task at once."""
+    HALT (stop at once, as SPACE's code resets its movement) or, with ``converging_stop: brake``,
+    HOLD; once converged, its task. Without holding it heads for its task at once."""
     inst = random_instance(7, 5, 4, size=50.0)
-    trace = simulate("grape", {"hold_while_converging": hold}, inst, 60, seed=1)
+    trace = simulate("grape", {"hold_while_converging": hold, "converging_stop": stop}, inst, 60, seed=1)
     first, last = trace.decisions[0], trace.decisions[-1]
-    assert all(d == HOLD for d in first.values()) if hold else all(d in inst.tasks for d in first.values())
+    assert all(d == held for d in first.values()) if hold else all(d in inst.tasks for d in first.values())
     assert all(d in inst.tasks for d in last.values())  # converged: everyone on a task
+
+
+def test_a_halted_agent_stops_at_once_where_a_held_one_brakes():
+    """The world's side of HALT: ``halt`` zeroes the speed this tick; ``stop`` brakes within the
+    acceleration limit (the agent rolls on)."""
+    from swarmbed.experiments.launch.config import resolve_experiment
+    from tests.conftest import experiment
+
+    exp = experiment("agents.count=1", "scenario.initial_tasks=1", "run.seed=3")
+    rolled = {}
+    for action in ("stop", "halt"):
+        world = resolve_experiment(exp).scenario().make_world(np.random.default_rng(0))
+        for _ in range(20):
+            world.apply({0: ["goto", 1000.0, 1000.0]})
+        before = (float(world.ax[0]), float(world.ay[0]))
+        world.apply({0: [action]})
+        rolled[action] = math.hypot(world.ax[0] - before[0], world.ay[0] - before[1])
+        assert world.invalid_actions[0] == 0
+    assert rolled["halt"] == 0.0 < rolled["stop"]
+
+
+def test_grape_restarting_at_its_nearest_task_is_not_a_new_partition_unless_asked():
+    near, other = TaskInfo(0, 10.0, 0.0, 30.0), TaskInfo(1, 40.0, 0.0, 30.0)
+    for bumps, grows in ((False, False), (True, True)):
+        grape = make("grape", {"restart_bumps_evolution": bumps}, 0, np.random.default_rng(0), 0)
+
+        def decide(k, tasks, g=grape):
+            return g.decide(LocalView(0, 1, k, float(k), 0.0, 0.0, 0.0, 0.0, 1.0, tasks, [], 1.0, 300.0))
+
+        for k in range(4):
+            decide(k, {0: near, 1: other})
+        settled = grape.evolution
+        decide(4, {1: other})  # its task completed: it restarts at the nearest one left
+        assert (grape.evolution > settled) == grows and grape.partition[0] == 1
 
 
 def test_grape_agent_whose_task_completed_takes_the_next_task_it_sees():
@@ -256,3 +291,40 @@ def test_grape_agent_hears_a_partition_newer_than_its_own_only_through_what_it_c
     a.rounds = 10
     b.mutex(view(2, [Message(0, "grape", a.message())]))
     assert (b.evolution, b.partition) == (50, {0: 1, 1: 0})
+
+
+@pytest.mark.parametrize("on_earlier_claim", ["keep", "abandon"])
+def test_fcg_keeps_its_task_on_an_earlier_claim_as_spaces_code_does_or_abandons_it_as_the_paper_says(
+    on_earlier_claim,
+):
+    """SPACE's plugins/greedy/greedy.py keeps a claimed task until it is done (the default); the
+    paper's Section IV-D abandons it on hearing an earlier claim and chooses again next tick."""
+    fcg = make("fcg", {"on_earlier_claim": on_earlier_claim}, 0, np.random.default_rng(0), 0)
+    near, far = TaskInfo(0, 10.0, 0.0, 30.0), TaskInfo(1, 50.0, 0.0, 30.0)
+    tasks = {0: near, 1: far}
+
+    def decide(k, inbox=()):
+        return fcg.decide(LocalView(0, 2, k, float(k), 0.0, 0.0, 0.0, 0.0, 1.0, tasks, list(inbox), 1.0, 300.0))
+
+    assert decide(5) == 0  # claims the nearest at tick 5
+    earlier = Message(1, "claim", [0, 2])  # agent 1 claimed it at tick 2
+    if on_earlier_claim == "keep":
+        assert [decide(6, [earlier]), decide(7, [earlier])] == [0, 0]
+    else:
+        assert decide(6, [earlier]) is None  # abandons; chooses again next tick, skipping the claimed task
+        assert decide(7, [earlier]) == 1
+
+
+@pytest.mark.parametrize("execute", ["settled", "first"])
+def test_cbba_works_only_on_a_bundle_a_consensus_round_left_alone_as_spaces_code_does(execute):
+    """SPACE's CBBA hands its agent a task only after a consensus round that did not change the
+    bundle (else the tree explores); ``execute: first`` heads for the path's first task every tick."""
+    cbba = make("cbba", {"execute": execute}, 0, np.random.default_rng(0), 0)
+    tasks = {0: TaskInfo(0, 10.0, 0.0, 30.0), 1: TaskInfo(1, 20.0, 0.0, 30.0)}
+
+    def decide(k, inbox=()):
+        return cbba.decide(LocalView(0, 2, k, float(k), 0.0, 0.0, 0.0, 0.0, 1.0, tasks, list(inbox), 1.0, 300.0))
+
+    built, settled = decide(0), decide(1)
+    assert settled == cbba.path[0] and built == (None if execute == "settled" else cbba.path[0])
+    assert decide(2) == cbba.path[0]  # nothing heard: still settled

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from swarmbed.netem import Radio
-from swarmbed.plugins.base import HOLD, Allocator, LocalView, Message, TaskInfo
+from swarmbed.plugins.base import HALT, HOLD, Allocator, LocalView, Message, TaskInfo
 from swarmbed.plugins.registry import make, resolve, resolve_scenario
 from swarmbed.wire.codec import TASK_DTYPE, unpack
 from swarmbed.wire.observation import Observation
@@ -179,7 +179,7 @@ def simulate(
             )
             trace.allocators[i].observe(view)
             decision = trace.allocators[i].decide(view)
-            if decision is not None and decision != HOLD and decision not in tasks:
+            if decision is not None and decision not in (HOLD, HALT) and decision not in tasks:
                 raise ConformanceError(f"{name}: agent {i} chose task {decision!r} at round {k}, which does not exist")
             decisions[i] = decision
             encoded = [o.encode() for o in view.outbox]
