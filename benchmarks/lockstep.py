@@ -7,7 +7,10 @@ bare barrier floor (one sample in and one out per client per tick, nothing else)
     python benchmarks/lockstep.py --n 10 20  # other sizes
 
 Prints ticks per second of all three, swarmbed's ratio to each, its start-up time and the memory
-each agent process holds of its own (USS).
+each agent process holds of its own (USS); then, from the run's timings.json, what one agent-tick
+cost over the tick loop in wake-ups (voluntary context switches of every thread of every run
+process) and CPU microseconds, by process kind: figures that do not move with the machine's day.
+``ZENOH_RUNTIME`` in the environment reaches every run process (issue 32's single-worker layout).
 """
 
 from __future__ import annotations
@@ -102,6 +105,8 @@ def swarmbed_run(n: int, ticks: int, auth: bool = True) -> dict:
         "startup_s": t["startup_s"],
         "uss_mb": t["agent_uss_mb_mean"],
         "copies": result.summary["network"]["copies"],
+        "wakeups": t["per_agent_tick"]["wakeups"],
+        "cpu_us": t["per_agent_tick"]["cpu_us"],
     }
 
 
@@ -123,6 +128,14 @@ def main() -> None:
         print(
             f"{n:>4} {floor:>15.1f} {raw:>13.1f} {ours['ticks_per_s']:>17.1f} {ours['ticks_per_s'] / floor:>8.2f} "
             f"{ours['ticks_per_s'] / raw:>6.2f} {ours['startup_s']:>10.1f} {ours['uss_mb']:>13.1f}",
+            flush=True,
+        )
+        woke, cpu = ours["wakeups"], ours["cpu_us"]
+        print(
+            "      per agent-tick (counts, not times): wake-ups "
+            + ", ".join(f"{k} {woke[k]:.2f}" for k in ("agents", "hub", "netem", "total"))
+            + "; CPU us "
+            + ", ".join(f"{k} {cpu[k]:.0f}" for k in ("agents", "hub", "netem", "total")),
             flush=True,
         )
 

@@ -90,3 +90,14 @@ def test_quickstart_completes_with_each_allocator(tmp_path, allocator):
     assert s["all_tasks_completed"] is True and s["tasks_completed"] == 20
     assert s["network"]["per_kind"][allocator]["messages"] > 0
     assert s["network"]["bytes_agree"] is True
+
+
+def test_timings_count_each_agent_ticks_wakeups_and_cpu_over_the_tick_loop(quickstart_runs):
+    """timings.json's per-agent-tick figures (benchmarks/lockstep.py prints them): every kind of
+    run process woke and worked during the tick loop; an agent wakes at least once per tick (its
+    tick arrives) and, with Zenoh's default threads, a few times more."""
+    per = quickstart_runs["a"].timings["per_agent_tick"]
+    woke, cpu = per["wakeups"], per["cpu_us"]
+    assert 1.0 <= woke["agents"] < 50 and woke["netem"] > 0 and woke["hub"] > 0
+    assert woke["total"] == pytest.approx(woke["agents"] + woke["netem"] + woke["hub"])
+    assert cpu["agents"] > 0 and cpu["netem"] > 0 and cpu["hub"] > 0

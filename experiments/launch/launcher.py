@@ -68,6 +68,23 @@ def own_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def wakeups(pid: int) -> int:
+    """Voluntary context switches of every thread of a process so far (each one a wake-up after
+    waiting: for a sample, a lock, a timer), from /proc/<pid>/task/*/status. A count, not a time:
+    it does not move with the machine's load the way wall and CPU times do."""
+    total = 0
+    for task in os.scandir(f"/proc/{pid}/task"):
+        try:
+            with open(f"{task.path}/status") as f:
+                for line in f:
+                    if line.startswith("voluntary_ctxt_switches:"):
+                        total += int(line.split()[1])
+                        break
+        except OSError:  # the thread ended while we looked
+            continue
+    return total
+
+
 def reset_peak_rss() -> None:
     """Start this process's VmHWM afresh (a sweep's pool worker hosts one run after another, and a
     run's peak is its own). Best effort: kernels before 4.0 keep the lifetime peak."""
@@ -292,6 +309,10 @@ class Children:
     def cpu_s(self) -> dict[str, float]:
         """CPU seconds (user + system) each child has used so far."""
         return self._each(lambda pid: sum(psutil.Process(pid).cpu_times()[:2]))
+
+    def wakeups(self) -> dict[str, int]:
+        """Each child's wake-ups so far (:func:`wakeups`)."""
+        return self._each(wakeups)
 
     def peak_rss_mb(self) -> dict[str, float]:
         """Each child's peak resident set so far (Linux VmHWM)."""

@@ -33,6 +33,7 @@ from swarmbed.experiments.launch.launcher import (
     own_cpu_s,
     peak_rss_mb,
     reset_peak_rss,
+    wakeups,
 )
 from swarmbed.experiments.launch.placement import AgentPlacement
 from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
@@ -254,7 +255,9 @@ def _execute(
             for observer in observers:
                 observer.start(live)
                 running.append(observer)
+            loop_start = _tick_costs(children)
             coord.run(on_tick)
+            loop_end = _tick_costs(children)
             if coord.agents.swap_log:  # where agents ran at the end, and what each host ran then
                 for host in sorted({h for h in coord.agents.hosts.values() if h != LOCAL}):
                     hosts[host] = host_info(session, host) or hosts.get(host)
@@ -276,6 +279,7 @@ def _execute(
         exit_codes = children.wait(timeout=15.0)
         timings = _timings(usage, coord, marks, hub_cpu_before, children.forked, exit_codes)
         timings.update(run_id=keys.run_id, endpoint=endpoint, auth=access is not None)
+        timings["per_agent_tick"] = _per_agent_tick(loop_start, loop_end, exp.agents.count, coord.last_tick + 1)
         summary = coord.write_results(timings)
         return RunResult(out_dir, summary, timings)
     except TableWriteError as exc:  # a full disk: one line, the first error, not what clean-up meets next
@@ -288,6 +292,34 @@ def _execute(
         if access:
             access.close()
         _keep_no_torn_result(coord, out_dir)
+
+
+def _tick_costs(children: Children) -> dict[str, dict[str, float]]:
+    """Wake-ups and CPU seconds so far by process kind (agents, netem, hub: the coordinator's own
+    process, which holds the hub's router), to be differenced over the tick loop."""
+    kinds: dict[str, dict[str, float]] = {k: {"wakeups": 0.0, "cpu_s": 0.0} for k in ("agents", "netem", "hub")}
+    cpu, woke = children.cpu_s(), children.wakeups()
+    for name in set(cpu) | set(woke):
+        kind = "netem" if name == "netem" else "agents" if name.startswith("agent_") else None
+        if kind:
+            kinds[kind]["wakeups"] += woke.get(name, 0)
+            kinds[kind]["cpu_s"] += cpu.get(name, 0.0)
+    kinds["hub"] = {"wakeups": float(wakeups(os.getpid())), "cpu_s": own_cpu_s()}
+    return kinds
+
+
+def _per_agent_tick(start: dict, end: dict, agents: int, ticks: int) -> dict:
+    """What one agent-tick cost over the tick loop, by process kind and in all: wake-ups (voluntary
+    context switches of every thread) and CPU microseconds. Agents that left or joined during the
+    loop (loss, swaps) make the differences approximate; the run's other figures are exact."""
+    n = max(1, agents * ticks)
+    out: dict[str, dict[str, float]] = {"wakeups": {}, "cpu_us": {}}
+    for kind in ("agents", "netem", "hub"):
+        out["wakeups"][kind] = (end[kind]["wakeups"] - start[kind]["wakeups"]) / n
+        out["cpu_us"][kind] = (end[kind]["cpu_s"] - start[kind]["cpu_s"]) * 1e6 / n
+    for figure in out.values():
+        figure["total"] = sum(figure.values())
+    return out
 
 
 def _usage(children: Children) -> dict[str, dict]:
