@@ -101,3 +101,15 @@ def test_timings_count_each_agent_ticks_wakeups_and_cpu_over_the_tick_loop(quick
     assert 1.0 <= woke["agents"] < 50 and woke["netem"] > 0 and woke["hub"] > 0
     assert woke["total"] == pytest.approx(woke["agents"] + woke["netem"] + woke["hub"])
     assert cpu["agents"] > 0 and cpu["netem"] > 0 and cpu["hub"] > 0
+
+
+def test_a_single_zenoh_worker_wakes_agents_less_and_changes_no_result(tmp_path):
+    """run.zenoh_threads: single hands every Zenoh runtime of the agents and the proxy to one
+    worker thread: the same files, fewer wake-ups per agent-tick (counts, not times)."""
+    sets = ["agents.count=12", "allocator={name: noop, peers: 5}", "run.duration=200", "run.stop_when_done=false"]
+    default = run_experiment(experiment(*sets), tmp_path / "default", progress=False)
+    single = run_experiment(experiment(*sets, "run.zenoh_threads=single"), tmp_path / "single", progress=False)
+    for name in DETERMINISTIC_FILES[:-1]:  # config.yaml names the setting
+        assert (default.out_dir / name).read_bytes() == (single.out_dir / name).read_bytes(), name
+    fewer = single.timings["per_agent_tick"]["wakeups"]["agents"]
+    assert fewer < 0.85 * default.timings["per_agent_tick"]["wakeups"]["agents"]

@@ -71,6 +71,11 @@ class RunSection(Strict):
     log_backups: int = Field(2, ge=0, description="rotated log files kept per process (name.log.1, ...)")
     record_every: int = Field(1, ge=1, description="ticks between time-series rows")
     record_trajectories: bool = Field(False, description="write trajectories.csv and markers.csv (for swarmbed replay)")
+    zenoh_threads: Literal["default", "single"] = Field(
+        "default",
+        description="Zenoh's threads in the agents and the proxy this machine starts: its default layout, or "
+        "single (every runtime handed to one worker: fewer wake-ups per tick; docs/benchmarks.md)",
+    )
     record_bt: bool = Field(
         False,
         description="write bt/agent_<id>.btlog, each agent's behavior tree run as Groot2 replays it "

@@ -18,6 +18,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import psutil
@@ -31,13 +32,25 @@ class ChildExited(RuntimeError):
     pass
 
 
-def python_env() -> dict[str, str]:
+#: ZENOH_RUNTIME for ``run.zenoh_threads: single``: every Zenoh runtime handed over to one worker
+#: thread, so a sample in and a sample out wake one thread instead of several
+SINGLE_WORKER = (
+    "(app: (handover: rx), acc: (handover: rx), tx: (handover: rx), net: (handover: rx), rx: (worker_threads: 1))"
+)
+
+
+def zenoh_env(threads: str) -> dict[str, str]:
+    """The environment that gives a run's processes ``run.zenoh_threads``."""
+    return {"ZENOH_RUNTIME": SINGLE_WORKER} if threads == "single" else {}
+
+
+def python_env(extra: Mapping[str, str] | None = None) -> dict[str, str]:
     """The environment of the Python processes a run starts (``python -m ...``): they import the
     swarmbed this process runs, and the current directory only where this process has it on its
     path too. ``-m`` alone would put the current directory first, so a run started beside a folder
     named ``swarmbed`` (another checkout, say) would run its agents and proxy on that code while
     the launcher ran this one."""
-    env = dict(os.environ)
+    env = {**os.environ, **(extra or {})}
     env["PYTHONSAFEPATH"] = "1"  # no current directory first on the path
     front = []
     root = os.path.dirname(os.path.dirname(os.path.abspath(swarmbed.__file__)))
@@ -139,7 +152,7 @@ class ForkServerError(RuntimeError):
 class ForkServer:
     """The launcher's end of :mod:`.forkserver`: start it, ask it for agents, learn their ends."""
 
-    def __init__(self, log_path: Path, timeout: float = 60.0) -> None:
+    def __init__(self, log_path: Path, timeout: float = 60.0, env: Mapping[str, str] | None = None) -> None:
         self.log = open(log_path, "wb")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "swarmbed.experiments.launch.forkserver", str(os.getpid())],
@@ -148,7 +161,7 @@ class ForkServer:
             stderr=self.log,
             start_new_session=True,
             close_fds=True,
-            env=python_env(),
+            env=python_env(env),
         )
         self.replies: queue.SimpleQueue = queue.SimpleQueue()
         self.exits: dict[int, int] = {}
@@ -225,12 +238,13 @@ def describe_exit(returncode: int | None) -> str:
 
 
 class Children:
-    def __init__(self, log_dir: Path, fork_agents: bool = False) -> None:
+    def __init__(self, log_dir: Path, fork_agents: bool = False, env: Mapping[str, str] | None = None) -> None:
         self.log_dir = log_dir
+        self.env = dict(env or {})  # beside python_env(): e.g. zenoh_env(run.zenoh_threads)
         self.procs: dict[str, subprocess.Popen | ForkedProcess] = {}
         self.started_at: dict[str, float] = {}
         self.forked = fork_agents
-        self.server: ForkServer | None = ForkServer(log_dir / "forkserver.log") if fork_agents else None
+        self.server: ForkServer | None = ForkServer(log_dir / "forkserver.log", env=self.env) if fork_agents else None
 
     def spawn(self, name: str, module: str, args: list[str]) -> subprocess.Popen | ForkedProcess:
         log_path = self.log_dir / f"{name}.log"
@@ -246,7 +260,7 @@ class Children:
                     stderr=subprocess.STDOUT,
                     start_new_session=True,
                     close_fds=True,
-                    env=python_env(),
+                    env=python_env(self.env),
                 )
         self.procs[name] = proc
         self.started_at[name] = time.monotonic()

@@ -34,6 +34,7 @@ from swarmbed.experiments.launch.launcher import (
     peak_rss_mb,
     reset_peak_rss,
     wakeups,
+    zenoh_env,
 )
 from swarmbed.experiments.launch.placement import AgentPlacement
 from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
@@ -155,7 +156,7 @@ def _execute(
             undo.callback(access.close)
         # the fork server first: it is spawned, never forked, but it needs no session of ours
         try:
-            children = Children(log_dir, fork_agents=fork_agents)
+            children = Children(log_dir, fork_agents=fork_agents, env=zenoh_env(exp.run.zenoh_threads))
         except ForkServerError as exc:
             raise RunError(str(exc)) from None
         t_server = time.perf_counter()
