@@ -224,7 +224,7 @@ class Coordinator:
                 self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX)))
             step = self._await_step(k)
             for j in step.lost:
-                self.agents.lose(j, k, "its process exited")
+                self.agents.lose(j, k, self._how_it_ended(j))
             actions = step.actions
             if step.late:
                 for a in step.late:
