@@ -549,12 +549,12 @@ def cmd_groot(args: argparse.Namespace) -> int:
     except ImportError:
         print("error: swarmbed groot needs pyzmq: pip install 'swarmbed[viewers]'", file=sys.stderr)
         return 2
-    session = _client_session(args)
+    session = _client_session(args, connect_timeout_s=args.wait)  # the run may not be up yet
     if session is None:
         return 2
     with session:
         try:
-            return run_gateway(session, args.run, args.agent, args.port, args.bind)
+            return run_gateway(session, args.run, args.agent, args.port, args.bind, wait=args.wait)
         except WatchError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -849,6 +849,9 @@ def main(argv: list[str] | None = None) -> int:
     gr.add_argument("--agent", type=int, default=0, help="the agent to show first (type another id to switch)")
     gr.add_argument("--port", type=int, default=1667, help="Groot2's port (and the next one), as BehaviorTree.CPP")
     gr.add_argument("--bind", default="127.0.0.1", help="the address Groot2 connects to (default: this machine only)")
+    gr.add_argument(
+        "--wait", type=float, default=10.0, help="seconds to wait for the hub to listen and the run to answer"
+    )
     add_zenoh_args(gr)
     gr.set_defaults(func=cmd_groot)
 

@@ -154,9 +154,9 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
         target=run_experiment, args=(experiment(*sets), tmp_path / "watched"), kwargs={"progress": False, "hub": hub}
     )
     runner.start()
-    time.sleep(1.0)  # the hub listens once the run has started its processes
     gateway = subprocess.Popen(
-        [sys.executable, "-m", "swarmbed", "groot", "--connect", endpoint, *operator.args, "--port", str(port)],
+        [sys.executable, "-m", "swarmbed", "groot", "--connect", endpoint, *operator.args, "--port", str(port)]
+        + ["--wait", "60"],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -173,9 +173,12 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
             deadline, buffers = time.monotonic() + 60, set()
             while time.monotonic() < deadline and len(buffers) < 3:
                 head, body = groot.ask("T")
-                if body[0]:
-                    buffers.add(groot.ask("S")[1][0])
-                    seen[agent] = (head[6:], body[0].decode(), buffers)
+                status_head, status = groot.ask("S")
+                identity = head[6:]
+                switched = agent == 0 or identity != seen[0][0]  # the gateway may not have switched yet
+                if body[0] and status_head[6:] == identity and switched:
+                    buffers.add(status[0])
+                    seen[agent] = (identity, body[0].decode(), buffers)
                 time.sleep(0.05)
         assert groot.ask("I", b'{"uid": 2}')[0] == b"error"  # no breakpoints: agents never pause
     finally:

@@ -162,7 +162,13 @@ def chaos_soak(tmp_path_factory):
     out = tmp_path_factory.mktemp("chaos") / "soak"
     # checkpoints every 100 ticks: the first kill (8 s in) finds one even on a loaded machine
     return out, soak(
-        experiment("agents.count=8", "run.snapshot_every=100", base=SOAK), out, 60, plan, interval=1.0, limits=SHORT
+        # I_base 10 s: cbba-etc's fallback rounds every 30-80 s, so that the 5 s loss burst meets copies
+        experiment("agents.count=8", "run.snapshot_every=100", "allocator.base_interval=10", base=SOAK),
+        out,
+        60,
+        plan,
+        interval=1.0,
+        limits=SHORT,
     )
 
 

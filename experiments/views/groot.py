@@ -18,6 +18,7 @@ from __future__ import annotations
 import re
 import sys
 import threading
+import time
 from collections.abc import Iterable
 
 import zenoh
@@ -87,8 +88,15 @@ class Gateway:
             self._drop()
 
 
-def find_run(session: zenoh.Session, run_id: str | None) -> str:
-    runs = running_runs(session)
+def find_run(session: zenoh.Session, run_id: str | None, wait: float = 0.0) -> str:
+    """The run to monitor: ``run_id``, or the one run this session sees; asked again for ``wait``
+    seconds while none is seen (a run that is starting has no coordinator token yet)."""
+    deadline = time.monotonic() + wait
+    while True:
+        runs = running_runs(session)
+        if runs or time.monotonic() >= deadline:
+            break
+        time.sleep(0.2)
     if run_id is not None:
         if run_id not in runs:
             raise WatchError(f"no run {run_id} is running where this session reaches (running: {runs or 'none'})")
@@ -105,9 +113,10 @@ def run_gateway(
     port: int,
     bind: str = "127.0.0.1",
     commands: Iterable[str] | None = None,
+    wait: float = 0.0,
 ) -> int:
     """Serve Groot2 until ``commands`` (default: stdin lines, an agent id each) ends or Ctrl-C."""
-    run = find_run(session, run_id)
+    run = find_run(session, run_id, wait)
     gateway = Gateway(session, run)
     stop = threading.Event()
     server = threading.Thread(target=serve, args=(gateway.tree, port, stop, bind), daemon=True)
