@@ -131,6 +131,7 @@ SLOW_MODULES = frozenset(
         "test_hosts",
         "test_netem_e2e",
         "test_realtime",
+        "test_recording",
         "test_report",
         "test_sar_e2e",
         "test_soak",

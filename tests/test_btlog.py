@@ -158,6 +158,7 @@ if __name__ == "__main__":  # the reference's own process (see the reference fix
 SAR_RUN = ["allocator.name=cbba-etc", "run.duration=30"]
 
 
+@pytest.mark.slow
 def test_a_recorded_run_has_one_btlog_per_agent_identical_on_a_rerun_with_swaps_and_the_same_results(tmp_path):
     from swarmbed.experiments.launch.runner import run_experiment
     from swarmbed.wire.rundir import BT
