@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -20,19 +19,18 @@ from typing import BinaryIO
 
 import zenoh
 
-from swarmbed.wire.btlog import decode_tree_changes, file_head, records
+from swarmbed.wire.btlog import decode_tree_changes, file_head, records, tree_size
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import agent_id_of
 from swarmbed.wire.rundir import BT, PART_SUFFIX, PARTIAL_PREFIX, btlog_name
 
 log = logging.getLogger("swarmbed.coordinator")
-_UID = re.compile(r'_uid="(\d+)"')
 
 
 class _AgentLog:
     def __init__(self, path: Path, xml: str) -> None:
         self.path = path
-        self.n_nodes = max((int(u) for u in _UID.findall(xml)), default=0)
+        self.n_nodes = tree_size(xml)
         self.last_tick = -1
         self.file: BinaryIO = open(path, "wb")  # noqa: SIM115 - open for the run, closed by the recorder
         self.file.write(file_head(xml))

@@ -61,6 +61,26 @@ def run_ours(xml: str, scripts: dict[str, list[str]], ticks: int):
     return trace, tree.blackboard
 
 
+def btcpp_tree(xml: str, scripts: dict[str, list[str]]):
+    """The tree of ``xml`` built by BehaviorTree.CPP with the scripted leaves (statuses only: no
+    event log), its main tree as the file names it."""
+    import xml.etree.ElementTree as ET
+
+    import behaviortreepy as bt
+
+    script = Script(scripts)
+    factory = bt.BehaviorTreeFactory()
+
+    def status(node):
+        return getattr(bt.NodeStatus, script.next(node.name()))
+
+    factory.register_simple_stateful_action("Act", status, status, lambda node: None)
+    factory.register_simple_condition("Cond", status)
+    factory.register_behavior_tree_from_text(xml)
+    root = ET.fromstring(xml)
+    return factory.create_tree(root.get("main_tree_to_execute") or root.find("BehaviorTree").get("ID"))
+
+
 def run_btcpp(xml: str, scripts: dict[str, list[str]], ticks: int):
     import behaviortreepy as bt
 

@@ -14,7 +14,7 @@ import pytest
 from swarmbed.agent_runtime.bt import NodeRegistry, load_tree
 from swarmbed.agent_runtime.bt.btlog import ChangeRecorder, tree_xml
 from swarmbed.wire.btlog import EPOCH_US, HEADER, BtLogError, file_head, read_btlog, records
-from tests.bt_harness import Act, Cond, Script, random_case
+from tests.bt_harness import Act, Cond, Script, btcpp_tree, random_case
 
 bt = pytest.importorskip("behaviortreepy", reason="the reference needs the BehaviorTree.CPP bindings")
 
@@ -78,17 +78,7 @@ def _write_references(plan_file: str) -> None:
 
 
 def _write_reference(xml: str, scripts: dict[str, list[str]], out: Path) -> None:
-    script = Script(scripts)
-    factory = bt.BehaviorTreeFactory()
-
-    def status(node):
-        return getattr(bt.NodeStatus, script.next(node.name()))
-
-    factory.register_simple_stateful_action("Act", status, status, lambda node: None)
-    factory.register_simple_condition("Cond", status)
-    factory.register_behavior_tree_from_text(xml)
-    root = ET.fromstring(xml)
-    tree = factory.create_tree(root.get("main_tree_to_execute") or root.find("BehaviorTree").get("ID"))
+    tree = btcpp_tree(xml, scripts)
     logger = bt.FileLogger(tree, str(out))
     for _ in range(TICKS):
         tree.tick_exactly_once()
@@ -101,7 +91,7 @@ def _write_reference(xml: str, scripts: dict[str, list[str]], out: Path) -> None
         time.sleep(0.02)
         logger.flush()
         settled = settled + 1 if out.stat().st_size == size else 0
-    del logger, tree, factory
+    del logger, tree
 
 
 def shape(xml: str) -> list[tuple]:

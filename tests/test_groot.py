@@ -12,7 +12,7 @@ import pytest
 from swarmbed.agent_runtime.bt import NodeRegistry, Status, load_tree
 from swarmbed.agent_runtime.bt.btlog import STATUS_CODE, ChangeRecorder, tree_xml
 from swarmbed.experiments.views.groot2 import MonitoredTree, serve, tree_identity
-from tests.bt_harness import Act, Cond, Script
+from tests.bt_harness import Act, Cond, Script, btcpp_tree
 from tests.test_btlog import CASES, TICKS, shape
 
 bt = pytest.importorskip("behaviortreepy", reason="the reference needs the BehaviorTree.CPP bindings")
@@ -69,18 +69,7 @@ def ask_both(mine: Groot, theirs: Groot, kind: str, payload: bytes | None = None
 @pytest.mark.parametrize("name", ["subtrees", *(f"random {s}" for s in range(0, 40, 3))])
 def test_groot2_hears_from_us_what_btcpps_publisher_answers(name):
     xml, scripts = CASES[name]
-    # BehaviorTree.CPP's publisher
-    their_script = Script(scripts)
-    factory = bt.BehaviorTreeFactory()
-
-    def status(node):
-        return getattr(bt.NodeStatus, their_script.next(node.name()))
-
-    factory.register_simple_stateful_action("Act", status, status, lambda node: None)
-    factory.register_simple_condition("Cond", status)
-    factory.register_behavior_tree_from_text(xml)
-    main = "Main"
-    their_tree = factory.create_tree(main)
+    their_tree = btcpp_tree(xml, scripts)  # BehaviorTree.CPP's, with its own publisher
     their_port = free_port()
     publisher = bt.Groot2Publisher(their_tree, their_port)
     # ours: our engine's status changes into the gateway's monitored tree, served over ZeroMQ

@@ -19,6 +19,7 @@ and compares the trees, uids and status changes.
 
 from __future__ import annotations
 
+import re
 import struct
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -33,10 +34,17 @@ _RECORD = 9
 _MAX_OFFSET_US = 2**48 - 1
 MAX_TREE_XML = 1 << 20  # bytes: a tree a person drew is far smaller
 MAX_CHANGES = 1 << 16  # status changes of one agent in one tick
+_UID = re.compile(r'_uid="(\d+)"')
 
 
 class BtLogError(ValueError):
     """A .btlog that cannot be read; the message says where it stops making sense."""
+
+
+def tree_size(xml: str) -> int:
+    """The number of nodes of a tree's XML as :func:`file_head` takes it: its largest ``_uid``
+    (uids run from 1)."""
+    return max((int(u) for u in _UID.findall(xml)), default=0)
 
 
 def file_head(xml: str, first_us: int = EPOCH_US) -> bytes:

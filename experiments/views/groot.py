@@ -15,7 +15,6 @@ Type another agent's id and Enter to switch; Ctrl-C to stop.
 
 from __future__ import annotations
 
-import re
 import sys
 import threading
 import time
@@ -25,11 +24,9 @@ import zenoh
 
 from swarmbed.experiments.views.groot2 import MonitoredTree, serve, tree_identity
 from swarmbed.experiments.views.watch import WatchError, running_runs
-from swarmbed.wire.btlog import decode_tree_changes
+from swarmbed.wire.btlog import decode_tree_changes, tree_size
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import Keys
-
-_UID = re.compile(r'_uid="(\d+)"')
 
 
 class Gateway:
@@ -64,13 +61,13 @@ class Gateway:
             return
         with self.lock:
             if changes.xml is not None:
-                self._n_nodes = max((int(u) for u in _UID.findall(changes.xml)), default=0)
+                self._n_nodes = tree_size(changes.xml)
                 if any(uid > self._n_nodes for uid, _ in changes.changes + changes.statuses):
                     self.malformed += 1
                     return
                 identity = tree_identity(self.keys.run_id, self.agent, changes.xml)
                 self.tree.reset(changes.xml, identity, self._n_nodes, changes.statuses)
-                self.tree.now_us = changes.time_us
+                self.tree.apply(changes.time_us, [])  # its time: a recording started now starts here
             elif self._n_nodes is not None:
                 self.tree.apply(changes.time_us, changes.changes)
             self.samples += 1
