@@ -14,7 +14,7 @@ from collections import defaultdict
 import numpy as np
 
 from swarmbed.agent_runtime.bt import Blackboard, Status, load_tree
-from swarmbed.agent_runtime.bt.btlog import STATUS_CODE, ChangeRecorder, tree_xml
+from swarmbed.agent_runtime.bt.btlog import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
 from swarmbed.agent_runtime.node_sets import node_registry, tree_path
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.context import NodeContext
@@ -68,6 +68,7 @@ class AgentRuntime:
         self.changes = ChangeRecorder(self.tree) if spec.record_bt else None
         self._tree_sent = False  # this process has not yet handed over its tree's XML
         self.watched = False  # a monitor (swarmbed groot) is looking
+        self.boards: BlackboardWatch | None = None  # while it looks: what it last saw of the blackboards
         self.sent: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # kind -> [messages, payload bytes]
         self.malformed = 0
         self.ticks = 0
@@ -139,15 +140,18 @@ class AgentRuntime:
         changes = self.changes.take()
         time_us = round(time * 1_000_000)
         if self._tree_sent:
-            return TreeChanges(tick, time_us, changes)
+            boards = self.boards.take() if self.boards is not None else {}
+            return TreeChanges(tick, time_us, changes, blackboards=boards)
         self._tree_sent = True
         statuses = [(n.uid, STATUS_CODE[n.status]) for n in self.tree.nodes if n.status is not Status.IDLE]
-        return TreeChanges(tick, time_us, changes, tree_xml(self.tree), statuses)
+        boards = self.boards.take(everything=True) if self.boards is not None else {}
+        return TreeChanges(tick, time_us, changes, tree_xml(self.tree), statuses, boards)
 
     def monitored(self, watched: bool) -> None:
         """Someone began (or stopped) monitoring this agent's tree: hand over its changes from the
         next tick (with the tree), or stop unless the run records them."""
         self.watched = watched
+        self.boards = BlackboardWatch(self.tree) if watched else None
         if watched:
             if self.changes is None:
                 self.changes = ChangeRecorder(self.tree)

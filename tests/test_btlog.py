@@ -183,16 +183,27 @@ def test_crafted_tree_change_samples_are_named():
     from swarmbed.wire.codec import pack
     from swarmbed.wire.errors import WireError
 
-    good = TreeChanges(4, 1_000_000, [(1, 1), (3, 2)], "<root/>", [(1, 1)])
+    boards = {"Main": {"count": 3, "half": 2.5, "word": "hi", "path": [1, None, "a"], "none": None}, "S::3": None}
+    good = TreeChanges(4, 1_000_000, [(1, 1), (3, 2)], "<root/>", [(1, 1)], boards)
     assert decode_tree_changes(encode_tree_changes(good), n_nodes=3) == good
     crafted = {
-        pack([4, 0, b"\x01\x00", None, b""]): "changes must be whole 3-byte",
-        pack([-1, 0, b"", None, b""]): "tick must be a count",
-        pack([4, True, b"", None, b""]): "time_us must be a count",
-        pack([4, 0, b"\x01\x00\x07", None, b""]): "no node 1 with status 7",
-        pack([4, 0, b"", None, b"\x09\x00\x01"]): "no node 9",
-        pack([4, 0, b"", "import os", b""]): "xml must be",
-        pack({"tick": 4}): "not [tick, time_us, changes, xml, statuses]",
+        pack([4, 0, b"\x01\x00", None, b"", {}]): "changes must be whole 3-byte",
+        pack([-1, 0, b"", None, b"", {}]): "tick must be a count",
+        pack([4, True, b"", None, b"", {}]): "time_us must be a count",
+        pack([4, 0, b"\x01\x00\x07", None, b"", {}]): "no node 1 with status 7",
+        pack([4, 0, b"", None, b"\x09\x00\x01", {}]): "no node 9",
+        pack([4, 0, b"", "import os", b"", {}]): "xml must be",
+        pack({"tick": 4}): "not [tick, time_us, changes, xml, statuses, blackboards]",
+        pack([4, 0, b"", None, b""]): "not [tick, time_us, changes, xml, statuses, blackboards]",
+        pack([4, 0, b"", None, b"", [1]]): "blackboards must be a map",
+        pack([4, 0, b"", None, b"", {b"Main": {}}]): "a blackboard's name must be text",
+        pack([4, 0, b"", None, b"", {"Main": [1]}]): "blackboard 'Main' must be a map",
+        pack([4, 0, b"", None, b"", {"Main": {"a": {"b": 1}}}]): "entry 'a' is not a number",
+        pack([4, 0, b"", None, b"", {"Main": {"a": [[1]]}}]): "entry 'a' is not a number",
+        pack([4, 0, b"", None, b"", {"Main": {"a": True}}]): "entry 'a' is not a number",
+        pack([4, 0, b"", None, b"", {"Main": {"a": "z" * 5000}}]): "entry 'a' is not a number",
+        pack([4, 0, b"", None, b"", {"Main": {"a": list(range(65))}}]): "entry 'a' is not a number",
+        pack([4, 0, b"", None, b"", {"Main": {str(i): 1 for i in range(257)}}]): "at most 256 entries",
     }
     for data, why in crafted.items():
         with pytest.raises(WireError, match=re.escape(why)):

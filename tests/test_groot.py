@@ -2,15 +2,18 @@
 ticked with the same leaf results, asked the same requests over ZeroMQ after every tick, give the
 same status buffers, the same recorded status changes and the same tree shape."""
 
+import contextlib
+import re
 import socket
 import struct
 import threading
 import time
 
+import msgpack
 import pytest
 
 from swarmbed.agent_runtime.bt import NodeRegistry, Status, load_tree
-from swarmbed.agent_runtime.bt.btlog import STATUS_CODE, ChangeRecorder, tree_xml
+from swarmbed.agent_runtime.bt.btlog import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
 from swarmbed.experiments.views.groot2 import MonitoredTree, serve, tree_identity
 from tests.bt_harness import Act, Cond, Script, btcpp_tree
 from tests.test_btlog import CASES, TICKS, shape
@@ -62,6 +65,27 @@ def changes_of(recorded: bytes) -> list[tuple[int, int]]:
     return [struct.unpack_from("<HB", recorded, i + 6) for i in range(0, len(recorded), 9)]
 
 
+@contextlib.contextmanager
+def both_publishers(their_tree, monitored: MonitoredTree):
+    """BehaviorTree.CPP's publisher on ``their_tree`` and ours on ``monitored``, each on a port of its
+    own, and a Groot2 client of each: ``(mine, theirs)``."""
+    their_port = free_port()
+    publisher = bt.Groot2Publisher(their_tree, their_port)
+    our_port, stop = free_port(), threading.Event()  # after theirs is bound: another port
+    server = threading.Thread(target=serve, args=(monitored, our_port, stop), daemon=True)
+    server.start()
+    mine, theirs = Groot(our_port), Groot(their_port)
+    try:
+        time.sleep(0.2)
+        yield mine, theirs
+    finally:
+        mine.close()
+        theirs.close()
+        stop.set()
+        server.join(timeout=5)
+        del publisher
+
+
 def ask_both(mine: Groot, theirs: Groot, kind: str, payload: bytes | None = None):
     return mine.ask(kind, payload)[1], theirs.ask(kind, payload)[1]
 
@@ -70,8 +94,6 @@ def ask_both(mine: Groot, theirs: Groot, kind: str, payload: bytes | None = None
 def test_groot2_hears_from_us_what_btcpps_publisher_answers(name):
     xml, scripts = CASES[name]
     their_tree = btcpp_tree(xml, scripts)  # BehaviorTree.CPP's, with its own publisher
-    their_port = free_port()
-    publisher = bt.Groot2Publisher(their_tree, their_port)
     # ours: our engine's status changes into the gateway's monitored tree, served over ZeroMQ
     registry = NodeRegistry()
     registry.register(Act)
@@ -80,12 +102,7 @@ def test_groot2_hears_from_us_what_btcpps_publisher_answers(name):
     recorder = ChangeRecorder(our_tree)
     monitored = MonitoredTree()
     monitored.reset(tree_xml(our_tree), tree_identity("test", name), len(our_tree.nodes))
-    our_port, stop = free_port(), threading.Event()
-    server = threading.Thread(target=serve, args=(monitored, our_port, stop), daemon=True)
-    server.start()
-    mine, theirs = Groot(our_port), Groot(their_port)
-    try:
-        time.sleep(0.2)
+    with both_publishers(their_tree, monitored) as (mine, theirs):
         ours_xml, their_xml = ask_both(mine, theirs, "T")
         assert shape(ours_xml[0].decode()) == shape(their_xml[0].decode())
         ours_s, their_s = ask_both(mine, theirs, "S")
@@ -103,12 +120,67 @@ def test_groot2_hears_from_us_what_btcpps_publisher_answers(name):
         head, body = mine.ask("Z")
         assert (head, body) == (b"error", [b"Request not recognized"])
         assert mine.socket.send(b"abc") is None and mine.socket.recv_multipart() == [b"error", b"wrong request header"]
-    finally:
-        mine.close()
-        theirs.close()
-        stop.set()
-        server.join(timeout=5)
-        del publisher
+
+
+BLACKBOARDS = """<root BTCPP_format="4" main_tree_to_execute="Main">
+  <BehaviorTree ID="Main"><Sequence>
+    <SetBlackboard value="3" output_key="literal"/>
+    <SubTree ID="Copy" x="{count}"/>
+    <SubTree ID="Copy" name="shared" _autoremap="true"/>
+    <SubTree ID="Outer" _autoremap="true"/>
+  </Sequence></BehaviorTree>
+  <BehaviorTree ID="Copy"><Sequence>
+    <SetBlackboard value="{x}" output_key="y"/>
+    <SetBlackboard value="kept here" output_key="_private"/>
+  </Sequence></BehaviorTree>
+  <BehaviorTree ID="Outer"><SubTree ID="Copy" x="{word}"/></BehaviorTree>
+</root>"""
+ROOT_VALUES = {
+    "count": 3,
+    "big": 70000,
+    "negative": -40,
+    "tenth": 0.1,
+    "half": 2.5,
+    "huge": 1e300,
+    "infinite": float("inf"),
+    "flag": True,
+    "word": "hello",
+    "x": "from the root",
+    "long": "z" * 300,
+}
+ASKED = [b"Main", b"Copy::3", b"shared", b"Outer::11/Copy::12", b"Main;shared;Copy::3;Main"]
+ASKED += [b"nope", b"", b";Main;nope"]
+
+
+def test_groot2_sees_the_blackboards_btcpps_publisher_shows():
+    """Typed values on the root blackboard, SetBlackboard writes in SubTrees (remapped, autoremapped,
+    private, nested): the same msgpack bytes for every blackboard Groot2 may ask for."""
+    their_tree = btcpp_tree(BLACKBOARDS, {})
+    root = their_tree.root_blackboard()
+    setters = {bool: root.set_bool, int: root.set_int, float: root.set_double, str: root.set_string}
+    for key, value in ROOT_VALUES.items():
+        setters[type(value)](key, value)
+    our_tree = load_tree("<test>", NodeRegistry(), text=BLACKBOARDS)
+    for key, value in ROOT_VALUES.items():
+        our_tree.blackboard.set(key, value)
+    assert their_tree.tick_exactly_once() == bt.NodeStatus.SUCCESS
+    assert our_tree.tick_once() == Status.SUCCESS
+    monitored = MonitoredTree()
+    boards = BlackboardWatch(our_tree)
+    monitored.reset(tree_xml(our_tree), tree_identity("test"), len(our_tree.nodes), [], boards.take(everything=True))
+    with both_publishers(their_tree, monitored) as (mine, theirs):
+        assert shape(mine.ask("T")[1][0].decode()) == shape(theirs.ask("T")[1][0].decode())
+        for names in ASKED:
+            ours, their = ask_both(mine, theirs, "B", names)
+            assert ours == their, f"blackboards {names!r}: {ours} != {their}"
+            assert (ours == [b"\xc0"]) == (names in (b"nope", b"")), names  # the names are the real ones
+        mine.socket.send(struct.pack("<BBI", 2, ord("B"), 99))
+        theirs.socket.send(struct.pack("<BBI", 2, ord("B"), 99))
+        assert mine.socket.recv_multipart() == theirs.socket.recv_multipart()
+        # a change reaches Groot2 with the next tick's changes; only what changed travels
+        our_tree.blackboard.set("word", "again")
+        assert boards.take() == {"Main": {**boards.last["Main"], "word": "again"}}
+        assert boards.take() == {}
 
 
 def test_a_tree_from_another_agent_has_another_identity_and_idle_nodes():
@@ -170,6 +242,9 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
                     seen[agent] = (identity, body[0].decode(), buffers)
                 time.sleep(0.05)
         assert groot.ask("I", b'{"uid": 2}')[0] == b"error"  # no breakpoints: agents never pause
+        main_id = re.search(r'<BehaviorTree ID="([^"]+)"', seen[4][1]).group(1)
+        board = msgpack.unpackb(groot.ask("B", main_id.encode())[1][0])[main_id]  # agent 4's blackboard
+        assert board["arrival_radius"] == 5.0 and "assigned_task" in board
     finally:
         groot.close()
         gateway.stdin.close()

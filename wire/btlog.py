@@ -34,7 +34,14 @@ _RECORD = 9
 _MAX_OFFSET_US = 2**48 - 1
 MAX_TREE_XML = 1 << 20  # bytes: a tree a person drew is far smaller
 MAX_CHANGES = 1 << 16  # status changes of one agent in one tick
+MAX_BLACKBOARDS = 256  # blackboards (the main tree and SubTree instances) in one sample
+MAX_ENTRIES = 256  # entries of one blackboard
+MAX_NAME = 256  # characters of a blackboard's or an entry's name
+MAX_TEXT = 4096  # characters of a text value
+MAX_ITEMS = 64  # items of a list value
 _UID = re.compile(r'_uid="(\d+)"')
+Scalar = int | float | str | None
+BlackboardValue = Scalar | list[Scalar]
 
 
 class BtLogError(ValueError):
@@ -92,13 +99,19 @@ class TreeChanges:
     """An agent's status changes in one tick, ``(uid, status code)`` in the order they happened, at
     simulated time ``time_us``. The first sample a process sends, and the first after a monitor
     appears, carry its tree (``xml``, as :func:`file_head` takes it) and every node's status at the
-    tick's end (``statuses``, the nodes not IDLE), from which a monitor starts."""
+    tick's end (``statuses``, the nodes not IDLE), from which a monitor starts.
+
+    ``blackboards``, only while a monitor looks: each blackboard whose content changed in the tick
+    (all of them with the tree), whole, by the name Groot2 asks for it (the main tree's ID, or a
+    SubTree's ``_fullpath``); nil for one with nothing Groot2 can show. Values are numbers, text,
+    nil, or lists of those."""
 
     tick: int
     time_us: int
     changes: list[tuple[int, int]]
     xml: str | None = None
     statuses: list[tuple[int, int]] = field(default_factory=list)
+    blackboards: dict[str, dict[str, BlackboardValue] | None] = field(default_factory=dict)
 
 
 def _flat(pairs: list[tuple[int, int]]) -> bytes:
@@ -116,19 +129,58 @@ def _pairs(flat: object, what: str, n_nodes: int | None) -> list[tuple[int, int]
 
 
 def encode_tree_changes(sample: TreeChanges) -> bytes:
-    return pack([sample.tick, sample.time_us, _flat(sample.changes), sample.xml, _flat(sample.statuses)])
+    return pack(
+        [sample.tick, sample.time_us, _flat(sample.changes), sample.xml, _flat(sample.statuses), sample.blackboards]
+    )
 
 
 def decode_tree_changes(data: bytes, n_nodes: int | None = None) -> TreeChanges:
     """A sample of :func:`encode_tree_changes`; WireError names what is wrong. ``n_nodes``: the
     tree's size, once known (uids run from 1 to it)."""
-    raw = unpack(data, max_bytes=MAX_TREE_XML + 6 * MAX_CHANGES + 64)
-    if not (isinstance(raw, list) and len(raw) == 5):
-        raise WireError("tree changes: not [tick, time_us, changes, xml, statuses]")
-    tick, time_us, changes, xml, statuses = raw
+    raw = unpack(data, max_bytes=MAX_TREE_XML + 6 * MAX_CHANGES + (1 << 20))
+    if not (isinstance(raw, list) and len(raw) == 6):
+        raise WireError("tree changes: not [tick, time_us, changes, xml, statuses, blackboards]")
+    tick, time_us, changes, xml, statuses, blackboards = raw
     for name, value in (("tick", tick), ("time_us", time_us)):
         if not (isinstance(value, int) and not isinstance(value, bool) and 0 <= value < 2**48):
             raise WireError(f"tree changes: {name} must be a count, got {value!r}")
     if not (xml is None or (isinstance(xml, str) and xml.startswith("<root") and len(xml) <= MAX_TREE_XML)):
         raise WireError("tree changes: xml must be a tree's <root> element or nil")
-    return TreeChanges(tick, time_us, _pairs(changes, "changes", n_nodes), xml, _pairs(statuses, "statuses", n_nodes))
+    return TreeChanges(
+        tick,
+        time_us,
+        _pairs(changes, "changes", n_nodes),
+        xml,
+        _pairs(statuses, "statuses", n_nodes),
+        _blackboards(blackboards),
+    )
+
+
+def _blackboards(raw: object) -> dict[str, dict[str, BlackboardValue] | None]:
+    if not (isinstance(raw, dict) and len(raw) <= MAX_BLACKBOARDS):
+        raise WireError(f"tree changes: blackboards must be a map of at most {MAX_BLACKBOARDS}")
+    out: dict[str, dict[str, BlackboardValue] | None] = {}
+    for name, entries in raw.items():
+        if not (isinstance(name, str) and len(name) <= MAX_NAME):
+            raise WireError(f"tree changes: a blackboard's name must be text of at most {MAX_NAME} characters")
+        if entries is None:
+            out[name] = None
+            continue
+        if not (isinstance(entries, dict) and len(entries) <= MAX_ENTRIES):
+            raise WireError(f"tree changes: blackboard {name!r} must be a map of at most {MAX_ENTRIES} entries or nil")
+        for key, value in entries.items():
+            if not (isinstance(key, str) and len(key) <= MAX_NAME):
+                raise WireError(f"tree changes: blackboard {name!r} has an entry name that is not short text")
+            listed = isinstance(value, list) and len(value) <= MAX_ITEMS and all(map(_scalar, value))
+            if not (_scalar(value) or listed):
+                raise WireError(f"tree changes: blackboard {name!r} entry {key!r} is not a number, text or a list")
+        out[name] = entries
+    return out
+
+
+def _scalar(value: object) -> bool:
+    if value is None or isinstance(value, float):
+        return True
+    if isinstance(value, int):
+        return not isinstance(value, bool) and -(2**63) <= value < 2**64
+    return isinstance(value, str) and len(value) <= MAX_TEXT

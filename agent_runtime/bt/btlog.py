@@ -5,11 +5,15 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
+import numpy as np
+
+from swarmbed.agent_runtime.bt.blackboard import Blackboard
 from swarmbed.agent_runtime.bt.node import ControlNode, DecoratorNode, TreeNode
 from swarmbed.agent_runtime.bt.palette import model_lines
 from swarmbed.agent_runtime.bt.registry import BUILTIN_TYPES
 from swarmbed.agent_runtime.bt.status import Status
 from swarmbed.agent_runtime.bt.tree import SubTree, Tree
+from swarmbed.wire.btlog import MAX_ENTRIES, MAX_ITEMS, MAX_TEXT, BlackboardValue
 
 STATUS_CODE = {Status.IDLE: 0, Status.RUNNING: 1, Status.SUCCESS: 2, Status.FAILURE: 3}
 
@@ -65,3 +69,47 @@ class ChangeRecorder:
     def take(self) -> list[tuple[int, int]]:
         changes, self.changes = self.changes, []
         return changes
+
+
+def shown_value(value: object) -> BlackboardValue:
+    """A blackboard value as Groot2 is shown it: numbers and text as they are (a bool as 1 or 0, as
+    BehaviorTree.CPP stores it), a short list or tuple of those as a list, anything else nil
+    (BehaviorTree.CPP, too, shows an entry of a type it cannot export as null)."""
+    if isinstance(value, bool | np.bool_):
+        return int(value)
+    if isinstance(value, int | np.integer):
+        return int(value) if -(2**63) <= value < 2**64 else None
+    if isinstance(value, float | np.floating):
+        return float(value)
+    if isinstance(value, str):
+        return value if len(value) <= MAX_TEXT else None
+    if isinstance(value, list | tuple) and len(value) <= MAX_ITEMS:
+        items = [shown_value(v) for v in value]
+        scalars = [v for v in items if not isinstance(v, list)]
+        return scalars if len(scalars) == len(items) else None
+    return None
+
+
+def tree_blackboards(tree: Tree) -> list[tuple[str, Blackboard]]:
+    """Every blackboard of the tree by the name Groot2 asks for it: the main tree's ID, then each
+    SubTree instance's ``_fullpath``."""
+    out = [(tree.main_id or "MainTree", tree.blackboard)]
+    out += [(n.fullpath, n.config.blackboard) for n in tree.nodes if isinstance(n, SubTree)]
+    return out
+
+
+class BlackboardWatch:
+    """What Groot2 sees of a tree's blackboards: :meth:`take` gives those whose content changed
+    since the last call (all of them the first time), each whole, nil if it holds nothing."""
+
+    def __init__(self, tree: Tree) -> None:
+        self.boards = tree_blackboards(tree)
+        self.last: dict[str, dict[str, BlackboardValue] | None] = {}
+
+    def take(self, everything: bool = False) -> dict[str, dict[str, BlackboardValue] | None]:
+        changed = {}
+        for name, board in self.boards:
+            shown = {k: shown_value(v) for k, v in sorted(board.items().items())[:MAX_ENTRIES]} or None
+            if everything or name not in self.last or self.last[name] != shown:
+                changed[name] = self.last[name] = shown
+        return changed

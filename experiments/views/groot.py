@@ -38,6 +38,7 @@ class Gateway:
         self.tree = tree or MonitoredTree()
         self.agent: int | None = None
         self.samples = 0
+        self.bytes = 0  # of the samples heard: what monitoring costs the agent on the wire
         self.malformed = 0
         self._entities: list = []
         self._n_nodes: int | None = None
@@ -54,8 +55,9 @@ class Gateway:
             self._entities = [sub, token]
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
+        data = sample.payload.to_bytes()
         try:
-            changes = decode_tree_changes(sample.payload.to_bytes(), self._n_nodes)
+            changes = decode_tree_changes(data, self._n_nodes)
         except WireError:
             self.malformed += 1
             return
@@ -66,11 +68,12 @@ class Gateway:
                     self.malformed += 1
                     return
                 identity = tree_identity(self.keys.run_id, self.agent, changes.xml)
-                self.tree.reset(changes.xml, identity, self._n_nodes, changes.statuses)
+                self.tree.reset(changes.xml, identity, self._n_nodes, changes.statuses, changes.blackboards)
                 self.tree.apply(changes.time_us, [])  # its time: a recording started now starts here
             elif self._n_nodes is not None:
-                self.tree.apply(changes.time_us, changes.changes)
+                self.tree.apply(changes.time_us, changes.changes, changes.blackboards)
             self.samples += 1
+            self.bytes += len(data)
 
     def _drop(self) -> None:
         for entity in reversed(self._entities):
@@ -136,4 +139,10 @@ def run_gateway(
         gateway.close()
         stop.set()
         server.join(timeout=5)
+        mean = gateway.bytes / gateway.samples if gateway.samples else 0.0
+        print(
+            f"groot: heard {gateway.samples} samples, {gateway.bytes} bytes ({mean:.0f} per sample), "
+            f"{gateway.malformed} malformed",
+            flush=True,
+        )
     return 0

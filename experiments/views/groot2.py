@@ -9,7 +9,10 @@ adds the 16-byte identity of the tree (Groot2 reloads the tree when it changes),
 - ``S``: every node's status, 3 bytes each (uint16 uid, uint8 status), tree by tree in the order the
   XML lists them (main tree, then each SubTree instance), nodes in document order within each; a node
   back to IDLE shows 10 + the status it left, as BehaviorTree.CPP encodes it;
-- ``B``: msgpack of the blackboards named in the second frame (``;``-separated), nil for unknown;
+- ``B``: the blackboards named in the second frame (``;``-separated: the main tree's ID, a
+  SubTree's ``_fullpath``), as a msgpack map of maps, names and entries sorted, unknown names left
+  out, nil if none is known or a blackboard holds nothing; numbers are packed as nlohmann::json
+  packs them (a double as float32 when that loses nothing), so the bytes are BehaviorTree.CPP's;
 - ``r``: recording of status changes, ``start`` or ``stop``; on start the body is the first
   timestamp (microseconds since the epoch, as text);
 - ``t``: the status changes recorded since the last ``t``, 9 bytes each (6 bytes of microseconds
@@ -23,19 +26,45 @@ BehaviorTree.CPP's own publisher and ours the same questions about the same tick
 from __future__ import annotations
 
 import hashlib
+import math
 import struct
 import threading
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from xml.etree import ElementTree
 
 import msgpack
 
-from swarmbed.wire.btlog import EPOCH_US
+from swarmbed.wire.btlog import EPOCH_US, BlackboardValue
 
 PROTOCOL = 2
 REQUEST = struct.Struct("<BBI")  # protocol, type, request id
 IDLE = 0
 HOOKS = frozenset(b"IRAXNU")  # breakpoint requests: insert, remove, remove all, disable all, reached, unlock
+
+
+def pack_like_nlohmann(value: object) -> bytes:
+    """msgpack as nlohmann::json's ``to_msgpack`` writes it (what BehaviorTree.CPP answers Groot2
+    with): maps with their keys sorted, a finite double that float32 holds exactly as float32."""
+    if isinstance(value, dict):
+        head = _container_head(len(value), 0x80, 0xDE)
+        return head + b"".join(pack_like_nlohmann(k) + pack_like_nlohmann(value[k]) for k in sorted(value))
+    if isinstance(value, list):
+        return _container_head(len(value), 0x90, 0xDC) + b"".join(map(pack_like_nlohmann, value))
+    if isinstance(value, float) and math.isfinite(value):
+        try:
+            single = struct.pack(">f", value)
+        except OverflowError:
+            single = b""
+        if single and struct.unpack(">f", single)[0] == value:
+            return b"\xca" + single
+    return msgpack.packb(value)
+
+
+def _container_head(n: int, fixed: int, code16: int) -> bytes:
+    """A msgpack map's or array's header: fixmap/fixarray, then the 16- and 32-bit forms."""
+    if n < 16:
+        return bytes([fixed | n])
+    return struct.pack(">BH", code16, n) if n < 1 << 16 else struct.pack(">BI", code16 + 1, n)
 
 
 def tree_identity(*names: object) -> bytes:
@@ -68,10 +97,20 @@ class MonitoredTree:
         self.now_us = EPOCH_US  # the last tick's time
         self.recording_from: int | None = None
         self.recorded = bytearray()
+        self.blackboards: dict[str, dict[str, BlackboardValue] | None] = {}
 
-    def reset(self, xml: str, identity: bytes, n_nodes: int, statuses: Sequence[tuple[int, int]] = ()) -> None:
-        """Show another tree (or the same tree's state afresh): every node IDLE unless ``statuses``."""
+    def reset(
+        self,
+        xml: str,
+        identity: bytes,
+        n_nodes: int,
+        statuses: Sequence[tuple[int, int]] = (),
+        blackboards: Mapping[str, dict[str, BlackboardValue] | None] | None = None,
+    ) -> None:
+        """Show another tree (or the same tree's state afresh): every node IDLE unless ``statuses``,
+        the blackboards as ``blackboards`` has them."""
         with self.lock:
+            self.blackboards = dict(blackboards or {})
             self.xml, self.identity = xml, identity
             self.order = [u for u in buffer_order(xml) if 0 < u <= n_nodes]
             self.raw = [IDLE] * (n_nodes + 1)
@@ -81,10 +120,17 @@ class MonitoredTree:
                     self.raw[uid] = self.shown[uid] = code
             self.recorded.clear()
 
-    def apply(self, time_us: int, changes: list[tuple[int, int]]) -> None:
-        """One tick's status changes ``(uid, status code)`` at ``time_us`` (since the epoch)."""
+    def apply(
+        self,
+        time_us: int,
+        changes: list[tuple[int, int]],
+        blackboards: Mapping[str, dict[str, BlackboardValue] | None] | None = None,
+    ) -> None:
+        """One tick's status changes ``(uid, status code)`` at ``time_us`` (since the epoch), and the
+        blackboards that changed in it."""
         with self.lock:
             self.now_us = time_us
+            self.blackboards.update(blackboards or {})
             for uid, code in changes:
                 if not 0 < uid < len(self.raw):
                     continue
@@ -106,8 +152,11 @@ class MonitoredTree:
             if kind == ord("S"):
                 return [head, b"".join(struct.pack("<HB", uid, self.shown[uid]) for uid in self.order)]
             if kind == ord("B"):
-                names = [n for n in payload.decode(errors="replace").split(";") if n]
-                return [head, msgpack.packb(dict.fromkeys(names)) if names else msgpack.packb(None)]
+                if len(frames) < 2:
+                    return [b"error", b"must be 2 parts message"]
+                names = set(payload.decode(errors="replace").split(";"))
+                shown = {n: self.blackboards[n] for n in sorted(names) if n in self.blackboards}
+                return [head, pack_like_nlohmann(shown or None)]
             if kind == ord("r"):
                 if payload == b"start":
                     self.recording_from = self.now_us
