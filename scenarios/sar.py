@@ -8,11 +8,18 @@ inspect a victim (learns the colour: a mismatch counts as a failed rescue), then
 colours match (a robot turns to the victim it inspects or rescues, and learns the outcome of its
 own actions). Inspecting takes ``inspect_time`` seconds and rescuing ``rescue_time`` seconds: the
 robot is busy meanwhile (its tree keeps ticking; the world ignores its actions), and the outcome
-(the colour learnt, the victim rescued, or a failure) happens when the action ends, if the victim is
-still there; an action that ends within the tick it began in takes effect in that tick. Durations
-are rounded up to whole ticks, so results converge as ``run.dt`` shrinks (tests/test_world.py pins
-it). Moves, inspections and rescues fail with their probabilities; a failed move leaves the robot
-stuck for ``move_penalty`` seconds. In steady state a rescued or expired victim is
+(the colour learnt, the victim rescued) happens when the action ends, if the victim is still there
+(``rescue_saves: start`` saves it when the rescue starts instead); an action that ends within the
+tick it began in takes effect in that tick. Durations are rounded up to whole ticks, so results
+converge as ``run.dt`` shrinks (tests/test_world.py pins it).
+
+Moves, inspections and rescues fail with their probabilities. A failed inspection or rescue is known
+when it is tried and costs only that tick (``failure_known: start``; the paper gives failed moves a
+time penalty and these none); ``failure_known: end`` charges its whole duration, as swarmbed did
+before 2026-11-26. A move is the run of ticks a robot spends going toward one goal (a point, or a
+victim): it fails at its start and leaves the robot stuck for ``move_penalty`` seconds, after which
+it tries again (``move_failure: per_move``, which converges as dt shrinks); ``per_tick`` draws on
+every tick of moving, as before 2026-11-26. In steady state a rescued or expired victim is
 replaced at once; in finite mode it is not. After ``agent_loss_grace`` seconds each robot is lost
 for good with probability ``agent_loss`` per step (tick).
 
@@ -73,6 +80,21 @@ class SARParams(BaseModel):
         RESCUE_TIME,
         ge=0,
         description="seconds a rescue takes; the victim is saved at the end (calibrated on tree: docs/reproduction.md)",
+    )
+    failure_known: Literal["end", "start"] = Field(
+        "start",
+        description="when a failed inspection or rescue is known: at its end, after its whole duration, or at its "
+        "start, costing only the tick it was tried in (the paper gives failed moves a penalty and these none)",
+    )
+    move_failure: Literal["per_tick", "per_move"] = Field(
+        "per_move",
+        description="what a failed move is: any tick of moving (the loss grows as dt shrinks), or one move, the "
+        "run of ticks toward one goal, failing at its start and tried again after the penalty",
+    )
+    rescue_saves: Literal["end", "start"] = Field(
+        "end",
+        description="when a rescue saves its victim: when it ends, if the victim is still there, or when it starts "
+        "(the robot then stays busy for rescue_time)",
     )
     agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
     agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
@@ -215,6 +237,7 @@ class SARWorld(World):
         self.results: dict[int, list[list[int]]] = {}  # robot -> inspection results for its next observation
         self.rescued_by: dict[int, list[int]] = {}  # robot -> victims it rescued, for its next observation
         self.pending: dict[int, tuple[str, int, int]] = {}  # robot -> (inspect|rescue, victim, tick it ends in)
+        self.goal: dict[int, tuple] = {}  # robot -> the goal of the move it is making (move_failure: per_move)
         self.tick = 0
         self._spawn(sc.victims)
 
@@ -294,6 +317,7 @@ class SARWorld(World):
     def kill(self, agent_id: int) -> None:
         self.alive[agent_id] = False
         self.pending.pop(agent_id, None)  # what it was doing dies with it
+        self.goal.pop(agent_id, None)
 
     def draw_losses(self) -> list[int]:
         """Robots lost at the next tick (one draw per live robot once the grace period is over)."""
@@ -361,20 +385,40 @@ class SARWorld(World):
         self.busy_until[i] = self.tick + self._ticks(seconds)
 
     def _begin(self, i: int, name: str, v: int, seconds: float) -> None:
-        """Start a timed action; it ends (and takes effect) in the last tick it occupies."""
+        """Start a timed action; it ends (and takes effect) in the last tick it occupies. With
+        ``failure_known: start`` a failed one ends here, costing this tick only; with
+        ``rescue_saves: start`` a rescue saves its victim here and the robot stays busy."""
+        if self.sc.failure_known == "start" and self._failed(name):
+            self._busy(i, 0.0)
+            return
         self._busy(i, seconds)
+        if name == "rescue" and self.sc.rescue_saves == "start":
+            self._rescue(i, v)
+            return
         self.pending[i] = (name, v, int(self.busy_until[i]) - 1)
         if self.busy_until[i] - 1 == self.tick:
             self._finish(i)
 
+    def _failed(self, name: str) -> bool:
+        """Whether this try of an inspection or a rescue fails (one draw, counted if it does)."""
+        if self.fail_rng.random() < (self.sc.inspect_fail if name == "inspect" else self.sc.rescue_fail):
+            self.counts[f"{name}_failures"] += 1
+            return True
+        return False
+
+    def _rescue(self, i: int, v: int) -> None:
+        self.rescues[i] += 1
+        self.rescued_by.setdefault(i, []).append(v)
+        self._end(v, RESCUED)
+
     def _finish(self, i: int) -> None:
         """The end of robot i's inspection or rescue: the outcome, if the victim is still there."""
         name, v, _ = self.pending.pop(i)
+        at_end = self.sc.failure_known == "end"
         if not self._in_reach(i, v):
             self.stale_actions[i] += 1  # it expired, or another robot rescued it, meanwhile
         elif name == "inspect":
-            if self.fail_rng.random() < self.sc.inspect_fail:
-                self.counts["inspect_failures"] += 1
+            if at_end and self._failed(name):
                 return
             self.counts["inspections"] += 1
             if i not in self.inspected.setdefault(v, set()):
@@ -382,19 +426,17 @@ class SARWorld(World):
                 if self.vcolor[v - self.base] != self.color[i]:
                     self.counts["failed_rescues"] += 1
             self.results.setdefault(i, []).append([v, int(self.vcolor[v - self.base])])
-        else:
-            if self.fail_rng.random() < self.sc.rescue_fail:
-                self.counts["rescue_failures"] += 1
-                return
-            self.rescues[i] += 1
-            self.rescued_by.setdefault(i, []).append(v)
-            self._end(v, RESCUED)
+        elif not (at_end and self._failed(name)):
+            self._rescue(i, v)
 
-    def _move(self, i: int, tx: float, ty: float) -> None:
-        if self.fail_rng.random() < self.sc.move_fail:
+    def _move(self, i: int, tx: float, ty: float, goal: tuple) -> None:
+        new_move = self.sc.move_failure == "per_tick" or self.goal.get(i) != goal
+        if new_move and self.fail_rng.random() < self.sc.move_fail:
             self.counts["move_failures"] += 1
             self._busy(i, self.sc.move_penalty)
+            self.goal.pop(i, None)  # it tries this move again once the penalty is over
             return
+        self.goal[i] = goal
         dx, dy = tx - self.ax[i], ty - self.ay[i]
         dist = math.hypot(dx, dy)
         if dist < 1e-12:
@@ -435,10 +477,12 @@ class SARWorld(World):
             r = None if v is None else self._at(v)
             if name in ("inspect", "rescue") and v is not None:
                 self._face(i, v)  # it looks where the victim is (or was)
+            if name not in ("goto", "goto_task"):
+                self.goal.pop(i, None)  # the move it was making, if any, is over
             if name == "goto" and len(action) == 3 and all(isinstance(c, (int, float)) for c in action[1:]):
-                self._move(i, float(action[1]), float(action[2]))
+                self._move(i, float(action[1]), float(action[2]), ("point", action[1], action[2]))
             elif name == "goto_task" and r is not None:
-                self._move(i, float(self.vx[r]), float(self.vy[r]))
+                self._move(i, float(self.vx[r]), float(self.vy[r]), ("victim", v))
             elif name == "inspect" and v is not None and self._in_reach(i, v):
                 self._begin(i, "inspect", v, self.sc.inspect_time)
             elif (

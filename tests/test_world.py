@@ -187,12 +187,72 @@ def test_victims_long_gone_leave_the_world_arrays_and_no_outcome_changes(monkeyp
 def test_sar_results_converge_as_the_tick_shrinks():
     """Mean rescues over 8 seeds at dt 1, 0.5, 0.25, 0.1, 0.05: the last two agree within 5 % and
     closer than the first two; and no run beats the bound the durations set (each rescue takes a
-    robot at least inspect_time + rescue_time = 40 s: 6 robots x 600 s / 40 s = 90)."""
+    robot at least one inspection: 6 robots x 600 s / inspect_time)."""
     runs = {dt: [_greedy_rescues(dt, seed) for seed in range(8)] for dt in (1.0, 0.5, 0.25, 0.1, 0.05)}
     means = [np.mean(r) for r in runs.values()]
     assert abs(means[-1] - means[-2]) <= 0.05 * means[-1], means
     assert abs(means[-1] - means[-2]) < abs(means[0] - means[1]), means
-    assert max(max(r) for r in runs.values()) <= 90, runs
+    assert max(max(r) for r in runs.values()) <= 6 * 600 / sar.INSPECT_TIME, runs
+
+
+FAILURES = ("scenario.move_fail=0.5", "scenario.inspect_fail=0.5", "scenario.rescue_fail=0.5")
+
+
+def test_with_failures_results_converge_as_the_tick_shrinks_when_a_move_fails_as_a_whole():
+    """Half of all moves, inspections and rescues fail, and moving takes most of a robot's time
+    (1-s inspections). With a move failing as a whole (at its start) a robot loses a penalty per
+    move, whatever the tick: rescues stay within 10 % of the same seeds' without failures at dt 0.1
+    and 0.05. Drawn on every tick of moving instead, the penalty is paid more often the shorter the
+    tick: rescues fall below 80 % of those without failures, and further as the tick shrinks."""
+
+    def mean_rescues(dt, *overrides):
+        return np.mean([_greedy_rescues(dt, s, 600.0, "scenario.inspect_time=1", *overrides) for s in range(6)])
+
+    share = {}
+    for dt in (0.1, 0.05):
+        clean = mean_rescues(dt)
+        share[dt] = (
+            mean_rescues(dt, *FAILURES) / clean,
+            mean_rescues(dt, *FAILURES, "scenario.move_failure=per_tick") / clean,
+        )
+    assert all(0.9 <= per_move <= 1.1 for per_move, _ in share.values()), share
+    assert all(per_tick < 0.8 for _, per_tick in share.values()) and share[0.05][1] < share[0.1][1], share
+
+
+def test_a_failed_inspection_costs_the_tick_it_was_tried_in_unless_failures_are_known_at_the_end():
+    for known, busy_ticks in (("start", 1), ("end", 40)):
+        w = _sar_world(
+            0.25,
+            0,
+            "agents.count=1",
+            "scenario.victims=1",
+            "scenario.replace=false",
+            "scenario.inspect_time=10",
+            "scenario.inspect_fail=1",
+            f"scenario.failure_known={known}",
+        )
+        w.vx[0], w.vy[0] = w.ax[0], w.ay[0]
+        w.apply({0: ["inspect", 0]})
+        assert w.busy_until[0] - w.tick == busy_ticks - 1, known
+        for _ in range(busy_ticks):
+            w.apply({0: ["stop"]})
+        assert w.counts["inspect_failures"] == 1 and not w.results, known
+
+
+def test_a_failed_move_stalls_the_robot_once_per_move_for_the_penalty():
+    """Every move fails until the robot has tried again: the penalty, then it goes."""
+    w = _sar_world(0.25, 0, "agents.count=1", "scenario.move_fail=0.5", "scenario.move_penalty=0.5")
+    goal = (float(w.ax[0]) + 100.0, float(w.ay[0]))
+    draws = []
+    w.fail_rng = type("Rigged", (), {"random": lambda self: draws.append(1) or (0.0 if len(draws) == 1 else 0.9)})()
+    start = float(w.ax[0])
+    for _ in range(12):
+        if w.busy_until[0] <= w.tick:
+            w._move(0, *goal, ("point", *goal))
+        w.tick += 1
+    assert len(draws) == 2  # the failed try and the one after the penalty; none while it goes on
+    assert w.counts["move_failures"] == 1
+    assert float(w.ax[0]) - start == pytest.approx(w.speed * 0.25 * (12 - 2))  # 2 ticks stuck
 
 
 def test_within_agrees_with_hypot_to_the_last_bit():

@@ -1,0 +1,66 @@
+"""The non-communicating `tree` strategy in the search-and-rescue world, in one process: the world
+and every robot's runtime stepped in lock-step as a run steps them, without Zenoh (`tree` sends no
+messages, so no radio is needed). For the world's calibration (docs/reproduction.md, section 2):
+a search over the action model is hundreds of trials; the chosen model is then checked with real
+runs (`swarmbed sweep experiments/sar/calibration_tree.yaml`).
+
+    python docs/scripts/tree_world.py --trials 3 --duration 1000 --set scenario.inspect_time=25
+
+prints the mean rescued, failed rescues, their ratio and expired per trial, as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from statistics import mean
+
+from swarmbed.agent_runtime.runtime import AgentRuntime
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.config import resolve_experiment
+from swarmbed.extension.actions import admit
+from swarmbed.wire.codec import EMPTY_INBOX
+from swarmbed.wire.schema import agent_spec
+from swarmbed.wire.seeds import WORLD, component_rng
+
+BASE = Path(__file__).resolve().parents[2] / "experiments" / "sar" / "_base.yaml"
+
+
+def trial(overrides: list[str], seed: int) -> dict:
+    exp = cfg.load(BASE, ["allocator.name=tree", f"run.seed={seed}", *overrides])
+    resolved = resolve_experiment(exp)
+    scenario = resolved.scenario()
+    world = scenario.make_world(component_rng(seed, WORLD), resolved.allocator_cls)
+    spec = agent_spec(exp, resolved.targets)
+    robots = {i: AgentRuntime(spec, i) for i in range(exp.agents.count)}
+    declared = scenario.actions
+    ticks = round(exp.run.duration / exp.run.dt)
+    for k in range(ticks):
+        actions = {}
+        for i, obs in world.observations().items():
+            decoded = robots[i].decode_observation(obs.to_wire())
+            action, _messages, _events = robots[i].step(k, decoded, EMPTY_INBOX)
+            actions[i] = admit(action, declared)
+        world.apply(actions)
+    return world.summary()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=3)
+    parser.add_argument("--duration", type=float, default=1000.0)
+    parser.add_argument("--seed", type=int, default=1, help="trial t uses seed + t")
+    parser.add_argument("--set", action="append", default=[], help="an experiment override, KEY=VALUE")
+    args = parser.parse_args()
+    runs = [trial([f"run.duration={args.duration}", *args.set], args.seed + t) for t in range(args.trials)]
+    keys = ("rescued", "failed_rescues", "expired", "stale_actions", "inspections")
+    out = {k: mean(r[k] for r in runs) for k in keys}
+    out["failed_per_rescue"] = out["failed_rescues"] / max(out["rescued"], 1e-9)
+    out["rescued_each"] = [r["rescued"] for r in runs]
+    out["set"] = args.set
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()
