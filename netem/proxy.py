@@ -66,6 +66,7 @@ class Proxy:
         self.lost: set[int] = set()  # agents whose current process left
         self.lost_unreported: list[int] = []
         self.world: WorldSample | None = None
+        self.awaited: set[int] = set()  # agents of the tick in hand not yet answered nor lost
         self.malformed = 0
         self._last = [0, 0, 0, 0, 0]
         self._last_drops: dict[str, int] = dict(self.ledger.dropped)
@@ -143,6 +144,7 @@ class Proxy:
             if what == "left":  # lost only if that process is the agent's current one (not one swapped out)
                 self.gone.add(data)
                 self._note_losses(self.world)
+                self.awaited -= self.lost
             elif what == "world":
                 try:
                     world = decode_world(data)
@@ -156,6 +158,7 @@ class Proxy:
                 self.radio.confirm()  # tick `world.tick` happens: the inboxes made for it arrived
                 self.world = world
                 self._note_losses(world)
+                self.awaited = set(world.ids).difference(self.outs.get(world.tick, ()), self.lost)
                 if self.spec.answer_within is not None:
                     self.answer_by = time.monotonic() + self.spec.answer_within
                     self.members[world.tick] = list(world.ids)
@@ -168,7 +171,9 @@ class Proxy:
                     self._late(out)
                 else:
                     self.outs.setdefault(out.tick, {})[out.agent_id] = out
-            if self.world is not None and self._complete(self.world):
+                    if self.world is not None and out.tick == self.world.tick:
+                        self.awaited.discard(out.agent_id)
+            if self.world is not None and not self.awaited:
                 self._route(self.world)
                 self.world = None
 
@@ -235,10 +240,6 @@ class Proxy:
             if agent not in self.lost and incarnation == w.incarnation(agent):
                 self.lost.add(agent)
                 self.lost_unreported.append(agent)
-
-    def _complete(self, w: WorldSample) -> bool:
-        got = self.outs.get(w.tick, {})
-        return all(a in got or a in self.lost for a in w.ids)
 
     def _late(self, out: AgentOut) -> None:
         """An answer for a tick already routed (real-time clock): its messages are booked late."""
