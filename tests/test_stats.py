@@ -89,3 +89,25 @@ def test_strategies_are_compared_within_each_setting_of_a_sweeps_other_factors(t
     table = pd.read_csv(tmp_path / "out" / "statistics.csv")
     assert set(table["sweep"]) == {"levels_loss-0", "levels_loss-0.5"}
     assert (table["n"] == 2).all()  # two runs per strategy in each setting, not four pooled
+
+
+def test_a_run_without_a_disk_has_its_own_group_in_the_range_figures(tmp_path, monkeypatch):
+    """``network.range: null`` (a propagation model alone) is a group of its own, after the ranges,
+    not a NaN that every comparison drops."""
+    from swarmbed.experiments.views import analyze as views
+
+    drawn: list[list[int]] = []
+    monkeypatch.setattr(views, "_boxes", lambda ax, data, *rest: drawn.append([len(d) for d in data]))
+    df = pd.DataFrame(
+        {
+            "scenario": ["disk", "disk", "logdistance", "logdistance"],
+            "agents.count": [30] * 4,
+            "network.range": [100.0, 100.0, np.nan, np.nan],
+            "allocator": ["cbba"] * 4,
+            "mission_time": [6000.0, 6100.0, 5200.0, 5300.0],
+        }
+    )
+    canvas = views.Canvas(tmp_path, "", {})
+    assert views._by_range_one(df, "mission_time", canvas) is not None
+    assert drawn == [[2, 2]]  # both groups drawn, two runs each
+    assert views._range_label(float("nan")) == "no disk" and views._range_label(100.0) == "100"

@@ -198,6 +198,7 @@ def test_sar_results_converge_as_the_tick_shrinks():
 FAILURES = ("scenario.move_fail=0.5", "scenario.inspect_fail=0.5", "scenario.rescue_fail=0.5")
 
 
+@pytest.mark.slow
 def test_with_failures_results_converge_as_the_tick_shrinks_when_a_move_fails_as_a_whole():
     """Half of all moves, inspections and rescues fail, and moving takes most of a robot's time
     (1-s inspections). With a move failing as a whole (at its start) a robot loses a penalty per

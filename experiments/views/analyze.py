@@ -290,6 +290,15 @@ class Canvas:
         return self.labels.get(metric, metric.replace("_", " "))
 
 
+NO_DISK = "no disk"
+
+
+def _range_label(value: object) -> str:
+    """A communication range as the figures label it: its number, or "no disk" where the run had
+    none (``network.range: null``, a propagation model deciding alone)."""
+    return NO_DISK if pd.isna(value) else f"{float(value):g}"
+
+
 def _by_range(df: pd.DataFrame, figure: Figure, canvas: Canvas) -> list[Path]:
     written = []
     for metric in figure.metrics:
@@ -322,7 +331,8 @@ def _by_range_one(df: pd.DataFrame, metric: str, canvas: Canvas) -> Path | None:
         else:
             algos = _ordered(df[ALLOCATOR].unique())
             counts = sorted(df[AGENTS].unique())
-            ranges = sorted(df[RANGE].unique())
+            df = df.assign(**{RANGE: df[RANGE].map(_range_label)})  # no disk (a propagation model alone): its own group
+            ranges = sorted(df[RANGE].unique(), key=lambda r: (r == NO_DISK, float(r) if r != NO_DISK else 0.0))
             fig, axes = plt.subplots(1, len(counts), figsize=(PAGE_IN, 2.4), sharey=True, squeeze=False)
             width = 0.8 / len(algos)
             for ax, n in zip(axes[0], counts):
@@ -332,7 +342,7 @@ def _by_range_one(df: pd.DataFrame, metric: str, canvas: Canvas) -> Path | None:
                     pos = np.arange(len(ranges)) + (a - (len(algos) - 1) / 2) * width
                     _boxes(ax, data, pos, width * 0.85, [strategy_color(algo)] * len(ranges))
                     ax.plot([], [], color=strategy_color(algo), lw=5, alpha=0.75, label=strategy_label(algo))
-                ax.set_xticks(range(len(ranges)), [str(r) for r in ranges])
+                ax.set_xticks(range(len(ranges)), ranges)
                 ax.set_xlabel("communication range")
                 ax.set_title(f"{n} agents")
             axes[0][0].set_ylabel(label)
