@@ -293,7 +293,7 @@ class Canvas:
 NO_DISK = "no disk"
 
 
-def _range_label(value: object) -> str:
+def _range_label(value: float) -> str:
     """A communication range as the figures label it: its number, or "no disk" where the run had
     none (``network.range: null``, a propagation model deciding alone)."""
     return NO_DISK if pd.isna(value) else f"{float(value):g}"
