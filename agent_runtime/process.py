@@ -8,7 +8,10 @@ and its agent id: the experiment itself comes from the coordinator, so it can ru
 from __future__ import annotations
 
 import logging
+import queue
+import threading
 import traceback
+from typing import Any
 
 import zenoh
 from pydantic import BaseModel
@@ -18,6 +21,7 @@ from swarmbed.wire.btlog import encode_tree_changes
 from swarmbed.wire.codec import (
     ControlIn,
     StopIn,
+    TickIn,
     WireError,
     decode_agent_in,
     encode_agent_out,
@@ -37,7 +41,7 @@ from swarmbed.wire.reports import (
     encode_report,
 )
 from swarmbed.wire.schema import AgentSpec
-from swarmbed.wire.session import open_from_args
+from swarmbed.wire.session import open_from_args, single_worker
 from swarmbed.wire.state import StateError
 from swarmbed.wire.transport import tcp_counters
 
@@ -47,6 +51,12 @@ EXIT_OK, EXIT_PLUGIN_ERROR, EXIT_COORDINATOR_GONE = 0, 1, 3
 COORDINATOR_GONE = "coordinator gone"
 
 
+#: The most an answer may put from inside the subscriber's callback on the single worker: a put
+#: that overfills the transmit queue waits for the very thread it holds (measured: ~160 KB from one
+#: callback stalls 5 s, 64 KB does not); a larger answer is put from the main thread instead.
+INLINE_PUT_MAX = 32 * 1024
+
+
 def serve(
     session: zenoh.Session,
     keys: Keys,
@@ -54,105 +64,219 @@ def serve(
     incarnation: int = 0,
     restored: bool = False,
     malformed: int = 0,
+    tick_in_callback: bool | None = None,
 ) -> int:
     """Answer tick samples until the run stops this agent. Swap orders name an incarnation: on
     ``snapshot`` this process hands its state to the coordinator and freezes (answers no tick),
-    then either ``retire``s (its successor goes on) or ``resume``s (the swap failed)."""
-    agent_id = runtime.agent_id
-    in_key = keys.agent_in(agent_id)
-    # A channel subscriber wakes this thread directly (no Python callback thread in between): the
-    # per-tick wake-up is what lock-step pays for, once per agent per tick.
-    sub = session.declare_subscriber(in_key)
+    then either ``retire``s (its successor goes on) or ``resume``s (the swap failed).
 
-    def on_coordinator(sample: zenoh.Sample) -> None:
-        if sample.kind == zenoh.SampleKind.DELETE:  # wake the loop with a local stop order
-            session.put(in_key, encode_stop(COORDINATOR_GONE))
+    ``tick_in_callback`` (default: whether Zenoh runs on the single worker): a tick is answered
+    inside the subscriber's own callback, so a sample in and a sample out wake that one thread and
+    nothing else. Whatever may block (orders, reports, a failing tick, an answer too large to put
+    from there) goes to the main thread, and so does every sample behind it, in arrival order."""
+    if tick_in_callback is None:
+        tick_in_callback = single_worker()
+    with _Agent(session, keys, runtime, incarnation, malformed) as agent:
+        if restored:  # subscribed and announced: the coordinator may retire the old process and go on
+            agent.report(Restored(kind="restored", agent=runtime.agent_id, incarnation=incarnation))
+        return agent.loop(tick_in_callback)
 
-    watch = session.liveliness().declare_subscriber(keys.alive_coordinator, on_coordinator)
-    out = session.declare_publisher(keys.agent_out(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
-    # before each answer, on the same session: the coordinator has a tick's changes before its end
-    bt = session.declare_publisher(keys.agent_bt(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
 
-    def report(data: BaseModel) -> None:
-        if not hand_over(session, keys.agent_report(agent_id), encode_report(data)):
+class _Agent:
+    """One agent process's session entities and the state its loop keeps between ticks."""
+
+    def __init__(
+        self, session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation: int, malformed: int
+    ) -> None:
+        self.session, self.keys, self.runtime, self.incarnation = session, keys, runtime, incarnation
+        self.malformed = malformed
+        self.frozen = False
+        self.sample_bytes = {"in": 0, "out": 0}  # this process's per-tick samples, for the wire-bytes accounting
+        # monitors (swarmbed groot) announce themselves with a token; the loop starts or stops handing
+        # over the tree's changes between ticks, never inside one
+        self.monitors: set[str] = set()
+        # the main thread's work, in arrival order; while any is waiting, the callback answers nothing
+        self.queue: queue.SimpleQueue = queue.SimpleQueue()
+        self.pending = 0
+        self.lock = threading.Lock()
+        self.in_key = keys.agent_in(runtime.agent_id)
+
+    def __enter__(self) -> _Agent:
+        s, keys, agent_id = self.session, self.keys, self.runtime.agent_id
+
+        def on_coordinator(sample: zenoh.Sample) -> None:
+            if sample.kind == zenoh.SampleKind.DELETE:  # wake the loop with a local stop order
+                s.put(self.in_key, encode_stop(COORDINATOR_GONE))
+
+        def on_monitor(sample: zenoh.Sample) -> None:
+            (self.monitors.add if sample.kind == zenoh.SampleKind.PUT else self.monitors.discard)(str(sample.key_expr))
+
+        self.watch = s.liveliness().declare_subscriber(keys.alive_coordinator, on_coordinator)
+        self.out = s.declare_publisher(keys.agent_out(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
+        # before each answer, on the same session: the coordinator has a tick's changes before its end
+        self.bt = s.declare_publisher(keys.agent_bt(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
+        self.watched = s.liveliness().declare_subscriber(keys.monitor(agent_id), on_monitor, history=True)
+        self.sub: zenoh.Subscriber | None = None
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for entity in (self.sub, self.watch, self.watched, self.out, self.bt):
+            if entity is not None:
+                entity.undeclare()
+
+    def report(self, data: BaseModel) -> None:
+        agent_id = self.runtime.agent_id
+        if not hand_over(self.session, self.keys.agent_report(agent_id), encode_report(data)):
             log.error("agent %d: the coordinator did not take the %s report", agent_id, getattr(data, "kind", "?"))
 
-    # monitors (swarmbed groot) announce themselves with a token; the loop starts or stops handing
-    # over the tree's changes between ticks, never inside one
-    monitors: set[str] = set()
+    def loop(self, tick_in_callback: bool) -> int:
+        agent_id = self.runtime.agent_id
+        channel = None
+        if tick_in_callback:
+            self.sub = self.session.declare_subscriber(
+                self.in_key, zenoh.handlers.Callback(self._on_sample, indirect=False)
+            )
+        else:  # a channel subscriber wakes the main thread directly (no Python callback thread between)
+            self.sub = channel = self.session.declare_subscriber(self.in_key)
+        token = self.session.liveliness().declare_token(self.keys.alive_agent(agent_id, self.incarnation))
+        try:
+            while True:
+                if tick_in_callback:
+                    kind, item = self.queue.get()
+                    code = self._main_work(kind, item)
+                    with self.lock:
+                        self.pending -= 1
+                else:
+                    msg = self._decode(channel.recv().payload.to_bytes())  # type: ignore[union-attr]
+                    code = None if msg is None else self._handle(msg)
+                if code is not None:
+                    return code
+        except Exception:  # ours, not the plugin's: logged before the token goes (the launcher then stops us)
+            log.exception("agent %d: failed", agent_id)
+            return EXIT_PLUGIN_ERROR
+        finally:
+            token.undeclare()
 
-    def on_monitor(sample: zenoh.Sample) -> None:
-        (monitors.add if sample.kind == zenoh.SampleKind.PUT else monitors.discard)(str(sample.key_expr))
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        """The single worker's callback: answer a tick here when nothing waits for the main thread."""
+        try:
+            msg = self._decode(sample.payload.to_bytes())
+            if msg is None:
+                return
+            with self.lock:
+                if self.pending or self.frozen or not isinstance(msg, TickIn):
+                    self._defer_locked("msg", msg)
+                    return
+            self._tick(msg, inline=True)
+        except Exception as exc:  # ours: the main thread logs it and stops this agent
+            self._defer("error", exc)
 
-    watched = session.liveliness().declare_subscriber(keys.monitor(agent_id), on_monitor, history=True)
-    token = session.liveliness().declare_token(keys.alive_agent(agent_id, incarnation))
-    if restored:  # subscribed and announced: the coordinator may retire the old process and go on
-        report(Restored(kind="restored", agent=agent_id, incarnation=incarnation))
-    frozen = False
-    sample_bytes = {"in": 0, "out": 0}  # this process's per-tick samples, for the wire-bytes accounting
-    try:
-        while True:
-            data = sub.recv().payload.to_bytes()
-            sample_bytes["in"] += len(data)
-            try:
-                msg = decode_agent_in(data)
-            except WireError as exc:
-                malformed += 1
-                log.warning("agent %d: malformed sample on %s dropped: %s", agent_id, in_key, exc)
-                continue
-            if isinstance(msg, ControlIn):
-                if msg.incarnation != incarnation:
-                    continue  # an order for the other process of a swap
-                if msg.order == "snapshot":
-                    frozen = _hand_over_state(session, keys, runtime, incarnation, malformed, report, msg.ticket)
-                elif msg.order == "checkpoint" and not frozen:
-                    _checkpoint(runtime, incarnation, malformed, report, msg.ticket)
-                elif msg.order == "resume":
-                    frozen = False
-                    log.info("agent %d: swap cancelled; going on here", agent_id)
-                elif msg.order == "retire":
-                    log.info("agent %d: moved to incarnation %d elsewhere; exiting", agent_id, incarnation + 1)
-                    return EXIT_OK
-                continue
-            if isinstance(msg, StopIn):
-                if msg.reason == COORDINATOR_GONE:
-                    log.error("agent %d: the coordinator went away; exiting", agent_id)
-                    return EXIT_COORDINATOR_GONE
-                transport = Transport.model_validate({"tcp": tcp_counters(), "samples": sample_bytes})
-                report(runtime.report(extra_malformed=malformed, transport=transport))
+    def _defer(self, kind: str, item: object) -> None:
+        with self.lock:
+            self._defer_locked(kind, item)
+
+    def _defer_locked(self, kind: str, item: object) -> None:
+        self.pending += 1
+        self.queue.put((kind, item))
+
+    def _main_work(self, kind: str, item: Any) -> int | None:
+        if kind == "msg":
+            return self._handle(item)
+        if kind == "put":
+            publisher, data = item
+            publisher.put(data)
+            return None
+        if kind == "fatal":
+            self.report(item)
+            return EXIT_PLUGIN_ERROR
+        raise item
+
+    def _decode(self, data: bytes) -> TickIn | ControlIn | StopIn | None:
+        self.sample_bytes["in"] += len(data)
+        try:
+            return decode_agent_in(data)
+        except WireError as exc:
+            self.malformed += 1
+            log.warning("agent %d: malformed sample on %s dropped: %s", self.runtime.agent_id, self.in_key, exc)
+            return None
+
+    def _handle(self, msg: TickIn | ControlIn | StopIn) -> int | None:
+        """One sample on the main thread: an order, a stop, or a tick; an exit code ends the loop."""
+        runtime, agent_id = self.runtime, self.runtime.agent_id
+        if isinstance(msg, ControlIn):
+            if msg.incarnation != self.incarnation:
+                return None  # an order for the other process of a swap
+            if msg.order == "snapshot":
+                frozen = _hand_over_state(
+                    self.session, self.keys, runtime, self.incarnation, self.malformed, self.report, msg.ticket
+                )
+                with self.lock:
+                    self.frozen = frozen
+            elif msg.order == "checkpoint" and not self.frozen:
+                _checkpoint(runtime, self.incarnation, self.malformed, self.report, msg.ticket)
+            elif msg.order == "resume":
+                with self.lock:
+                    self.frozen = False
+                log.info("agent %d: swap cancelled; going on here", agent_id)
+            elif msg.order == "retire":
+                log.info("agent %d: moved to incarnation %d elsewhere; exiting", agent_id, self.incarnation + 1)
                 return EXIT_OK
-            if frozen:
-                continue  # its successor answers this tick
-            try:
-                obs = runtime.decode_observation(msg.obs)
-            except WireError as exc:  # blind for one tick: answer it (the clock must go on), count it
-                malformed += 1
-                log.warning("agent %d: malformed observation of tick %d dropped: %s", agent_id, msg.tick, exc)
-                out.put(encode_agent_out(msg.tick, agent_id, ["stop"], []))
-                continue
-            if bool(monitors) != runtime.watched:
-                runtime.monitored(bool(monitors))
-            try:
-                action, messages, events = runtime.step(msg.tick, obs, msg.inbox)
-            except Exception as exc:  # a plugin or node raised: stop this agent, loudly
-                tb = traceback.format_exc()
-                log.error("agent %d: failed at tick %d:\n%s", agent_id, msg.tick, tb)
-                error = f"{type(exc).__name__}: {exc}"
-                report(Fatal(kind="fatal", agent=agent_id, tick=msg.tick, error=error, traceback=tb))
-                return EXIT_PLUGIN_ERROR
-            changes = runtime.tree_changes(msg.tick, obs.time)
-            if changes is not None:
-                bt.put(encode_tree_changes(changes))
-            answer = encode_agent_out(msg.tick, agent_id, action, messages, events)
-            sample_bytes["out"] += len(answer)
-            out.put(answer)
-    except Exception:  # ours, not the plugin's: logged before the token goes (the launcher then stops us)
-        log.exception("agent %d: failed", agent_id)
-        return EXIT_PLUGIN_ERROR
-    finally:
-        token.undeclare()
-        for entity in (sub, watch, watched, out, bt):
-            entity.undeclare()
+            return None
+        if isinstance(msg, StopIn):
+            if msg.reason == COORDINATOR_GONE:
+                log.error("agent %d: the coordinator went away; exiting", agent_id)
+                return EXIT_COORDINATOR_GONE
+            transport = Transport.model_validate({"tcp": tcp_counters(), "samples": self.sample_bytes})
+            self.report(runtime.report(extra_malformed=self.malformed, transport=transport))
+            return EXIT_OK
+        if self.frozen:
+            return None  # its successor answers this tick
+        return self._tick(msg, inline=False)
+
+    def _tick(self, msg: TickIn, inline: bool) -> int | None:
+        """Answer one tick: step the tree and put its changes and the answer (from the callback, only
+        what fits the transmit queue; a failure is reported from the main thread)."""
+        runtime, agent_id = self.runtime, self.runtime.agent_id
+        try:
+            obs = runtime.decode_observation(msg.obs)
+        except WireError as exc:  # blind for one tick: answer it (the clock must go on), count it
+            self.malformed += 1
+            log.warning("agent %d: malformed observation of tick %d dropped: %s", agent_id, msg.tick, exc)
+            self._put(self.out, encode_agent_out(msg.tick, agent_id, ["stop"], []), inline)
+            return None
+        if bool(self.monitors) != runtime.watched:
+            runtime.monitored(bool(self.monitors))
+        try:
+            action, messages, events = runtime.step(msg.tick, obs, msg.inbox)
+        except Exception as exc:  # a plugin or node raised: stop this agent, loudly
+            tb = traceback.format_exc()
+            log.error("agent %d: failed at tick %d:\n%s", agent_id, msg.tick, tb)
+            error = f"{type(exc).__name__}: {exc}"
+            fatal = Fatal(kind="fatal", agent=agent_id, tick=msg.tick, error=error, traceback=tb)
+            if inline:
+                self._defer("fatal", fatal)
+                return None
+            self.report(fatal)
+            return EXIT_PLUGIN_ERROR
+        changes = runtime.tree_changes(msg.tick, obs.time)
+        tree = encode_tree_changes(changes) if changes is not None else None
+        answer = encode_agent_out(msg.tick, agent_id, action, messages, events)
+        self.sample_bytes["out"] += len(answer)
+        if inline and len(answer) + len(tree or b"") > INLINE_PUT_MAX:
+            if tree is not None:
+                self._defer("put", (self.bt, tree))
+            self._defer("put", (self.out, answer))
+            return None
+        if tree is not None:
+            self._put(self.bt, tree, inline)
+        self._put(self.out, answer, inline)
+        return None
+
+    def _put(self, publisher: zenoh.Publisher, data: bytes, inline: bool) -> None:
+        if inline and len(data) > INLINE_PUT_MAX:
+            self._defer("put", (publisher, data))
+        else:
+            publisher.put(data)
 
 
 def _hand_over_state(

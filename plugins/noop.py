@@ -1,7 +1,7 @@
 """An allocator that allocates nothing: for benchmarks of the runtime itself.
 
-With ``peers > 0`` it sends one small message per tick to the ``peers`` agents after it (by id,
-wrapping around), so that the radio and the inboxes carry traffic.
+With ``peers > 0`` it sends ``messages`` small messages per tick (one by default) to the ``peers``
+agents after it (by id, wrapping around), so that the radio and the inboxes carry traffic.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ class NoopParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
     peers: int = Field(0, ge=0)
     payload_bytes: int = Field(16, ge=0, le=65536)
+    messages: int = Field(1, ge=1, le=16, description="messages sent per tick, each to every peer")
 
 
 class NoopAllocator(Allocator):
@@ -27,5 +28,6 @@ class NoopAllocator(Allocator):
         if p.peers and view.n_agents > 1:
             n = view.n_agents
             peers = sorted({(self.agent_id + k) % n for k in range(1, min(p.peers, n - 1) + 1)})
-            view.send(peers, "noop", b"\0" * p.payload_bytes)
+            for _ in range(p.messages):
+                view.send(peers, "noop", b"\0" * p.payload_bytes)
         return None

@@ -1,6 +1,7 @@
 """The quickstart experiment end to end: real processes, real Zenoh on loopback."""
 
 import json
+import time
 
 import pytest
 
@@ -113,3 +114,18 @@ def test_a_single_zenoh_worker_wakes_agents_less_and_changes_no_result(tmp_path)
         assert (default.out_dir / name).read_bytes() == (single.out_dir / name).read_bytes(), name
     fewer = single.timings["per_agent_tick"]["wakeups"]["agents"]
     assert fewer < 0.85 * default.timings["per_agent_tick"]["wakeups"]["agents"]
+
+
+def test_answers_too_large_for_the_single_workers_callback_go_out_from_the_main_thread(tmp_path):
+    """On the single worker a tick is answered inside the subscriber's callback, on Zenoh's only
+    thread; a put that overfills the transmit queue there would wait for that very thread. Answers
+    of 256 KB (4 messages of 64 KB) are put from the main thread instead: the same files, on time."""
+    sets = ["agents.count=6", "allocator={name: noop, peers: 5, payload_bytes: 65536, messages: 4}", "run.duration=30"]
+    sets += ["run.stop_when_done=false", "network.range=null", "network.rate=null", "network.loss=0"]
+    default = run_experiment(experiment(*sets), tmp_path / "default", progress=False)
+    started = time.monotonic()
+    single = run_experiment(experiment(*sets, "run.zenoh_threads=single"), tmp_path / "single", progress=False)
+    assert time.monotonic() - started < 60  # a stalled put waits 5 s a time: 30 ticks would take minutes
+    for name in DETERMINISTIC_FILES[:-1]:
+        assert (default.out_dir / name).read_bytes() == (single.out_dir / name).read_bytes(), name
+    assert single.summary["network"]["delivered"] == 4 * 6 * 5 * 29  # every copy but the last tick's

@@ -143,16 +143,39 @@ BOOM = textwrap.dedent("""
 """)
 
 
-def test_plugin_that_raises_stops_the_run_with_its_traceback(tmp_path):
+@pytest.mark.parametrize("threads", ["default", "single"])
+def test_plugin_that_raises_stops_the_run_with_its_traceback(tmp_path, threads):
     plugin = tmp_path / "boom.py"
     plugin.write_text(BOOM)
-    exp = experiment(f"allocator={{name: '{plugin}:Boom'}}")
+    exp = experiment(f"allocator={{name: '{plugin}:Boom'}}", f"run.zenoh_threads={threads}")
     with pytest.raises(RunError) as info:
         run_experiment(exp, tmp_path / "run", progress=False)
     msg = str(info.value)
     assert "agent 1 stopped at tick 5" in msg and "boom at five" in msg and "Traceback" in msg
     assert "boom at five" in (tmp_path / "run" / "logs" / "agent_1.log").read_text()
     assert not (tmp_path / "run" / "summary.json").exists()
+
+
+SLEEPY = textwrap.dedent("""
+    import time
+    from swarmbed.plugins.base import Allocator
+
+    class Sleepy(Allocator):
+        def decide(self, view):
+            if view.tick == 3 and self.agent_id == 1:
+                time.sleep(14)  # longer than Zenoh's 10 s lease
+            return None
+""")
+
+
+def test_a_tick_longer_than_zenohs_lease_keeps_the_single_workers_agent(tmp_path):
+    """On the single worker an agent's tick runs on Zenoh's only thread, which sends no keep-alive
+    meanwhile: the agent's lease is a minute, so a 14 s tick does not cost it its session."""
+    plugin = tmp_path / "sleepy.py"
+    plugin.write_text(SLEEPY)
+    sets = [f"allocator={{name: '{plugin}:Sleepy'}}", "agents.count=4", "run.duration=10", "run.stop_when_done=false"]
+    result = run_experiment(experiment(*sets, "run.zenoh_threads=single"), tmp_path / "run", progress=False)
+    assert result.summary["ticks"] == 10
 
 
 def test_run_goes_on_without_a_failed_agent_when_allowed(tmp_path):

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import socket
 from collections.abc import Sequence
 from pathlib import Path
@@ -23,6 +24,24 @@ from pathlib import Path
 import zenoh
 
 from swarmbed.wire.credentials import CredentialsError, read_credentials
+
+#: ZENOH_RUNTIME for ``run.zenoh_threads: single``: every Zenoh runtime handed over to one worker
+#: thread, so a sample in and a sample out wake one thread instead of several
+SINGLE_WORKER = (
+    "(app: (handover: rx), acc: (handover: rx), tx: (handover: rx), net: (handover: rx), rx: (worker_threads: 1))"
+)
+
+
+#: A client on the single worker answers ticks on Zenoh's only thread, which sends no keep-alive
+#: while a tick runs: its lease (how long its router waits before giving it up) is a minute, not
+#: Zenoh's 10 s, so that a long tick does not cost the agent its session
+SINGLE_WORKER_LEASE_MS = 60_000
+
+
+def single_worker() -> bool:
+    """Whether this process's Zenoh runs on the single worker (``run.zenoh_threads: single``, or
+    the same ``ZENOH_RUNTIME`` given by hand on another host)."""
+    return os.environ.get("ZENOH_RUNTIME") == SINGLE_WORKER
 
 
 def zenoh_config(
@@ -43,6 +62,8 @@ def zenoh_config(
     conf.insert_json5("scouting/multicast/enabled", "false")
     if not config_file:
         conf.insert_json5("transport/shared_memory/enabled", "false")
+    if single_worker() and mode == "client":
+        conf.insert_json5("transport/link/tx/lease", json.dumps(SINGLE_WORKER_LEASE_MS))
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
         if connect_timeout_s is not None:

@@ -24,19 +24,13 @@ from pathlib import Path
 import psutil
 
 import swarmbed
+from swarmbed.wire.session import SINGLE_WORKER
 
 AGENT_MODULE = "swarmbed.agent_runtime"
 
 
 class ChildExited(RuntimeError):
     pass
-
-
-#: ZENOH_RUNTIME for ``run.zenoh_threads: single``: every Zenoh runtime handed over to one worker
-#: thread, so a sample in and a sample out wake one thread instead of several
-SINGLE_WORKER = (
-    "(app: (handover: rx), acc: (handover: rx), tx: (handover: rx), net: (handover: rx), rx: (worker_threads: 1))"
-)
 
 
 def zenoh_env(threads: str) -> dict[str, str]:
