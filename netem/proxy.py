@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import os
 import queue
+import threading
 import time
 from pathlib import Path
 
@@ -61,6 +62,10 @@ class Proxy:
         self.ledger = Ledger(self.sink, self.receivers, drop_reasons(spec.network))
         self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
+        # agents' outputs gather here, taken in Zenoh's own thread (no Python thread hop per
+        # sample); the main thread is woken once for all that gathered while it was busy
+        self.arrived: list[tuple[str, bytes]] = []
+        self.arrived_lock = threading.Lock()
         self.outs: dict[int, dict[int, AgentOut]] = {}
         self.gone: set[tuple[int, int]] = set()  # (agent, incarnation) whose process left
         self.lost: set[int] = set()  # agents whose current process left
@@ -92,12 +97,25 @@ class Proxy:
         if sample.kind == zenoh.SampleKind.DELETE:
             self.events.put(("gone", None))
 
+    def _on_out(self, sample: zenoh.Sample) -> None:
+        item = (str(sample.key_expr), sample.payload.to_bytes())
+        with self.arrived_lock:
+            self.arrived.append(item)
+            first = len(self.arrived) == 1
+        if first:
+            self.events.put(("outs", None))
+
+    def _take_arrived(self) -> list[tuple[str, bytes]]:
+        with self.arrived_lock:
+            arrived, self.arrived = self.arrived, []
+        return arrived
+
     def run(self) -> int:
         s, k = self.session, self.keys
         put = self.events.put
         subs = [
             s.declare_subscriber(k.world, lambda x: put(("world", x.payload.to_bytes()))),
-            s.declare_subscriber(k.agent_out_all, lambda x: put(("out", (str(x.key_expr), x.payload.to_bytes())))),
+            s.declare_subscriber(k.agent_out_all, zenoh.handlers.Callback(self._on_out, indirect=False)),
             s.declare_subscriber(k.netem_stop, lambda x: put(("stop", x.payload.to_bytes()))),
             s.declare_subscriber(k.netem_control, lambda x: put(("control", x.payload.to_bytes()))),
             s.liveliness().declare_subscriber(k.alive_agents, self._on_agent_alive),
@@ -163,16 +181,17 @@ class Proxy:
                     self.answer_by = time.monotonic() + self.spec.answer_within
                     self.members[world.tick] = list(world.ids)
                     self.members.pop(world.tick - 1000, None)
-            elif what == "out":
-                out = self._take_out(*data)
-                if out is None:
-                    continue
-                if out.tick <= self.routed:
-                    self._late(out)
-                else:
-                    self.outs.setdefault(out.tick, {})[out.agent_id] = out
-                    if self.world is not None and out.tick == self.world.tick:
-                        self.awaited.discard(out.agent_id)
+            elif what == "outs":
+                for key, sample in self._take_arrived():
+                    out = self._take_out(key, sample)
+                    if out is None:
+                        continue
+                    if out.tick <= self.routed:
+                        self._late(out)
+                    else:
+                        self.outs.setdefault(out.tick, {})[out.agent_id] = out
+                        if self.world is not None and out.tick == self.world.tick:
+                            self.awaited.discard(out.agent_id)
             if self.world is not None and not self.awaited:
                 self._route(self.world)
                 self.world = None
@@ -259,10 +278,11 @@ class Proxy:
             except queue.Empty:
                 log.warning("netem: some agents never answered up to tick %d", last)
                 return
-            if what == "out":
-                out = self._take_out(*data)
-                if out is not None:
-                    self._late(out)
+            if what == "outs":
+                for key, sample in self._take_arrived():
+                    out = self._take_out(key, sample)
+                    if out is not None:
+                        self._late(out)
             elif what == "left":
                 left.add(data[0])
 
