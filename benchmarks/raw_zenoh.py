@@ -1,33 +1,64 @@
-"""The raw Zenoh baseline's processes: a client (ticked by the bench, relays one message, replies)
-and the relay; with ``--fanout 0`` the bare barrier (a client replies to each tick at once, no
-relay). Started by ``benchmarks/lockstep.py``; not part of swarmbed."""
+"""The raw Zenoh floors' processes, started by ``benchmarks/lockstep.py``; not part of swarmbed.
+
+- ``client``: ticked by the bench; replies at once (``--fanout 0``, the bare barrier) or relays one
+  message and replies once the ``--fanout`` it is owed have arrived (the retired relay baseline);
+  ``--direct`` answers inside the subscriber's own callback (``indirect=False``: no Python thread
+  in between), the B1 floor's client.
+- ``relay``: forwards each client's message to the next ``FANOUT`` clients (relay baseline).
+- ``agent`` and ``proxy``: swarmbed's skeleton with no Python work (B2): an agent answers a tick
+  with one output on its own key; the proxy, its own process, counts a tick's outputs and sends
+  the coordinator one step sample when the last arrives.
+"""
 
 import argparse
 import queue
 import struct
+import threading
 
 import zenoh
 
 from swarmbed.wire.session import zenoh_config
 
 BLOCK = zenoh.CongestionControl.BLOCK
+FANOUT = 5
 
 
-def client(s: zenoh.Session, ns: str, i: int, fanout: int) -> None:
+def _direct(fn):  # a handler that runs in Zenoh's own thread, with no Python thread hop
+    return zenoh.handlers.Callback(fn, indirect=False)
+
+
+def client(s: zenoh.Session, ns: str, i: int, fanout: int, direct: bool) -> None:
+    done = s.declare_publisher(f"{ns}/done", congestion_control=BLOCK)
+    finished = threading.Event()
+    if direct:  # B1: the reply is put from the callback that received the tick
+
+        def on_tick(x: zenoh.Sample) -> None:
+            data = x.payload.to_bytes()
+            (k,) = struct.unpack("<q", data[:8])
+            if k < 0:
+                finished.set()
+            else:
+                done.put(struct.pack("<qq", k, i))
+
+        sub = s.declare_subscriber(f"{ns}/c/{i}/tick", _direct(on_tick))
+        token = s.liveliness().declare_token(f"{ns}/alive/{i}")
+        finished.wait()
+        token.undeclare()
+        sub.undeclare()
+        return
     events: queue.SimpleQueue = queue.SimpleQueue()
     subs = [
         s.declare_subscriber(f"{ns}/c/{i}/tick", lambda x: events.put(("tick", x.payload.to_bytes()))),
         s.declare_subscriber(f"{ns}/c/{i}/relay", lambda x: events.put(("relay", x.payload.to_bytes()))),
     ]
     to_relay = s.declare_publisher(f"{ns}/relay", congestion_control=BLOCK)
-    done = s.declare_publisher(f"{ns}/done", congestion_control=BLOCK)
     token = s.liveliness().declare_token(f"{ns}/alive/{i}")
     relayed: dict[int, int] = {}
     waiting: int | None = None
     while True:
         what, data = events.get()
         if what == "tick":
-            (k,) = struct.unpack("<q", data)
+            (k,) = struct.unpack("<q", data[:8])
             if k < 0:
                 break
             if fanout:
@@ -65,16 +96,71 @@ def relay(s: zenoh.Session, ns: str, n: int) -> None:
     sub.undeclare()
 
 
-FANOUT = 5
+def agent(s: zenoh.Session, ns: str, i: int, out_bytes: int) -> None:
+    """B2's agent: one output per tick, on its own key, of swarmbed's usual size."""
+    out = s.declare_publisher(f"{ns}/out/{i}", congestion_control=BLOCK)
+    finished = threading.Event()
+
+    def on_tick(x: zenoh.Sample) -> None:
+        data = x.payload.to_bytes()
+        (k,) = struct.unpack("<q", data[:8])
+        if k < 0:
+            finished.set()
+        else:
+            out.put(struct.pack("<qq", k, i) + b"\0" * max(0, out_bytes - 16))
+
+    sub = s.declare_subscriber(f"{ns}/c/{i}/tick", _direct(on_tick))
+    token = s.liveliness().declare_token(f"{ns}/alive/{i}")
+    finished.wait()
+    token.undeclare()
+    sub.undeclare()
+
+
+def proxy(s: zenoh.Session, ns: str, n: int, out_bytes: int) -> None:
+    """B2's proxy: a counter, not a scan; the step goes out from the callback of the last output."""
+    step = s.declare_publisher(f"{ns}/step", congestion_control=BLOCK)
+    finished = threading.Event()
+    got = [0]
+
+    def on_out(x: zenoh.Sample) -> None:
+        data = x.payload.to_bytes()
+        (k,) = struct.unpack("<q", data[:8])
+        got[0] += 1
+        if got[0] == n:
+            got[0] = 0
+            step.put(struct.pack("<q", k) + b"\0" * max(0, out_bytes - 8))
+
+    def on_stop(x: zenoh.Sample) -> None:
+        finished.set()
+
+    subs = [
+        s.declare_subscriber(f"{ns}/out/*", _direct(on_out)),
+        s.declare_subscriber(f"{ns}/stop", _direct(on_stop)),
+    ]
+    token = s.liveliness().declare_token(f"{ns}/alive/proxy")
+    finished.wait()
+    token.undeclare()
+    for x in subs:
+        x.undeclare()
+
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
-    ap.add_argument("role", choices=["client", "relay"])
+    ap.add_argument("role", choices=["client", "relay", "agent", "proxy"])
     ap.add_argument("--ns", required=True)
     ap.add_argument("--connect", required=True)
     ap.add_argument("--id", type=int, default=0)
     ap.add_argument("--n", type=int, default=0)
     ap.add_argument("--fanout", type=int, default=FANOUT, help="messages each client waits for per tick (0: none)")
+    ap.add_argument("--direct", action="store_true", help="client: reply inside a direct callback")
+    ap.add_argument("--bytes", type=int, default=200, help="agent and proxy: bytes of each output")
     a = ap.parse_args()
     with zenoh.open(zenoh_config("client", connect=[a.connect])) as session:
-        client(session, a.ns, a.id, a.fanout) if a.role == "client" else relay(session, a.ns, a.n)
+        if a.role == "client":
+            client(session, a.ns, a.id, a.fanout, a.direct)
+        elif a.role == "relay":
+            relay(session, a.ns, a.n)
+        elif a.role == "agent":
+            agent(session, a.ns, a.id, a.bytes)
+        else:
+            proxy(session, a.ns, a.n, a.bytes)
