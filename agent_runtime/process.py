@@ -77,9 +77,7 @@ def serve(
     if tick_in_callback is None:
         tick_in_callback = single_worker()
     with _Agent(session, keys, runtime, incarnation, malformed) as agent:
-        if restored:  # subscribed and announced: the coordinator may retire the old process and go on
-            agent.report(Restored(kind="restored", agent=runtime.agent_id, incarnation=incarnation))
-        return agent.loop(tick_in_callback)
+        return agent.loop(tick_in_callback, restored)
 
 
 class _Agent:
@@ -129,7 +127,7 @@ class _Agent:
         if not hand_over(self.session, self.keys.agent_report(agent_id), encode_report(data)):
             log.error("agent %d: the coordinator did not take the %s report", agent_id, getattr(data, "kind", "?"))
 
-    def loop(self, tick_in_callback: bool) -> int:
+    def loop(self, tick_in_callback: bool, restored: bool) -> int:
         agent_id = self.runtime.agent_id
         channel = None
         if tick_in_callback:
@@ -139,6 +137,8 @@ class _Agent:
         else:  # a channel subscriber wakes the main thread directly (no Python callback thread between)
             self.sub = channel = self.session.declare_subscriber(self.in_key)
         token = self.session.liveliness().declare_token(self.keys.alive_agent(agent_id, self.incarnation))
+        if restored:  # subscribed and announced: the coordinator may retire the old process and go on
+            self.report(Restored(kind="restored", agent=agent_id, incarnation=self.incarnation))
         try:
             while True:
                 if tick_in_callback:

@@ -47,7 +47,7 @@ def test_swapped_agents_give_the_files_of_a_run_where_nothing_moved(tmp_path, ba
     ticks = sorted(int(t) for t in rng.choice(np.arange(1, 100), 6, replace=False))
     swaps = ", ".join(f"{{agent: {int(rng.integers(n))}, tick: {t}, to: local}}" for t in ticks)
     run_experiment(experiment(*sets, f"swaps=[{swaps}]", base=base), tmp_path / "moved", progress=False)
-    same_results(tmp_path / "still", tmp_path / "moved")
+    same_results(tmp_path / "still", tmp_path / "moved", config=still == sets)
     records = _swaps(tmp_path / "moved")
     assert [r["outcome"] for r in records] == ["ok"] * 6 and all(int(r["snapshot_bytes"]) > 0 for r in records)
 
