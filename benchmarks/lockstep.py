@@ -123,7 +123,6 @@ def swarmbed_run(n: int, ticks: int, threads: str = "default", auth: bool = True
         "ticks_per_s": t["ticks_per_s"],
         "startup_s": t["startup_s"],
         "uss_mb": t["agent_uss_mb_mean"],
-        "out_bytes": result.summary["wire"]["agent_sample_bytes_out"] / max(1, n * ticks),
         "wakeups": t["per_agent_tick"]["wakeups"],
         "cpu_us": t["per_agent_tick"]["cpu_us"],
     }
@@ -166,7 +165,7 @@ def main() -> None:
             woke, cpu = r["wakeups"], r["cpu_us"]
             print(
                 f"  {'swarmbed ' + t:<18} {r['ticks_per_s']:>8.1f} {woke['total']:>20.2f}   "
-                f"(startup {r['startup_s']:.1f} s, USS/agent {r['uss_mb']:.1f} MB, output {r['out_bytes']:.0f} B)"
+                f"(startup {r['startup_s']:.1f} s, USS/agent {r['uss_mb']:.1f} MB)"
             )
             print(
                 "      per agent-tick: wake-ups "

@@ -74,7 +74,8 @@ class RunSection(Strict):
     zenoh_threads: Literal["default", "single"] = Field(
         "default",
         description="Zenoh's threads in the agents and the proxy this machine starts: its default layout, or "
-        "single (every runtime handed to one worker: fewer wake-ups per tick; docs/benchmarks.md)",
+        "single (every runtime handed to one worker, agents answering ticks in its callback: one wake-up per "
+        "agent-tick; such agents take a 60 s lease, so a cut-off host's are given up later; docs/benchmarks.md)",
     )
     record_bt: bool = Field(
         False,
