@@ -156,11 +156,11 @@ def test_plugin_that_raises_stops_the_run_with_its_traceback(tmp_path, threads):
     assert not (tmp_path / "run" / "summary.json").exists()
 
 
-SLEEPY = textwrap.dedent("""
+LONG_TICK = textwrap.dedent("""
     import time
     from swarmbed.plugins.base import Allocator
 
-    class Sleepy(Allocator):
+    class LongTick(Allocator):
         def decide(self, view):
             if view.tick == 3 and self.agent_id == 1:
                 time.sleep(14)  # longer than Zenoh's 10 s lease
@@ -171,9 +171,10 @@ SLEEPY = textwrap.dedent("""
 def test_a_tick_longer_than_zenohs_lease_keeps_the_single_workers_agent(tmp_path):
     """On the single worker an agent's tick runs on Zenoh's only thread, which sends no keep-alive
     meanwhile: the agent's lease is a minute, so a 14 s tick does not cost it its session."""
-    plugin = tmp_path / "sleepy.py"
-    plugin.write_text(SLEEPY)
-    sets = [f"allocator={{name: '{plugin}:Sleepy'}}", "agents.count=4", "run.duration=10", "run.stop_when_done=false"]
+    # its own file name: plugin files load as modules named by their stem (test_realtime has a sleepy.py)
+    plugin = tmp_path / "long_tick.py"
+    plugin.write_text(LONG_TICK)
+    sets = [f"allocator={{name: '{plugin}:LongTick'}}", "agents.count=4", "run.duration=10", "run.stop_when_done=false"]
     result = run_experiment(experiment(*sets, "run.zenoh_threads=single"), tmp_path / "run", progress=False)
     assert result.summary["ticks"] == 10
 
