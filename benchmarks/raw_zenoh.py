@@ -27,24 +27,29 @@ def _direct(fn):  # a handler that runs in Zenoh's own thread, with no Python th
     return zenoh.handlers.Callback(fn, indirect=False)
 
 
+def _answer_ticks(s: zenoh.Session, ns: str, i: int, answer: zenoh.Publisher, size: int) -> None:
+    """Answer each tick with ``size`` bytes on ``answer``, put from the callback that received it,
+    until a negative tick."""
+    finished = threading.Event()
+
+    def on_tick(x: zenoh.Sample) -> None:
+        (k,) = struct.unpack("<q", x.payload.to_bytes()[:8])
+        if k < 0:
+            finished.set()
+        else:
+            answer.put(struct.pack("<qq", k, i) + b"\0" * max(0, size - 16))
+
+    sub = s.declare_subscriber(f"{ns}/c/{i}/tick", _direct(on_tick))
+    token = s.liveliness().declare_token(f"{ns}/alive/{i}")
+    finished.wait()
+    token.undeclare()
+    sub.undeclare()
+
+
 def client(s: zenoh.Session, ns: str, i: int, fanout: int, direct: bool) -> None:
     done = s.declare_publisher(f"{ns}/done", congestion_control=BLOCK)
-    finished = threading.Event()
     if direct:  # B1: the reply is put from the callback that received the tick
-
-        def on_tick(x: zenoh.Sample) -> None:
-            data = x.payload.to_bytes()
-            (k,) = struct.unpack("<q", data[:8])
-            if k < 0:
-                finished.set()
-            else:
-                done.put(struct.pack("<qq", k, i))
-
-        sub = s.declare_subscriber(f"{ns}/c/{i}/tick", _direct(on_tick))
-        token = s.liveliness().declare_token(f"{ns}/alive/{i}")
-        finished.wait()
-        token.undeclare()
-        sub.undeclare()
+        _answer_ticks(s, ns, i, done, 16)
         return
     events: queue.SimpleQueue = queue.SimpleQueue()
     subs = [
@@ -97,23 +102,8 @@ def relay(s: zenoh.Session, ns: str, n: int) -> None:
 
 
 def agent(s: zenoh.Session, ns: str, i: int, out_bytes: int) -> None:
-    """B2's agent: one output per tick, on its own key, of swarmbed's usual size."""
-    out = s.declare_publisher(f"{ns}/out/{i}", congestion_control=BLOCK)
-    finished = threading.Event()
-
-    def on_tick(x: zenoh.Sample) -> None:
-        data = x.payload.to_bytes()
-        (k,) = struct.unpack("<q", data[:8])
-        if k < 0:
-            finished.set()
-        else:
-            out.put(struct.pack("<qq", k, i) + b"\0" * max(0, out_bytes - 16))
-
-    sub = s.declare_subscriber(f"{ns}/c/{i}/tick", _direct(on_tick))
-    token = s.liveliness().declare_token(f"{ns}/alive/{i}")
-    finished.wait()
-    token.undeclare()
-    sub.undeclare()
+    """B2's agent: one output of ``out_bytes`` per tick, on its own key."""
+    _answer_ticks(s, ns, i, s.declare_publisher(f"{ns}/out/{i}", congestion_control=BLOCK), out_bytes)
 
 
 def proxy(s: zenoh.Session, ns: str, n: int, out_bytes: int) -> None:
