@@ -2,6 +2,7 @@
 
 Rectangular area; tasks with a workload that agents reduce at their work rate; initial tasks plus
 periodic generations; point-mass agents. An agent works on a task while within ``arrival_radius``
+(plus ``work_radius_per_workload`` x the task's initial workload, SPACE's code)
 of it; the work rates of agents on one task add, and the workload never goes below zero (work
 beyond what was left is not counted). A task is done when its workload reaches zero.
 
@@ -41,6 +42,18 @@ class MTSRParams(BaseModel):
     initial_tasks: int = Field(250, ge=0, description="tasks at time 0")
     workload: tuple[float, float] = Field((6.0, 60.0), description="task workload range [min, max]")
     arrival_radius: float = Field(10.0, gt=0, description="distance within which an agent works on a task")
+    work_radius_per_workload: float = Field(
+        0.0,
+        ge=0,
+        description="a task's work radius grows by this much per unit of its initial workload "
+        "(SPACE's code: 1/3, its task radius amount / task_visualisation_factor added to the arrival threshold)",
+    )
+    approach_radius: float = Field(
+        0.0,
+        ge=0,
+        description="within this distance of its target an agent's speed is at most max_speed x distance / "
+        "approach_radius (SPACE's code: target_approaching_radius 50); 0: no such slow-down",
+    )
     generations: Generations = Field(Generations(), description="tasks added during the run")
     agent_positions: list[tuple[float, float]] | None = Field(None, description="fixed start positions (else uniform)")
     task_positions: list[tuple[float, float]] | None = Field(None, description="fixed initial task positions")
@@ -135,7 +148,7 @@ class MTSRWorld(World):
         self.dt = scenario.dt
         self.rng = rng
         a = scenario.agents
-        self.limits = Limits(a.max_speed, a.max_accel, a.max_turn_rate)
+        self.limits = Limits(a.max_speed, a.max_accel, a.max_turn_rate, self.sc.approach_radius)
         self.n = a.count
         self.work_rate = a.work_rate
         self.awareness = a.awareness_range
@@ -153,6 +166,7 @@ class MTSRWorld(World):
         self.tx = np.zeros(0)
         self.ty = np.zeros(0)
         self.workload = np.zeros(0)
+        self.work_radius = np.zeros(0)
         self.remaining = np.zeros(0)
         self.spawned_at = np.zeros(0)
         self.done_at = np.full(0, np.nan)
@@ -181,6 +195,10 @@ class MTSRWorld(World):
         self.ty = np.concatenate([self.ty, self.rng.uniform(0, self.sc.height, count)])
         w = self.rng.uniform(lo, hi, count)
         self.workload = np.concatenate([self.workload, w])
+        # SPACE's code: arrival threshold + initial amount / 3; a factor of 0 leaves arrival_radius
+        self.work_radius = np.concatenate(
+            [self.work_radius, self.sc.arrival_radius + self.sc.work_radius_per_workload * w]
+        )
         self.remaining = np.concatenate([self.remaining, w])
         self.spawned_at = np.concatenate([self.spawned_at, np.full(count, self.time)])
         self.done_at = np.concatenate([self.done_at, np.full(count, np.nan)])
@@ -269,7 +287,7 @@ class MTSRWorld(World):
             target, task = self._target(i, actions.get(i, ["stop"]))
             if (
                 task is not None
-                and math.hypot(self.tx[task] - self.ax[i], self.ty[task] - self.ay[i]) <= self.sc.arrival_radius
+                and math.hypot(self.tx[task] - self.ax[i], self.ty[task] - self.ay[i]) <= self.work_radius[task]
             ):
                 working.setdefault(task, []).append(i)
                 target = None  # brake while working

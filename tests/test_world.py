@@ -43,6 +43,47 @@ def test_agent_reaches_its_target_and_stops():
     assert math.hypot(x - 30, y - 40) < 1e-6 and v < 0.6
 
 
+def test_approach_radius_slows_an_agent_as_the_formula_says():
+    """Within r of its target, facing it, with acceleration to spare, the speed is max_speed * d / r:
+    d shrinks by the factor (1 - v dt / r) per step, and as dt shrinks it converges on SPACE's
+    continuous slow-down d(t) = d0 exp(-v t / r)."""
+    v_max, r, d0, horizon = 0.25, 50.0, 40.0, 100.0
+    for dt, tol in ((1.0, 1e-9), (0.1, 1e-9)):
+        lim = Limits(max_speed=v_max, max_accel=10.0, max_turn_rate=1.0, approach_radius=r)
+        x, v = 0.0, v_max * d0 / r
+        steps = round(horizon / dt)
+        for _ in range(steps):
+            x, _, _, v = step(x, 0.0, 0.0, v, (d0, 0.0), lim, dt)
+        assert d0 - x == pytest.approx(d0 * (1 - v_max * dt / r) ** steps, rel=tol)
+    exact = d0 * math.exp(-v_max * horizon / r)
+    coarse = [d0 * (1 - v_max * dt / r) ** round(horizon / dt) for dt in (1.0, 0.1, 0.01)]
+    errors = [abs(c - exact) for c in coarse]
+    assert errors[0] > errors[1] > errors[2] and errors[2] < 1e-3 * exact
+    # without the radius the same agent closes at full speed
+    lim = Limits(max_speed=v_max, max_accel=10.0, max_turn_rate=1.0)
+    x, v = 0.0, v_max
+    for _ in range(200):
+        x, _, _, v = step(x, 0.0, 0.0, v, (d0, 0.0), lim, 1.0)
+    assert x == pytest.approx(d0)
+
+
+@pytest.mark.parametrize(("per_workload", "works"), [(0.0, False), (1 / 3, True)])
+def test_work_radius_grows_with_the_task_workload(per_workload, works):
+    """SPACE's code works a task from within threshold + amount / 3: 10 + 30 / 3 = 20 here."""
+    exp = experiment(
+        "agents.count=1",
+        "scenario.initial_tasks=1",
+        "scenario.workload=[30, 30]",
+        "scenario.task_positions=[[50, 50]]",
+        "scenario.agent_positions=[[69.5, 50]]",
+        "scenario.arrival_radius=10",
+        f"scenario.work_radius_per_workload={per_workload}",
+    )
+    w = MTSRWorld(exp, np.random.default_rng(0))
+    w.apply({0: ["goto_task", 0]})
+    assert bool(w.remaining[0] < 30.0) is works
+
+
 def test_collaborative_work_adds_rates_and_never_overcounts():
     exp = experiment(
         "agents.count=3",
