@@ -39,8 +39,7 @@ def test_every_scenario_passes_the_checker(kind):
 
 
 def _example_module():
-    load_target(PICKUP, Scenario)
-    return sys.modules["swarmbed_user_plugin_example_scenario"]
+    return sys.modules[load_target(PICKUP, Scenario).__module__]
 
 
 def test_the_checker_catches_a_world_that_is_not_seeded():

@@ -2,10 +2,16 @@
 
 The launcher resolves the names in an experiment (``allocator.name``, ``scenario.kind``) to
 targets; processes load exactly the targets they are handed, and never look a name up.
+
+A file is loaded as module ``swarmbed_user_plugin_<stem>_<digest>``, the digest taken from the
+file's bytes: two different files of one name (``a/plugin.py``, ``b/plugin.py``) in one process, a
+sweep worker's, stay two modules, while the same file copied to another host gets the same module
+name there, which is what a snapshot's ``module:qualname`` type names rely on.
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import importlib.util
 import sys
@@ -24,12 +30,19 @@ def is_target(text: str) -> bool:
     return ":" in text
 
 
+def user_module_name(path: Path) -> str:
+    """The module name a plugin file loads as: its stem and a digest of its bytes."""
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+    stem = "".join(c if c.isalnum() else "_" for c in path.stem)
+    return f"swarmbed_user_plugin_{stem}_{digest}"
+
+
 def _import_module(ref: str) -> ModuleType:
     if ref.endswith(".py"):
         path = Path(ref).resolve()
         if not path.is_file():
             raise TargetError(f"file {ref} does not exist")
-        mod_name = f"swarmbed_user_plugin_{path.stem}"
+        mod_name = user_module_name(path)
         if mod_name in sys.modules:
             return sys.modules[mod_name]
         spec = importlib.util.spec_from_file_location(mod_name, path)
