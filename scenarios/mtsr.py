@@ -82,6 +82,9 @@ class MTSR(Scenario):
         "time_99": "time to 99 % of tasks (s)",
         "distance_per_agent_mean": "average distance per agent",
         "work_per_agent_mean": "average work per agent",
+        # SPACE's Monte Carlo analysis: the Gini coefficient of the per-agent values, one per run
+        "distance_per_agent_gini": "Gini coefficient of distance per agent",
+        "work_per_agent_gini": "Gini coefficient of work per agent",
         "tasks_completed": "tasks completed",
         # one value per agent, pooled over a scenario's runs (SPACE's per-agent panels): a run's mean
         # work per agent is its total work over N, the same for every allocator that completes the
@@ -89,7 +92,21 @@ class MTSR(Scenario):
         "distance_per_agent": "travel distance per agent",
         "work_per_agent": "workload per agent",
     }
-    figures = (Figure("by_range", ("mission_time", "time_95", "time_99", "distance_per_agent", "work_per_agent")),)
+    # one value per run in every panel, as SPACE's Monte Carlo analysis plots them (the per-agent
+    # values pooled over runs stay available: "distance_per_agent", "work_per_agent")
+    figures = (
+        Figure(
+            "by_range",
+            (
+                "mission_time",
+                "time_95",
+                "time_99",
+                "distance_per_agent_mean",
+                "work_per_agent_gini",
+                "distance_per_agent_gini",
+            ),
+        ),
+    )
     summary_keys = (
         "mission_time",
         "all_tasks_completed",

@@ -134,7 +134,12 @@ def test_analyze_writes_tables_and_figures(sweep_dir):
     summary = pd.read_csv(sweep_dir / "out" / "scenario_summary.csv")
     row = summary[(summary["scenario"] == "fast_range-30") & (summary["metric"] == "mission_time")].iloc[0]
     assert row["n"] == 2 and row["ci95_low"] <= row["mean"] <= row["ci95_high"]
-    assert {"fig_distance_per_agent.png", "fig_work_per_agent.png"} <= names
+    # SPACE's panels, one value per run each
+    assert {
+        "fig_distance_per_agent_mean.png",
+        "fig_work_per_agent_gini.png",
+        "fig_distance_per_agent_gini.png",
+    } <= names
     # the same sweep again rewrites the table: what analyze made of the old one goes with it
     run_sweep(
         load_sweep(sweep_dir / "sweep.yaml", extra=["run.duration=150"]), sweep_dir / "out", jobs=2, progress=False
@@ -142,8 +147,8 @@ def test_analyze_writes_tables_and_figures(sweep_dir):
     assert not list((sweep_dir / "out").glob("fig_*")) and not list((sweep_dir / "out").glob("scenario_summary.*"))
 
 
-def test_per_agent_panels_pool_every_agent_of_every_run(sweep_dir):
-    """SPACE's distance and workload panels: one value per agent, not one mean per run."""
+def test_per_agent_values_pool_every_agent_of_every_run(sweep_dir):
+    """A per-agent metric named as such (``work_per_agent``) draws one value per agent of every run."""
     from swarmbed.experiments.views.analyze import _values, load
 
     df = load([sweep_dir / "out"])
@@ -151,6 +156,34 @@ def test_per_agent_panels_pool_every_agent_of_every_run(sweep_dir):
         work = _values(rows, "work_per_agent")
         assert len(work) == rows["agents"].sum() and len(rows) == 2
         assert work.sum() == pytest.approx(rows["work_total"].sum())
+
+
+def test_gini_matches_the_mean_absolute_difference_definition(sweep_dir):
+    """Gini = sum_i sum_j |x_i - x_j| / (2 n^2 mean), checked on random values and on every run's
+    work per agent in the sweep's table."""
+    import json
+
+    import numpy as np
+
+    from swarmbed.experiments.campaigns.sweep import gini
+
+    def reference(x):
+        x = np.asarray(x, dtype=float)
+        return np.abs(x[:, None] - x[None, :]).sum() / (2 * len(x) ** 2 * x.mean())
+
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 7, 50):
+        x = rng.exponential(size=n)
+        assert gini(list(x)) == pytest.approx(reference(x))
+    assert gini([3.0, 3.0, 3.0]) == pytest.approx(0.0) and gini([0.0, 0.0, 4.0]) == pytest.approx(2 / 3)
+    assert gini([1.0, -1.0]) is None and gini([0.0, 0.0]) is None
+    table = pd.read_csv(sweep_dir / "out" / "sweep.csv")
+    ok = table[table["status"] == "ok"]
+    for _, row in ok.iterrows():
+        summary = json.loads(
+            (sweep_dir / "out" / row["scenario"] / f"run_{row['run']:03d}" / "summary.json").read_text()
+        )
+        assert row["work_per_agent_gini"] == pytest.approx(reference(summary["work_per_agent"]))
 
 
 def test_plain_experiment_sweeps_with_a_command_line_grid():

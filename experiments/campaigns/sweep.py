@@ -245,8 +245,20 @@ def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S) -> Outcome
         return outcome
 
 
+def gini(values: Sequence[float]) -> float | None:
+    """The Gini coefficient of non-negative values (0: all equal; (n - 1) / n: one holds all), as
+    SPACE's Monte Carlo analysis reads per-agent work and distance, one value per run; None for
+    negative values or a zero sum. Computed from the sorted values: 2 sum(i x_(i)) / (n sum x) - (n + 1) / n."""
+    x = np.sort(np.asarray(values, dtype=float))
+    if len(x) == 0 or x[0] < 0 or x.sum() <= 0:
+        return None
+    n = len(x)
+    return float(2.0 * np.dot(np.arange(1, n + 1), x) / (n * x.sum()) - (n + 1) / n)
+
+
 def flatten(summary: dict, prefix: str = "") -> dict[str, Any]:
-    """Scalar metrics of a summary, nested keys dotted; per-agent lists become their mean."""
+    """Scalar metrics of a summary, nested keys dotted; per-agent lists become their mean and their
+    Gini coefficient (one value per run each, as SPACE plots them)."""
     row: dict[str, Any] = {}
     for key, value in summary.items():
         name = f"{prefix}{key}"
@@ -257,6 +269,7 @@ def flatten(summary: dict, prefix: str = "") -> dict[str, Any]:
         elif isinstance(value, list):
             if value and all(isinstance(v, (int, float)) for v in value):
                 row[f"{name}_mean"] = float(np.mean(value))
+                row[f"{name}_gini"] = gini(value)
         else:
             row[name] = value
     return row

@@ -6,9 +6,10 @@
   (``Scenario.control_allocator``, cbba-etc for search and rescue) or ``--control`` does: one-way
   ANOVA across allocators, Dunnett's test and Cohen's d against the control.
 - Figures: the ones each scenario names in ``Scenario.figures`` (``swarmbed.extension.figures``).
-  MT-SR: SPACE Fig. 3 panels, one PNG per metric (mission time and time to 99 %: one value per
-  run; travel distance and workload per agent: one value per agent, pooled over the runs), boxes
-  by communication range, one group per algorithm, one panel per agent count. Search and rescue
+  MT-SR: SPACE Fig. 3 panels, one PNG per metric, one value per run as SPACE's Monte Carlo
+  analysis plots them (mission time, times to 95 % and 99 % of tasks, mean travel distance per
+  agent, and the Gini coefficients of work and distance per agent), boxes by communication range,
+  one group per algorithm, one panel per agent count. Search and rescue
   (CBBA-ETC Section 5.4): mean rescued and expired per trial with 95 % CI bars, boxplots per
   trial, rescued against messages sent, and over several sweeps (the victim-count or robot-count
   series) messages and rescues against victim count and robot count. A scenario that names none

@@ -1,0 +1,117 @@
+"""Tables of SPACE Fig. 3 sweeps (MT-SR: agents x range x allocator), as docs/reproduction.md prints them.
+
+    python docs/scripts/fig3.py runs/space_fig3_code
+    python docs/scripts/fig3.py runs/space_fig3_code --agents 50 --orderings
+
+Per cell (agent count, range) and allocator: runs, and for mission time, time to 95 % and 99 % of
+the tasks, the mean travel distance per agent and the Gini coefficient of work per agent, the mean
+over runs with its 95 % t-interval (SPACE plots one value per run; so do these tables). Runs that
+never finished count at the run's cap for mission time and are flagged. ``--orderings``: for
+every cell, each pair of allocators compared over the seeds both ran (run i of every scenario has
+the same seed): the mean paired difference, its 95 % t-interval and the paired t-test's p, so
+that a reader sees which orderings the runs settle and which they do not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+from pathlib import Path
+
+import pandas as pd
+from scipy import stats
+
+from swarmbed.experiments.folders import read_table
+from swarmbed.experiments.views.analyze import ci95
+
+ALLOCATORS = ["cbba", "grape", "fcg"]
+METRICS = {
+    "mission_time": "mission time, s",
+    "time_95": "time to 95 % of tasks, s",
+    "time_99": "time to 99 % of tasks, s",
+    "distance_per_agent_mean": "distance per agent",
+    "work_per_agent_gini": "Gini coefficient of work per agent",
+}
+
+
+def runs(sweep: Path) -> pd.DataFrame:
+    df = read_table(sweep)
+    df = df[df["status"] == "ok"].dropna(subset=["agents.count", "network.range"]).copy()
+    df["allocator"] = df["allocator"].astype(str)
+    return df
+
+
+def _ci(values: pd.Series) -> str:
+    values = values.dropna()
+    fmt = ",.0f" if values.abs().max() >= 10 else ".3f"
+    if len(values) == 0:
+        return "-"
+    if len(values) == 1:
+        return f"{values.iloc[0]:{fmt}}"
+    low, high = ci95(values)
+    return f"{values.mean():{fmt}} ({low:{fmt}}-{high:{fmt}})"
+
+
+def cells(df: pd.DataFrame) -> list[tuple[int, float]]:
+    return sorted({(int(a), float(r)) for a, r in zip(df["agents.count"], df["network.range"])})
+
+
+def tables(df: pd.DataFrame) -> None:
+    allocators = [a for a in ALLOCATORS if a in set(df["allocator"])]
+    for metric, label in METRICS.items():
+        if metric not in df.columns:
+            continue
+        print(f"\n{label} (mean of the runs, 95 % t-interval in brackets; runs per cell in the last column):\n")
+        print("| agents | range | " + " | ".join(a.upper() for a in allocators) + " | runs |")
+        print("| ---: | ---: | " + " | ".join("---:" for _ in allocators) + " | --- |")
+        for agents, rng in cells(df):
+            cell = df[(df["agents.count"] == agents) & (df["network.range"] == rng)]
+            values, counts = [], []
+            for a in allocators:
+                d = cell[cell["allocator"] == a]
+                unfinished = int((~d["all_tasks_completed"].astype(bool)).sum())
+                values.append(_ci(d[metric]) + (f" ({unfinished} unfinished)" if unfinished else ""))
+                counts.append(str(len(d)))
+            print(f"| {agents} | {rng:.0f} | " + " | ".join(values) + f" | {'/'.join(counts)} |")
+
+
+def orderings(df: pd.DataFrame, metric: str) -> None:
+    allocators = [a for a in ALLOCATORS if a in set(df["allocator"])]
+    print(f"\n{METRICS[metric]}: paired by seed, first minus second (mean, 95 % t-interval, p):\n")
+    print("| agents | range | pair | seeds | difference (95 % CI) | p |")
+    print("| ---: | ---: | --- | ---: | --- | ---: |")
+    for agents, rng in cells(df):
+        cell = df[(df["agents.count"] == agents) & (df["network.range"] == rng)]
+        by = {a: cell[cell["allocator"] == a].set_index("seed")[metric] for a in allocators}
+        for first, second in itertools.combinations(allocators, 2):
+            both = by[first].index.intersection(by[second].index)
+            diff = (by[first].loc[both] - by[second].loc[both]).dropna()
+            if len(diff) < 2:
+                continue
+            low, high = ci95(diff)
+            p = stats.ttest_1samp(diff, 0.0).pvalue if diff.std() > 0 else float("nan")
+            print(
+                f"| {agents} | {rng:.0f} | {first.upper()} - {second.upper()} | {len(diff)} "
+                f"| {diff.mean():+,.0f} ({low:+,.0f} to {high:+,.0f}) | {p:.3f} |"
+            )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("sweep", type=Path)
+    parser.add_argument("--agents", type=int, nargs="*", help="only these agent counts")
+    parser.add_argument("--orderings", action="store_true", help="paired comparisons between allocators")
+    args = parser.parse_args()
+    df = runs(args.sweep)
+    if args.agents:
+        df = df[df["agents.count"].isin(args.agents)]
+    tables(df)
+    if args.orderings:
+        for metric in ("mission_time", "time_95", "time_99"):
+            if metric in df.columns:
+                orderings(df, metric)
+    print(f"\n{len(df)} runs, {df['seed'].nunique()} seeds")
+
+
+if __name__ == "__main__":
+    main()
