@@ -1,6 +1,7 @@
 """Sweeps (parallel, resumable, failures recorded) and their analysis, on small real runs."""
 
 import textwrap
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -197,6 +198,20 @@ def test_space_fig3_has_27_scenarios():
     assert len(sweep.scenarios) == 27 and sweep.runs == 1
     with pytest.raises(cfg.ConfigError):
         load_sweep(QUICKSTART, grid=["agents.count"])
+
+
+def test_the_50_agent_sweep_plans_the_figure_sweeps_50_agent_runs(tmp_path):
+    """space_fig3_code_a50.yaml adds runs to space_fig3_code.yaml's a50 cells: same folders, same
+    seeds, same settings, so the two can share one output folder."""
+    from swarmbed.experiments.campaigns.sweep import plan
+
+    def key(spec):
+        return (Path(spec.out_dir).relative_to(tmp_path), spec.seed, spec.base, spec.scenario.overrides, spec.extra)
+
+    whole = plan(load_sweep(QUICKSTART.parent / "space_fig3_code.yaml", runs=3), tmp_path)
+    fifty = plan(load_sweep(QUICKSTART.parent / "space_fig3_code_a50.yaml", runs=3), tmp_path)
+    assert len(fifty) == 9 * 3
+    assert sorted(map(key, fifty)) == sorted(key(s) for s in whole if s.scenario.name.startswith("a50_"))
 
 
 def _runs(out):
