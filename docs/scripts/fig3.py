@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import json
 from pathlib import Path
 
 import pandas as pd
 from scipy import stats
 
-from swarmbed.experiments.folders import read_table
+from swarmbed.experiments.campaigns.sweep import collect, read_spec
 from swarmbed.experiments.views.analyze import ci95
 
 ALLOCATORS = ["cbba", "grape", "fcg"]
@@ -34,10 +35,17 @@ METRICS = {
 }
 
 
+def _allocator(value: object) -> str:
+    text = str(value)
+    return str(json.loads(text)["name"]) if text.startswith("{") else text
+
+
 def runs(sweep: Path) -> pd.DataFrame:
-    df = read_table(sweep)
+    """Every finished run of the sweep, read from the runs' own summaries (a sweep still under way
+    has no table yet; a finished one's table may predate a column, such as the Gini ones)."""
+    df = collect(read_spec(sweep), sweep)
     df = df[df["status"] == "ok"].dropna(subset=["agents.count", "network.range"]).copy()
-    df["allocator"] = df["allocator"].astype(str)
+    df["allocator"] = (df["allocator.name"] if "allocator.name" in df else df["allocator"]).map(_allocator)
     return df
 
 
