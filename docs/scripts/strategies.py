@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import yaml
 from scipy import stats
 
 from swarmbed.experiments.folders import read_table
@@ -30,6 +31,9 @@ ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
 def runs(sweep: Path) -> pd.DataFrame:
     df = read_table(sweep)
     df = df[df["status"] == "ok"].copy()
+    if "allocator.name" not in df:  # a plain experiment swept with --set: the runs' configs say
+        dirs = [sweep / str(sc) / f"run_{int(r):03d}" for sc, r in zip(df["scenario"], df["run"])]
+        df["allocator.name"] = [yaml.safe_load((d / "config.yaml").read_text())["allocator"]["name"] for d in dirs]
     df["strategy"] = df["allocator.name"].astype(str)
     return df
 
