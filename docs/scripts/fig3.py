@@ -84,6 +84,18 @@ def tables(df: pd.DataFrame) -> None:
             print(f"| {agents} | {rng:.0f} | " + " | ".join(values) + f" | {'/'.join(counts)} |")
 
 
+def _paired(first: pd.Series, second: pd.Series) -> str | None:
+    """``| seeds | mean difference (95 % CI) | p |`` of first minus second over the seeds both ran;
+    None with fewer than two."""
+    both = first.index.intersection(second.index)
+    diff = (first.loc[both] - second.loc[both]).dropna()
+    if len(diff) < 2:
+        return None
+    low, high = ci95(diff)
+    p = stats.ttest_1samp(diff, 0.0).pvalue if diff.std() > 0 else float("nan")
+    return f"| {len(diff)} | {diff.mean():+,.0f} ({low:+,.0f} to {high:+,.0f}) | {p:.3f} |"
+
+
 def orderings(df: pd.DataFrame, metric: str) -> None:
     allocators = [a for a in ALLOCATORS if a in set(df["allocator"])]
     print(f"\n{METRICS[metric]}: paired by seed, first minus second (mean, 95 % t-interval, p):\n")
@@ -93,16 +105,9 @@ def orderings(df: pd.DataFrame, metric: str) -> None:
         cell = df[(df["agents.count"] == agents) & (df["network.range"] == rng)]
         by = {a: cell[cell["allocator"] == a].set_index("seed")[metric] for a in allocators}
         for first, second in itertools.combinations(allocators, 2):
-            both = by[first].index.intersection(by[second].index)
-            diff = (by[first].loc[both] - by[second].loc[both]).dropna()
-            if len(diff) < 2:
-                continue
-            low, high = ci95(diff)
-            p = stats.ttest_1samp(diff, 0.0).pvalue if diff.std() > 0 else float("nan")
-            print(
-                f"| {agents} | {rng:.0f} | {first.upper()} - {second.upper()} | {len(diff)} "
-                f"| {diff.mean():+,.0f} ({low:+,.0f} to {high:+,.0f}) | {p:.3f} |"
-            )
+            row = _paired(by[first], by[second])
+            if row:
+                print(f"| {agents} | {rng:.0f} | {first.upper()} - {second.upper()} {row}")
 
 
 def range_effect(df: pd.DataFrame, metric: str) -> None:
@@ -120,16 +125,9 @@ def range_effect(df: pd.DataFrame, metric: str) -> None:
                 r: sub[(sub["allocator"] == a) & (sub["network.range"] == r)].set_index("seed")[metric] for r in ranges
             }
             for r in ranges[1:]:
-                both = by[r].index.intersection(by[ranges[0]].index)
-                diff = (by[r].loc[both] - by[ranges[0]].loc[both]).dropna()
-                if len(diff) < 2:
-                    continue
-                low, high = ci95(diff)
-                p = stats.ttest_1samp(diff, 0.0).pvalue if diff.std() > 0 else float("nan")
-                print(
-                    f"| {agents} | {a.upper()} | {r:.0f} - {ranges[0]:.0f} | {len(diff)} "
-                    f"| {diff.mean():+,.0f} ({low:+,.0f} to {high:+,.0f}) | {p:.3f} |"
-                )
+                row = _paired(by[r], by[ranges[0]])
+                if row:
+                    print(f"| {agents} | {a.upper()} | {r:.0f} - {ranges[0]:.0f} {row}")
 
 
 def main() -> None:
