@@ -14,6 +14,8 @@ from typing import Any
 
 import pandas as pd
 
+from swarmbed.wire.rundir import RunFileError, member
+
 # a sweep folder
 SPEC = "sweep.json"  # the sweep as planned: name, base, seed, runs, scenarios and their overrides
 TABLE = "sweep.csv"
@@ -32,12 +34,37 @@ CHAOS = "chaos.csv"
 DERIVED = ("fig_*", "scenario_summary.*", "statistics.*", "report.html")
 
 
+#: the columns every sweep table has; a file without them is not one
+TABLE_COLUMNS = ("scenario", "run", "status")
+
+
 def read_table(sweep_dir: Path) -> pd.DataFrame:
-    """A sweep's table: ``sweep.parquet`` where it is at least as new as ``sweep.csv``, else the CSV."""
+    """A sweep's table: ``sweep.parquet`` where it is at least as new as ``sweep.csv``, else the CSV;
+    the other one where the first cannot be read (torn, a link out of the folder, another shape).
+    A RunFileError naming both files when neither can."""
     parquet, csv = sweep_dir / PARQUET, sweep_dir / TABLE
-    if parquet.exists() and (not csv.exists() or parquet.stat().st_mtime_ns >= csv.stat().st_mtime_ns):
-        return pd.read_parquet(parquet)
-    return pd.read_csv(csv)
+    order = [PARQUET, TABLE]
+    if not parquet.exists() or (csv.exists() and parquet.stat().st_mtime_ns < csv.stat().st_mtime_ns):
+        order.reverse()
+    problems = []
+    for name in order:
+        if not (sweep_dir / name).exists():
+            continue
+        try:
+            path = member(sweep_dir, name)
+            table = pd.read_parquet(path) if name == PARQUET else pd.read_csv(path)
+        except RunFileError as exc:
+            problems.append(str(exc))
+            continue
+        except Exception as exc:  # pyarrow and pandas raise many kinds for a torn or foreign file
+            problems.append(f"{sweep_dir / name}: cannot be read as a table ({type(exc).__name__})")
+            continue
+        missing = [c for c in TABLE_COLUMNS if c not in table.columns]
+        if missing:
+            problems.append(f"{sweep_dir / name}: not a sweep table (no column {missing[0]!r})")
+            continue
+        return table
+    raise RunFileError("; ".join(problems) or f"{sweep_dir}: no {TABLE} or {PARQUET}")
 
 
 def dotted(data: Any, prefix: str = "") -> dict[str, Any]:

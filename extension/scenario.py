@@ -120,10 +120,10 @@ class Scenario(abc.ABC):
     Params: ClassVar[type[BaseModel]]
     #: the typed observation its world sends each agent every tick
     Observation: ClassVar[type[BaseObservation]] = BaseObservation
-    #: behavior-tree nodes its agents' trees may use, and the tree used when the allocator has none
     #: the actions its agents may send (:mod:`swarmbed.extension.actions`); the coordinator hands
     #: the world ``["invalid"]`` for any other
     actions: ClassVar[ActionSpec] = MOVE_ACTIONS
+    #: behavior-tree nodes its agents' trees may use, and the tree used when the allocator has none
     bt_nodes: ClassVar[tuple[type, ...]] = ()
     #: (None: SPACE's default tree, ``swarmbed.agent_runtime.nodes.SPACE_TREE``)
     default_tree: ClassVar[Path | None] = None
@@ -134,6 +134,10 @@ class Scenario(abc.ABC):
     benefit_metric: ClassVar[str | None] = None
     #: every key ``World.summary()`` returns (checked by the scenario checker)
     summary_keys: ClassVar[tuple[str, ...]] = ()
+    #: metrics that a run stopped by ``run.duration`` reports as the duration rather than as measured:
+    #: metric -> the summary key that is true where the run got there (``swarmbed analyze`` counts
+    #: such runs per cell and marks the metric's mean as a lower bound)
+    capped_by: ClassVar[Mapping[str, str]] = {}
     #: what ``swarmbed analyze`` tabulates (per sweep scenario: n, mean, CI) and labels its axes
     #: with: summary metric -> label; empty: the outcome metrics under their own names
     metric_labels: ClassVar[Mapping[str, str]] = {}

@@ -141,6 +141,25 @@ def resolve_scenario(kind: str) -> type[Scenario]:
         raise PluginError(f"scenario {kind!r}: {exc}") from None
 
 
+def registered_scenario(kind: object, trusted: bool = False) -> type[Scenario]:
+    """The scenario class registered as ``kind`` (here or by an entry point), for readers of results:
+    a run or sweep folder is data that anyone may have crafted, so the name it holds is looked up among
+    the registered names only, never imported as a target; for any other name (a user's own
+    ``module:Class``, a name registered elsewhere, garbage) the generic :class:`Scenario`, whose views
+    still table every run. ``trusted``: the user vouches for the folder (``--trust-plugins``): a
+    target it names is imported too."""
+    _read_entry_points()
+    target = _SCENARIOS.get(kind) if isinstance(kind, str) else None
+    if target is None and trusted and isinstance(kind, str) and is_target(kind):
+        target = kind
+    if target is None:
+        return Scenario
+    try:
+        return load_target(target, Scenario)
+    except TargetError:
+        return Scenario
+
+
 def _validate(model: type[BaseModel], params: Mapping[str, Any], section: str) -> BaseModel:
     try:
         return model.model_validate(dict(params))

@@ -107,6 +107,7 @@ class MTSR(Scenario):
             ),
         ),
     )
+    capped_by = {"mission_time": "all_tasks_completed"}
     summary_keys = (
         "mission_time",
         "all_tasks_completed",

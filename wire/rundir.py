@@ -8,6 +8,12 @@ written is ``<name>.part``; one of a run that did not complete is ``partial_<nam
 
 from __future__ import annotations
 
+import json
+import math
+import stat
+from pathlib import Path
+from typing import Any
+
 CONFIG = "config.yaml"  # the resolved experiment
 PROVENANCE = "provenance.json"  # which code made the run
 SUMMARY = "summary.json"  # written last: its presence means the run completed
@@ -62,3 +68,66 @@ REPRODUCIBLE = (
     RECEIVER_LEDGER,
     RESTARTS,
 )
+
+
+# -- reading a folder someone else may have made ---------------------------------------------------
+#: the most a reader takes from one JSON or YAML file of a run (a summary is a few kB)
+MAX_DOCUMENT_BYTES = 16 << 20
+
+
+class RunFileError(ValueError):
+    """A file of a run or sweep folder that a reader refuses; the message names it and why."""
+
+
+def member(folder: Path, name: str) -> Path:
+    """``folder/name``, refused unless it is a regular file that stays inside ``folder``: a results
+    folder is data anyone may have crafted, and a link in it must not make a reader open
+    ``/etc/shadow``, a FIFO that never ends, or ``/dev/zero``."""
+    path = Path(folder) / name
+    try:
+        real, inside = path.resolve(strict=True), Path(folder).resolve(strict=True)
+        st = real.stat()
+    except OSError as exc:
+        raise RunFileError(f"{path}: {exc.strerror or exc}") from None
+    except RuntimeError:  # a loop of links
+        raise RunFileError(f"{path}: a loop of symbolic links") from None
+    if real != inside and inside not in real.parents:
+        raise RunFileError(f"{path}: a link to {real}, outside {folder}: not read")
+    if not stat.S_ISREG(st.st_mode):
+        raise RunFileError(f"{path}: not a regular file")
+    return real
+
+
+def read_member(folder: Path, name: str, max_bytes: int = MAX_DOCUMENT_BYTES) -> bytes:
+    """The bytes of ``folder/name`` (see :func:`member`), refused beyond ``max_bytes``."""
+    path = member(folder, name)
+    if path.stat().st_size > max_bytes:
+        raise RunFileError(f"{Path(folder) / name}: {path.stat().st_size:,} bytes, more than {max_bytes:,} read here")
+    with open(path, "rb") as f:
+        data = f.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise RunFileError(f"{Path(folder) / name}: grew past {max_bytes:,} bytes while read")
+    return data
+
+
+def read_json_member(folder: Path, name: str, max_bytes: int = MAX_DOCUMENT_BYTES) -> dict[str, Any]:
+    """The JSON object in ``folder/name``; a RunFileError names the file for anything else."""
+    data = read_member(folder, name, max_bytes)
+    try:
+        value = json.loads(data)
+    except (ValueError, RecursionError) as exc:
+        raise RunFileError(f"{Path(folder) / name}: not JSON ({str(exc)[:80]})") from None
+    if not isinstance(value, dict):
+        raise RunFileError(f"{Path(folder) / name}: not a JSON object")
+    return value
+
+
+def check_finite(value: object, what: str) -> float:
+    """``value`` as a finite float, or a RunFileError naming ``what``."""
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise RunFileError(f"{what}: {str(value)[:40]!r} is not a number") from None
+    if not math.isfinite(number):
+        raise RunFileError(f"{what}: {number} is not finite")
+    return number

@@ -9,13 +9,13 @@ summary its readers cannot read; readers validate what they load with :func:`rea
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from swarmbed.wire.errors import WireError
+from swarmbed.wire.rundir import RunFileError, read_json_member
 
 
 class KindTotals(BaseModel):
@@ -83,10 +83,12 @@ def check_summary(summary: dict[str, Any]) -> None:
 
 
 def read_summary(path: Path) -> dict[str, Any]:
-    """A run's ``summary.json`` as a dict, checked against :class:`RunSummary`."""
-    summary = json.loads(path.read_text())
-    if not isinstance(summary, dict):
-        raise WireError(f"{path}: not a JSON object")
+    """A run's ``summary.json`` as a dict, checked against :class:`RunSummary`; a WireError naming the
+    file for anything else (a link out of its folder, a huge or torn file, another shape)."""
+    try:
+        summary = read_json_member(path.parent, path.name)
+    except RunFileError as exc:
+        raise WireError(str(exc)) from None
     try:
         check_summary(summary)
     except WireError as exc:

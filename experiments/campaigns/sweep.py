@@ -57,7 +57,10 @@ from swarmbed.experiments.folders import ATTEMPTS, DERIVED, ERROR, PARQUET, SPEC
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
 from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml, read_yaml
+from swarmbed.wire.errors import WireError
+from swarmbed.wire.rundir import RunFileError, read_json_member, read_member
 from swarmbed.wire.schema import SAFE_NAME
+from swarmbed.wire.summary import read_summary
 
 
 class ScenarioEntry(BaseModel):
@@ -123,8 +126,13 @@ def _parse_grid(text: str) -> tuple[str, list[Any]]:
     key, sep, raw = text.partition("=")
     if not sep:
         raise cfg.ConfigError(f"--grid {text!r}: expected dotted.key=v1,v2,...")
+    parts = raw.split(",")
+    if not key.strip() or any(not v.strip() for v in parts):
+        raise cfg.ConfigError(f"--grid {text!r}: a key and values between commas, none of them empty")
+    if len(set(map(str.strip, parts))) < len(parts):
+        raise cfg.ConfigError(f"--grid {text!r}: a value is given twice")
     try:
-        return key.strip(), [parse_yaml(v, f"--grid {text}") for v in raw.split(",")]
+        return key.strip(), [parse_yaml(v, f"--grid {text}") for v in parts]
     except YamlFileError as exc:
         raise cfg.ConfigError(str(exc)) from None
 
@@ -275,6 +283,9 @@ def flatten(summary: dict, prefix: str = "") -> dict[str, Any]:
     return row
 
 
+CORRUPT = "unreadable"  # in sweep.csv: a completed run whose files cannot be read (named on stderr)
+
+
 def run_status(run_dir: Path, stale_after: float = claims.STALE_AFTER_S) -> str:
     """``ok`` (summary.json), ``running`` (a live claim), ``failed`` (error.txt), ``interrupted``
     (a claim whose holder is gone: the next sweep command redoes it) or ``missing``."""
@@ -298,6 +309,20 @@ def _last_attempt(run_dir: Path) -> dict[str, Any]:
     return last if isinstance(last, dict) else {}
 
 
+def _completed_row(run_dir: Path) -> dict[str, Any]:
+    """A completed run's summary, transport totals and provenance, flattened into one table row;
+    a RunFileError or WireError names the file that cannot be read."""
+    row = flatten(read_summary(run_dir / results.SUMMARY))
+    if (run_dir / results.TRANSPORT).exists():  # measured, not reproducible: in its own columns
+        totals = read_json_member(run_dir, results.TRANSPORT).get("totals")
+        if not isinstance(totals, dict):
+            raise RunFileError(f"{run_dir / results.TRANSPORT}: no totals object")
+        row.update(flatten(totals, "wire."))
+    if (run_dir / PROVENANCE).exists():  # which code made it (runs of older versions have none)
+        row.update(flatten(read_json_member(run_dir, PROVENANCE), "provenance."))
+    return row
+
+
 def collect(sweep: Sweep, out: Path, stale_after: float = claims.STALE_AFTER_S) -> pd.DataFrame:
     rows = []
     for spec in plan(sweep, out):
@@ -306,15 +331,17 @@ def collect(sweep: Sweep, out: Path, stale_after: float = claims.STALE_AFTER_S) 
         row.update({k: json.dumps(v) if isinstance(v, (dict, list)) else v for k, v in spec.scenario.overrides})
         row["status"] = run_status(run_dir, stale_after)
         if row["status"] == "ok":
-            row.update(flatten(json.loads((run_dir / results.SUMMARY).read_text())))
-            transport = run_dir / results.TRANSPORT  # measured, not reproducible: in its own columns
-            if transport.exists():
-                row.update(flatten(json.loads(transport.read_text())["totals"], "wire."))
-            made_by = run_dir / PROVENANCE  # which code made it (runs of older versions have none)
-            if made_by.exists():
-                row.update(flatten(json.loads(made_by.read_text()), "provenance."))
+            try:
+                row.update(_completed_row(run_dir))
+            except (RunFileError, WireError) as exc:  # one bad file: that run is named, the others tabled
+                print(f"sweep: run {run_dir} left out of the table: {exc}", file=sys.stderr)
+                row["status"], row["error"] = CORRUPT, str(exc)
         elif row["status"] == "failed":
-            lines = [ln for ln in (run_dir / ERROR).read_text().split("\n\n", 1)[0].splitlines() if ln.strip()]
+            try:
+                text = read_member(run_dir, ERROR, 1 << 20).decode(errors="replace")
+            except RunFileError as exc:
+                text = str(exc)
+            lines = [ln for ln in text.split("\n\n", 1)[0].splitlines() if ln.strip()]
             row["error"] = " | ".join(dict.fromkeys([lines[0], lines[-1]])) if lines else "unknown error"
         rows.append(row)
     return pd.DataFrame(rows)
@@ -372,21 +399,29 @@ def write_spec(sweep: Sweep, out: Path) -> None:
     )  # the keys above get sorted
 
 
+def _folder_name(name: object) -> str:
+    """A scenario's name from a sweep.json (a folder under the sweep's): a ValueError for anything
+    that is not a plain name (``../..`` would lead a reader out of the sweep)."""
+    if not (isinstance(name, str) and re.fullmatch(SAFE_NAME, name)):
+        raise ValueError(f"scenario name {str(name)[:40]!r} is not a folder name")
+    return name
+
+
 def read_spec(out: Path) -> Sweep:
     """The sweep a directory was made by, from its ``sweep.json``."""
     try:
-        data = json.loads((out / SPEC).read_text())
+        data = read_json_member(out, SPEC)
         order = data.get("order") or list(data["scenarios"])
         return Sweep(
             data["name"],
             Path(data["base"]),
             int(data["seed"]),
             int(data["runs"]),
-            [SweepScenario(name, tuple(data["scenarios"][name].items())) for name in order],
+            [SweepScenario(_folder_name(name), tuple(data["scenarios"][name].items())) for name in order],
             list(data["factors"]),
             list(data["extra"]),
         )
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RunFileError) as exc:
         raise cfg.ConfigError(f"{out}: not a sweep directory (no readable {SPEC}: {exc})") from None
 
 

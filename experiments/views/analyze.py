@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -42,7 +43,9 @@ from swarmbed.experiments.views.colours import STRATEGY_ORDER, strategy_color, s
 from swarmbed.experiments.views.pooling import mixed_configurations, mixed_versions  # noqa: E402
 from swarmbed.experiments.views.stats import compare  # noqa: E402
 from swarmbed.extension import Figure, Scenario  # noqa: E402
-from swarmbed.plugins.registry import PluginError, resolve_scenario  # noqa: E402
+from swarmbed.plugins.registry import registered_scenario  # noqa: E402
+from swarmbed.wire.rundir import SUMMARY, RunFileError, read_json_member  # noqa: E402
+from swarmbed.wire.summary import read_summary  # noqa: E402
 
 AGENTS, RANGE, ALLOCATOR = "agents.count", "network.range", "allocator"
 #: what every scenario's runs send, tabulated beside the scenario's own metrics
@@ -57,7 +60,7 @@ class AnalyzeError(ValueError):
     pass
 
 
-def load(sweep_dirs: list[Path], mixed_versions_ok: bool = False) -> pd.DataFrame:
+def load(sweep_dirs: list[Path], mixed_versions_ok: bool = False, trusted: bool = False) -> pd.DataFrame:
     """Completed runs of the sweeps, one row each; ``attrs["factors"]``: the keys they vary."""
     frames: list[pd.DataFrame] = []
     factors: list[str] = []
@@ -70,17 +73,22 @@ def load(sweep_dirs: list[Path], mixed_versions_ok: bool = False) -> pd.DataFram
                 f"{sweep_dir}: no {TABLE} yet (a sweep writes it when it stops); run the same "
                 f"`swarmbed sweep` again: it skips the runs that completed and writes the table"
             )
-        df = read_table(sweep_dir)
+        try:
+            df = read_table(sweep_dir)
+            meta = read_json_member(sweep_dir, SPEC)
+        except RunFileError as exc:
+            raise AnalyzeError(str(exc)) from None
+        if not isinstance(meta.get("name"), str) or not isinstance(meta.get("factors", []), list):
+            raise AnalyzeError(f"{spec}: not a sweep's plan (no name, or factors that are not a list)")
         mixed = mixed_configurations(sweep_dir, df)
         if mixed:
             raise AnalyzeError(
                 f"{sweep_dir}: {mixed}; a scenario's runs may differ only in their seed "
                 "(redo them with swarmbed sweep ... --redo-mismatched)"
             )
-        meta = json.loads(spec.read_text())
         df["sweep"] = meta["name"]
         df["run_dir"] = [str(sweep_dir / str(sc) / f"run_{int(r):03d}") for sc, r in zip(df["scenario"], df["run"])]
-        factors += [f for f in meta.get("factors", []) if f not in factors]
+        factors += [f for f in meta.get("factors", []) if isinstance(f, str) and f not in factors]
         frames.append(df)
     df = pd.concat(frames, ignore_index=True)
     versions = mixed_versions(df)
@@ -95,7 +103,7 @@ def load(sweep_dirs: list[Path], mixed_versions_ok: bool = False) -> pd.DataFram
     df[ALLOCATOR] = df["allocator"].map(_allocator_label)  # every summary names its allocator
     kinds = df["scenario_kind"].dropna().unique() if "scenario_kind" in df else []
     _resolve_keys(
-        df, tuple(k for kind in kinds for f in figures_of(scenario_class(kind)) for k in f.over if k != AGENTS)
+        df, tuple(k for kind in kinds for f in figures_of(scenario_class(kind, trusted)) for k in f.over if k != AGENTS)
     )
     if len(sweep_dirs) > 1:
         df["scenario"] = df["sweep"] + "/" + df["scenario"]
@@ -157,14 +165,20 @@ def ci95(values: pd.Series) -> tuple[float, float]:
     return float(v.mean() - half), float(v.mean() + half)
 
 
-def scenario_summary(df: pd.DataFrame, metrics: dict) -> pd.DataFrame:
+def scenario_summary(df: pd.DataFrame, metrics: dict, capped_by: Mapping[str, str] | None = None) -> pd.DataFrame:
+    """Per scenario and metric: n, mean, sd, median, 95 % CI. ``capped_by``: metrics a run stopped by
+    its duration reports as the duration (metric -> the summary flag true where it got there); for
+    those, ``capped`` counts the runs that did not, and ``note`` says the mean is then a lower bound."""
     rows = []
+    capped_by = capped_by or {}
     for scenario, group in df.groupby("scenario", sort=True):
         for metric in metrics:
             if metric not in group:
                 continue
             v = group[metric].dropna().astype(float)
             lo, hi = ci95(v)
+            flag = capped_by.get(metric)
+            capped = int((group[flag].astype(str).str.lower() != "true").sum()) if flag in group else 0
             rows.append(
                 {
                     "scenario": scenario,
@@ -175,6 +189,8 @@ def scenario_summary(df: pd.DataFrame, metrics: dict) -> pd.DataFrame:
                     "median": v.median(),
                     "ci95_low": lo,
                     "ci95_high": hi,
+                    "capped": capped,
+                    "note": f"{capped} of {len(group)} runs stopped at run.duration: a lower bound" if capped else "",
                 }
             )
     return pd.DataFrame(rows)
@@ -191,7 +207,11 @@ def to_markdown(table: pd.DataFrame) -> str:
 
 def _allocator_label(value) -> str:
     if isinstance(value, str) and value.startswith("{"):
-        return json.loads(value).get("name", value)
+        try:
+            named = json.loads(value)
+        except ValueError:
+            return value
+        return str(named.get("name", value)) if isinstance(named, dict) else value
     return str(value)
 
 
@@ -270,7 +290,7 @@ def _values(rows: pd.DataFrame, metric: str) -> pd.Series:
         return rows[metric].dropna()
     values: list[float] = []
     for run_dir in rows["run_dir"]:
-        values += json.loads((Path(run_dir) / "summary.json").read_text()).get(metric, [])
+        values += read_summary(Path(run_dir) / SUMMARY).get(metric, [])
     return pd.Series(values, dtype=float)
 
 
@@ -569,13 +589,11 @@ DRAW = {
 }
 
 
-def scenario_class(kind: Any) -> type[Scenario]:
-    """The registered class of a sweep's ``scenario_kind``; the base class for one not known here
-    (its runs still get the summary table and a box per allocator of each outcome metric)."""
-    try:
-        return resolve_scenario(str(kind))
-    except PluginError:
-        return Scenario
+def scenario_class(kind: Any, trusted: bool = False) -> type[Scenario]:
+    """The registered class of a sweep's ``scenario_kind``; the base class for one not registered here
+    (its runs still get the summary table and a box per allocator of each outcome metric). A name read
+    from a results folder is never imported: see :func:`registered_scenario`."""
+    return registered_scenario(kind, trusted)
 
 
 def figures_of(cls: type[Scenario]) -> tuple[Figure, ...]:
@@ -583,7 +601,9 @@ def figures_of(cls: type[Scenario]) -> tuple[Figure, ...]:
     return cls.figures or (Figure("boxes", tuple(cls.outcome_metrics)),)
 
 
-def analyze(sweep_dirs: list[Path] | Path, control: str | None = None, mixed_versions_ok: bool = False) -> list[Path]:
+def analyze(
+    sweep_dirs: list[Path] | Path, control: str | None = None, mixed_versions_ok: bool = False, trusted: bool = False
+) -> list[Path]:
     """Tables and figures from sweep directories, written to the first. The figures and the metric
     labels are the ones each scenario names (``Scenario.figures``, ``Scenario.metric_labels``).
     ``control``: the allocator the others are compared with (default: the scenario's
@@ -592,7 +612,7 @@ def analyze(sweep_dirs: list[Path] | Path, control: str | None = None, mixed_ver
     ``mixed_versions_ok``."""
     dirs = [sweep_dirs] if isinstance(sweep_dirs, Path) else list(sweep_dirs)
     out = dirs[0]
-    df = load(dirs, mixed_versions_ok)
+    df = load(dirs, mixed_versions_ok, trusted)
     if control is not None and control not in set(df[ALLOCATOR]):
         raise AnalyzeError(
             f"--control {control}: no such strategy in these sweeps "
@@ -608,9 +628,9 @@ def analyze(sweep_dirs: list[Path] | Path, control: str | None = None, mixed_ver
     for kind in kinds:
         rows = df[df["scenario_kind"].fillna("").astype(str) == kind].copy()
         rows.attrs = df.attrs
-        cls = scenario_class(kind)
+        cls = scenario_class(kind, trusted)
         labels = {**(cls.metric_labels or {m: m.replace("_", " ") for m in cls.outcome_metrics}), **NETWORK_LABELS}
-        summaries.append(scenario_summary(rows, labels))
+        summaries.append(scenario_summary(rows, labels, cls.capped_by))
         chosen = control or cls.control_allocator
         if chosen is not None:
             for sweep, group in rows.groupby("group", sort=True):

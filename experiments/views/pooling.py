@@ -3,6 +3,7 @@ but the seed) and, unless told otherwise, by one version of each scenario and al
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +12,7 @@ import pandas as pd
 from swarmbed.experiments.folders import dotted
 from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml
 from swarmbed.wire import rundir
+from swarmbed.wire.schema import SAFE_NAME
 
 VERSIONED = ("provenance.scenario.version", "provenance.allocator.version")
 
@@ -37,10 +39,13 @@ def mixed_configurations(sweep_dir: Path, table: pd.DataFrame) -> str | None:
     for scenario, group in ok.groupby("scenario"):
         first: tuple[str, dict[str, Any]] | None = None
         for run in group["run"]:
+            if not (isinstance(scenario, str) and re.fullmatch(SAFE_NAME, scenario)):
+                return f"a scenario named {str(scenario)[:40]!r} in the table: not a scenario folder"
             name = f"{scenario}/run_{int(run):03d}"
             try:
-                config = dotted(parse_yaml((sweep_dir / name / rundir.CONFIG).read_text(), name) or {})
-            except (OSError, YamlFileError) as exc:
+                text = rundir.read_member(sweep_dir / name, rundir.CONFIG).decode(errors="replace")
+                config = dotted(parse_yaml(text, name) or {})
+            except (rundir.RunFileError, YamlFileError) as exc:
                 return f"{name}: no readable {rundir.CONFIG} ({exc})"
             config.pop("run.seed", None)
             if first is None:

@@ -9,15 +9,14 @@ copies. (Drops by reason over time are on the report's own page.)
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
+from pydantic import ValidationError
 
 from swarmbed.experiments.views.page import Page
 from swarmbed.netem.propagation import delivery_probability
-from swarmbed.wire.rundir import RECEIVER_LEDGER
+from swarmbed.wire.rundir import RECEIVER_LEDGER, RunFileError
 from swarmbed.wire.schema import NetworkSection
 
 DISTANCE_BINS = 25
@@ -53,14 +52,18 @@ def loss_runs(copies: pd.DataFrame) -> np.ndarray:
     return np.asarray(runs, dtype=int)
 
 
-def radio_pages(page: Page, run: Path, config: dict) -> None:
-    file = run / RECEIVER_LEDGER
-    if not file.exists():
+def radio_pages(page: Page, copies: pd.DataFrame | None, config: dict) -> None:
+    """The per-copy figures of a run whose per-receiver ledger is ``copies`` (None: it has none)."""
+    if copies is None or "distance" not in copies:
         return
-    copies = pd.read_parquet(file)
-    if "distance" not in copies or not np.isfinite(copies["distance"]).any():
+    distance = pd.to_numeric(copies["distance"], errors="coerce")
+    if not np.isfinite(distance).any():
         return
-    network = NetworkSection.model_validate(config["network"])
+    try:
+        network = NetworkSection.model_validate(config.get("network"))
+    except ValidationError as exc:
+        raise RunFileError(f"config.yaml: network: {exc.errors()[0]['msg']}") from None
+    copies = copies.assign(distance=distance)
     page.heading(
         "The radio, copy by copy",
         "From the per-receiver ledger: each copy's distance, outcome and delay as the radio's models drew them.",

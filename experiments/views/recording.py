@@ -24,16 +24,29 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
+from swarmbed.experiments.views import runfiles
 from swarmbed.experiments.views.colours import DROP_COLORS
-from swarmbed.wire.btlog import EPOCH_US, read_btlog
-from swarmbed.wire.rundir import BT, CONFIG, MARKERS, RECEIVER_LEDGER, SUMMARY, TIMESERIES, TRAJECTORIES, btlog_name
+from swarmbed.wire.btlog import EPOCH_US, BtLogError, read_btlog
+from swarmbed.wire.rundir import (
+    BT,
+    MARKERS,
+    RECEIVER_LEDGER,
+    SUMMARY,
+    TIMESERIES,
+    TRAJECTORIES,
+    RunFileError,
+    btlog_name,
+    read_member,
+)
+
+MAX_BTLOG_BYTES = 1 << 30  # one agent's tree log: far beyond a day's run
 
 FRAME = "world"
 EPOCH_NS = EPOCH_US * 1000
@@ -89,7 +102,19 @@ def _headings(traj: pd.DataFrame) -> np.ndarray:
 
 def write_mcap(run: Path, out: Path) -> dict:
     """Write ``run`` as an MCAP file at ``out``; returns what was written (messages per topic, bytes,
-    seconds)."""
+    seconds). The file is written under a temporary name and renamed when complete: an interrupted
+    or failed recording never stands under ``out``."""
+    tmp = out.with_name(out.name + ".part")
+    try:
+        written = _write_mcap(run, tmp)
+        os.replace(tmp, out)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return written
+
+
+def _write_mcap(run: Path, out: Path) -> dict:
     try:
         import foxglove
         from foxglove import channels
@@ -116,12 +141,27 @@ def write_mcap(run: Path, out: Path) -> dict:
     if not (run / TRAJECTORIES).exists():
         raise RecordingError(f"{run}: no {TRAJECTORIES}; run it again with --set run.record_trajectories=true")
     started = time.perf_counter()
-    dt = float(yaml.safe_load((run / CONFIG).read_text())["run"]["dt"])
-    traj = pd.read_csv(run / TRAJECTORIES, keep_default_na=False)
+    try:
+        dt, ticks = runfiles.dt_of(run), runfiles.ticks_of(run)
+        traj = runfiles.table(run, TRAJECTORIES, ticks, ("x", "y"), ("agent",), keep_default_na=False)
+        markers = (
+            runfiles.table(run, MARKERS, ticks, columns=("marker", "x", "y", "label", "event"), keep_default_na=False)
+            if (run / MARKERS).exists()
+            else None
+        )
+        counters = runfiles.table(run, TIMESERIES, ticks)
+        copies = (
+            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
+            if (run / RECEIVER_LEDGER).exists()
+            else None
+        )
+        trees = _tree_changes(run, dt, ticks)
+    except RunFileError as exc:
+        raise RecordingError(str(exc)) from None
+    if markers is not None:  # a marker where no number is (a crafted file) is left out
+        xy = markers[["x", "y"]].apply(pd.to_numeric, errors="coerce")
+        markers = markers[(markers["event"] != "appear") | np.isfinite(xy.to_numpy(dtype=float)).all(axis=1)]
     traj["heading"] = _headings(traj)
-    markers = pd.read_csv(run / MARKERS, keep_default_na=False) if (run / MARKERS).exists() else None
-    counters = pd.read_csv(run / TIMESERIES)
-    copies = pd.read_parquet(run / RECEIVER_LEDGER) if (run / RECEIVER_LEDGER).exists() else None
     span = max(float(np.ptp(traj["x"])), float(np.ptp(traj["y"])), 1.0)
     size = span / 100  # an agent's sphere: a hundredth of the arena's extent
 
@@ -143,7 +183,6 @@ def write_mcap(run: Path, out: Path) -> dict:
     )
     sent = dict.fromkeys(("/agents", "/agents/poses", "/markers", "/radio", "/counters", "/agents/tree"), 0)
 
-    trees = _tree_changes(run, dt)
     marker_rows = {int(t): r for t, r in markers.groupby("tick")} if markers is not None else {}
     copy_rows = {int(t): r for t, r in copies.groupby("tick")} if copies is not None else {}
     counter_rows = {int(row["tick"]): row for row in counters.to_dict("records")}
@@ -273,8 +312,9 @@ def _plain(value: object) -> object:
     return value.item() if isinstance(value, np.generic) else value
 
 
-def _tree_changes(run: Path, dt: float) -> dict[int, list[tuple[int, list[tuple[int, int]]]]]:
-    """tick -> [(agent, [(uid, status code)])] from the run's .btlog files, if it recorded them."""
+def _tree_changes(run: Path, dt: float, ticks: int) -> dict[int, list[tuple[int, list[tuple[int, int]]]]]:
+    """tick -> [(agent, [(uid, status code)])] from the run's .btlog files, if it recorded them (a
+    RunFileError for a file that is not one, or whose records fall outside the run's ticks)."""
     folder = run / BT
     out: dict[int, list[tuple[int, list[tuple[int, int]]]]] = {}
     if not folder.is_dir():
@@ -282,10 +322,17 @@ def _tree_changes(run: Path, dt: float) -> dict[int, list[tuple[int, list[tuple[
     tick_us = dt * 1_000_000
     agent = 0
     while (folder / btlog_name(agent)).exists():
-        _, _, records = read_btlog((folder / btlog_name(agent)).read_bytes())
+        name = f"{BT}/{btlog_name(agent)}"
+        try:
+            _, _, records = read_btlog(read_member(run, name, MAX_BTLOG_BYTES))
+        except (BtLogError, UnicodeDecodeError) as exc:
+            raise RunFileError(f"{run / name}: {exc}") from None
         by_tick: dict[int, list[tuple[int, int]]] = {}
         for offset, uid, code in records:
-            by_tick.setdefault(round(offset / tick_us), []).append((uid, code))
+            tick = round(offset / tick_us)
+            if tick > ticks or code >= len(STATUS_NAMES):
+                raise RunFileError(f"{run / name}: a record at tick {tick} with status {code}, not of this run")
+            by_tick.setdefault(tick, []).append((uid, code))
         for tick, changes in by_tick.items():
             out.setdefault(tick, []).append((agent, changes))
         agent += 1

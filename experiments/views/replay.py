@@ -14,10 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
+from swarmbed.experiments.views import runfiles
 from swarmbed.experiments.views.colours import DROP_COLORS, LABEL_COLORS
+from swarmbed.wire.rundir import MARKERS, RECEIVER_LEDGER, SUMMARY, TRAJECTORIES, RunFileError
 
+MARKER_COLUMNS = ("marker", "x", "y", "label", "event")
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
 
 
@@ -45,25 +47,35 @@ def replay(
     from matplotlib import animation
     from matplotlib.collections import LineCollection
 
-    traj_file, marker_file = run / "trajectories.csv", run / "markers.csv"
-    if not (run / "summary.json").exists():
-        raise ReplayError(f"{run}: not a completed run (no summary.json)")
-    if not traj_file.exists() or not marker_file.exists():
-        raise ReplayError(
-            f"{run}: no trajectories.csv/markers.csv; run it again with --set run.record_trajectories=true"
-        )
+    if not (run / SUMMARY).exists():
+        raise ReplayError(f"{run}: not a completed run (no {SUMMARY})")
+    if not (run / TRAJECTORIES).exists() or not (run / MARKERS).exists():
+        raise ReplayError(f"{run}: no {TRAJECTORIES}/{MARKERS}; run it again with --set run.record_trajectories=true")
     out = out or run / "replay.gif"
     if out.suffix not in (".gif", ".mp4"):
         raise ReplayError(f"{out}: a replay is a .gif or an .mp4")
     if out.suffix == ".mp4" and shutil.which("ffmpeg") is None:
         raise ReplayError("an .mp4 needs ffmpeg (not installed here); ask for a .gif instead")
-    dt = float(yaml.safe_load((run / "config.yaml").read_text())["run"]["dt"])
-    traj = pd.read_csv(traj_file, keep_default_na=False)
+    if fps < 1 or (every is not None and every < 1):
+        raise ReplayError(f"--fps {fps} / --every {every}: both must be at least 1")
+    for name, value in (("--from", start), ("--to", end)):
+        if value is not None and not np.isfinite(value):
+            raise ReplayError(f"{name} {value}: give a time in simulated seconds")
+    try:
+        dt, ticks = runfiles.dt_of(run), runfiles.ticks_of(run)
+        traj = runfiles.table(run, TRAJECTORIES, ticks, ("x", "y"), ("agent",), keep_default_na=False)
+        markers = runfiles.table(run, MARKERS, ticks, columns=MARKER_COLUMNS, keep_default_na=False)
+        copies = (
+            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
+            if (run / RECEIVER_LEDGER).exists()
+            else None
+        )
+    except RunFileError as exc:
+        raise ReplayError(str(exc)) from None
+    if traj.empty:
+        raise ReplayError(f"{run / TRAJECTORIES}: no row")
     if "label" not in traj:  # recorded before agents had labels
         traj["label"] = ""
-    markers = pd.read_csv(marker_file, keep_default_na=False)
-    copies_file = run / "network_ledger_receivers.parquet"
-    copies = pd.read_parquet(copies_file) if copies_file.exists() else None
 
     first, last = int(traj["tick"].min()), int(traj["tick"].max())
     lo = first if start is None else max(first, int(np.ceil(start / dt)))
@@ -73,10 +85,16 @@ def replay(
     every = every or max(1, int(np.ceil((hi - lo + 1) / MAX_FRAMES)))
     frames = list(range(lo, hi + 1, every))
 
-    xs = np.concatenate([traj["x"].to_numpy(), pd.to_numeric(markers["x"], errors="coerce").dropna().to_numpy()])
-    ys = np.concatenate([traj["y"].to_numpy(), pd.to_numeric(markers["y"], errors="coerce").dropna().to_numpy()])
+    marker_xy = markers.assign(
+        x=pd.to_numeric(markers["x"], errors="coerce"), y=pd.to_numeric(markers["y"], errors="coerce")
+    )
+    marker_xy = marker_xy[np.isfinite(marker_xy["x"]) & np.isfinite(marker_xy["y"])]
+    xs = np.concatenate([traj["x"].to_numpy(dtype=float), marker_xy["x"].to_numpy(dtype=float)])
+    ys = np.concatenate([traj["y"].to_numpy(dtype=float), marker_xy["y"].to_numpy(dtype=float)])
     pad = 0.05 * max(float(np.ptp(xs)), float(np.ptp(ys)), 1.0)
     by_tick = dict(tuple(traj.groupby("tick")))
+    # a marker drawn where no number is (a crafted file) is left out; a vanishing one needs none
+    markers = markers[(markers["event"] == "vanish") | markers.index.isin(marker_xy.index)]
     marker_events = markers.groupby("tick")
     marker_ticks = sorted(marker_events.groups)
 

@@ -14,27 +14,35 @@ colour per scenario).
 
 from __future__ import annotations
 
-import json
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
-import yaml
 from scipy import stats
 
 import swarmbed
 from swarmbed.experiments.folders import PARQUET, SOAK_PROCESSES, TABLE, read_table
+from swarmbed.experiments.views import runfiles
 from swarmbed.experiments.views.colours import DROP_COLORS
 from swarmbed.experiments.views.page import Page, _fmt
 from swarmbed.experiments.views.pooling import mixed_configurations
 from swarmbed.experiments.views.radio_pages import radio_pages
 from swarmbed.experiments.views.soak_page import soak_report
-from swarmbed.plugins.registry import PluginError, resolve_scenario
-from swarmbed.wire.errors import WireError
-from swarmbed.wire.rundir import SUMMARY
-from swarmbed.wire.summary import read_summary
+from swarmbed.netem.ledger import LEDGER_COLUMNS
+from swarmbed.plugins.registry import registered_scenario
+from swarmbed.wire.rundir import (
+    AGENTS,
+    LEDGER,
+    RECEIVER_LEDGER,
+    SUMMARY,
+    TIMESERIES,
+    TRANSPORT,
+    RunFileError,
+    read_json_member,
+)
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
 
@@ -44,18 +52,13 @@ class ReportError(ValueError):
 
 
 def _benefit(kind: str) -> str | None:
-    try:
-        return resolve_scenario(kind).benefit_metric
-    except PluginError:
-        return None
+    return registered_scenario(kind).benefit_metric
 
 
 def _outcomes(kind: str) -> list[str]:
-    """A scenario's benefit metric, then its other outcome metrics ([] for a kind not known here)."""
-    try:
-        cls = resolve_scenario(kind)
-    except PluginError:
-        return []
+    """A scenario's benefit metric, then its other outcome metrics ([] for a kind not registered here:
+    a name read from a results folder is never imported)."""
+    cls = registered_scenario(kind)
     return [m for m in (cls.benefit_metric, *cls.outcome_metrics) if m]
 
 
@@ -72,13 +75,20 @@ def _binned(frame: pd.DataFrame, ticks: int, dt: float, by: str, value: str) -> 
 def run_report(run: Path) -> tuple[str, int]:
     """The HTML of one run's report and how many figures it has."""
     try:
-        summary = read_summary(run / SUMMARY)
-    except (WireError, ValueError) as exc:
+        summary = runfiles.summary_of(run)
+        config, dt, ticks = runfiles.config_of(run), runfiles.dt_of(run), runfiles.ticks_of(run)
+        ledger = runfiles.table(run, LEDGER, ticks, columns=LEDGER_COLUMNS)
+        agents = runfiles.table(run, AGENTS)
+        wire = read_json_member(run, TRANSPORT) if (run / TRANSPORT).exists() else None
+        receivers = (
+            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
+            if (run / RECEIVER_LEDGER).exists()
+            else None
+        )
+        series = runfiles.table(run, TIMESERIES, ticks) if (run / TIMESERIES).exists() else None
+    except RunFileError as exc:
         raise ReportError(str(exc)) from None
-    config = yaml.safe_load((run / "config.yaml").read_text())
-    ledger = pd.read_csv(run / "network_ledger.csv")
-    agents = pd.read_csv(run / "agents.csv")
-    net, dt, ticks = summary["network"], float(config["run"]["dt"]), int(summary["ticks"])
+    net = summary["network"]
     page = Page(f"{summary['name']}: bandwidth accounting")
     sent = ledger[ledger["outcome"] == "sent"]
     copies = ledger[ledger["outcome"] != "sent"]
@@ -110,10 +120,10 @@ def run_report(run: Path) -> tuple[str, int]:
         ]
     page.table(rows)
 
-    transport_file = run / "transport.json"
-    if transport_file.exists():
-        wire = json.loads(transport_file.read_text())
-        t = wire["totals"]
+    if wire is not None:
+        t = wire.get("totals")
+        if not isinstance(t, dict):
+            raise ReportError(f"{run / TRANSPORT}: no totals object")
         page.heading(
             "On the wire",
             "Payload: the radio messages as agents encode them (reproducible). Samples: "
@@ -231,13 +241,12 @@ def run_report(run: Path) -> tuple[str, int]:
         )
         page.figure(fig, "network_ledger.csv (drop rows)")
 
-    receivers_file = run / "network_ledger_receivers.parquet"
-    if receivers_file.exists():
+    if receivers is not None:
         page.heading(
             "Who sent what to whom, and what became of it",
             "One cell per sender and receiver: copies delivered, and copies dropped (any reason).",
         )
-        per_copy = pd.read_parquet(receivers_file, columns=["sender", "receiver", "outcome"])
+        per_copy = receivers
         ids = [str(i) for i in range(int(summary["agents"]))]
         for title, rows in (
             ("delivered", per_copy["outcome"] == "delivered"),
@@ -260,7 +269,7 @@ def run_report(run: Path) -> tuple[str, int]:
                 yaxis_title="sender",
                 yaxis_autorange="reversed",
             )
-            page.figure(fig, receivers_file.name)
+            page.figure(fig, RECEIVER_LEDGER)
     else:
         page.heading(
             "Who sent what, and what became of it",
@@ -279,27 +288,23 @@ def run_report(run: Path) -> tuple[str, int]:
         fig.update_layout(title="Copies by sender and outcome", xaxis_title="sender")
         page.figure(fig, "network_ledger.csv")
 
-    radio_pages(page, run, config)
+    radio_pages(page, receivers, config)
 
-    if benefit and (run / "timeseries.csv").exists():
-        series = pd.read_csv(run / "timeseries.csv")
-        if benefit in series:
-            fig = go.Figure(
-                [
-                    go.Scatter(x=series["time"], y=series[benefit], name=benefit.replace("_", " ")),
-                    go.Scatter(
-                        x=series["time"], y=series["bytes_sent"] / 1000, name="kB sent (cumulative)", yaxis="y2"
-                    ),
-                ]
-            )
-            fig.update_layout(
-                title="Outcome beside traffic",
-                xaxis_title="simulated time (s)",
-                yaxis_title=benefit.replace("_", " "),
-                yaxis2={"title": "kB sent", "overlaying": "y", "side": "right"},
-                legend=LEGEND_BELOW,
-            )
-            page.figure(fig, "timeseries.csv")
+    if benefit and series is not None and {benefit, "time", "bytes_sent"} <= set(series.columns):
+        fig = go.Figure(
+            [
+                go.Scatter(x=series["time"], y=series[benefit], name=benefit.replace("_", " ")),
+                go.Scatter(x=series["time"], y=series["bytes_sent"] / 1000, name="kB sent (cumulative)", yaxis="y2"),
+            ]
+        )
+        fig.update_layout(
+            title="Outcome beside traffic",
+            xaxis_title="simulated time (s)",
+            yaxis_title=benefit.replace("_", " "),
+            yaxis2={"title": "kB sent", "overlaying": "y", "side": "right"},
+            legend=LEGEND_BELOW,
+        )
+        page.figure(fig, "timeseries.csv")
     subtitle = (
         f"run {run} · seed {summary['seed']} · swarmbed {swarmbed.__version__} · "
         f"report made {time.strftime('%Y-%m-%d %H:%M')}"
@@ -427,21 +432,40 @@ def is_soak(folder: Path) -> bool:
     return (folder / SOAK_PROCESSES).exists() or (folder / (SOAK_PROCESSES + ".part")).exists()
 
 
-def report(folder: Path, out: Path | None = None) -> Path:
-    """Write the report of a soak, a run or a sweep folder; returns the file."""
+def _report_text(folder: Path) -> str:
     if is_soak(folder):
-        text, _ = soak_report(folder)
-    elif (folder / "summary.json").exists():
-        text, _ = run_report(folder)
-    elif (folder / TABLE).exists() or (folder / PARQUET).exists():
-        text, _ = sweep_report(folder)
-    else:
+        return soak_report(folder)[0]
+    if (folder / SUMMARY).exists():
+        return run_report(folder)[0]
+    if (folder / TABLE).exists() or (folder / PARQUET).exists():
+        return sweep_report(folder)[0]
+    raise ReportError(
+        f"{folder}: neither a completed run (no summary.json), a sweep (no sweep.csv) nor a soak "
+        "(no soak_processes.csv)"
+    )
+
+
+def report(folder: Path, out: Path | None = None) -> Path:
+    """Write the report of a soak, a run or a sweep folder; returns the file (``out`` a folder: the
+    report goes into it). Written under a temporary name, renamed when complete."""
+    try:
+        text = _report_text(folder)
+    except ReportError:
+        raise
+    except RunFileError as exc:
+        raise ReportError(str(exc)) from None
+    except (KeyError, ValueError, TypeError) as exc:  # a file of the right shape holding the wrong things
         raise ReportError(
-            f"{folder}: neither a completed run (no summary.json), a sweep (no sweep.csv) nor a soak "
-            "(no soak_processes.csv)"
-        )
+            f"{folder}: a file of it holds what a report cannot draw ({type(exc).__name__}: {exc})"
+        ) from None
     out = out or folder / "report.html"
-    tmp = out.with_name(out.name + ".part")
-    tmp.write_text(text)
-    tmp.replace(out)
+    if out.is_dir():
+        out = out / "report.html"
+    tmp = out.with_name(f"{out.name}.{os.getpid()}.part")
+    try:
+        tmp.write_text(text)
+        tmp.replace(out)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return out

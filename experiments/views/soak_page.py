@@ -4,7 +4,6 @@ event marked on the same time axis. A soak that was killed is reported from its 
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -18,6 +17,7 @@ from swarmbed.experiments.folders import SOAK_RUN as RUN
 from swarmbed.experiments.folders import SOAK_VERDICT as VERDICT
 from swarmbed.experiments.views.colours import DROP_COLORS
 from swarmbed.experiments.views.page import Page
+from swarmbed.wire.rundir import RunFileError, member, read_json_member
 
 CHAOS_COLORS = {"kill_agent": "#D55E00", "stop_agent": "#E69F00", "loss_burst": "#0072B2", "rate_cap": "#009E73"}
 
@@ -26,7 +26,12 @@ def _read(folder: Path, name: str) -> tuple[pd.DataFrame | None, str]:
     """A soak table and the file it came from (the ``.part`` of a soak that did not finish)."""
     for candidate in (name, name + ".part"):
         if (folder / candidate).exists():
-            return pd.read_csv(folder / candidate), candidate
+            try:
+                return pd.read_csv(member(folder, candidate)), candidate
+            except RunFileError:
+                raise
+            except Exception as exc:  # pandas raises many kinds for a torn or foreign file
+                raise RunFileError(f"{folder / candidate}: cannot be read as a table ({type(exc).__name__})") from None
     return None, name
 
 
@@ -36,7 +41,7 @@ def soak_report(folder: Path) -> tuple[str, int]:
     chaos, chaos_file = _read(folder, CHAOS_FILE)
     assert procs is not None, f"{folder}: no {PROCESSES}"
     page = Page(f"{folder.name}: soak")
-    verdict = json.loads((folder / VERDICT).read_text()) if (folder / VERDICT).exists() else None
+    verdict = read_json_member(folder, VERDICT) if (folder / VERDICT).exists() else None
     if verdict is None:
         page.heading(
             "No verdict", f"The soak did not finish (no {VERDICT}); what follows is read from the files it was writing."
