@@ -41,6 +41,7 @@ from swarmbed.wire.codec import (
     encode_stop,
     encode_tick,
     encode_world,
+    unpack,
 )
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of
 from swarmbed.wire.membership import accept_handovers, serve_text
@@ -127,8 +128,9 @@ class Coordinator:
             s.declare_queryable(k.agent_snapshot_all, self.agents.on_snapshot_query),
             s.declare_queryable(k.swap, self.agents.on_swap_query),
         ]
-        if self.trees is not None:
-            self._entities.append(s.declare_subscriber(k.agent_bt_all, self.trees.on_sample))
+        # agents hand their trees' changes over while recording or while a monitor watches; monitors
+        # read them under view/ from here, with DROP, so a monitor that stops reading holds nothing up
+        self._entities.append(s.declare_subscriber(k.agent_bt_all, self._on_bt))
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
         self.agents.agent_pubs = self.agent_pubs
         self.world_pub = s.declare_publisher(k.world, congestion_control=BLOCK)
@@ -137,6 +139,15 @@ class Coordinator:
         self.status_pub = s.declare_publisher(k.status, congestion_control=zenoh.CongestionControl.DROP)
         self._entities += self.agent_pubs + [self.world_pub, self.stop_pub, self.status_pub]
         self._entities.append(s.liveliness().declare_token(k.alive_coordinator))
+
+    def _on_bt(self, sample: zenoh.Sample) -> None:
+        if self.trees is not None:
+            self.trees.on_sample(sample)
+        try:
+            agent = agent_id_of(str(sample.key_expr))  # only agent i may publish on agent/<i>/bt
+        except WireError:
+            return
+        self.session.put(self.keys.view_bt(agent), sample.payload, congestion_control=zenoh.CongestionControl.DROP)
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -278,6 +289,23 @@ class Coordinator:
             )
         )
 
+    def _stuck(self) -> str:
+        """Who held the tick up, as the proxy sees it: the agents that did not answer, or the proxy."""
+        try:
+            replies = self.session.get(self.keys.netem_awaiting, timeout=2.0)
+            for reply in replies:
+                if reply.ok is None:
+                    continue
+                tick, awaited = unpack(reply.ok.payload.to_bytes(), max_bytes=1 << 20)
+                if awaited:
+                    named = ", ".join(map(str, awaited[:20])) + (" ..." if len(awaited) > 20 else "")
+                    logs = ", ".join(self.agents.log_of(int(a)) for a in awaited[:3])
+                    return f"the proxy still waits for agent(s) {named} at tick {tick}; see {logs}"
+                return f"the proxy has every answer of tick {tick}; see logs/netem.log"
+        except Exception:  # a malformed or missing answer: say what is known
+            pass
+        return "the netem proxy did not answer; see logs/netem.log"
+
     def _await_step(self, k: int) -> NetemStep:
         timeout = self.exp.run.tick_timeout
         deadline = time.monotonic() + timeout
@@ -286,8 +314,7 @@ class Coordinator:
                 what, data = self.events.next(deadline - time.monotonic())
             except queue.Empty:
                 raise RunError(
-                    f"tick {k}: no step from the netem proxy within {timeout:.0f} s "
-                    "(an agent or the proxy is stuck; see the logs)"
+                    f"tick {k}: no step from the netem proxy within {timeout:.0f} s ({self._stuck()})"
                 ) from None
             if what == "step":
                 try:

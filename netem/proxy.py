@@ -15,6 +15,7 @@ import queue
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -32,6 +33,8 @@ from swarmbed.wire.codec import (
     decode_world,
     encode_inbox,
     encode_netem_step,
+    encode_traffic,
+    pack,
 )
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
 from swarmbed.wire.membership import fetch_spec, hand_over
@@ -47,6 +50,14 @@ from swarmbed.wire.transport import tcp_counters
 log = logging.getLogger("swarmbed.netem")
 
 LEDGER_FILE, RECEIVER_LEDGER_FILE = LEDGER, RECEIVER_LEDGER
+TRAFFIC_EVERY = 0.25  # wall seconds between traffic samples for watchers
+
+
+def _matching(publisher: zenoh.Publisher) -> bool:
+    """Whether anyone subscribes to ``publisher``'s key. zenoh-python 1.10 returns a MatchingStatus
+    (its ``.matching``); its type stub says a bool."""
+    status: Any = publisher.matching_status
+    return bool(getattr(status, "matching", status))
 
 
 class Proxy:
@@ -83,6 +94,11 @@ class Proxy:
         self.answered: dict[int, int] = {}  # agent -> the last tick it answered
         self.late_events: dict[str, int] = {}
         self.controls: list[NetemControl] = []  # parameter changes not yet in force (chaos)
+        # for watchers (wall-clock paced, never in a result): agent -> [messages, payload bytes] sent,
+        # counted only while someone subscribes to the view
+        self.traffic: dict[int, list[int]] = {}
+        self.watched = False
+        self.traffic_at = 0.0
 
     # -- events ----------------------------------------------------------------------------------
     def _on_agent_alive(self, sample: zenoh.Sample) -> None:
@@ -105,6 +121,12 @@ class Proxy:
         if first:
             self.events.put(("outs", None))
 
+    def _on_awaiting_query(self, query: zenoh.Query) -> None:
+        """Which tick is in hand and which agents have not answered it (for a coordinator that waited
+        too long: it names them)."""
+        world, awaited = self.world, sorted(self.awaited)
+        query.reply(self.keys.netem_awaiting, pack([-1 if world is None else world.tick, awaited]))
+
     def _take_arrived(self) -> list[tuple[str, bytes]]:
         with self.arrived_lock:
             arrived, self.arrived = self.arrived, []
@@ -113,7 +135,7 @@ class Proxy:
     def run(self) -> int:
         s, k = self.session, self.keys
         put = self.events.put
-        subs = [
+        subs: list[Any] = [
             s.declare_subscriber(k.world, lambda x: put(("world", x.payload.to_bytes()))),
             s.declare_subscriber(k.agent_out_all, zenoh.handlers.Callback(self._on_out, indirect=False)),
             s.declare_subscriber(k.netem_stop, lambda x: put(("stop", x.payload.to_bytes()))),
@@ -121,12 +143,16 @@ class Proxy:
             s.liveliness().declare_subscriber(k.alive_agents, self._on_agent_alive),
             s.liveliness().declare_subscriber(k.alive_coordinator, self._on_coordinator),
         ]
+        subs.append(s.declare_queryable(k.netem_awaiting, self._on_awaiting_query))
         self.step_pub = s.declare_publisher(k.netem_step, congestion_control=zenoh.CongestionControl.BLOCK)
+        # DROP: a watcher that stops reading loses samples and never holds up a tick
+        self.traffic_pub = s.declare_publisher(k.view_traffic, congestion_control=zenoh.CongestionControl.DROP)
         token = s.liveliness().declare_token(k.alive_netem)
         try:
             return self._loop()
         finally:
             token.undeclare()
+            self.traffic_pub.undeclare()
             for sub in subs:
                 sub.undeclare()
             self.sink.flush()
@@ -322,8 +348,29 @@ class Proxy:
         )
         self.lost_unreported = []
         self.step_pub.put(encode_netem_step(step))
+        self._publish_traffic(outs)
+
+    def _publish_traffic(self, outs: dict[int, AgentOut]) -> None:
+        """Count what each agent sent while anyone watches; hand watchers the totals every
+        ``TRAFFIC_EVERY`` wall seconds."""
+        if self.watched:
+            for a, o in outs.items():
+                if o.messages:
+                    total = self.traffic.setdefault(a, [0, 0])
+                    total[0] += len(o.messages)
+                    total[1] += sum(len(m.payload) for m in o.messages)
+        now = time.monotonic()
+        if now - self.traffic_at >= TRAFFIC_EVERY:
+            self.traffic_at = now
+            if self.watched:
+                self.traffic_pub.put(encode_traffic(self.traffic))
+            self.watched = _matching(self.traffic_pub)
+            if self.watched and not self.traffic:  # the first watcher: counted from the tick in hand
+                self._publish_traffic(outs)
 
     def _finish(self, last_tick: int) -> None:
+        if self.watched:  # the totals as the run ends
+            self.traffic_pub.put(encode_traffic(self.traffic))
         self.radio.finish(last_tick)
         self.ledger.close_tick(1 << 62)
         self.ledger.check()

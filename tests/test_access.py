@@ -4,6 +4,8 @@ credentials, and holds every identity to its own keys; refused messages never re
 import csv
 import json
 import os
+import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -19,8 +21,8 @@ import zenoh
 from swarmbed.experiments.launch.access import RunAccess, access_rules
 from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
-from swarmbed.wire.codec import encode_agent_out, pack
-from swarmbed.wire.credentials import CredentialsError, Identity, read_credentials, write_credentials
+from swarmbed.wire.codec import decode_traffic, encode_agent_out, pack
+from swarmbed.wire.credentials import CredentialsError, Identity, check_admitted, read_credentials, write_credentials
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
 from swarmbed.wire.session import zenoh_config
@@ -62,8 +64,69 @@ def test_credentials_files_are_private_and_checked(tmp_path):
     (tmp_path / "junk.json").chmod(0o600)
     with pytest.raises(CredentialsError, match="junk.json: not a JSON object"):
         read_credentials(tmp_path / "junk.json")
-    with pytest.raises(CredentialsError, match="must be non-empty"):
+    with pytest.raises(CredentialsError, match="user name 'a:b'"):
         Identity.new("a:b", "host")
+
+
+def _crafted(folder: Path, name: str, **fields) -> Path:
+    path = folder / f"{name}.json"
+    path.write_text(json.dumps(fields))
+    path.chmod(0o600)
+    return path
+
+
+def test_a_credentials_file_carries_one_identity_and_only_its_own_host(tmp_path):
+    """Every field is checked on read as on write: a password with a line break would add a second
+    ``user:password`` line to the hub's dictionary; a host of ``*`` would be given every host's keys."""
+    good = {"user": "op", "password": "p" * 24, "role": "operator"}
+    cases = {
+        "newline": ({**good, "password": "p" * 24 + "\nagent-4:stolenpass"}, "password"),
+        "colon": ({**good, "password": "a:" + "p" * 24}, "password"),
+        "star": ({**good, "role": "host", "host": "*"}, "host name '*'"),
+        "host-of-operator": ({**good, "host": "labpc2"}, "only a host identity"),
+        "number": ({**good, "user": 7}, "user: must be a string"),
+        "list": ({**good, "password": ["x"]}, "password: must be a string"),
+        "role": ({**good, "role": "coordinator"}, "role 'coordinator'"),
+        "extra": ({**good, "admin": True}, "unknown field 'admin'"),
+        "long": ({**good, "user": "u" * 65}, "user name"),
+    }
+    for name, (fields, why) in cases.items():
+        path = _crafted(tmp_path, name, **fields)
+        with pytest.raises(CredentialsError, match=re.escape(why)) as caught:
+            read_credentials(path)
+        assert str(path) in str(caught.value) and "\n" not in str(caught.value)
+    # a device or a FIFO is refused before a byte is read (it would never end)
+    with pytest.raises(CredentialsError, match="not a regular file"):
+        read_credentials("/dev/zero")
+    os.mkfifo(tmp_path / "fifo")
+    with pytest.raises(CredentialsError, match="not a regular file"):
+        read_credentials(tmp_path / "fifo")
+    big = _crafted(tmp_path, "big", **good, pad="x" * 10_000)
+    with pytest.raises(CredentialsError, match="more than a credentials file holds"):
+        read_credentials(big)
+    # two admitted files may not be one user, nor bound to one host name
+    one = Identity.new("labpc2", "host")
+    other = Identity.new("someone", "host", "labpc2")
+    with pytest.raises(CredentialsError, match="both bound to host 'labpc2'"):
+        check_admitted([one, other])
+    with pytest.raises(CredentialsError, match="both user 'op'"):
+        check_admitted([Identity.new("op", "operator"), Identity.new("op", "host")])
+    with pytest.raises(CredentialsError, match="cannot be admitted"):
+        check_admitted([Identity.new("agent-x", "agent")])
+    with pytest.raises(ValueError, match="both bound"):  # the launcher refuses them too
+        RunAccess(Keys("abc123"), range(2), [one, other])
+    # what swarmbed run --admit says, before any process starts
+    op = write_credentials(tmp_path / "op.json", Identity.new("op", "operator"))
+    cli = subprocess.run(
+        [sys.executable, "-m", "swarmbed", "run", "experiments/quickstart.yaml", "--out", str(tmp_path / "never")]
+        + ["--admit", str(op), "--admit", str(_crafted(tmp_path, "bad", **cases["newline"][0]))],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=Path(__file__).resolve().parent.parent,
+    )
+    assert cli.returncode == 2 and len(cli.stderr.strip().splitlines()) == 1 and "bad.json" in cli.stderr
+    assert not (tmp_path / "never").exists()
 
 
 def test_the_launcher_keeps_credentials_off_the_command_line_and_removes_them():
@@ -159,28 +222,86 @@ def test_an_agent_may_publish_only_on_its_own_keys(tmp_path):
 
 
 def test_an_operator_watches_and_asks_but_cannot_publish(tmp_path, operator):
-    seen = {}
+    seen: dict = {}
 
     def look(keys: Keys, endpoint: str) -> None:
-        with zenoh.open(zenoh_config("client", [endpoint], credentials=str(operator.path))) as s:
-            outs = []
-            sub = s.declare_subscriber(keys.agent_out_all, lambda sample: outs.append(1))
-            for _ in range(5):
-                s.put(keys.agent_out(0), b"\xc1", congestion_control=BLOCK)
-                s.put(keys.world, b"\xc1", congestion_control=BLOCK)
-            time.sleep(0.5)
-            sub.undeclare()
-            seen["outs"] = len(outs)
+        s = zenoh.open(zenoh_config("client", [endpoint], credentials=str(operator.path)))
+        seen["session"] = s
+        seen["outs"], seen["ins"], seen["traffic"], seen["status"] = [], [], [], []
+        seen["subs"] = [
+            s.declare_subscriber(keys.agent_out_all, lambda x: seen["outs"].append(1)),  # refused: BLOCK keys
+            s.declare_subscriber(keys.agent_in(0), lambda x: seen["ins"].append(1)),
+            s.declare_subscriber(keys.view_traffic, lambda x: seen["traffic"].append(x.payload.to_bytes())),
+            s.declare_subscriber(keys.status, lambda x: seen["status"].append(1)),
+        ]
+        for _ in range(5):  # refused at the hub (its own subscriber above is local: it would hear these)
+            s.put(keys.world, b"\xc1", congestion_control=BLOCK)
 
-    result = run_experiment(
-        experiment("run.duration=600", "run.stop_when_done=false"),
-        tmp_path / "run",
-        progress=False,
-        on_ready=look,
-        hub=HubOptions(admit=[operator.identity]),
-    )
-    assert seen["outs"] > 0  # it reads what agents send
+    try:
+        result = run_experiment(
+            experiment("run.duration=600", "run.stop_when_done=false", "allocator.name=cbba"),
+            tmp_path / "run",
+            progress=False,
+            on_ready=look,
+            hub=HubOptions(admit=[operator.identity]),
+        )
+    finally:
+        for sub in seen.get("subs", []):
+            sub.undeclare()
+        if "session" in seen:
+            seen["session"].close()
+    assert seen["outs"] == [] and seen["ins"] == []  # never a key the run blocks on
+    assert seen["status"] and seen["traffic"]  # it reads the run's progress and every agent's traffic
+    last = decode_traffic(seen["traffic"][-1])
+    assert set(last) == set(range(5)) and all(m > 0 and b > 0 for m, b in last.values())
+    assert sum(m for m, _ in last.values()) <= result.summary["network"]["messages_sent"]
     assert result.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}
+
+
+#: an operator's client that subscribes and then never reads (stopped with SIGSTOP by the test)
+STOPPED_CLIENT = """
+import sys, time, zenoh
+from swarmbed.wire.session import zenoh_config
+s = zenoh.open(zenoh_config("client", [sys.argv[1]], credentials=sys.argv[2]))
+subs = [s.declare_subscriber(k, zenoh.handlers.FifoChannel(4)) for k in sys.argv[3:]]
+print("ready", flush=True)
+time.sleep(600)
+"""
+
+
+def test_an_operator_that_stops_reading_holds_nothing_up(tmp_path, operator):
+    """A suspended ``swarmbed watch`` (or any admitted client that stops reading) subscribed to all
+    it may: the run goes on at its pace and computes what it computes alone. Before operators were
+    kept to DROP keys, this run lost agent 2 at tick ~480 ("let go of its token") within 26 s."""
+    clients: list[subprocess.Popen] = []
+
+    def look(keys: Keys, endpoint: str) -> None:
+        asked = [f"{keys.root}/**", keys.status, keys.view, keys.agent_out_all, keys.agent_in(2)]
+        client = subprocess.Popen(
+            [sys.executable, "-c", STOPPED_CLIENT, endpoint, str(operator.path), *asked],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        clients.append(client)
+        assert client.stdout.readline().startswith("ready")
+        client.send_signal(signal.SIGSTOP)
+
+    sets = ("agents.count=10", "allocator.name=cbba", "run.duration=1000", "run.stop_when_done=false")
+    try:
+        run_experiment(
+            experiment(*sets),
+            tmp_path / "held",
+            progress=False,
+            on_ready=look,
+            hub=HubOptions(admit=[operator.identity]),
+        )
+    finally:
+        for client in clients:
+            client.kill()
+            client.wait(timeout=10)
+    assert clients
+    run_experiment(experiment(*sets), tmp_path / "alone", progress=False)
+    same_results(tmp_path / "held", tmp_path / "alone")
 
 
 def test_junk_at_every_key_is_refused_or_counted_and_changes_nothing(tmp_path, operator):

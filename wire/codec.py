@@ -353,6 +353,24 @@ def decode_status(data: bytes) -> dict:
     return msg
 
 
+def encode_traffic(totals: dict[int, list[int]]) -> bytes:
+    """Proxy -> watchers: agent -> [messages, payload bytes] it sent since the proxy began counting."""
+    return pack(totals)
+
+
+def decode_traffic(data: bytes, max_agents: int = 100_000) -> dict[int, tuple[int, int]]:
+    msg = unpack(data, max_bytes=32 * max_agents)
+    _expect(isinstance(msg, dict) and len(msg) <= max_agents, "traffic must be a map of agents")
+    out: dict[int, tuple[int, int]] = {}
+    for agent, pair in msg.items():
+        _expect(
+            _is_int(agent) and agent >= 0 and isinstance(pair, list) and len(pair) == 2 and all(map(_is_int, pair)),
+            "traffic must map agent ids to [messages, bytes]",
+        )
+        out[agent] = (pair[0], pair[1])
+    return out
+
+
 # --- reports (maps: rare, and read by people too) ---------------------------------------------
 
 

@@ -21,6 +21,15 @@ from typing import IO
 # roles a credentials file made by ``swarmbed credentials`` may have; the processes a run spawns
 # itself get their own identities (netem, agent-<id>) from the launcher
 ROLES = ("operator", "host")
+#: every role an identity may hold: the admitted ones and those of the processes a run spawns
+ALL_ROLES = (*ROLES, "netem", "agent")
+#: user and host names: one line of the hub's ``user:password`` dictionary and one key chunk of
+#: ``swarmbed/hosts/<name>`` each, so no ``:``, no line break, no wildcard, bounded
+NAME = re.compile(r"[A-Za-z0-9_.@-]{1,64}")
+#: passwords: what ``secrets.token_urlsafe`` writes, or any printable ASCII without spaces or ``:``
+PASSWORD = re.compile(r"[!-9;-~]{8,256}")
+#: a credentials file is a few hundred bytes; anything far larger is not one (and is not read)
+MAX_FILE_BYTES = 4096
 
 
 class CredentialsError(ValueError):
@@ -34,12 +43,28 @@ class Identity:
     role: str
     host: str = ""  # role host: the one host name this identity may act as (its user name if empty)
 
+    def __post_init__(self) -> None:
+        """Every field checked, whoever built the identity: a password with a line break would write a
+        second ``user:password`` line into the hub's dictionary, a host of ``*`` would be given every
+        host's keys."""
+        for field in ("user", "password", "role", "host"):
+            if not isinstance(getattr(self, field), str):
+                raise CredentialsError(f"{field}: must be a string, not {type(getattr(self, field)).__name__}")
+        if not NAME.fullmatch(self.user):
+            raise CredentialsError(f"user name {self.user[:80]!r}: 1 to 64 letters, digits, _ . @ - only")
+        if not PASSWORD.fullmatch(self.password):
+            raise CredentialsError("password: 8 to 256 printable characters, without spaces, ':' or line breaks")
+        if self.role not in ALL_ROLES:
+            raise CredentialsError(f"role {self.role[:80]!r}: one of {', '.join(ROLES)}")
+        if self.host and (self.role != "host" or not NAME.fullmatch(self.host) or "@" in self.host):
+            raise CredentialsError(
+                f"host name {self.host[:80]!r}: only a host identity has one, 1 to 64 letters, digits, _ . - only"
+            )
+        if self.role == "host" and "@" in self.host_name:
+            raise CredentialsError(f"host name {self.host_name[:80]!r}: letters, digits, _ . - only")
+
     @classmethod
     def new(cls, user: str, role: str, host: str = "") -> Identity:
-        if not user or ":" in user or any(c.isspace() for c in user):
-            raise CredentialsError(f"user name {user!r}: must be non-empty, without ':' or spaces")
-        if host and not re.fullmatch(r"[A-Za-z0-9_.-]+", host):
-            raise CredentialsError(f"host name {host!r}: letters, digits, _ . - only")
         return cls(user, secrets.token_urlsafe(24), role, host if role == "host" else "")
 
     @property
@@ -68,22 +93,56 @@ def read_credentials(path: str | Path) -> Identity:
     """The identity in ``path``; a CredentialsError names the file and what is wrong with it."""
     path = Path(path)
     try:
-        mode = path.stat().st_mode
-        text = path.read_text()
+        st = path.stat()
     except OSError as exc:
         raise CredentialsError(f"credentials file {path}: {exc.strerror}") from None
-    if mode & (stat.S_IRWXG | stat.S_IRWXO):
+    # type, size and mode before a byte is read: /dev/zero or a FIFO would never end
+    if not stat.S_ISREG(st.st_mode):
+        raise CredentialsError(f"credentials file {path}: not a regular file")
+    if st.st_size > MAX_FILE_BYTES:
+        raise CredentialsError(f"credentials file {path}: {st.st_size} bytes, more than a credentials file holds")
+    if st.st_mode & (stat.S_IRWXG | stat.S_IRWXO):
         raise CredentialsError(
-            f"credentials file {path}: readable by others (mode {stat.S_IMODE(mode):o}); run chmod 600 {path}"
+            f"credentials file {path}: readable by others (mode {stat.S_IMODE(st.st_mode):o}); run chmod 600 {path}"
         )
     try:
-        data = json.loads(text)
-        identity = Identity(
-            str(data["user"]), str(data["password"]), str(data.get("role", "operator")), str(data.get("host", ""))
-        )
-    except (ValueError, KeyError, TypeError):
-        raise CredentialsError(f"credentials file {path}: not a JSON object with user and password") from None
-    return identity
+        with open(path, "rb") as f:
+            raw = f.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise CredentialsError(f"credentials file {path}: {exc.strerror}") from None
+    try:
+        data = json.loads(raw)
+    except ValueError:
+        raise CredentialsError(f"credentials file {path}: not JSON") from None
+    if not isinstance(data, dict) or not {"user", "password"} <= data.keys():
+        raise CredentialsError(f"credentials file {path}: not a JSON object with user and password")
+    unknown = sorted(str(k) for k in data.keys() - {"user", "password", "role", "host"})
+    if unknown:
+        raise CredentialsError(f"credentials file {path}: unknown field {unknown[0][:40]!r}")
+    try:
+        return Identity(data["user"], data["password"], data.get("role", "operator"), data.get("host", ""))
+    except CredentialsError as exc:
+        raise CredentialsError(f"credentials file {path}: {exc}") from None
+
+
+def check_admitted(identities: Iterable[Identity]) -> list[Identity]:
+    """The identities a hub is asked to admit, refused unless each is an operator or a host and no two
+    share a user name or are bound to one host name (the later would take the earlier's keys)."""
+    out: list[Identity] = []
+    users: set[str] = set()
+    hosts: set[str] = set()
+    for identity in identities:
+        if identity.role not in ROLES:
+            raise CredentialsError(f"user {identity.user!r}: role {identity.role!r} cannot be admitted (only {ROLES})")
+        if identity.user in users:
+            raise CredentialsError(f"two admitted credentials files are both user {identity.user!r}")
+        users.add(identity.user)
+        if identity.role == "host":
+            if identity.host_name in hosts:
+                raise CredentialsError(f"two admitted credentials files are both bound to host {identity.host_name!r}")
+            hosts.add(identity.host_name)
+        out.append(identity)
+    return out
 
 
 def write_dictionary(path: Path, identities: Iterable[Identity]) -> Path:

@@ -71,6 +71,28 @@ class Keys:
     def status(self) -> str:
         return f"{self.root}/status"
 
+    # What operators may read. Every key below view/ (and status) is published with congestion
+    # control DROP, so a watcher that stops reading loses samples instead of holding up the run;
+    # the run's own keys (ticks, outputs, steps, the world) are BLOCK and no operator may read them.
+    @property
+    def view(self) -> str:
+        return f"{self.root}/view/**"
+
+    # netem proxy -> watchers: every agent's messages and payload bytes sent so far (wall-clock paced)
+    @property
+    def view_traffic(self) -> str:
+        return f"{self.root}/view/traffic"
+
+    # coordinator -> monitors (swarmbed groot): agent i's tree changes, as the agent handed them over
+    def view_bt(self, agent_id: int) -> str:
+        return f"{self.root}/view/agent/{agent_id}/bt"
+
+    # netem proxy queryable: the agents whose answer to the tick in hand it still waits for (a stuck
+    # run names them)
+    @property
+    def netem_awaiting(self) -> str:
+        return f"{self.root}/netem/awaiting"
+
     # netem proxy -> coordinator: final totals once the ledger is on disk
     @property
     def netem_report(self) -> str:

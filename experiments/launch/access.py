@@ -12,7 +12,9 @@ Identities of one run (users in the hub's dictionary):
 ``agent-<i>``  agent i: publishes only ``agent/<i>/out``, reports and snapshots only for itself,
                receives only ``agent/<i>/in``
 operators      files made by ``swarmbed credentials --role operator`` and admitted with
-               ``swarmbed run --admit``: read everything (``swarmbed watch``), ask for swaps
+               ``swarmbed run --admit``: read the run's progress, views and tokens (``swarmbed
+               watch``, ``swarmbed groot``), all published with DROP, never a key the run blocks
+               on; ask for swaps
 hosts          files made with ``--role host``: a host daemon's router, bound to one host name
                (its credentials' ``host``, else its user name). It carries the traffic of the
                agents it may carry (placed on it, moved to it by a scripted swap, or listed in
@@ -37,7 +39,7 @@ from pathlib import Path
 
 import psutil
 
-from swarmbed.wire.credentials import Identity, write_credentials, write_dictionary
+from swarmbed.wire.credentials import Identity, check_admitted, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, PREFIX, Keys
 from swarmbed.wire.process import process_alive
 
@@ -94,16 +96,16 @@ def access_rules(
     alive = f"{root}/alive/**"
     rules = [
         _allow("deliver", EVERY_MESSAGE, ["**"], flow="egress"),  # what a subject may send is held at ingress
-        _allow("netem", ["put"], [k.netem_step]),
+        _allow("netem", ["put"], [k.netem_step, k.view_traffic]),
         _allow("netem-subscribe", ["declare_subscriber"], [k.world, k.agent_out_all, k.netem_stop, k.netem_control]),
         _allow("netem-query", ["query"], [k.netem_config, k.netem_report]),
+        _allow("netem-serve", ["declare_queryable", "reply"], [k.netem_awaiting]),
         _allow("netem-alive", ["liveliness_token"], [k.alive_netem]),
         _allow("watch-alive", ["declare_liveliness_subscriber", "liveliness_query"], [alive]),
-        _allow(
-            "operator-read",
-            ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
-            [f"{root}/**", f"{HOSTS}/**"],
-        ),
+        # operators read only what is published with DROP (progress, views): a reader that stops
+        # reading must never hold up a key the run blocks on (ticks, outputs, steps, the world)
+        _allow("operator-read", ["declare_subscriber"], [k.status, k.view]),
+        _allow("operator-tokens", ["declare_liveliness_subscriber", "liveliness_query"], [alive, f"{HOSTS}/**"]),
         _allow("operator-ask", ["query"], [k.swap, f"{HOSTS}/*/info"]),
         _allow("operator-monitor", ["liveliness_token"], [k.monitor_all]),
         _allow("operator-find", ["liveliness_query"], [f"{PREFIX}/*/alive/coordinator"]),
@@ -113,7 +115,15 @@ def access_rules(
     policies: list[dict] = [
         {
             "subjects": ["netem"],
-            "rules": ["deliver", "netem", "netem-subscribe", "netem-query", "netem-alive", "watch-alive"],
+            "rules": [
+                "deliver",
+                "netem",
+                "netem-subscribe",
+                "netem-query",
+                "netem-serve",
+                "netem-alive",
+                "watch-alive",
+            ],
         }
     ]
     for i in agent_ids:
@@ -128,7 +138,14 @@ def access_rules(
         policies.append(
             {
                 "subjects": ["operators"],
-                "rules": ["deliver", "operator-read", "operator-ask", "operator-find", "operator-monitor"],
+                "rules": [
+                    "deliver",
+                    "operator-read",
+                    "operator-tokens",
+                    "operator-ask",
+                    "operator-find",
+                    "operator-monitor",
+                ],
             }
         )
     for user, (host, ids) in sorted(hosts.items()):
@@ -161,7 +178,7 @@ class RunAccess:
     ) -> None:
         self.keys = keys
         self.agent_ids = sorted(agent_ids)
-        self.admitted = list(admitted)
+        self.admitted = check_admitted(admitted)
         self.carriers = {host: sorted(ids) for host, ids in (carriers or {}).items()}  # host -> agents it may carry
         taken = {"netem", *map(agent_user, self.agent_ids)}
         for identity in self.admitted:

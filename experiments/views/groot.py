@@ -50,7 +50,7 @@ class Gateway:
             self._drop()
             self.agent, self._n_nodes = agent, None
             self.tree.reset("", tree_identity(self.keys.run_id, agent, "waiting"), 0)
-            sub = self.session.declare_subscriber(self.keys.agent_bt(agent), self._on_sample)
+            sub = self.session.declare_subscriber(self.keys.view_bt(agent), self._on_sample)
             token = self.session.liveliness().declare_token(self.keys.monitor(agent))
             self._entities = [sub, token]
 
@@ -106,6 +106,13 @@ def find_run(session: zenoh.Session, run_id: str | None, wait: float = 0.0) -> s
     return runs[0]
 
 
+def agent_command(text: str) -> int | None:
+    """The agent id a line typed at the gateway names, or None: ASCII digits only (``"²".isdigit()``
+    is true, and ``int("²")`` raises), at most 9 of them."""
+    text = text.strip()
+    return int(text) if text.isascii() and text.isdigit() and len(text) <= 9 else None
+
+
 def run_gateway(
     session: zenoh.Session,
     run_id: str | None,
@@ -115,7 +122,9 @@ def run_gateway(
     commands: Iterable[str] | None = None,
     wait: float = 0.0,
 ) -> int:
-    """Serve Groot2 until ``commands`` (default: stdin lines, an agent id each) ends or Ctrl-C."""
+    """Serve Groot2 until Ctrl-C (or SIGTERM), switching agents on ``commands`` (default: stdin lines,
+    an agent id each). Where the commands end: at a terminal's end of input (Ctrl-D) the gateway
+    stops; a closed standard input that is no terminal (``&``, nohup, a service) leaves it serving."""
     run = find_run(session, run_id, wait)
     gateway = Gateway(session, run)
     stop = threading.Event()
@@ -128,11 +137,14 @@ def run_gateway(
             text = line.strip()
             if not text:
                 continue
-            if not text.isdigit():
-                print(f"groot: {text!r} is not an agent id", flush=True)
+            chosen = agent_command(text)
+            if chosen is None:
+                print(f"groot: {text[:40]!r} is not an agent id", flush=True)
                 continue
-            gateway.show(int(text))
-            print(f"groot: agent {text}", flush=True)
+            gateway.show(chosen)
+            print(f"groot: agent {chosen}", flush=True)
+        if commands is None and not sys.stdin.isatty():
+            stop.wait()  # no terminal to read: serve until interrupted
     except KeyboardInterrupt:
         pass
     finally:

@@ -4,10 +4,10 @@ With ``--map FILE.html`` it also keeps an HTML page of the run's map (agents, ta
 that reloads itself every second.
 
 Read-only by construction: the watcher's session only subscribes (the coordinator's progress
-samples, the agents' per-tick outputs for their traffic, the run's liveliness tokens) and never
-puts, queries a run's queryables or declares a token. The coordinator publishes its progress at
-most four times a wall second with congestion control ``DROP``, so a slow watcher loses samples
-rather than slowing the run.
+samples, the proxy's per-agent traffic totals, the run's liveliness tokens) and never puts, queries
+a run's queryables or declares a token. Both samples come at most four times a wall second with
+congestion control ``DROP``, so a slow or stopped watcher loses samples rather than slowing the run
+(operators may read nothing else: see ``swarmbed.experiments.launch.access``).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from rich.table import Table
 from rich.text import Text
 
 from swarmbed.experiments.views.colours import LABEL_COLORS
-from swarmbed.wire.codec import WireError, decode_agent_out, decode_status
+from swarmbed.wire.codec import WireError, decode_status, decode_traffic
 from swarmbed.wire.keys import PREFIX, Keys, agent_id_of
 
 RATE_WINDOW = 2.0  # wall seconds over which per-agent rates are measured
@@ -73,22 +73,20 @@ class RunView:
                 self.ticks_per_s = rate if self.ticks_per_s == 0 else 0.5 * self.ticks_per_s + 0.5 * rate
             self.status, self.last_status_at = status, now
 
-    def on_out(self, data: bytes) -> None:
+    def on_traffic(self, data: bytes) -> None:
         try:
-            out = decode_agent_out(data)
+            totals = decode_traffic(data)
         except WireError:
             self.malformed += 1
             return
         now = time.monotonic()
-        size = sum(len(m.payload) for m in out.messages)
         with self.lock:
-            total = self.totals.setdefault(out.agent_id, [0, 0])
-            total[0] += len(out.messages)
-            total[1] += size
-            window = self.traffic.setdefault(out.agent_id, collections.deque())
-            window.append((now, total[0], total[1]))
-            while window and window[0][0] < now - RATE_WINDOW:
-                window.popleft()
+            for agent, (messages, size) in totals.items():
+                self.totals[agent] = [messages, size]
+                window = self.traffic.setdefault(agent, collections.deque())
+                window.append((now, messages, size))
+                while window and window[0][0] < now - RATE_WINDOW:
+                    window.popleft()
 
     def on_alive(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr).split("/alive/", 1)[1]
@@ -245,7 +243,7 @@ def watch(
     view = RunView(run_id)
     subs = [
         session.declare_subscriber(keys.status, lambda s: view.on_status(s.payload.to_bytes())),
-        session.declare_subscriber(keys.agent_out_all, lambda s: view.on_out(s.payload.to_bytes())),
+        session.declare_subscriber(keys.view_traffic, lambda s: view.on_traffic(s.payload.to_bytes())),
         session.liveliness().declare_subscriber(keys.alive_all, view.on_alive, history=True),
     ]
     started = time.monotonic()
