@@ -7,8 +7,11 @@ import math
 from importlib import resources
 from pathlib import Path
 
+import numpy as np
+
 from swarmbed.agent_runtime.bt import InputPort, NodeRegistry, OutputPort, StatefulAction, Status, SyncAction
-from swarmbed.extension.allocator import HALT, HOLD
+from swarmbed.extension.allocator import HALT, HOLD, DecisionError
+from swarmbed.extension.context import NodeContext
 
 
 class LocalSensingNode(SyncAction):
@@ -41,7 +44,7 @@ class DecisionMakingNode(SyncAction):
 
     def tick(self):
         ctx = self.config.context
-        task = ctx.allocator.decide(ctx.view)
+        task = _task_id(ctx.allocator.decide(ctx.view), ctx)
         if task in (HOLD, HALT):  # stay put: no task to execute, and no exploring either
             self.set_output("task_id", None)
             if task == HALT:
@@ -49,6 +52,20 @@ class DecisionMakingNode(SyncAction):
             return Status.SUCCESS
         self.set_output("task_id", task)
         return Status.FAILURE if task is None else Status.SUCCESS
+
+
+def _task_id(value: object, ctx: NodeContext) -> int | None:
+    """What ``decide`` returned, as a task id, None, HOLD or HALT; a DecisionError naming the agent, the
+    tick and the value for anything else (a task id the world does not know is the world's to count,
+    as an invalid action)."""
+    if value is None:
+        return None
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        return int(value)
+    raise DecisionError(
+        f"agent {ctx.agent_id}, tick {ctx.view.tick}: {type(ctx.allocator).__name__}.decide returned "
+        f"{str(value)[:60]!r} ({type(value).__name__}); it must return a task id (int), None, HOLD or HALT"
+    )
 
 
 class TaskExecutingNode(StatefulAction):

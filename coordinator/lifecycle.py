@@ -132,9 +132,11 @@ class AgentLifecycle:
         detail = f"\n{fatal.error}\n{fatal.traceback}" if fatal else ""
         policy = self.exp.run.agent_loss
         if policy == "fail":
+            # a plugin that raised would raise again: restarting it is not offered
+            hint = "continue to go on without it" if fatal else "continue or restart to go on"
             raise RunError(
                 f"agent {agent} stopped at tick {tick} because {why}; see {self.log_of(agent)}"
-                f" (set run.on_agent_loss to continue or restart to go on){detail}"
+                f" (set run.on_agent_loss to {hint}){detail}"
             )
         if policy == "restart" and fatal is None and self.placement is not None:
             # a crashed process is started again at the next tick; a plugin that raised would raise again

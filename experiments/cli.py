@@ -6,10 +6,12 @@ import argparse
 import json
 import logging
 import os
+import shutil
 import signal
 import sys
 import textwrap
 import time
+import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -47,6 +49,8 @@ def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> 
     """The run's outcome (as its scenario words it), its network totals, and any agent it lost."""
     net = summary["network"]
     rows = scenario.summary_rows(summary)
+    if summary.get("invalid_actions"):  # what the allocator asked that the world could not do
+        rows.append(("invalid actions (refused by the world)", summary["invalid_actions"]))
     rows += [
         ("messages sent", net["messages_sent"]),
         ("payload bytes sent", net["bytes_sent"]),
@@ -76,21 +80,56 @@ def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> 
         )
 
 
+#: a sweep planning more runs than this asks for --yes
+CONFIRM_RUNS = 1000
+
+
+def _taken(out: Path, force: bool) -> str | None:
+    """Why ``out`` cannot take a new run, or None. A folder that holds anything is refused (a finished
+    run would be overwritten and its extra logs left beside the new ones) unless ``force``, which
+    clears it whole first."""
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        return f"--out {out}: exists and is not a folder"
+    if not out.exists() or not any(out.iterdir()):
+        return None
+    if not force:
+        what = "a finished run" if (out / "summary.json").exists() else "files"
+        return f"--out {out}: holds {what} already; give another --out, or --force to clear it first"
+    shutil.rmtree(out)
+    return None
+
+
+#: what Ctrl-C left, per command that starts a run (the others say only "interrupted")
+INTERRUPTED = {
+    "run": "interrupted: every process was stopped; no summary.json was written",
+    "soak": "interrupted: every process was stopped; the soak's files so far are kept, no verdict was written",
+}
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from swarmbed.experiments.launch.hub import HubOptions
     from swarmbed.experiments.launch.runner import run_experiment
-    from swarmbed.wire.credentials import CredentialsError, read_credentials
+    from swarmbed.wire.credentials import CredentialsError, check_admitted, read_credentials
     from swarmbed.wire.session import tls_from_args
 
     exp = cfg.load(args.experiment, args.set, args.seed)
     try:
-        admitted = [read_credentials(path) for path in args.admit]
+        admitted = check_admitted(read_credentials(path) for path in args.admit)
         tls = tls_from_args(args)
     except CredentialsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
+    if args.check:
+        from swarmbed.experiments.launch.check import describe_plan
+
+        print(describe_plan(exp, out, admitted))
+        return 0
+    problem = _taken(out, args.force)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
     hub = HubOptions(listen=args.listen, auth=not args.no_auth, admit=admitted, tls=tls)
     result = run_experiment(exp, out, progress=not args.no_progress, hub=hub)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
@@ -284,7 +323,7 @@ def _sweep_executor(args: argparse.Namespace, out: Path) -> Executor:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from swarmbed.experiments.campaigns.executors import ExecutorError
-    from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep, status
+    from swarmbed.experiments.campaigns.sweep import experiment_for, load_sweep, plan, run_sweep, status
 
     if args.status:
         try:
@@ -300,6 +339,22 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         return 2
     sweep = load_sweep(args.sweep, args.runs, args.grid, args.set, args.seed)
     out = Path(args.out) if args.out else Path("runs") / sweep.name
+    planned = plan(sweep, out)
+    if args.check:
+        from swarmbed.experiments.launch.check import describe_sweep
+
+        left = sum(1 for spec in planned if not (Path(spec.out_dir) / "summary.json").exists())
+        first = {spec.scenario.name: spec for spec in reversed(planned)}
+        every = {name: experiment_for(spec.base, spec.scenario, spec.seed, spec.extra) for name, spec in first.items()}
+        print(describe_sweep(len(planned), left, every, args.jobs or 1))
+        return 0
+    if len(planned) > CONFIRM_RUNS and not args.yes:
+        print(
+            f"error: this sweep plans {len(planned):,} runs; give --yes to start them "
+            f"(--check prints the plan and an estimate of its wall time)",
+            file=sys.stderr,
+        )
+        return 2
     try:
         executor = _sweep_executor(args, out)
     except ExecutorError as exc:
@@ -334,7 +389,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"{held} runs are held by another sweep command on {out}: swarmbed sweep --status {out}")
     metrics: list[str] = []
     for kind in ok["scenario_kind"].dropna().unique() if "scenario_kind" in ok else ():
-        metrics += [m for m in registry.resolve_scenario(kind).outcome_metrics if m not in metrics]
+        metrics += [m for m in registry.registered_scenario(kind).outcome_metrics if m not in metrics]
     shown = [c for c in (*metrics, "network.messages_sent") if c in ok]
     if shown:
         print("means over each scenario's completed runs (swarmbed analyze for intervals and tests):")
@@ -347,7 +402,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
     try:
         written = analyze(
-            [Path(d) for d in args.sweep_dir], control=args.control, mixed_versions_ok=args.mixed_versions
+            [Path(d) for d in args.sweep_dir],
+            control=args.control,
+            mixed_versions_ok=args.mixed_versions,
+            trusted=args.trust_plugins,
         )
     except (AnalyzeError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -376,6 +434,13 @@ def cmd_check_allocator(args: argparse.Namespace) -> int:
         except ConformanceError as exc:
             failed += 1
             print(f"FAIL {check.__name__}: {exc}")
+        except Exception as exc:  # the plugin raised: that check fails, the others still run
+            failed += 1
+            where = traceback.extract_tb(exc.__traceback__)[-1]
+            print(
+                f"FAIL {check.__name__}: the plugin raised {type(exc).__name__}: {exc} "
+                f"({where.filename}:{where.lineno})"
+            )
     return 1 if failed else 0
 
 
@@ -414,6 +479,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     except ReplayError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except (KeyError, ValueError, TypeError) as exc:  # a file of the right shape holding the wrong things
+        print(f"error: {args.run_dir}: a file of it holds what a replay cannot draw ({exc!r})", file=sys.stderr)
+        return 2
     print(f"{path}  ({frames} frames, {path.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
     return 0
 
@@ -425,6 +493,9 @@ def _replay_mcap(run: Path, out: Path) -> int:
         written = write_mcap(run, out)
     except RecordingError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyError, ValueError, TypeError, OverflowError) as exc:  # a file of the right shape, wrong things in it
+        print(f"error: {run}: a file of it holds what a recording cannot draw ({exc!r})", file=sys.stderr)
         return 2
     topics = ", ".join(f"{topic} {n}" for topic, n in written["messages"].items() if n)
     print(f"{out}  ({written['bytes'] / 1e6:.1f} MB, {written['seconds']:.1f} s; messages: {topics})")
@@ -564,9 +635,23 @@ def cmd_swap(args: argparse.Namespace) -> int:
     """Ask a running run to move one agent to another host before its next tick; wait for the outcome."""
     import json
 
+    from swarmbed.experiments.views.watch import running_runs
+    from swarmbed.wire.credentials import CredentialsError, read_credentials
     from swarmbed.wire.keys import Keys
 
-    key = Keys(args.run).swap
+    if args.credentials:
+        try:
+            role = read_credentials(args.credentials).role
+        except CredentialsError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        if role != "operator":
+            print(
+                f"error: {args.credentials} is a {role}'s credentials: swaps are asked by an operator "
+                "(swarmbed credentials FILE --user NAME, admitted with swarmbed run --admit FILE)",
+                file=sys.stderr,
+            )
+            return 2
 
     def ask(request: dict) -> dict | None:
         for reply in session.get(key, payload=json.dumps(request), timeout=5.0):
@@ -578,6 +663,16 @@ def cmd_swap(args: argparse.Namespace) -> int:
     if session is None:
         return 2
     with session:
+        if args.run is None:  # the only run visible from here, as swarmbed watch picks it
+            runs = running_runs(session)
+            if len(runs) != 1:
+                print(
+                    f"error: {len(runs)} runs are visible ({', '.join(runs) or 'none'}): name one with --run",
+                    file=sys.stderr,
+                )
+                return 2
+            args.run = runs[0]
+        key = Keys(args.run).swap
         answer = ask({"agent": args.agent, "to": args.to})
         if answer is None or "error" in answer:
             print(f"error: run {args.run}: {answer['error'] if answer else 'no coordinator answered'}", file=sys.stderr)
@@ -610,7 +705,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     run.add_argument("experiment", help="experiment YAML file")
     run.add_argument("--seed", type=int, help="run seed (overrides run.seed)")
-    run.add_argument("--out", help="run directory (default: runs/<name>/seed<seed>-<time>)")
+    run.add_argument("--out", help="run directory (default: runs/<name>/seed<seed>-<time>); it must be empty")
+    run.add_argument("--force", action="store_true", help="clear --out first if it holds anything")
+    run.add_argument(
+        "--check",
+        action="store_true",
+        help="validate everything (files, plugins, trees and port values, ticks, credentials) and print the plan "
+        "with an estimate of its wall time; start nothing",
+    )
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.add_argument(
@@ -763,6 +865,13 @@ def main(argv: list[str] | None = None) -> int:
     sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")
     sw.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every run")
     sw.add_argument("--no-progress", action="store_true")
+    sw.add_argument("--yes", action="store_true", help=f"start a sweep of more than {1000:,} runs without asking")
+    sw.add_argument(
+        "--check",
+        action="store_true",
+        help="validate the sweep and every scenario's experiment, print the plan and a wall-time estimate; "
+        "start nothing",
+    )
     sw.set_defaults(func=cmd_sweep)
 
     an = sub.add_parser("analyze", help="tables and figures from a sweep directory")
@@ -772,6 +881,12 @@ def main(argv: list[str] | None = None) -> int:
         "--mixed-versions",
         action="store_true",
         help="pool runs of a scenario or allocator made in different versions (provenance.json)",
+    )
+    an.add_argument(
+        "--trust-plugins",
+        action="store_true",
+        help="import the scenario classes the runs name as module:Class or file.py:Class (only for folders you "
+        "made yourself: a received folder could name any code); registered scenarios need no trust",
     )
     an.set_defaults(func=cmd_analyze)
 
@@ -856,7 +971,7 @@ def main(argv: list[str] | None = None) -> int:
     gr.set_defaults(func=cmd_groot)
 
     swap = sub.add_parser("swap", help="move a running agent to another host, with its state")
-    swap.add_argument("--run", required=True, help="the run id (timings.json and deployment.json name it)")
+    swap.add_argument("--run", help="the run id (deployment.json names it; default: the only run visible)")
     swap.add_argument("--agent", type=int, required=True, help="the agent to move")
     swap.add_argument("--to", required=True, help="the host to move it to ('local': the launching machine)")
     swap.add_argument("--wait", type=float, default=60.0, help="seconds to wait for the outcome")
@@ -890,7 +1005,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"run failed: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:
-        print(str(exc) or "interrupted: every process was stopped; no summary.json was written", file=sys.stderr)
+        print(str(exc) or INTERRUPTED.get(args.command, "interrupted"), file=sys.stderr)
         return 128 + stopped_by[0]
     except BrokenPipeError:  # the reader of our output went away (e.g. `| head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -10,6 +10,12 @@ from pydantic import BaseModel, ConfigDict
 
 from swarmbed.extension.view import LocalView
 
+
+class DecisionError(ValueError):
+    """``decide`` returned what is not a task id, None, HOLD or HALT; the message names the agent,
+    the tick and the value."""
+
+
 #: what :meth:`Allocator.decide` returns to keep the agent still this tick (no task, no exploring):
 #: SPACE's GRAPE holds its agents while their partition converges. Task ids are never negative.
 HOLD = -2

@@ -184,8 +184,21 @@ def test_crafted_tree_change_samples_are_named():
     from swarmbed.wire.errors import WireError
 
     boards = {"Main": {"count": 3, "half": 2.5, "word": "hi", "path": [1, None, "a"], "none": None}, "S::3": None}
-    good = TreeChanges(4, 1_000_000, [(1, 1), (3, 2)], "<root/>", [(1, 1)], boards)
+    xml = '<root><A _uid="1"/><B _uid="2"/><C _uid="3"/></root>'
+    good = TreeChanges(4, 1_000_000, [(1, 1), (3, 2)], xml, [(1, 1)], boards)
     assert decode_tree_changes(encode_tree_changes(good), n_nodes=3) == good
+    # the tree a sample brings decides its size, whatever a uid in it claims (a gateway allocates by it)
+    for tree, why in (
+        ('<root><A _uid="50000000"/></root>', "at most 5 digits"),
+        ('<root><A _uid="1"/><B _uid="9"/></root>', "not 1 to 2"),
+        ('<root><A _uid="1"/><B _uid="1"/></root>', "not 1 to 2"),
+        ('<root><A _uid="' + "7" * 5000 + '"/></root>', "at most 5 digits"),
+        ('<root><A _uid="\u00b2"/></root>', "at most 5 digits"),
+    ):
+        with pytest.raises(WireError, match=re.escape(why)):
+            decode_tree_changes(pack([4, 0, b"", tree, b"", {}]))
+    with pytest.raises(WireError, match="no node 4"):  # statuses beyond the tree it comes with
+        decode_tree_changes(pack([4, 0, b"", xml, b"\x04\x00\x01", {}]), n_nodes=9)
     crafted = {
         pack([4, 0, b"\x01\x00", None, b"", {}]): "changes must be whole 3-byte",
         pack([-1, 0, b"", None, b"", {}]): "tick must be a count",

@@ -4,6 +4,7 @@ same status buffers, the same recorded status changes and the same tree shape.""
 
 import contextlib
 import re
+import signal
 import socket
 import struct
 import threading
@@ -247,9 +248,13 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
         assert board["arrival_radius"] == 5.0 and "assigned_task" in board
     finally:
         groot.close()
-        gateway.stdin.close()
+        gateway.stdin.close()  # no terminal: a closed stdin leaves the gateway serving, until interrupted
+        time.sleep(1.0)
+        still_serving = gateway.poll() is None
+        gateway.send_signal(signal.SIGINT)
         gateway.wait(timeout=20)
         runner.join(timeout=300)
+    assert still_serving, "the gateway stopped when its standard input closed"
     assert set(seen) == {0, 4} and seen[0][0] != seen[4][0]  # another agent: another tree identity
     for _identity, xml, buffers in seen.values():
         assert len(buffers) == 2 and shape(xml)[0][0] == "BehaviorTree"  # its tree, ticking

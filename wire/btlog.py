@@ -39,7 +39,8 @@ MAX_ENTRIES = 256  # entries of one blackboard
 MAX_NAME = 256  # characters of a blackboard's or an entry's name
 MAX_TEXT = 4096  # characters of a text value
 MAX_ITEMS = 64  # items of a list value
-_UID = re.compile(r'_uid="(\d+)"')
+_UID = re.compile(r'_uid="([^"]*)"')
+MAX_NODES = 0xFFFF  # a record's uid is a uint16
 Scalar = int | float | str | None
 BlackboardValue = Scalar | list[Scalar]
 
@@ -49,9 +50,17 @@ class BtLogError(ValueError):
 
 
 def tree_size(xml: str) -> int:
-    """The number of nodes of a tree's XML as :func:`file_head` takes it: its largest ``_uid``
-    (uids run from 1)."""
-    return max((int(u) for u in _UID.findall(xml)), default=0)
+    """The number of nodes of a tree's XML as :func:`file_head` takes it (uids run from 1 to it, each
+    once). A WireError for any other numbering: the size is what a reader allocates for, so it is
+    taken from the nodes the XML holds, never from a uid it claims."""
+    uids = _UID.findall(xml)
+    if len(uids) > MAX_NODES:
+        raise WireError(f"tree: {len(uids)} nodes, more than a .btlog record can name ({MAX_NODES})")
+    if any(not (u.isascii() and u.isdigit()) or len(u) > 5 for u in uids):
+        raise WireError("tree: every _uid must be a number of at most 5 digits")
+    if sorted(map(int, uids)) != list(range(1, len(uids) + 1)):
+        raise WireError(f"tree: its {len(uids)} nodes' _uid are not 1 to {len(uids)}, each once")
+    return len(uids)
 
 
 def file_head(xml: str, first_us: int = EPOCH_US) -> bytes:
@@ -146,6 +155,8 @@ def decode_tree_changes(data: bytes, n_nodes: int | None = None) -> TreeChanges:
             raise WireError(f"tree changes: {name} must be a count, got {value!r}")
     if not (xml is None or (isinstance(xml, str) and xml.startswith("<root") and len(xml) <= MAX_TREE_XML)):
         raise WireError("tree changes: xml must be a tree's <root> element or nil")
+    if xml is not None:
+        n_nodes = tree_size(xml)  # its statuses are checked against the tree it comes with
     return TreeChanges(
         tick,
         time_us,

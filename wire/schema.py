@@ -264,6 +264,11 @@ class Experiment(Strict):
                 f"run.duration / run.dt is {self.run.duration / self.run.dt:.3g} ticks, more than the "
                 f"{MAX_TICKS:,} a run may have"
             )
+        if self.ticks < 1:
+            raise ValueError(
+                f"run.duration {self.run.duration:g} s with run.dt {self.run.dt:g} s makes 0 ticks: "
+                "a run needs a duration of at least one tick"
+            )
         return self
 
 

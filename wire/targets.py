@@ -15,6 +15,7 @@ import hashlib
 import importlib
 import importlib.util
 import sys
+import traceback
 from pathlib import Path
 from types import ModuleType
 from typing import TypeVar
@@ -72,7 +73,15 @@ def load_target(target: str, base: type[T]) -> type[T]:
         raise TargetError(
             f"cannot import {module_ref!r}: {type(exc).__name__}: {exc.msg} ({exc.filename}, line {exc.lineno})"
         ) from None
-    cls = getattr(module, cls_name, None)
+    except Exception as exc:  # the module raised as it was imported: where, in the user's code
+        frame = traceback.extract_tb(exc.__traceback__)[-1]
+        raise TargetError(
+            f"cannot import {module_ref!r}: it raised {type(exc).__name__}: {exc} "
+            f"({frame.filename}, line {frame.lineno})"
+        ) from None
+    if not hasattr(module, cls_name):
+        raise TargetError(f"{module_ref} has no class {cls_name!r}")
+    cls = getattr(module, cls_name)
     if not (isinstance(cls, type) and issubclass(cls, base)):
         raise TargetError(f"{target} is not a subclass of {base.__name__}")
     return cls

@@ -78,7 +78,7 @@ def OutputPort(type_: type = str, default: str | None = None, description: str =
     return Port("output", type_, default, description)
 
 
-def _convert(raw: str, type_: type) -> Any:
+def convert_port(raw: str, type_: type) -> Any:
     if type_ is bool:
         low = raw.strip().lower()
         if low in ("true", "1"):
@@ -147,7 +147,7 @@ class TreeNode:
         key = blackboard_key(raw, port)
         if key is None:
             try:
-                value = _convert(raw, spec.type)
+                value = convert_port(raw, spec.type)
             except ValueError as exc:
                 raise BTError(f"{self.config.path}: port '{port}': {exc}") from None
             self._literals[port] = value

@@ -17,9 +17,11 @@ from swarmbed.agent_runtime.bt.node import (
     ControlNode,
     DecoratorNode,
     NodeConfig,
+    Port,
     StatusWatcher,
     TreeNode,
     blackboard_key,
+    convert_port,
     watch_node,
 )
 from swarmbed.agent_runtime.bt.registry import NodeRegistry
@@ -146,6 +148,8 @@ class _Builder:
         for pname, spec in ports.items():
             if pname not in raw and spec.required:
                 raise BTError(f"{where}: required port '{pname}' is missing")
+            if pname in raw:
+                _check_port_value(where, pname, spec, raw[pname])
         node = node_type(el.attrs.get("name", node_id), NodeConfig(bb, raw, where, self.context))
         self._add(node)
         n = len(el.children)
@@ -254,3 +258,16 @@ def load_tree(
     builder = _Builder(where, trees, registry, context)
     root_node = builder.build_tree(main, bb, ())
     return Tree(root_node, bb, builder.nodes, main)
+
+
+def _check_port_value(where: str, name: str, spec: Port, raw: str) -> None:
+    """A port's value as the tree gives it, checked against its declared type when the tree is loaded
+    (``<Repeat num_cycles="abc">`` is refused here, not at the first tick of a run)."""
+    if blackboard_key(raw, name) is not None:
+        return  # read from the blackboard when ticked
+    if spec.direction == "output":
+        raise BTError(f"{where}: output port '{name}' must name a blackboard key ({{key}}), not {raw!r}")
+    try:
+        convert_port(raw, spec.type)
+    except (ValueError, TypeError):
+        raise BTError(f"{where}: port '{name}': {raw[:40]!r} is not a {spec.type.__name__}") from None

@@ -133,14 +133,26 @@ def parse_override(text: str) -> tuple[str, Any]:
 
 
 def _origin(line: str, where: str, overridden: dict[str, Any], origin: str = "--set") -> str:
-    """``line`` (``dotted.key: message``) prefixed by where that key came from: ``--set`` or the file."""
+    """``line`` (``dotted.key: message``) prefixed by where that key came from: the flag that gave it
+    (``--set key=value`` as the user wrote the value, ``--seed N``) or the file."""
     key, _, message = line.partition(": ")
     for set_key, value in overridden.items():
+        flag = f"--seed {value}" if set_key == SEED_FLAG else f"{origin} {set_key}={_as_written(value)}"
+        set_key = "run.seed" if set_key == SEED_FLAG else set_key
         if key == set_key:
-            return f"{origin} {set_key}={value}: {message}"
+            return f"{flag}: {message}"
         if key.startswith(set_key + ".") or set_key.startswith(key + "."):
-            return f"{origin} {set_key}={value}: {line}"
+            return f"{flag}: {line}"
     return f"{where}: {line}"
+
+
+#: the key under which ``--seed`` is listed among the overridden ones (errors then name ``--seed``)
+SEED_FLAG = "<--seed>"
+
+
+def _as_written(value: Any) -> str:
+    """A value as YAML writes it (``null``, ``true``, ``[1, 2]``), the way a user typed it after ``=``."""
+    return value if isinstance(value, str) else json.dumps(value)
 
 
 def _message(error: Any) -> str:
@@ -290,9 +302,11 @@ def load(
     pairs = [parse_override(text) for text in overrides]
     pairs = [(k, _absolute(k, v, Path.cwd()) if k in PATH_KEYS else v) for k, v in pairs]  # from the shell: from here
     apply_overrides(data, pairs, str(path))
+    overridden: dict[str, Any] = dict(pairs)
     if seed is not None:
         _set_dotted(data, "run.seed", seed, str(path))
-    return validate(data, str(path), dict(pairs), origin)
+        overridden = {k: v for k, v in overridden.items() if k != "run.seed"} | {SEED_FLAG: seed}
+    return validate(data, str(path), overridden, origin)
 
 
 def to_yaml(exp: Experiment) -> str:

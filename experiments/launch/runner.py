@@ -95,7 +95,15 @@ def plan_run(exp: Experiment, out_dir: Path, hub: HubOptions = LOOPBACK_ONLY) ->
     """The plan of a validated experiment (:func:`swarmbed.experiments.launch.config.load` checked
     its placement and names)."""
     where = hosts_of(exp.placement, exp.agents.count)
-    return RunPlan(exp, resolve_experiment(exp), out_dir, Keys(secrets.token_hex(6)), where, hub)
+    plan = RunPlan(exp, resolve_experiment(exp), out_dir, Keys(secrets.token_hex(6)), where, hub)
+    admitted = {i.host_name for i in hub.admit if i.role == "host"}
+    refused = [h for h in plan.remote_hosts if hub.auth and h not in admitted]
+    if refused:  # it could be up and would still never get in: say so now, not "not reachable" later
+        raise RunError(
+            f"placement names host(s) {', '.join(refused)}, which this run does not admit: give swarmbed run "
+            "--admit FILE with each host's credentials file (swarmbed credentials FILE --user NAME --role host)"
+        )
+    return plan
 
 
 def _start_result_dir(plan: RunPlan) -> None:

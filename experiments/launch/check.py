@@ -1,0 +1,97 @@
+"""``swarmbed run --check`` and ``swarmbed sweep --check``: what a command would do, and roughly how
+long it would take, without starting a process.
+
+By the time a plan is described the experiment has been loaded the way a run loads it (files,
+duplicate keys, plugins imported, parameters validated, behavior trees loaded with their port values
+checked, at least one tick), so whatever would stop a run before its first tick has already been
+said. The wall-time estimate comes from a short calibration: the allocator's own ``observe`` and
+``decide`` timed in this process on a random instance of the experiment's size (capped), plus the
+per agent-tick cost of swarmbed's processes measured in docs/benchmarks.md, spread over this
+machine's cores. It is a guide, not a measurement.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.plugins.checks.allocator import random_instance, simulate
+from swarmbed.wire.credentials import Identity
+from swarmbed.wire.schema import Experiment, hosts_of
+
+#: CPU seconds swarmbed's own processes spend per agent-tick with a no-op allocator (agent ~330 us,
+#: hub and proxy ~70 us each: docs/benchmarks.md, 2026-11-26, 50-200 agents)
+PROCESS_CPU_PER_AGENT_TICK = 470e-6
+#: wall seconds to start a run's processes: a fixed part and one per agent (fork server, joins)
+STARTUP_S, STARTUP_PER_AGENT_S = 3.0, 0.03
+CALIBRATION_AGENTS, CALIBRATION_TASKS, CALIBRATION_ROUNDS = 10, 40, 20
+
+
+def allocator_seconds_per_agent_tick(exp: Experiment) -> float:
+    """The allocator's own CPU per agent and tick, timed in this process on a small random instance."""
+    kind = exp.scenario.kind if exp.scenario.kind in ("mtsr", "sar") else "mtsr"
+    n = max(2, min(exp.agents.count, CALIBRATION_AGENTS))
+    inst = random_instance(exp.run.seed, n, CALIBRATION_TASKS, scenario=kind)
+    params = dict(exp.allocator.params())
+    started = time.process_time()
+    simulate(exp.allocator.name, params, inst, CALIBRATION_ROUNDS, exp.run.seed, scenario=kind)
+    return (time.process_time() - started) / (n * CALIBRATION_ROUNDS)
+
+
+def estimate_wall_s(exp: Experiment, cores: int | None = None) -> float:
+    """Rough wall seconds of one run of ``exp`` on this machine."""
+    cores = max(1, min(cores or os.cpu_count() or 1, exp.agents.count + 2))
+    try:
+        per_agent_tick = PROCESS_CPU_PER_AGENT_TICK + allocator_seconds_per_agent_tick(exp)
+    except Exception:  # an allocator the kit cannot drive (a scenario of its own): the process cost alone
+        per_agent_tick = PROCESS_CPU_PER_AGENT_TICK
+    ticking = exp.ticks * exp.agents.count * per_agent_tick / cores
+    return STARTUP_S + STARTUP_PER_AGENT_S * exp.agents.count + ticking
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def describe_plan(exp: Experiment, out: Path, admitted: Sequence[Identity] = ()) -> str:
+    """What ``swarmbed run`` would do with ``exp``, in a few lines; nothing is started or written."""
+    resolved = cfg.resolve_experiment(exp)
+    hosts = sorted({h for h in hosts_of(exp.placement, exp.agents.count).values() if h != "local"})
+    admitted_hosts = {i.host_name for i in admitted if i.role == "host"}
+    lines = [
+        f"check: {exp.name} is valid; nothing was started",
+        f"  scenario {exp.scenario.kind} ({resolved.targets.scenario}), allocator {exp.allocator.name} "
+        f"({resolved.targets.allocator})",
+        f"  {exp.agents.count} agents, {exp.ticks:,} ticks of {exp.run.dt:g} s ({exp.run.duration:g} simulated s), "
+        f"seed {exp.run.seed}, clock {exp.run.clock}",
+        f"  results into {out}"
+        + (" (not empty: give --force to clear it)" if out.exists() and any(out.iterdir()) else ""),
+    ]
+    for host in hosts:
+        if host in admitted_hosts:
+            lines.append(f"  host {host}: admitted; it must be up and reach this machine when the run starts")
+        else:
+            lines.append(f"  host {host}: NOT admitted (give --admit with its credentials file)")
+    lines.append(f"  estimated wall time: about {_duration(estimate_wall_s(exp))} on {os.cpu_count()} cores")
+    return "\n".join(lines)
+
+
+def describe_sweep(n_runs: int, runs_left: int, per_run: dict[str, Experiment], jobs: int) -> str:
+    """What ``swarmbed sweep`` would do: runs planned and left, and a wall-time estimate."""
+    lines = [f"check: the sweep is valid; nothing was started ({n_runs} runs planned, {runs_left} still to run)"]
+    total = 0.0
+    for name, exp in per_run.items():
+        one = estimate_wall_s(exp, cores=max(1, (os.cpu_count() or 1) // max(1, jobs)))
+        lines.append(f"  {name}: {exp.agents.count} agents, {exp.ticks:,} ticks, about {_duration(one)} a run")
+        total += one
+    if per_run:
+        mean = total / len(per_run)
+        lines.append(f"  estimated wall time: about {_duration(mean * runs_left / max(1, jobs))} with --jobs {jobs}")
+    return "\n".join(lines)

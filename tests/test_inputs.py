@@ -1,0 +1,182 @@
+"""What a user types and writes, refused before any process starts with one line that names what and
+where (issue 42: a new user's ~60 bad inputs). Nothing here starts a process: each command is
+refused, checked or planned in this interpreter."""
+
+import json
+
+import pandas as pd
+import pytest
+
+from swarmbed.agent_runtime.bt import BTError, load_tree
+from swarmbed.agent_runtime.nodes import space_registry
+from swarmbed.experiments import cli
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.hub import HubOptions
+from swarmbed.experiments.launch.runner import RunError, plan_run
+from swarmbed.experiments.views.analyze import scenario_summary
+from swarmbed.experiments.views.groot import agent_command
+from swarmbed.plugins.registry import PluginError, resolve
+from tests.conftest import QUICKSTART, experiment
+
+
+def _file(path, text):
+    path.write_text(text)
+    return path
+
+
+def _main(capsys, *argv):
+    rc = cli.main(list(map(str, argv)))
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_a_key_given_twice_is_refused_with_file_line_and_key(tmp_path):
+    twice = _file(tmp_path / "twice.yaml", "run:\n  seed: 5\n  duration: 100\nrun:\n  seed: 6\n")
+    with pytest.raises(cfg.ConfigError, match=r"twice.yaml, line 4: key 'run' is given twice .*first on line 1"):
+        cfg.load(twice)
+    inner = _file(tmp_path / "inner.yaml", "run:\n  seed: 5\n  seed: 6\n")
+    with pytest.raises(cfg.ConfigError, match=r"inner.yaml, line 3: key 'seed' is given twice"):
+        cfg.load(inner)
+
+
+def test_numbers_are_read_as_yaml_1_2_reads_them(tmp_path):
+    base = QUICKSTART.read_text()
+    octal = _file(tmp_path / "octal.yaml", base.replace("count: 5", "count: 010"))
+    assert "count: 010" in octal.read_text() and cfg.load(octal).agents.count == 10  # not 8
+    text = QUICKSTART.read_text()
+    clock = _file(tmp_path / "clock.yaml", text.replace("duration: 2000", "duration: 1:00"))
+    with pytest.raises(cfg.ConfigError, match=r"run.duration"):  # text, not 60 seconds
+        cfg.load(clock)
+    assert cfg.load(QUICKSTART, ["network.loss=1e-1"]).network.loss == 0.1  # refused before
+    yes = _file(tmp_path / "yes.yaml", text.replace("run:\n", "run:\n  stop_when_done: yes\n", 1))
+    with pytest.raises(cfg.ConfigError, match="stop_when_done"):  # "yes" is text in YAML 1.2
+        cfg.load(yes)
+
+
+def test_a_plan_of_zero_ticks_is_refused():
+    with pytest.raises(cfg.ConfigError, match="makes 0 ticks"):
+        experiment("run.dt=10", "run.duration=5")
+    assert experiment("run.dt=10", "run.duration=10").ticks == 1
+
+
+def test_a_port_value_of_the_wrong_type_is_refused_when_the_tree_loads(tmp_path):
+    tree = _file(
+        tmp_path / "t.xml",
+        '<root BTCPP_format="4"><BehaviorTree ID="M"><Repeat num_cycles="abc">'
+        "<AlwaysSuccess/></Repeat></BehaviorTree></root>",
+    )
+    with pytest.raises(BTError, match=r"t.xml:1 .*port 'num_cycles': 'abc' is not a int"):
+        load_tree(tree, space_registry())
+    with pytest.raises(cfg.ConfigError, match="num_cycles"):  # before any process starts
+        experiment(f"agents.behavior_tree={tree}")
+    tree.write_text(tree.read_text().replace("abc", "3"))
+    load_tree(tree, space_registry())
+
+
+def test_a_plugin_that_raises_at_import_or_lacks_its_class_is_one_line(tmp_path):
+    bad = _file(tmp_path / "bad.py", "import json\n\nraise RuntimeError('no licence server')\n")
+    with pytest.raises(PluginError) as caught:
+        resolve(f"{bad}:Picker")
+    assert "RuntimeError: no licence server" in str(caught.value) and "bad.py, line 3" in str(caught.value)
+    assert "\n" not in str(caught.value)
+    empty = _file(tmp_path / "empty.py", "X = 1\n")
+    with pytest.raises(PluginError, match="has no class 'Picker'"):
+        resolve(f"{empty}:Picker")
+
+
+RAISING_PLUGIN = """
+from swarmbed.extension import Allocator, NoParams
+
+class Raising(Allocator):
+    Params = NoParams
+
+    def decide(self, view):
+        raise KeyError("oops")
+"""
+
+
+def test_check_allocator_reports_every_check_of_a_plugin_that_raises(tmp_path, capsys):
+    plugin = _file(tmp_path / "raising.py", RAISING_PLUGIN)
+    rc, out, _ = _main(capsys, "check-allocator", f"{plugin}:Raising")
+    fails = [line for line in out.splitlines() if line.startswith("FAIL")]
+    assert rc == 1 and len(fails) >= 4, out  # every check ran and said why
+    assert all("raised KeyError: 'oops' (" in line and "raising.py:8" in line for line in fails), fails
+
+
+def test_out_that_holds_a_run_is_refused_and_kept_unless_forced(tmp_path, capsys):
+    out = tmp_path / "done"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")
+    (out / "logs").mkdir()
+    (out / "logs" / "agent_7.log").write_text("old")
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--out", out)
+    assert rc == 2 and "holds a finished run already" in err and "--force" in err
+    assert (out / "summary.json").read_text() == "{}" and (out / "logs" / "agent_7.log").exists()
+    (tmp_path / "file").write_text("x")
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--out", tmp_path / "file")
+    assert rc == 2 and "not a folder" in err
+
+
+def test_errors_blame_the_flag_that_gave_the_value(tmp_path, capsys):
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--seed", "-1", "--check")
+    assert rc == 2 and err.startswith("error: --seed -1:"), err
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--set", "run=null", "--check")
+    assert rc == 2 and err.startswith("error: --set run=null: must be a section"), err
+    rc, _, err = _main(capsys, "sweep", QUICKSTART, "--grid", "allocator.name=,,", "--check")
+    assert rc == 2 and "none of them empty" in err and "share a name" not in err, err
+    rc, _, err = _main(capsys, "sweep", QUICKSTART, "--grid", "allocator.name=fcg,fcg", "--check")
+    assert rc == 2 and "given twice" in err, err
+
+
+def test_check_validates_and_plans_without_starting_anything(tmp_path, capsys):
+    out = tmp_path / "never"
+    rc, text, _ = _main(capsys, "run", QUICKSTART, "--check", "--out", out)
+    assert rc == 0 and "nothing was started" in text and "estimated wall time: about" in text, text
+    assert "5 agents" in text and "fcg" in text and not out.exists()
+    sweep = _file(tmp_path / "big.yaml", f"name: big\nbase: {QUICKSTART}\nruns: 400\n")
+    rc, _, err = _main(capsys, "sweep", sweep, "--grid", "allocator.name=fcg,cbba,grape", "--out", tmp_path / "s")
+    assert rc == 2 and "1,200 runs" in err and "--yes" in err and not (tmp_path / "s").exists()
+    rc, text, _ = _main(capsys, "sweep", sweep, "--grid", "allocator.name=fcg,cbba", "--check", "--out", tmp_path / "s")
+    assert rc == 0 and "800 runs planned, 800 still to run" in text and not (tmp_path / "s").exists(), text
+
+
+def test_a_host_that_is_not_admitted_is_named_as_such():
+    exp = experiment("agents.count=4", "placement={labpc2: '2-3'}")
+    with pytest.raises(RunError, match="host\\(s\\) labpc2, which this run does not admit"):
+        plan_run(exp, cfg.Path("/nonexistent"), HubOptions())
+    plan_run(exp, cfg.Path("/nonexistent"), HubOptions(auth=False))  # an open hub admits anyone
+
+
+def test_the_gateway_takes_only_plain_agent_ids():
+    assert agent_command(" 4 ") == 4 and agent_command("²") is None and agent_command("7" * 5000) is None
+    assert agent_command("-1") is None and agent_command("x") is None
+
+
+def test_interrupting_a_view_says_nothing_of_a_summary(capsys, monkeypatch):
+    def interrupted(_args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "cmd_replay", interrupted)
+    monkeypatch.setattr(cli, "cmd_run", interrupted)
+    rc, _, err = _main(capsys, "replay", "somewhere")
+    assert rc == 130 and err.strip() == "interrupted"
+    rc, _, err = _main(capsys, "run", QUICKSTART)
+    assert rc == 130 and "no summary.json was written" in err
+
+
+def test_capped_runs_are_counted_and_marked_per_cell():
+    runs = pd.DataFrame(
+        {
+            "scenario": ["a"] * 4,
+            "mission_time": [100.0, 120.0, 3000.0, 3000.0],
+            "all_tasks_completed": [True, True, False, False],
+        }
+    )
+    table = scenario_summary(runs, {"mission_time": "mission time"}, {"mission_time": "all_tasks_completed"})
+    row = table.iloc[0]
+    assert row["capped"] == 2 and "2 of 4 runs stopped at run.duration: a lower bound" in row["note"]
+    plain = scenario_summary(
+        runs.assign(all_tasks_completed=True), {"mission_time": "m"}, {"mission_time": "all_tasks_completed"}
+    )
+    assert plain.iloc[0]["capped"] == 0 and plain.iloc[0]["note"] == ""
+    assert json.loads(json.dumps(list(table.columns)))[-2:] == ["capped", "note"]
