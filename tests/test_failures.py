@@ -156,6 +156,48 @@ def test_plugin_that_raises_stops_the_run_with_its_traceback(tmp_path, threads):
     assert not (tmp_path / "run" / "summary.json").exists()
 
 
+GARBAGE = textwrap.dedent("""
+    from swarmbed.plugins.base import Allocator
+
+    class Garbage(Allocator):
+        def decide(self, view):
+            return "task-3" if view.tick == 2 and self.agent_id == 3 else None
+""")
+
+
+def test_a_decision_that_is_no_task_id_names_the_agent_the_tick_and_the_value(tmp_path):
+    plugin = tmp_path / "garbage.py"
+    plugin.write_text(GARBAGE)
+    with pytest.raises(RunError) as info:
+        run_experiment(experiment(f"allocator={{name: '{plugin}:Garbage'}}"), tmp_path / "run", progress=False)
+    msg = str(info.value)
+    assert (
+        "agent 3 stopped at tick 2" in msg and "DecisionError: agent 3, tick 2: Garbage.decide returned 'task-3'" in msg
+    )
+    assert "restart" not in msg.splitlines()[0]  # a plugin that raised is not offered a restart
+
+
+STUCK = textwrap.dedent("""
+    import time
+    from swarmbed.plugins.base import Allocator
+
+    class Stuck(Allocator):
+        def decide(self, view):
+            if view.tick == 3 and self.agent_id == 2:
+                time.sleep(30)
+            return None
+""")
+
+
+def test_a_stuck_tick_names_the_agents_that_did_not_answer(tmp_path):
+    plugin = tmp_path / "stuck_agent.py"
+    plugin.write_text(STUCK)
+    exp = experiment(f"allocator={{name: '{plugin}:Stuck'}}", "run.tick_timeout=4")
+    with pytest.raises(RunError) as info:
+        run_experiment(exp, tmp_path / "run", progress=False)
+    assert "the proxy still waits for agent(s) 2 at tick 3; see logs/agent_2.log" in str(info.value), info.value
+
+
 LONG_TICK = textwrap.dedent("""
     import time
     from swarmbed.plugins.base import Allocator
