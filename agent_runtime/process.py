@@ -30,7 +30,7 @@ from swarmbed.wire.codec import (
 )
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_over, is_alive
-from swarmbed.wire.process import child_args
+from swarmbed.wire.process import child_args, pin_thread_state
 from swarmbed.wire.reports import (
     Checkpoint,
     Fatal,
@@ -147,7 +147,10 @@ class _Agent:
                     with self.lock:
                         self.pending -= 1
                 else:
-                    msg = self._decode(channel.recv().payload.to_bytes())  # type: ignore[union-attr]
+                    data = channel.recv().payload.to_bytes()  # type: ignore[union-attr]
+                    if self.runtime.stages is not None:
+                        self.runtime.stages.start()
+                    msg = self._decode(data)
                     code = None if msg is None else self._handle(msg)
                 if code is not None:
                     return code
@@ -159,6 +162,9 @@ class _Agent:
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         """The single worker's callback: answer a tick here when nothing waits for the main thread."""
+        pin_thread_state()
+        if self.runtime.stages is not None:
+            self.runtime.stages.start()
         try:
             msg = self._decode(sample.payload.to_bytes())
             if msg is None:
@@ -226,6 +232,8 @@ class _Agent:
             if msg.reason == COORDINATOR_GONE:
                 log.error("agent %d: the coordinator went away; exiting", agent_id)
                 return EXIT_COORDINATOR_GONE
+            if runtime.stages is not None:
+                log.info("agent %d: %s", agent_id, runtime.stages.line())
             transport = Transport.model_validate({"tcp": tcp_counters(), "samples": self.sample_bytes})
             self.report(runtime.report(extra_malformed=self.malformed, transport=transport))
             return EXIT_OK
@@ -237,6 +245,9 @@ class _Agent:
         """Answer one tick: step the tree and put its changes and the answer (from the callback, only
         what fits the transmit queue; a failure is reported from the main thread)."""
         runtime, agent_id = self.runtime, self.runtime.agent_id
+        st = runtime.stages
+        if st is not None:
+            st.mark("decode")
         try:
             obs = runtime.decode_observation(msg.obs)
         except WireError as exc:  # blind for one tick: answer it (the clock must go on), count it
@@ -244,6 +255,8 @@ class _Agent:
             log.warning("agent %d: malformed observation of tick %d dropped: %s", agent_id, msg.tick, exc)
             self._put(self.out, encode_agent_out(msg.tick, agent_id, ["stop"], []), inline)
             return None
+        if st is not None:
+            st.mark("observation")
         if bool(self.monitors) != runtime.watched:
             runtime.monitored(bool(self.monitors))
         try:
@@ -270,6 +283,9 @@ class _Agent:
         if tree is not None:
             self._put(self.bt, tree, inline)
         self._put(self.out, answer, inline)
+        if st is not None:
+            st.mark("answer")
+            st.ticks += 1
         return None
 
     def _put(self, publisher: zenoh.Publisher, data: bytes, inline: bool) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 from collections import defaultdict
+from typing import Any
 
 import numpy as np
 
@@ -26,6 +27,8 @@ from swarmbed.wire.observation import Observation
 from swarmbed.wire.reports import Final, Transport
 from swarmbed.wire.schema import AgentSpec
 from swarmbed.wire.seeds import agent_seeds
+from swarmbed.wire.stages import Stages
+from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.state import StateError, pack_state, unpack_state
 from swarmbed.wire.targets import load_target
 
@@ -72,6 +75,24 @@ class AgentRuntime:
         self.sent: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # kind -> [messages, payload bytes]
         self.malformed = 0
         self.ticks = 0
+        self.stages: Stages | None = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
+        if self.stages is not None:
+            self._time_decide(self.stages)
+
+    def _time_decide(self, st: Stages) -> None:
+        """Charge ``decide`` to the allocator, not to the tree that calls it (profiling only). The
+        allocator becomes an instance of a subclass that times it: its attributes, and so its
+        snapshot, are untouched."""
+        cls = type(self.allocator)
+
+        def decide(allocator: Allocator, view: LocalView) -> Any:
+            st.mark("tree")
+            try:
+                return cls.decide(allocator, view)
+            finally:
+                st.mark("allocator")
+
+        self.allocator.__class__ = type(cls.__name__, (cls,), {"decide": decide, "__module__": cls.__module__})
 
     @property
     def view(self) -> LocalView:
@@ -118,8 +139,15 @@ class AgentRuntime:
             obs,
         )
         ctx.action = ["stop"]
+        st = self.stages
+        if st is not None:
+            st.mark("view")
         self.allocator.observe(ctx.view)
+        if st is not None:
+            st.mark("allocator")
         self.tree.tick_once()
+        if st is not None:
+            st.mark("tree")
         messages = []
         for out in ctx.view.outbox:
             msg = out.encode()
@@ -128,6 +156,8 @@ class AgentRuntime:
             counter[1] += len(msg.payload)
             messages.append(msg)
         self.ticks += 1
+        if st is not None:
+            st.mark("messages")
         events, self.allocator.events = self.allocator.events, {}
         return ctx.action, messages, events
 

@@ -57,6 +57,8 @@ from swarmbed.wire.reports import (
 )
 from swarmbed.wire.schema import LOCAL, Experiment, Targets, agent_spec, netem_spec
 from swarmbed.wire.seeds import WORLD, component_rng
+from swarmbed.wire.stages import Stages
+from swarmbed.wire.stages import enabled as stages_enabled
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
@@ -205,6 +207,7 @@ class Coordinator:
         w, r, rec = self.world, self.exp.run, self.recorder
         rec.open()
         inboxes: dict[int, bytes] = {}
+        st = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
         t0 = status_at = time.perf_counter()
         period = r.dt / r.speed  # wall seconds per tick on the real-time clock
         for k in range(self.exp.ticks):
@@ -223,6 +226,8 @@ class Coordinator:
                     time.sleep(-lag)
                     lag = time.perf_counter() - (t0 + k * period)
                 self.start_lags.append(max(lag, 0.0))
+            if st is not None:
+                st.start()
             ids, xs, ys = w.positions()
             rec.positions(k, ids, xs, ys)
             if k > 0:
@@ -231,9 +236,18 @@ class Coordinator:
             incarnations = {a: i for a, i in self.agents.incarnation.items() if i}
             alive_next = [i for i in ids if i not in doomed]
             self.world_pub.put(encode_world(WorldSample(k, ids, xs, ys, alive_next, incarnations)))
-            for i, obs in w.observations().items():
+            if st is not None:
+                st.mark("world")
+            observed = w.observations()
+            if st is not None:
+                st.mark("observations")
+            for i, obs in observed.items():
                 self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX)))
+            if st is not None:
+                st.mark("encode and put")
             step = self._await_step(k)
+            if st is not None:
+                st.mark("await step")
             for j in step.lost:
                 self.agents.lose(j, k, self._how_it_ended(j))
             actions = step.actions
@@ -253,6 +267,9 @@ class Coordinator:
             self.last_tick = k
             if w.tick % self.exp.run.record_every == 0 or w.finished:
                 rec.row([len(step.late), round(1000 * self.start_lags[-1], 3)] if self.realtime else ())
+            if st is not None:
+                st.mark("apply and record")
+                st.ticks += len(ids)  # per agent-tick, as the other processes count
             if on_tick:
                 on_tick(w.tick, w.time)
             if time.perf_counter() - status_at >= STATUS_EVERY:
@@ -261,6 +278,8 @@ class Coordinator:
                 rec.flush()
         self._publish_status(time.perf_counter() - t0)
         self.wall["run_s"] = time.perf_counter() - t0
+        if st is not None:
+            log.info("coordinator: %s", st.line())
 
     def _publish_status(self, wall_s: float) -> None:
         """Where the run is, for ``swarmbed watch`` (wall-clock paced: never part of the results)."""

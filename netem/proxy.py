@@ -38,13 +38,15 @@ from swarmbed.wire.codec import (
 )
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
 from swarmbed.wire.membership import fetch_spec, hand_over
-from swarmbed.wire.process import child_args
+from swarmbed.wire.process import child_args, pin_thread_state
 from swarmbed.wire.reports import NetemFatal, NetemFinal, Transport, encode_report
 from swarmbed.wire.rowfile import RowFile, TableWriteError
 from swarmbed.wire.rundir import LEDGER, RECEIVER_LEDGER
 from swarmbed.wire.schema import NetemSpec
 from swarmbed.wire.seeds import NETEM, component_rng
 from swarmbed.wire.session import open_from_args
+from swarmbed.wire.stages import Stages
+from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.transport import tcp_counters
 
 log = logging.getLogger("swarmbed.netem")
@@ -94,6 +96,7 @@ class Proxy:
         self.answered: dict[int, int] = {}  # agent -> the last tick it answered
         self.late_events: dict[str, int] = {}
         self.controls: list[NetemControl] = []  # parameter changes not yet in force (chaos)
+        self.stages: Stages | None = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
         # for watchers (wall-clock paced, never in a result): agent -> [messages, payload bytes] sent,
         # counted only while someone subscribes to the view
         self.traffic: dict[int, list[int]] = {}
@@ -114,6 +117,7 @@ class Proxy:
             self.events.put(("gone", None))
 
     def _on_out(self, sample: zenoh.Sample) -> None:
+        pin_thread_state()  # a direct callback in Zenoh's thread: keep its Python thread state
         item = (str(sample.key_expr), sample.payload.to_bytes())
         with self.arrived_lock:
             self.arrived.append(item)
@@ -208,6 +212,8 @@ class Proxy:
                     self.members[world.tick] = list(world.ids)
                     self.members.pop(world.tick - 1000, None)
             elif what == "outs":
+                if self.stages is not None:
+                    self.stages.start()
                 for key, sample in self._take_arrived():
                     out = self._take_out(key, sample)
                     if out is None:
@@ -313,6 +319,9 @@ class Proxy:
                 left.add(data[0])
 
     def _route(self, w: WorldSample) -> None:
+        st = self.stages
+        if st is not None:
+            st.mark("take outputs")
         self.answer_by = None
         self.routed = w.tick
         if w.tick == 0:
@@ -322,10 +331,16 @@ class Proxy:
         members = set(w.ids)
         self._apply_controls(w.tick)
         self.radio.route(w.tick, w.ids, w.xs, w.ys, {a: o.messages for a, o in outs.items() if a in members})
+        if st is not None:
+            st.mark("route")
         alive_next = [a for a in w.alive_next if a not in self.lost]
         inboxes = self.radio.deliver(w.tick + 1, alive_next)
+        if st is not None:
+            st.mark("deliver")
         self.ledger.close_tick(w.tick)
         self.sink.tick()
+        if st is not None:
+            st.mark("ledger")
         led = self.ledger
         now = [led.messages_sent, led.bytes_sent, led.copies, led.delivered, led.dropped_total]
         counters = [a - b for a, b in zip(now, self._last)]
@@ -349,6 +364,9 @@ class Proxy:
         self.lost_unreported = []
         self.step_pub.put(encode_netem_step(step))
         self._publish_traffic(outs)
+        if st is not None:
+            st.mark("step")
+            st.ticks += len(w.ids)  # per agent-tick
 
     def _publish_traffic(self, outs: dict[int, AgentOut]) -> None:
         """Count what each agent sent while anyone watches; hand watchers the totals every
@@ -369,6 +387,8 @@ class Proxy:
                 self._publish_traffic(outs)
 
     def _finish(self, last_tick: int) -> None:
+        if self.stages is not None:
+            log.info("netem: %s", self.stages.line())
         if self.watched:  # the totals as the run ends
             self.traffic_pub.put(encode_traffic(self.traffic))
         self.radio.finish(last_tick)

@@ -1,0 +1,53 @@
+"""CPU per tick by stage, measured live inside a process (``benchmarks/profile_tick.py``).
+
+Off unless the environment has ``SWARMBED_PROFILE_STAGES=1`` (a run's children inherit it): then a
+process keeps a :class:`Stages` and charges the CPU time of the thread that ticks (Linux's
+per-thread clock, so other processes' and threads' work never counts) to the stage that used it,
+and writes one line of microseconds per tick at the end of its log. Off, the cost is one attribute
+test per stage.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections import defaultdict
+
+ENV = "SWARMBED_PROFILE_STAGES"
+PREFIX = "stages (thread CPU us per agent-tick): "
+
+
+def enabled() -> bool:
+    return os.environ.get(ENV) == "1"
+
+
+class Stages:
+    """Thread CPU nanoseconds charged to named stages, between marks."""
+
+    def __init__(self) -> None:
+        self.ns: defaultdict[str, int] = defaultdict(int)
+        self.ticks = 0
+        self._at = time.thread_time_ns()
+
+    def start(self) -> None:
+        """The tick begins: what ran before it is not charged to any stage."""
+        self._at = time.thread_time_ns()
+
+    def mark(self, stage: str) -> None:
+        """Charge the time since the last mark (or start) to ``stage``."""
+        now = time.thread_time_ns()
+        self.ns[stage] += now - self._at
+        self._at = now
+
+    def line(self) -> str:
+        """One line: microseconds per counted tick (an agent's tick; the hub and the proxy count one
+        per agent they tick) of every stage, in the order they were first charged."""
+        ticks = max(self.ticks, 1)
+        cells = ", ".join(f"{name} {ns / 1000 / ticks:.1f}" for name, ns in self.ns.items())
+        return f"{PREFIX}{cells} (over {self.ticks} ticks)"
+
+
+def parse(line: str) -> dict[str, float]:
+    """The stages of a :meth:`Stages.line`, as {stage: us per tick}."""
+    cells = line.split(PREFIX, 1)[1].split(" (over", 1)[0]
+    return {name: float(us) for name, us in (cell.rsplit(" ", 1) for cell in cells.split(", "))}
