@@ -76,8 +76,19 @@ class AgentRuntime:
         self.malformed = 0
         self.ticks = 0
         self.stages: Stages | None = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
+        self._last_action: list | None = None
+        self._last_tasks = b""
         if self.stages is not None:
             self._time_decide(self.stages)
+
+    def _count_idle(self, st: Stages, obs: Observation, action: list, messages: list) -> None:
+        """Count a tick that a step skipping idle agents could have spared (issue 43): the same answer
+        as the tick before (action, and no message either time), nothing received, and the same tasks
+        in view. Profiling only."""
+        tasks = obs.tasks.tobytes()
+        if action == self._last_action and not messages and not self.context.view.inbox and tasks == self._last_tasks:
+            st.idle += 1
+        self._last_action, self._last_tasks = list(action), tasks
 
     def _time_decide(self, st: Stages) -> None:
         """Charge ``decide`` to the allocator, not to the tree that calls it (profiling only). The
@@ -157,6 +168,7 @@ class AgentRuntime:
             messages.append(msg)
         self.ticks += 1
         if st is not None:
+            self._count_idle(st, obs, ctx.action, messages)
             st.mark("messages")
         events, self.allocator.events = self.allocator.events, {}
         return ctx.action, messages, events

@@ -47,7 +47,7 @@ def test_bad_overrides_are_refused():
         cfg.load(QUICKSTART, ["agents.speed=3"])
     with pytest.raises(
         cfg.ConfigError,
-        match=r"^--set scenario.generations=\{'interval': -1\}: "
+        match=r'^--set scenario.generations=\{"interval": -1\}: '
         r"scenario.generations.interval: Input should be greater than 0$",
     ):
         cfg.load(QUICKSTART, ["scenario.generations={interval: -1}"])

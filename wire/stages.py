@@ -27,6 +27,7 @@ class Stages:
     def __init__(self) -> None:
         self.ns: defaultdict[str, int] = defaultdict(int)
         self.ticks = 0
+        self.idle = 0  # an agent's ticks that repeated the last answer with nothing new (issue 43)
         self._at = time.thread_time_ns()
 
     def start(self) -> None:
@@ -44,7 +45,16 @@ class Stages:
         per agent they tick) of every stage, in the order they were first charged."""
         ticks = max(self.ticks, 1)
         cells = ", ".join(f"{name} {ns / 1000 / ticks:.1f}" for name, ns in self.ns.items())
-        return f"{PREFIX}{cells} (over {self.ticks} ticks)"
+        idle = f", {self.idle} idle" if self.idle else ""
+        return f"{PREFIX}{cells} (over {self.ticks} ticks{idle})"
+
+
+def counts(line: str) -> tuple[int, int]:
+    """(ticks, idle ticks) of a :meth:`Stages.line`."""
+    tail = line.split(" (over ", 1)[1].rstrip(")")
+    ticks, _, rest = tail.partition(" ticks")
+    idle = rest.split(", ", 1)[1].split(" idle")[0] if " idle" in rest else "0"
+    return int(ticks), int(idle)
 
 
 def parse(line: str) -> dict[str, float]:

@@ -1,0 +1,92 @@
+"""Nothing a run computes changes: every shipped experiment, run by two installs, gives byte-identical
+result files.
+
+    python benchmarks/same_results.py --old /tmp/old/bin/python --new .venv/bin/python
+    python benchmarks/same_results.py --old ... --new ... --duration 200 --only sar
+
+Each interpreter runs each shipped experiment file (``experiments/**/*.yaml`` that is neither a
+sweep nor a chaos plan) through ``swarmbed run``, its horizon cut to ``--duration`` simulated seconds
+(0: the file's own), in lock-step; then the reproducible result files are compared byte for byte
+(``config.yaml`` and ``provenance.json`` too, unless the versions' configurations are meant to
+differ: ``--skip-config``). Prints one line per experiment and exits 1 if any differs. Part of every
+commit that touches the tick path (issue 43).
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+COMPARED = (
+    "summary.json",
+    "timeseries.csv",
+    "agents.csv",
+    "network_ledger.csv",
+    "trajectories.csv",
+    "markers.csv",
+    "network_ledger_receivers.parquet",
+)
+
+
+def experiments(only: str | None) -> list[Path]:
+    out = []
+    for path in sorted((ROOT / "experiments").rglob("*.yaml")):
+        data = yaml.safe_load(path.read_text()) or {}
+        if "base" in data or "events" in data or (only and only not in str(path)):
+            continue
+        out.append(path)
+    return out
+
+
+def run(python: str, path: Path, out: Path, duration: float) -> str | None:
+    """The error of one run, or None."""
+    sets = ["--set", f"run.duration={duration}"] if duration else []
+    done = subprocess.run(
+        [python, "-m", "swarmbed", "run", str(path), "--out", str(out), "--no-progress", *sets],
+        capture_output=True,
+        text=True,
+    )
+    return None if done.returncode == 0 else (done.stderr.strip().splitlines() or ["failed"])[-1]
+
+
+def compare(a: Path, b: Path, config: bool) -> list[str]:
+    names = [*COMPARED, *(("config.yaml",) if config else ())]
+    return [
+        n
+        for n in names
+        if (a / n).exists() != (b / n).exists() or ((a / n).exists() and (a / n).read_bytes() != (b / n).read_bytes())
+    ]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--old", required=True, help="the python of the install before the change")
+    ap.add_argument("--new", default=sys.executable, help="the python of the install after it")
+    ap.add_argument("--duration", type=float, default=300.0, help="simulated seconds per run (0: the file's)")
+    ap.add_argument("--only", help="only files whose path contains this")
+    ap.add_argument("--skip-config", action="store_true", help="do not compare config.yaml (new keys were added)")
+    args = ap.parse_args()
+    differs = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        for path in experiments(args.only):
+            name = str(path.relative_to(ROOT))
+            old, new = Path(tmp) / name / "old", Path(tmp) / name / "new"
+            errors = [run(args.old, path, old, args.duration), run(args.new, path, new, args.duration)]
+            if any(errors):
+                print(f"FAILED    {name}: {errors}")
+                differs += 1
+                continue
+            bad = compare(old, new, not args.skip_config)
+            differs += bool(bad)
+            print(f"{'DIFFERS' if bad else 'identical'} {name}{': ' + ', '.join(bad) if bad else ''}", flush=True)
+    return 1 if differs else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

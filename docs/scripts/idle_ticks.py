@@ -1,0 +1,107 @@
+"""How many agent-ticks could a step that skips idle agents spare? (issue 43, item 5)
+
+    python docs/scripts/idle_ticks.py                       # every shipped experiment and sweep scenario
+    python docs/scripts/idle_ticks.py --duration 600 --only sar
+
+An agent-tick is *idle* when the agent's answer equals its answer of the tick before (the same
+action, and no radio message either time), it received nothing, and the tasks in its view are the
+same: exactly the ticks whose skipping could not change what the agent does next, for an agent whose
+decision depends only on what it received and sees (a timer inside a node or an allocator would
+still need its tick). Each experiment runs with ``SWARMBED_PROFILE_STAGES=1``: every agent counts
+its idle ticks and logs them (``swarmbed.wire.stages``); this sums them per experiment. Sweep files
+contribute each of their scenarios (the first run's seed), so every strategy is counted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import yaml
+
+from swarmbed.experiments.campaigns.sweep import experiment_for, load_sweep, plan
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.wire import stages
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def cases(only: str | None) -> list[tuple[str, cfg.Experiment]]:
+    """(name, experiment) of every shipped experiment file and every scenario of every sweep file."""
+    out: list[tuple[str, cfg.Experiment]] = []
+    seen: set[str] = set()
+    for path in sorted((ROOT / "experiments").rglob("*.yaml")):
+        data = yaml.safe_load(path.read_text()) or {}
+        name = str(path.relative_to(ROOT))
+        if "events" in data or (only and only not in name):
+            continue
+        if "base" not in data:
+            out.append((name, cfg.load(path)))
+            continue
+        sweep = load_sweep(path)
+        for spec in plan(sweep, Path("unused")):
+            if spec.index == 0:
+                exp = experiment_for(spec.base, spec.scenario, spec.seed, spec.extra)
+                key = cfg.to_yaml(exp.model_copy(update={"name": "x"}))
+                if key not in seen:  # sweeps share scenarios (the density series, the baselines)
+                    seen.add(key)
+                    out.append((f"{name} {spec.scenario.name}", exp))
+    return out
+
+
+def count(exp: cfg.Experiment, duration: float) -> tuple[int, int]:
+    """(agent-ticks, idle agent-ticks) of one run of ``exp``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        config = Path(tmp) / "exp.yaml"
+        config.write_text(cfg.to_yaml(exp))
+        sets = ["--set", f"run.duration={min(duration, exp.run.duration)}"] if duration else []
+        done = subprocess.run(
+            [sys.executable, "-m", "swarmbed", "run", str(config), "--out", f"{tmp}/run", "--no-progress", *sets],
+            capture_output=True,
+            text=True,
+            env={**os.environ, stages.ENV: "1"},
+        )
+        if done.returncode != 0:
+            raise RuntimeError(done.stderr.strip().splitlines()[-1])
+        ticks = idle = 0
+        for log in (Path(tmp) / "run" / "logs").glob("agent_*.log"):
+            for line in log.read_text().splitlines():
+                if stages.PREFIX in line:
+                    t, i = stages.counts(line)
+                    ticks, idle = ticks + t, idle + i
+        return ticks, idle
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration", type=float, default=600.0, help="simulated seconds per run (0: the file's own)")
+    ap.add_argument("--only", help="only files whose path contains this")
+    ap.add_argument("--json", help="also write the counts here")
+    args = ap.parse_args()
+    rows = []
+    print("| experiment | allocator | agents | agent-ticks | idle | share |")
+    print("| --- | --- | ---: | ---: | ---: | ---: |")
+    for name, exp in cases(args.only):
+        try:
+            ticks, idle = count(exp, args.duration)
+        except RuntimeError as exc:
+            print(f"| {name} | {exp.allocator.name} | {exp.agents.count} | failed: {exc} | | |", flush=True)
+            continue
+        share = idle / ticks if ticks else 0.0
+        rows.append({"experiment": name, "allocator": exp.allocator.name, "ticks": ticks, "idle": idle})
+        print(
+            f"| {name} | {exp.allocator.name} | {exp.agents.count} | {ticks:,} | {idle:,} | {100 * share:.0f} % |",
+            flush=True,
+        )
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
