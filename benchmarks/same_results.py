@@ -3,6 +3,7 @@ result files.
 
     python benchmarks/same_results.py --old /tmp/old/bin/python --new .venv/bin/python
     python benchmarks/same_results.py --old ... --new ... --duration 200 --only sar
+    python benchmarks/same_results.py --old ... --new ... --set run.zenoh_threads=single
 
 Each interpreter runs each shipped experiment file (``experiments/**/*.yaml`` that is neither a
 sweep nor a chaos plan) through ``swarmbed run``, its horizon cut to ``--duration`` simulated seconds
@@ -44,9 +45,10 @@ def experiments(only: str | None) -> list[Path]:
     return out
 
 
-def run(python: str, path: Path, out: Path, duration: float) -> str | None:
+def run(python: str, path: Path, out: Path, duration: float, extra: list[str]) -> str | None:
     """The error of one run, or None."""
     sets = ["--set", f"run.duration={duration}"] if duration else []
+    sets += [arg for value in extra for arg in ("--set", value)]
     done = subprocess.run(
         [python, "-m", "swarmbed", "run", str(path), "--out", str(out), "--no-progress", *sets],
         capture_output=True,
@@ -70,6 +72,7 @@ def main() -> int:
     ap.add_argument("--new", default=sys.executable, help="the python of the install after it")
     ap.add_argument("--duration", type=float, default=300.0, help="simulated seconds per run (0: the file's)")
     ap.add_argument("--only", help="only files whose path contains this")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="for every run of both")
     ap.add_argument("--skip-config", action="store_true", help="do not compare config.yaml (new keys were added)")
     args = ap.parse_args()
     differs = 0
@@ -77,7 +80,9 @@ def main() -> int:
         for path in experiments(args.only):
             name = str(path.relative_to(ROOT))
             old, new = Path(tmp) / name / "old", Path(tmp) / name / "new"
-            errors = [run(args.old, path, old, args.duration), run(args.new, path, new, args.duration)]
+            errors = [
+                run(python, path, out, args.duration, args.set) for python, out in ((args.old, old), (args.new, new))
+            ]
             if any(errors):
                 print(f"FAILED    {name}: {errors}")
                 differs += 1

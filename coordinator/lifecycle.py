@@ -57,6 +57,11 @@ RESTART_COLUMNS = [
 SWAP_COLUMNS = ["tick", "agent", "from", "to", "outcome", "reason", "snapshot_bytes", "pause_ms"]
 
 
+#: swap requests an operator may have waiting at once, and in one run (a flood is refused, not queued)
+MAX_QUEUED_SWAPS = 16
+MAX_SWAPS_PER_RUN = 10_000
+
+
 class AgentLifecycle:
     """Which agents are up, down or lost, and the swaps, restarts and checkpoints that move them."""
 
@@ -202,6 +207,10 @@ class AgentLifecycle:
                 record = self.requested_swaps.get(req.swap)
                 answer: dict[str, Any] = record if record is not None else {"pending": True}
             elif req.agent < self.n:
+                if self.swap_requests.qsize() >= MAX_QUEUED_SWAPS:
+                    raise WireError(f"{MAX_QUEUED_SWAPS} swaps are already waiting; ask again after they are done")
+                if len(self.requested_swaps) >= MAX_SWAPS_PER_RUN:
+                    raise WireError(f"this run took {MAX_SWAPS_PER_RUN} swap requests already")
                 number = len(self.requested_swaps)
                 self.requested_swaps[number] = None
                 self.swap_requests.put((req.agent, req.to, number))

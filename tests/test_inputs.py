@@ -180,3 +180,19 @@ def test_capped_runs_are_counted_and_marked_per_cell():
     )
     assert plain.iloc[0]["capped"] == 0 and plain.iloc[0]["note"] == ""
     assert json.loads(json.dumps(list(table.columns)))[-2:] == ["capped", "note"]
+
+
+def test_swap_requests_are_bounded_before_they_are_queued():
+    from swarmbed.wire.errors import WireError
+    from swarmbed.wire.reports import SwapRequest, decode_swap
+
+    assert decode_swap(b'{"agent": 3, "to": "labpc2"}') == SwapRequest(agent=3, to="labpc2")
+    for crafted, why in (
+        (json.dumps({"agent": 3, "to": "h" * (2 << 20)}).encode(), r"bytes \(at most 1024\)"),
+        (b"[" * 100_000, r"bytes \(at most 1024\)"),
+        (b"[" * 900, "nested too deep|not JSON"),
+        (b'{"agent": 3, "to": "a\\nb"}', "a swap request is"),
+        (b'{"agent": 3, "to": "*"}', "a swap request is"),
+    ):
+        with pytest.raises(WireError, match=why):
+            decode_swap(crafted)

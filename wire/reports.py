@@ -164,7 +164,7 @@ class SwapRequest(_Message):
     """Move ``agent`` to host ``to`` before the next tick."""
 
     agent: AgentId
-    to: str = Field(min_length=1)
+    to: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,64}$")  # a host name (or "local"), as placements name them
 
 
 class SwapQuery(_Message):
@@ -176,14 +176,24 @@ class SwapQuery(_Message):
 _SWAP = TypeAdapter(SwapRequest | SwapQuery)
 
 
+#: a swap request or query is a few dozen bytes of JSON; anything far larger is refused unread
+MAX_SWAP_BYTES = 1024
+
+
 def decode_swap(data: bytes | None) -> SwapRequest | SwapQuery:
-    """A swap request or a query of one, from its JSON; WireError names what is wrong."""
+    """A swap request or a query of one, from its JSON; WireError names what is wrong (a request of
+    more than :data:`MAX_SWAP_BYTES`, nested past what JSON's parser takes, or a host name that is
+    not one)."""
+    if data is not None and len(data) > MAX_SWAP_BYTES:
+        raise WireError(f"a swap request of {len(data):,} bytes (at most {MAX_SWAP_BYTES})")
     try:
         return _SWAP.validate_python(json.loads(data) if data is not None else None)
+    except RecursionError:
+        raise WireError("not JSON: nested too deep") from None
     except ValueError as exc:  # ValidationError is a ValueError too
         if isinstance(exc, ValidationError):
             raise WireError('a swap request is {"agent": I, "to": HOST}, a query {"swap": N}') from None
-        raise WireError(f"not JSON: {exc}") from None
+        raise WireError(f"not JSON: {str(exc)[:80]}") from None
 
 
 # -- hub -> host daemon: agent processes ------------------------------------------------------------

@@ -1,7 +1,8 @@
 """How many agent-ticks could a step that skips idle agents spare? (issue 43, item 5)
 
     python docs/scripts/idle_ticks.py                       # every shipped experiment and sweep scenario
-    python docs/scripts/idle_ticks.py --duration 600 --only sar
+    python docs/scripts/idle_ticks.py --duration 600 --only sar/base_R20_V100
+    python docs/scripts/idle_ticks.py --only radio/sar_bursts --scenario ge_
 
 An agent-tick is *idle* when the agent's answer equals its answer of the tick before (the same
 action, and no radio message either time), it received nothing, and the tasks in its view are the
@@ -31,7 +32,7 @@ from swarmbed.wire import stages
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def cases(only: str | None) -> list[tuple[str, cfg.Experiment]]:
+def cases(only: str | None, scenario: str | None = None) -> list[tuple[str, cfg.Experiment]]:
     """(name, experiment) of every shipped experiment file and every scenario of every sweep file."""
     out: list[tuple[str, cfg.Experiment]] = []
     seen: set[str] = set()
@@ -45,7 +46,7 @@ def cases(only: str | None) -> list[tuple[str, cfg.Experiment]]:
             continue
         sweep = load_sweep(path)
         for spec in plan(sweep, Path("unused")):
-            if spec.index == 0:
+            if spec.index == 0 and (scenario is None or scenario in spec.scenario.name):
                 exp = experiment_for(spec.base, spec.scenario, spec.seed, spec.extra)
                 key = cfg.to_yaml(exp.model_copy(update={"name": "x"}))
                 if key not in seen:  # sweeps share scenarios (the density series, the baselines)
@@ -81,12 +82,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--duration", type=float, default=600.0, help="simulated seconds per run (0: the file's own)")
     ap.add_argument("--only", help="only files whose path contains this")
+    ap.add_argument("--scenario", help="of sweep files, only scenarios whose name contains this")
     ap.add_argument("--json", help="also write the counts here")
     args = ap.parse_args()
     rows = []
     print("| experiment | allocator | agents | agent-ticks | idle | share |")
     print("| --- | --- | ---: | ---: | ---: | ---: |")
-    for name, exp in cases(args.only):
+    for name, exp in cases(args.only, args.scenario):
         try:
             ticks, idle = count(exp, args.duration)
         except RuntimeError as exc:
