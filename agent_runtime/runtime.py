@@ -83,11 +83,12 @@ class AgentRuntime:
 
     def _count_idle(self, st: Stages, obs: Observation, action: list, messages: list) -> None:
         """Count a tick that a step skipping idle agents could have spared (issue 43): the same answer
-        as the tick before (action, and no message either time), nothing received, and the same tasks
-        in view. Profiling only."""
+        as the tick before and no message sent, nothing received, and the same tasks
+        in view; and the looser *quiet* tick, whatever its view. Profiling only."""
         tasks = obs.tasks.tobytes()
-        if action == self._last_action and not messages and not self.context.view.inbox and tasks == self._last_tasks:
-            st.idle += 1
+        if action == self._last_action and not messages and not self.context.view.inbox:
+            st.quiet += 1
+            st.idle += tasks == self._last_tasks
         self._last_action, self._last_tasks = list(action), tasks
 
     def _time_decide(self, st: Stages) -> None:

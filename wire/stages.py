@@ -28,6 +28,7 @@ class Stages:
         self.ns: defaultdict[str, int] = defaultdict(int)
         self.ticks = 0
         self.idle = 0  # an agent's ticks that repeated the last answer with nothing new (issue 43)
+        self.quiet = 0  # the same, tasks in view changed or not
         self._at = time.thread_time_ns()
 
     def start(self) -> None:
@@ -45,16 +46,18 @@ class Stages:
         per agent they tick) of every stage, in the order they were first charged."""
         ticks = max(self.ticks, 1)
         cells = ", ".join(f"{name} {ns / 1000 / ticks:.1f}" for name, ns in self.ns.items())
-        idle = f", {self.idle} idle" if self.idle else ""
+        idle = f", {self.idle} idle, {self.quiet} quiet" if self.quiet else ""
         return f"{PREFIX}{cells} (over {self.ticks} ticks{idle})"
 
 
-def counts(line: str) -> tuple[int, int]:
-    """(ticks, idle ticks) of a :meth:`Stages.line`."""
+def counts(line: str) -> tuple[int, int, int]:
+    """(ticks, idle ticks, quiet ticks) of a :meth:`Stages.line`."""
     tail = line.split(" (over ", 1)[1].rstrip(")")
     ticks, _, rest = tail.partition(" ticks")
-    idle = rest.split(", ", 1)[1].split(" idle")[0] if " idle" in rest else "0"
-    return int(ticks), int(idle)
+    if " idle" not in rest:
+        return int(ticks), 0, 0
+    idle, quiet = (part.split(" ")[0] for part in rest.split(", ")[1:3])
+    return int(ticks), int(idle), int(quiet)
 
 
 def parse(line: str) -> dict[str, float]:

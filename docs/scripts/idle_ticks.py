@@ -5,10 +5,12 @@
     python docs/scripts/idle_ticks.py --only radio/sar_bursts --scenario ge_
 
 An agent-tick is *idle* when the agent's answer equals its answer of the tick before (the same
-action, and no radio message either time), it received nothing, and the tasks in its view are the
+action, and it sends no radio message), it received nothing, and the tasks in its view are the
 same: exactly the ticks whose skipping could not change what the agent does next, for an agent whose
 decision depends only on what it received and sees (a timer inside a node or an allocator would
-still need its tick). Each experiment runs with ``SWARMBED_PROFILE_STAGES=1``: every agent counts
+still need its tick). A *quiet* tick is the looser upper bound: the same answer and nothing
+received, whatever changed in view (what declared events could spare at most). Each experiment
+runs with ``SWARMBED_PROFILE_STAGES=1``: every agent counts
 its idle ticks and logs them (``swarmbed.wire.stages``); this sums them per experiment. Sweep files
 contribute each of their scenarios (the first run's seed), so every strategy is counted.
 """
@@ -55,8 +57,8 @@ def cases(only: str | None, scenario: str | None = None) -> list[tuple[str, cfg.
     return out
 
 
-def count(exp: cfg.Experiment, duration: float) -> tuple[int, int]:
-    """(agent-ticks, idle agent-ticks) of one run of ``exp``."""
+def count(exp: cfg.Experiment, duration: float) -> tuple[int, int, int]:
+    """(agent-ticks, idle agent-ticks, quiet agent-ticks) of one run of ``exp``."""
     with tempfile.TemporaryDirectory() as tmp:
         config = Path(tmp) / "exp.yaml"
         config.write_text(cfg.to_yaml(exp))
@@ -69,13 +71,13 @@ def count(exp: cfg.Experiment, duration: float) -> tuple[int, int]:
         )
         if done.returncode != 0:
             raise RuntimeError(done.stderr.strip().splitlines()[-1])
-        ticks = idle = 0
+        ticks = idle = quiet = 0
         for log in (Path(tmp) / "run" / "logs").glob("agent_*.log"):
             for line in log.read_text().splitlines():
                 if stages.PREFIX in line:
-                    t, i = stages.counts(line)
-                    ticks, idle = ticks + t, idle + i
-        return ticks, idle
+                    t, i, q = stages.counts(line)
+                    ticks, idle, quiet = ticks + t, idle + i, quiet + q
+        return ticks, idle, quiet
 
 
 def main() -> int:
@@ -86,11 +88,11 @@ def main() -> int:
     ap.add_argument("--json", help="also write the counts here")
     args = ap.parse_args()
     rows = []
-    print("| experiment | allocator | agents | agent-ticks | idle | share |")
-    print("| --- | --- | ---: | ---: | ---: | ---: |")
+    print("| experiment | allocator | agents | agent-ticks | idle | share | quiet (view may change) |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: |")
     for name, exp in cases(args.only, args.scenario):
         try:
-            ticks, idle = count(exp, args.duration)
+            ticks, idle, quiet = count(exp, args.duration)
         except RuntimeError as exc:
             print(f"| {name} | {exp.allocator.name} | {exp.agents.count} | failed: {exc} | | |", flush=True)
             continue
