@@ -94,12 +94,13 @@ def main() -> int:
         try:
             ticks, idle, quiet = count(exp, args.duration)
         except RuntimeError as exc:
-            print(f"| {name} | {exp.allocator.name} | {exp.agents.count} | failed: {exc} | | |", flush=True)
+            print(f"| {name} | {exp.allocator.name} | {exp.agents.count} | failed: {exc} | | | |", flush=True)
             continue
         share = idle / ticks if ticks else 0.0
-        rows.append({"experiment": name, "allocator": exp.allocator.name, "ticks": ticks, "idle": idle})
+        rows.append({"experiment": name, "allocator": exp.allocator.name, "ticks": ticks, "idle": idle, "quiet": quiet})
         print(
-            f"| {name} | {exp.allocator.name} | {exp.agents.count} | {ticks:,} | {idle:,} | {100 * share:.0f} % |",
+            f"| {name} | {exp.allocator.name} | {exp.agents.count} | {ticks:,} | {idle:,} | {100 * share:.0f} % "
+            f"| {100 * quiet / max(ticks, 1):.0f} % |",
             flush=True,
         )
     if args.json:
