@@ -233,3 +233,42 @@ def test_a_host_daemon_answers_crafted_start_and_stop_requests_with_why_and_star
     finally:
         daemon.terminate()
         daemon.wait(timeout=10)
+
+
+def _host_says(hub_admits: bool, tmp_path) -> str:
+    """What a host daemon prints within 20 s when it connects to a hub that does or does not admit it."""
+    from swarmbed.experiments.launch.access import RunAccess
+    from swarmbed.experiments.launch.hub import open_hub
+    from swarmbed.wire.credentials import write_credentials
+    from swarmbed.wire.keys import Keys
+
+    me = Identity.new("lab1", "host")
+    tmp_path.mkdir()
+    creds = write_credentials(tmp_path / "lab1.json", me)
+    access = RunAccess(Keys("hubcheck"), range(1), [me] if hub_admits else [])
+    hub, endpoint = open_hub(settings=access.hub_settings())
+    daemon = subprocess.Popen(
+        [sys.executable, "-m", "swarmbed", "host", "--name", "lab1", "--connect", endpoint]
+        + ["--credentials", str(creds), "--logs", str(tmp_path / "logs")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    said: list[str] = []
+    try:
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and not any("connected to" in line for line in said):
+            said.append(daemon.stdout.readline())
+    finally:
+        daemon.send_signal(signal.SIGINT)
+        daemon.wait(timeout=20)
+        hub.close()
+        access.close()
+    return "".join(said)
+
+
+def test_a_host_the_hub_does_not_admit_says_so_and_one_it_admits_says_connected(tmp_path):
+    refused = _host_says(False, tmp_path / "refused")
+    assert "not connected to" in refused and "does not admit this host's credentials" in refused, refused
+    admitted = _host_says(True, tmp_path / "admitted")
+    assert "host lab1: connected to" in admitted and "not connected" not in admitted, admitted

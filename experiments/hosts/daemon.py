@@ -26,6 +26,7 @@ import shutil
 import signal
 import tempfile
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -214,6 +215,36 @@ def host_router_rules(agents_user: str) -> dict:
     }
 
 
+class HubLink:
+    """Says, once each time it changes, whether the daemon's router reached a hub it connects to:
+    a hub that is up but does not admit this host's credentials refuses it at the handshake, and
+    from here that looks like silence, so after :data:`SILENT_S` the daemon names both causes."""
+
+    SILENT_S = 10.0
+
+    def __init__(self, name: str, connect: list[str], session: zenoh.Session) -> None:
+        self.name, self.connect, self.session = name, connect, session
+        self.since = time.monotonic()
+        self.linked: bool | None = None  # None: nothing said yet
+
+    def check(self) -> None:
+        if not self.connect:
+            return
+        linked = bool(self.session.info.routers_zid())
+        if linked and self.linked is not True:
+            print(f"host {self.name}: connected to {', '.join(self.connect)}", flush=True)
+            self.linked = True
+        elif not linked and self.linked is None and time.monotonic() - self.since >= self.SILENT_S:
+            print(
+                f"host {self.name}: not connected to {', '.join(self.connect)} after {self.SILENT_S:.0f} s: the hub "
+                "is not up yet, or it does not admit this host's credentials (swarmbed run --admit FILE)",
+                flush=True,
+            )
+            self.linked = False
+        elif not linked and self.linked:  # lost: said again if it stays away
+            self.linked, self.since = None, time.monotonic()
+
+
 def serve(
     name: str,
     connect: list[str],
@@ -288,9 +319,11 @@ def serve(
             logs,
         )
         print(f"host {name} up: router on {', '.join(listen)}", flush=True)
+        link = HubLink(name, connect, session)
         try:
             while not stop.wait(1.0):
                 host.reap()
+                link.check()
         finally:
             host.close()
             if private:
