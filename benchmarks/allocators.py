@@ -22,7 +22,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from lockstep import raw_baseline
+from lockstep import floor as barrier
 
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.runner import run_experiment
@@ -88,7 +88,7 @@ def main() -> None:
     )
     for n in args.n:
         duration = args.large_duration if n >= LARGE else args.duration
-        floor = raw_baseline(n, max(50, int(max(20, 5000 // n) * args.floor_seconds)), fanout=0)
+        floor = barrier("B0", n, max(50, int(max(20, 5000 // n) * args.floor_seconds)))["ticks_per_s"]
         for name in args.allocators:
             m = measure(n, name, duration, tuple(args.sets))
             ref = SPACE_REFERENCE.get((n, name))
