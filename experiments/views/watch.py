@@ -154,7 +154,7 @@ class RunView:
             f"agents {len(agents_alive)} up of {len(s['alive'])} in the world",
         )
         table = Table(
-            title="payload each agent sent since this view attached (the run totals are above; "
+            title="payload each agent sent since the first watcher attached (the run totals are above; "
             "rates: per wall second, last 2 s)",
             title_justify="left",
         )
