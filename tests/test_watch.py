@@ -90,6 +90,9 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
     assert text.rstrip().endswith("is over (its coordinator left)")
     for agent in range(6):  # one table row per agent
         assert re.search(rf"│\s+{agent} │\s+(up|-) │", text), agent
+    # every agent's traffic, from the proxy's view/traffic (an operator may not read agent outputs)
+    assert summary["network"]["messages_sent"] > 0
+    assert re.search(r"│\s+\d+ │\s+(?:up|-) │\s+[\d,.]+ │\s+[\d,]+ │\s+[1-9][\d,]* │", text), text[-3000:]
     page = (tmp_path / "map.html").read_text()  # the live map's last state: every agent and every task
     assert "http-equiv='refresh'" in page and "tick 2,500 of 2,500" in page
     assert page.count("<circle") == 6 and page.count("<title>agent") == 6
