@@ -298,3 +298,21 @@ def test_analyze_refuses_a_control_the_sweeps_do_not_have(sweep_dir, capsys):
     assert (out / "statistics.md").read_text() == "stale"  # refused before anything was written
     assert main(["analyze", str(out)]) == 0
     assert not (out / "statistics.md").exists()  # MT-SR sweep: no statistics, and no stale ones left
+
+
+def test_ctrl_c_while_a_resumed_sweep_plans_still_leaves_the_table_of_what_completed(tmp_path, monkeypatch):
+    from swarmbed.experiments.campaigns import sweep as sweeps
+
+    (tmp_path / "s.yaml").write_text(f"name: s\nbase: {QUICKSTART}\nruns: 2\n")
+    plan = sweeps.load_sweep(tmp_path / "s.yaml", extra=["run.duration=60"])
+    sweeps.run_sweep(plan, tmp_path / "out", jobs=2, progress=False)
+    (tmp_path / "out" / "sweep.csv").unlink()
+
+    def interrupted(*_args, **_kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweeps, "_check_completed", interrupted)
+    with pytest.raises(sweeps.SweepInterrupted, match="interrupted while planning: nothing was started; 2 of 2"):
+        sweeps.run_sweep(plan, tmp_path / "out", jobs=2, progress=False)
+    table = pd.read_csv(tmp_path / "out" / "sweep.csv")
+    assert list(table["status"]) == ["ok", "ok"]

@@ -504,10 +504,20 @@ def run_sweep(
     out.mkdir(parents=True, exist_ok=True)
     specs = plan(sweep, out)
     agents: dict[str, int] = {}  # per scenario name
-    for spec in specs:  # every scenario is valid before anything starts
-        if spec.scenario.name not in agents:
-            agents[spec.scenario.name] = experiment_for(spec.base, spec.scenario, spec.seed, spec.extra).agents.count
-    _check_completed(specs, out, redo_mismatched)
+    try:
+        for spec in specs:  # every scenario is valid before anything starts
+            if spec.scenario.name not in agents:
+                exp = experiment_for(spec.base, spec.scenario, spec.seed, spec.extra)
+                agents[spec.scenario.name] = exp.agents.count
+        _check_completed(specs, out, redo_mismatched)
+    except KeyboardInterrupt:  # while planning: nothing started, but a resumed sweep's table is brought up to date
+        done = _complete(specs)
+        if done and (out / SPEC).exists():
+            write_tables(collect(sweep, out, stale_after), out)
+        raise SweepInterrupted(
+            f"interrupted while planning: nothing was started; {done} of {len(specs)} runs are complete"
+            + (f" and in {out / TABLE}" if done and (out / SPEC).exists() else "")
+        ) from None
     write_spec(sweep, out)
     executor = executor or executors.get("local", jobs=jobs)
     todo = [s for s in specs if run_status(Path(s.out_dir), stale_after) != "ok"]
