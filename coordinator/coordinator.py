@@ -131,7 +131,10 @@ class Coordinator:
             s.declare_queryable(k.swap, self.agents.on_swap_query),
         ]
         # agents hand their trees' changes over while recording or while a monitor watches; monitors
-        # read them under view/ from here, with DROP, so a monitor that stops reading holds nothing up
+        # read them under view/ from here, with DROP, so a monitor that stops reading holds nothing up;
+        # only the changes of an agent someone monitors are republished (none while only recording)
+        self.monitored: set[str] = set()  # monitor token keys alive now
+        self._entities.append(s.liveliness().declare_subscriber(k.monitor_all, self._on_monitor, history=True))
         self._entities.append(s.declare_subscriber(k.agent_bt_all, self._on_bt))
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
         self.agents.agent_pubs = self.agent_pubs
@@ -142,14 +145,21 @@ class Coordinator:
         self._entities += self.agent_pubs + [self.world_pub, self.stop_pub, self.status_pub]
         self._entities.append(s.liveliness().declare_token(k.alive_coordinator))
 
+    def _on_monitor(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        (self.monitored.add if sample.kind == zenoh.SampleKind.PUT else self.monitored.discard)(key)
+
     def _on_bt(self, sample: zenoh.Sample) -> None:
         if self.trees is not None:
             self.trees.on_sample(sample)
+        if not self.monitored:
+            return
         try:
             agent = agent_id_of(str(sample.key_expr))  # only agent i may publish on agent/<i>/bt
         except WireError:
             return
-        self.session.put(self.keys.view_bt(agent), sample.payload, congestion_control=zenoh.CongestionControl.DROP)
+        if self.keys.monitor(agent) in self.monitored:
+            self.session.put(self.keys.view_bt(agent), sample.payload, congestion_control=zenoh.CongestionControl.DROP)
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
