@@ -116,6 +116,8 @@ class Coordinator:
         self.slowest_tick = (0.0, -1)  # (wall seconds, tick): the longest a tick took from start to start
         self.slowest_in_interval = 0.0  # the same since a monitor last read it (and set it to 0)
         self._entities: list = []
+        self.ros2: Any = None  # a Ros2Out while the run publishes ROS 2 topics
+        self.pursuing: dict[int, list] = {}  # the actions the world was last given (for ROS 2's task markers)
 
     # -- setup -----------------------------------------------------------------------------------
     def declare(self) -> None:
@@ -144,6 +146,13 @@ class Coordinator:
         self.status_pub = s.declare_publisher(k.status, congestion_control=zenoh.CongestionControl.DROP)
         self._entities += self.agent_pubs + [self.world_pub, self.stop_pub, self.status_pub]
         self._entities.append(s.liveliness().declare_token(k.alive_coordinator))
+        if self.exp.ros2 is not None:  # the run as ROS 2 topics (docs/ros2.md): the hub is also a ROS 2 node
+            from swarmbed.coordinator.ros2 import Ros2Out
+
+            try:
+                self.ros2 = Ros2Out(s, self.exp.ros2, self.n, self.scenario.actions)
+            except ImportError as exc:  # the ros2 extra is not installed: say so before any process starts
+                raise RunError(str(exc)) from None
 
     def _on_monitor(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -171,7 +180,15 @@ class Coordinator:
                 return
         self.events.put(("join" if sample.kind == zenoh.SampleKind.PUT else "leave", key))
 
+    @property
+    def _task_size(self) -> float:
+        """How wide a task is drawn for ROS 2: the scenario's arrival diameter, where it has one."""
+        return 2.0 * float(getattr(self.scenario.params, "arrival_radius", 0.5))
+
     def close(self) -> None:
+        if self.ros2 is not None:
+            self.ros2.close()
+            self.ros2 = None
         for e in reversed(self._entities):
             try:
                 e.undeclare()
@@ -255,6 +272,9 @@ class Coordinator:
                 self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX)))
             if st is not None:
                 st.mark("encode and put")
+            if self.ros2 is not None:  # while the agents think
+                pursuing = {a: self.pursuing[a] for a in ids if a in self.pursuing}
+                self.ros2.publish(k, w.time, (ids, xs, ys), w.markers(), pursuing, inboxes, self._task_size)
             step = self._await_step(k)
             if st is not None:
                 st.mark("await step")
@@ -269,7 +289,10 @@ class Coordinator:
             if self.realtime:
                 self.last_action.update(actions)
             declared = self.scenario.actions  # a world sees only actions of the shapes its scenario declares
-            w.apply({a: admit(act, declared) for a, act in actions.items() if w.alive[a]})
+            admitted = {a: admit(act, declared) for a, act in actions.items() if w.alive[a]}
+            w.apply(admitted)
+            if self.ros2 is not None:
+                self.pursuing.update(admitted)
             rec.step(step)
             for j in doomed:
                 self.agents.retire(j, k + 1)

@@ -123,6 +123,7 @@ def whole_rows(path: Path) -> int:
 #: marked ``slow``. ``pytest -m "not slow"`` is the fast lane for day-to-day work; CI runs everything.
 SLOW_MODULES = frozenset(
     {
+        "test_ros2_run",
         "test_access",
         "test_disk_full",
         "test_e2e",

@@ -225,6 +225,15 @@ def parse_ids(ids: str | int | list[int], n_agents: int, where: str = "placement
     return out
 
 
+class Ros2Section(Strict):
+    """Publish the run as ROS 2 topics on rmw_zenoh's keys (docs/ros2.md). What a ROS 2 machine
+    sees is not part of the results: config.yaml leaves this out, deployment.json records it."""
+
+    domain: int = Field(0, ge=0, le=232, description="ROS_DOMAIN_ID: the first chunk of every topic key")
+    frame_id: str = Field("map", pattern=r"^[A-Za-z_][A-Za-z0-9_/]{0,63}$", description="frame of poses and markers")
+    every: int = Field(1, ge=1, description="ticks between poses, task markers and inboxes (/clock: every tick)")
+
+
 class Experiment(Strict):
     name: str = Field(
         "experiment",
@@ -252,6 +261,9 @@ class Experiment(Strict):
     agents: AgentsSection = AgentsSection()
     allocator: AllocatorSection = AllocatorSection()
     network: NetworkSection = NetworkSection()
+    ros2: Ros2Section | None = Field(
+        None, exclude=True, description="publish poses, tasks, inboxes and /clock as ROS 2 topics; null: off"
+    )
 
     @property
     def ticks(self) -> int:

@@ -42,6 +42,7 @@ import psutil
 from swarmbed.wire.credentials import Identity, check_admitted, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, PREFIX, Keys
 from swarmbed.wire.process import process_alive
+from swarmbed.wire.ros2 import ADMIN_SPACE as ROS2_ADMIN_SPACE
 
 log = logging.getLogger("swarmbed.access")
 OWNER = "owner.json"  # in a run's private folder: the launcher that made it (pid, start time)
@@ -87,11 +88,17 @@ def _agent_rules(k: Keys, user: str, ids: Iterable[int]) -> list[dict]:
 
 
 def access_rules(
-    keys: Keys, agent_ids: Iterable[int], operators: Iterable[str], hosts: Mapping[str, tuple[str, Iterable[int]]]
+    keys: Keys,
+    agent_ids: Iterable[int],
+    operators: Iterable[str],
+    hosts: Mapping[str, tuple[str, Iterable[int]]],
+    ros2_domain: int | None = None,
 ) -> dict:
     """The hub's ``access_control`` section for one run (default deny). ``hosts``: each admitted
     host's user name -> (the host name it is bound to, the agents it may carry, as
-    :func:`~swarmbed.wire.schema.carriers` gives them)."""
+    :func:`~swarmbed.wire.schema.carriers` gives them). ``ros2_domain``: the ROS 2 domain the run
+    publishes on, if it does; operators may then read its topics and join its graph (a ROS 2 node
+    of theirs holds its own tokens), and publish on none of its topics."""
     k, root = keys, keys.root
     alive = f"{root}/alive/**"
     rules = [
@@ -111,6 +118,16 @@ def access_rules(
         _allow("operator-find", ["liveliness_query"], [f"{PREFIX}/*/alive/coordinator"]),
         _allow("host-watch", ["declare_liveliness_subscriber", "liveliness_query"], [alive, f"{HOSTS}/**"]),
     ]
+    operator_rules = ["operator-read", "operator-tokens", "operator-ask", "operator-find", "operator-monitor"]
+    if ros2_domain is not None:
+        graph = f"{ROS2_ADMIN_SPACE}/{ros2_domain}/**"
+        rules += [
+            _allow("ros2-read", ["declare_subscriber"], [f"{ros2_domain}/**"]),
+            _allow("ros2-graph", ["declare_liveliness_subscriber", "liveliness_query", "liveliness_token"], [graph]),
+            # `**` never matches an `@` chunk: the graph's tokens need their own way out
+            _allow("ros2-deliver", EVERY_MESSAGE, [graph], flow="egress"),
+        ]
+        operator_rules += ["ros2-read", "ros2-graph", "ros2-deliver"]
     subjects: list[dict] = [{"id": "netem", "usernames": ["netem"]}]
     policies: list[dict] = [
         {
@@ -138,14 +155,7 @@ def access_rules(
         policies.append(
             {
                 "subjects": ["operators"],
-                "rules": [
-                    "deliver",
-                    "operator-read",
-                    "operator-tokens",
-                    "operator-ask",
-                    "operator-find",
-                    "operator-monitor",
-                ],
+                "rules": ["deliver", *operator_rules],
             }
         )
     for user, (host, ids) in sorted(hosts.items()):
@@ -175,8 +185,10 @@ class RunAccess:
         agent_ids: Iterable[int],
         admitted: Iterable[Identity] = (),
         carriers: Mapping[str, Iterable[int]] | None = None,
+        ros2_domain: int | None = None,
     ) -> None:
         self.keys = keys
+        self.ros2_domain = ros2_domain
         self.agent_ids = sorted(agent_ids)
         self.admitted = check_admitted(admitted)
         self.carriers = {host: sorted(ids) for host, ids in (carriers or {}).items()}  # host -> agents it may carry
@@ -207,6 +219,7 @@ class RunAccess:
                 hosts={
                     i.user: (i.host_name, self.carriers.get(i.host_name, [])) for i in self.admitted if i.role == "host"
                 },
+                ros2_domain=self.ros2_domain,
             ),
         }
 

@@ -159,7 +159,17 @@ def _execute(
     hub_cpu_before = own_cpu_s()  # a sweep's pool worker hosts one run after another: count this one's
     reset_peak_rss()
     with ExitStack() as undo:  # what is set up before the run's own try: undone if a later step fails
-        access = RunAccess(keys, range(exp.agents.count), options.admit, carriers(exp)) if options.auth else None
+        access = (
+            RunAccess(
+                keys,
+                range(exp.agents.count),
+                options.admit,
+                carriers(exp),
+                ros2_domain=exp.ros2.domain if exp.ros2 else None,
+            )
+            if options.auth
+            else None
+        )
         if access:
             undo.callback(access.close)
         # the fork server first: it is spawned, never forked, but it needs no session of ours
@@ -233,6 +243,7 @@ def _execute(
             "hub": [endpoint, *listen],
             "placement": {str(i): h for i, h in where.items()},
             "hosts": hosts,
+            **({"ros2": exp.ros2.model_dump(mode="json")} if exp.ros2 else {}),
         }
         results.write_json(out_dir / DEPLOYMENT, deployment)
         try:

@@ -1,0 +1,247 @@
+"""The run as ROS 2 topics: what a ROS 2 machine on rmw_zenoh sees of a running experiment.
+
+With ``ros2:`` in the experiment, the coordinator's session (the hub) is also a ROS 2 node,
+``/swarmbed``, that publishes at each tick:
+
+=========================  ======================================  ==================================
+topic                      type                                    what
+=========================  ======================================  ==================================
+``/clock``                 ``rosgraph_msgs/msg/Clock``             simulated time (for ``use_sim_time``)
+``/robot_<i>/pose``        ``geometry_msgs/msg/PoseStamped``       robot i's position, simulated time
+``/tasks``                 ``visualization_msgs/msg/MarkerArray``  every task on the map, its holders
+``/robot_<i>/radio``       ``swarmbed_msgs/msg/RadioInbox``        what robot i received this tick
+=========================  ======================================  ==================================
+
+Keys, payloads, attachments and tokens follow rmw_zenoh (:mod:`swarmbed.wire.ros2`). Samples go out
+with congestion control DROP, as every view of a run does: a ROS 2 reader that stops reading loses
+samples and never holds up a tick. Nothing here feeds back into the run: the results are the same
+with publishing on or off (tests/test_ros2.py holds them byte-identical).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import zenoh
+
+from swarmbed.extension.actions import ActionSpec
+from swarmbed.wire.codec import EMPTY_INBOX, WireError, decode_inbox
+from swarmbed.wire.ros2 import (
+    PUBLISHER,
+    RADIO_INBOX,
+    SENSOR_QOS,
+    Qos,
+    Ros2Types,
+    encode_attachment,
+    endpoint_token,
+    gid,
+    node_token,
+    stamp,
+    topic_key,
+    wall_ns,
+)
+from swarmbed.wire.schema import Ros2Section
+
+NODE_NAME = "swarmbed"
+CLOCK, POSE, MARKERS = "rosgraph_msgs/msg/Clock", "geometry_msgs/msg/PoseStamped", "visualization_msgs/msg/MarkerArray"
+TASK_HEIGHT = 2.0  # metres of a task's cylinder; its diameter is the arrival radius, at least 1
+FREE, HELD = (0.6, 0.6, 0.6, 0.8), (1.0, 0.55, 0.0, 0.9)  # RGBA of a task nobody / somebody pursues
+
+
+@dataclass
+class _Topic:
+    """One publisher: its Zenoh publisher, token, GID and sequence number."""
+
+    ros_type: str
+    publisher: zenoh.Publisher
+    token: zenoh.LivelinessToken
+    gid: bytes
+    sequence: int = 0
+
+
+class Ros2Out:
+    """The ``/swarmbed`` node of one run, on the hub's session."""
+
+    def __init__(self, session: zenoh.Session, settings: Ros2Section, n_agents: int, actions: ActionSpec) -> None:
+        self.types = Ros2Types()
+        self.settings = settings
+        self.session = session
+        self.zid = str(session.zid())
+        self.node = session.liveliness().declare_token(node_token(settings.domain, self.zid, 0, NODE_NAME))
+        self._next_id = 1
+        self.clock = self._declare("/clock", CLOCK, SENSOR_QOS)
+        self.tasks = self._declare("/tasks", MARKERS, Qos())
+        self.poses = [self._declare(f"/robot_{i}/pose", POSE, Qos()) for i in range(n_agents)]
+        self.radio = [self._declare(f"/robot_{i}/radio", RADIO_INBOX, Qos()) for i in range(n_agents)]
+        # the actions that name a task or victim by its id (["goto_task", 12]): who pursues what
+        self.aiming = frozenset(name for name, kinds in actions.items() if kinds == (int,))
+        t = self.types
+        self.Header, self.Pose, self.PoseStamped = (
+            t.cls("std_msgs/msg/Header"),
+            t.cls("geometry_msgs/msg/Pose"),
+            t.cls(POSE),
+        )
+        self.Point, self.Quaternion = t.cls("geometry_msgs/msg/Point"), t.cls("geometry_msgs/msg/Quaternion")
+        self.malformed = 0
+        self._tasks_shown: tuple[dict, dict] | None = None  # the task markers last published, and who pursued each
+
+    def _declare(self, topic: str, ros_type: str, qos: Qos) -> _Topic:
+        d, type_hash = self.settings.domain, self.types.hash(ros_type)
+        token = endpoint_token(PUBLISHER, d, self.zid, 0, self._next_id, NODE_NAME, topic, ros_type, type_hash, qos)
+        self._next_id += 1
+        return _Topic(
+            ros_type,
+            self.session.declare_publisher(
+                topic_key(d, topic, ros_type, type_hash), congestion_control=zenoh.CongestionControl.DROP
+            ),
+            self.session.liveliness().declare_token(token),
+            gid(token),
+        )
+
+    def _put(self, topic: _Topic, msg: object) -> None:
+        topic.sequence += 1  # rmw_zenoh's publishers count from 1
+        topic.publisher.put(
+            self.types.serialize(msg, topic.ros_type),
+            attachment=encode_attachment(topic.sequence, wall_ns(), topic.gid),
+        )
+
+    def publish(
+        self,
+        tick: int,
+        sim_time: float,
+        positions: tuple[Sequence[int], Sequence[float], Sequence[float]],
+        markers: Mapping[int, tuple[float, float, str]],
+        actions: Mapping[int, list],
+        inboxes: Mapping[int, bytes],
+        marker_size: float,
+    ) -> None:
+        """Tick ``tick`` at ``sim_time``: the clock always; the rest every ``every`` ticks. ``inboxes``
+        are the encoded inboxes the proxy made for the next tick (what each robot received)."""
+        t = self.types
+        now = stamp(t, sim_time)
+        self._put(self.clock, t.cls(CLOCK)(clock=now))
+        if tick % self.settings.every:
+            return
+        header = self.Header(stamp=now, frame_id=self.settings.frame_id)
+        for i, x, y in zip(*positions):
+            pose = self.Pose(
+                position=self.Point(x=x, y=y, z=0.0), orientation=self.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+            )
+            self._put(self.poses[i], self.PoseStamped(header=header, pose=pose))
+        pursuers: dict[int, list[int]] = {}
+        for agent, action in sorted(actions.items()):
+            if action and action[0] in self.aiming:
+                pursuers.setdefault(int(action[1]), []).append(agent)
+        if (markers, pursuers) != self._tasks_shown:  # markers stay on a ROS 2 display until replaced
+            self._tasks_shown = (dict(markers), pursuers)
+            self._put(self.tasks, self._markers(header, markers, pursuers, marker_size))
+        for i in positions[0]:  # every live robot, an empty inbox too
+            self._put(self.radio[i], self._inbox(header, i, inboxes.get(i, EMPTY_INBOX)))
+
+    def _inbox(self, header: object, robot: int, data: bytes) -> object:
+        try:
+            items = decode_inbox(data)
+        except WireError:  # the proxy's own encoding: never expected, counted, never fatal
+            self.malformed += 1
+            items = []
+        return self.types.cls(RADIO_INBOX)(
+            header=header,
+            robot=robot,
+            senders=np.array([d.sender for d in items], dtype=np.int32),
+            kinds=[d.kind for d in items],
+            sizes=np.array([len(d.payload) for d in items], dtype=np.uint32),
+        )
+
+    def _markers(
+        self,
+        header: object,
+        markers: Mapping[int, tuple[float, float, str]],
+        pursuers: Mapping[int, list[int]],
+        size: float,
+    ) -> object:
+        """A cylinder per task (grey when nobody pursues it, orange when someone does) and a label
+        naming it and its pursuers; the array starts with DELETEALL, so tasks done disappear."""
+        t = self.types
+        Marker, Color, Vector3 = (
+            t.cls("visualization_msgs/msg/Marker"),
+            t.cls("std_msgs/msg/ColorRGBA"),
+            t.cls("geometry_msgs/msg/Vector3"),
+        )
+
+        def marker(ns: str, ident: int, kind: int, action: int, x: float, y: float, z: float, scale, rgba, text: str):
+            return Marker(
+                header=header,
+                ns=ns,
+                id=ident,
+                type=kind,
+                action=action,
+                pose=self.Pose(
+                    position=self.Point(x=x, y=y, z=z), orientation=self.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+                ),
+                scale=Vector3(x=scale[0], y=scale[1], z=scale[2]),
+                color=Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
+                lifetime=t.cls("builtin_interfaces/msg/Duration")(sec=0, nanosec=0),
+                frame_locked=False,
+                points=[],
+                colors=[],
+                texture_resource="",
+                texture=t.cls("sensor_msgs/msg/CompressedImage")(header=header, format="", data=_no_bytes()),
+                uv_coordinates=[],
+                text=text,
+                mesh_resource="",
+                mesh_file=t.cls("visualization_msgs/msg/MeshFile")(filename="", data=_no_bytes()),
+                mesh_use_embedded_materials=False,
+            )
+
+        out = [marker("", 0, Marker.CUBE, Marker.DELETEALL, 0.0, 0.0, 0.0, (1.0, 1.0, 1.0), FREE, "")]
+        d = max(size, 1.0)
+        for ident, (x, y, label) in sorted(markers.items()):
+            who = pursuers.get(ident, [])
+            out.append(
+                marker(
+                    "tasks",
+                    ident,
+                    Marker.CYLINDER,
+                    Marker.ADD,
+                    x,
+                    y,
+                    TASK_HEIGHT / 2,
+                    (d, d, TASK_HEIGHT),
+                    HELD if who else FREE,
+                    "",
+                )
+            )
+            text = f"{label} {ident}" + (" <- " + ",".join(map(str, who)) if who else "")
+            out.append(
+                marker(
+                    "labels",
+                    ident,
+                    Marker.TEXT_VIEW_FACING,
+                    Marker.ADD,
+                    x,
+                    y,
+                    TASK_HEIGHT + 1,
+                    (0, 0, d),
+                    (1.0, 1.0, 1.0, 1.0),
+                    text,
+                )
+            )
+        return t.cls(MARKERS)(markers=out)
+
+    def close(self) -> None:
+        for topic in [self.clock, self.tasks, *self.poses, *self.radio]:
+            for entity in (topic.token, topic.publisher):
+                try:
+                    entity.undeclare()
+                except Exception:
+                    pass
+        try:
+            self.node.undeclare()
+        except Exception:
+            pass
+
+
+def _no_bytes() -> np.ndarray:
+    return np.zeros(0, dtype=np.uint8)

@@ -1,0 +1,98 @@
+"""rmw_zenoh's conventions, checked against independent references: the examples of rmw_zenoh's
+design document, rosbags' type hashes, the CDR layout and Zenoh's own serialiser. No ROS needed."""
+
+import struct
+
+import pytest
+
+from swarmbed.wire.errors import WireError
+from swarmbed.wire.ros2 import (
+    BEST_EFFORT,
+    PUBLISHER,
+    RADIO_INBOX,
+    SENSOR_QOS,
+    SUBSCRIPTION,
+    Qos,
+    Ros2Types,
+    decode_attachment,
+    encode_attachment,
+    endpoint_token,
+    gid,
+    node_token,
+    stamp,
+    topic_key,
+)
+
+# rmw_zenoh docs/design.md: the chatter topic, its node and publisher tokens, as a talker writes them
+STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
+ZID = "8b20917502ee955ac4476e0266340d5c"
+
+
+@pytest.fixture(scope="module")
+def types():
+    return Ros2Types()
+
+
+def test_keys_and_tokens_are_those_of_rmw_zenohs_design_document(types):
+    assert types.hash("std_msgs/msg/String") == STRING_HASH  # rosbags' REP-2016 hash = the document's
+    assert topic_key(0, "/chatter", "std_msgs/msg/String", STRING_HASH) == (
+        f"0/chatter/std_msgs::msg::dds_::String_/{STRING_HASH}"
+    )
+    assert topic_key(0, "/robot1/chatter", "std_msgs/msg/String", STRING_HASH).startswith("0/robot1/chatter/std_msgs")
+    assert node_token(0, ZID, 0, "talker") == f"@ros2_lv/0/{ZID}/0/0/NN/%/%/talker"
+    assert endpoint_token(
+        PUBLISHER, 0, ZID, 0, 10, "talker", "/chatter", "std_msgs/msg/String", STRING_HASH, Qos(depth=7)
+    ) == (f"@ros2_lv/0/{ZID}/0/10/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/{STRING_HASH}/::,7:,:,:,,")
+    assert endpoint_token(
+        SUBSCRIPTION, 0, ZID, 0, 10, "listener", "/chatter", "std_msgs/msg/String", STRING_HASH, Qos()
+    ).endswith("/::,10:,:,:,,")
+    # the QoS is a delta against rmw_zenoh's default profile (reliable, volatile, keep-last 42)
+    assert Qos(depth=42).keyexpr() == "::,:,:,:,,"
+    assert SENSOR_QOS.keyexpr() == f"{BEST_EFFORT}::,1:,:,:,,"
+    with pytest.raises(WireError):
+        topic_key(0, "/x", "PoseStamped", STRING_HASH)
+
+
+def test_the_attachment_is_the_33_bytes_rmw_zenoh_reads():
+    source = bytes(range(16))
+    data = encode_attachment(41, 1_700_000_000_123_456_789, source)
+    # the layout rmw_zenoh's design document gives: int64 sequence, int64 timestamp (little-endian),
+    # the GID's length (16) and its bytes
+    assert data == struct.pack("<qqB", 41, 1_700_000_000_123_456_789, 16) + source
+    # and it is what Zenoh's own serialiser makes of (int64, int64, bytes)
+    from zenoh.ext import Int64, z_serialize
+
+    assert data == z_serialize((Int64(41), Int64(1_700_000_000_123_456_789), source)).to_bytes()
+    assert decode_attachment(data) == (41, 1_700_000_000_123_456_789, source)
+    for bad in (data[:-1], data + b"\0", b"\xff" * 33, b""):  # truncated, long, a wrong GID length
+        with pytest.raises(WireError):
+            decode_attachment(bad)
+    with pytest.raises(WireError):
+        encode_attachment(1, 2, b"short")
+
+
+def test_a_gid_is_sixteen_bytes_of_the_token_and_differs_between_entities():
+    a = gid(f"@ros2_lv/0/{ZID}/0/1/MP/%/%/swarmbed/%clock")
+    b = gid(f"@ros2_lv/0/{ZID}/0/2/MP/%/%/swarmbed/%tasks")
+    assert len(a) == len(b) == 16 and a != b
+    assert a == gid(f"@ros2_lv/0/{ZID}/0/1/MP/%/%/swarmbed/%clock")
+
+
+def test_payloads_are_cdr_with_the_encapsulation_header(types):
+    clock = types.cls("rosgraph_msgs/msg/Clock")(clock=stamp(types, 12.25))
+    data = types.serialize(clock, "rosgraph_msgs/msg/Clock")
+    # CDR little-endian: the encapsulation header 00 01 00 00, then int32 sec and uint32 nanosec
+    assert data == b"\x00\x01\x00\x00" + struct.pack("<iI", 12, 250_000_000)
+    inbox = types.cls(RADIO_INBOX)
+    assert types.hash(RADIO_INBOX).startswith("RIHS01_") and inbox is not None
+    with pytest.raises(WireError):
+        types.deserialize(data[:5], "geometry_msgs/msg/PoseStamped")
+
+
+def test_the_shipped_ros2_package_defines_the_type_the_run_publishes():
+    from pathlib import Path
+
+    from swarmbed.wire.ros2 import RADIO_INBOX_MSG
+
+    shipped = Path(__file__).resolve().parent.parent / "docs" / "ros2" / "swarmbed_msgs" / "msg" / "RadioInbox.msg"
+    assert shipped.read_text() == RADIO_INBOX_MSG  # what a ROS 2 machine builds is what its hash names

@@ -1,0 +1,179 @@
+"""A run seen from a ROS 2 machine: a raw Zenoh client with an operator's credentials subscribes to
+rmw_zenoh's keys and graph tokens, as rmw_zenoh would, and decodes every sample with rosbags. What
+it reads is checked against the run's own record (trajectories, markers, ledger)."""
+
+import csv
+import threading
+import time
+from collections import defaultdict
+
+import pytest
+import zenoh
+
+from swarmbed.experiments.launch.hub import HubOptions
+from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.wire.ros2 import Ros2Types, decode_attachment, gid
+from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
+from tests.conftest import experiment, read_ledger, same_results
+
+DOMAIN = 7
+SETTINGS = ("agents.count=4", "run.duration=80", "run.stop_when_done=false", "run.record_trajectories=true")
+
+
+class RosReader:
+    """What a ROS 2 machine on the domain receives: data samples by topic, graph tokens."""
+
+    def __init__(self, endpoint: str, credentials: str) -> None:
+        self.samples: dict[str, list[tuple[str, bytes, bytes | None]]] = defaultdict(list)
+        self.tokens: set[str] = set()
+        self.lock = threading.Lock()
+        self.session = zenoh.open(zenoh_config("client", [endpoint], credentials=credentials))
+        self.sub = self.session.declare_subscriber(f"{DOMAIN}/**", self._on_sample)
+        self.graph = self.session.liveliness().declare_subscriber(f"@ros2_lv/{DOMAIN}/**", self._on_token, history=True)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        topic = "/" + "/".join(key.split("/")[1:-2])
+        attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
+        with self.lock:
+            self.samples[topic].append((key, sample.payload.to_bytes(), attachment))
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            with self.lock:
+                self.tokens.add(str(sample.key_expr))
+
+
+@pytest.fixture(scope="module")
+def seen(tmp_path_factory):
+    """One run with ROS 2 on, read from outside; one with it off, same seed."""
+    from tests.conftest import Operator
+
+    base = tmp_path_factory.mktemp("ros2")
+    operator = Operator(base)
+    endpoint = free_loopback_endpoint()
+    readers: list[RosReader] = []
+
+    def on_ready(_keys, _endpoint) -> None:
+        readers.append(RosReader(endpoint, str(operator.path)))
+        time.sleep(0.5)  # the reader's subscriptions reach the hub before the first tick
+        # another operator session tries to pass a pose off as robot 0's: the hub must refuse it
+        forger = zenoh.open(zenoh_config("client", [endpoint], credentials=str(operator.path)))
+        forger.put(f"{DOMAIN}/robot_0/pose/geometry_msgs::msg::dds_::PoseStamped_/forged", b"forged")
+        forger.liveliness().declare_token(f"@ros2_lv/{DOMAIN}/forged/0/0/NN/%/%/impostor")
+        time.sleep(0.2)
+        forger.close()
+
+    exp = experiment(*SETTINGS, f"ros2={{domain: {DOMAIN}}}")
+    on = run_experiment(
+        exp,
+        base / "on",
+        progress=False,
+        hub=HubOptions(listen=[endpoint], admit=[operator.identity]),
+        on_ready=on_ready,
+    )
+    time.sleep(0.5)
+    reader = readers[0]
+    reader.session.close()
+    off = run_experiment(experiment(*SETTINGS), base / "off", progress=False)
+    return on, off, reader
+
+
+def _rows(path):
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def test_every_topic_is_on_rmw_zenohs_key_with_its_type_hash_and_attachment(seen):
+    on, _off, reader = seen
+    types = Ros2Types()
+    ticks = on.summary["ticks"]
+    expected = {
+        "/clock": "rosgraph_msgs/msg/Clock",
+        "/tasks": "visualization_msgs/msg/MarkerArray",
+        **{f"/robot_{i}/pose": "geometry_msgs/msg/PoseStamped" for i in range(4)},
+        **{f"/robot_{i}/radio": "swarmbed_msgs/msg/RadioInbox" for i in range(4)},
+    }
+    assert set(reader.samples) == set(expected)
+    tokens = {t.split("/")[9].replace("%", "/"): t for t in reader.tokens if "/MP/" in t}
+    for topic, ros_type in expected.items():
+        samples = reader.samples[topic]
+        package, _, name = ros_type.split("/")
+        key = f"{DOMAIN}{topic}/{package}::msg::dds_::{name}_/{types.hash(ros_type)}"
+        assert {k for k, _, _ in samples} == {key}, topic
+        published = ticks if topic != "/tasks" else len(samples)  # /tasks: when it changed
+        assert len(samples) == published, topic  # one a tick, none lost on loopback, none forged
+        # the publisher's token names the same topic, type and hash; the attachment's GID is its hash
+        token = tokens[topic]
+        assert token.split("/")[10:12] == key.split("/")[-2:]
+        attachments = [decode_attachment(a) for _, _, a in samples]
+        assert [seq for seq, _, _ in attachments] == list(range(1, published + 1)), topic
+        assert {g for _, _, g in attachments} == {gid(token)}
+        for _, payload, _ in samples:
+            types.deserialize(payload, ros_type)
+    zid = next(iter(tokens.values())).split("/")[2]
+    assert f"@ros2_lv/{DOMAIN}/{zid}/0/0/NN/%/%/swarmbed" in reader.tokens
+    # an operator's ROS 2 tools join the graph (their own node's token), but the pose it forged for
+    # robot 0 never reached a reader: the hub refused the put
+    assert any("/impostor" in t for t in reader.tokens)
+    assert not any(p == b"forged" for samples in reader.samples.values() for _, p, _ in samples)
+
+
+def test_clock_poses_and_markers_are_the_runs_own_record(seen):
+    on, _off, reader = seen
+    types = Ros2Types()
+    dt = 1.0  # the quick start's
+    clock = [types.deserialize(p, "rosgraph_msgs/msg/Clock").clock for _, p, _ in reader.samples["/clock"]]
+    assert [c.sec + c.nanosec / 1e9 for c in clock] == pytest.approx([k * dt for k in range(len(clock))])
+    trajectory = {
+        (int(r["tick"]), int(r["agent"])): (float(r["x"]), float(r["y"]))
+        for r in _rows(on.out_dir / "trajectories.csv")
+    }
+    for i in range(4):
+        for k, (_, payload, _) in enumerate(reader.samples[f"/robot_{i}/pose"]):
+            msg = types.deserialize(payload, "geometry_msgs/msg/PoseStamped")
+            assert (msg.header.stamp.sec, msg.header.frame_id) == (int(k * dt), "map")
+            assert (msg.pose.position.x, msg.pose.position.y) == pytest.approx(trajectory[(k, i)])
+    events = defaultdict(list)  # markers.csv: each task as it appears and vanishes
+    for r in _rows(on.out_dir / "markers.csv"):
+        events[int(r["tick"])].append((int(r["marker"]), r["event"]))
+    standing: set[int] = set()
+    shown = {}  # tick -> the task ids of the markers published at it
+    for _, payload, _ in reader.samples["/tasks"]:
+        markers = types.deserialize(payload, "visualization_msgs/msg/MarkerArray").markers
+        assert markers[0].action == 3  # DELETEALL first: tasks done disappear
+        shown[round(markers[0].header.stamp.sec / dt)] = ({m.id for m in markers if m.ns == "tasks"}, markers)
+    assert 0 in shown and len(shown) < on.summary["ticks"]  # published when the map or a pursuit changed
+    for k in range(on.summary["ticks"]):
+        for marker, event in events[k]:
+            (standing.add if event == "appear" else standing.discard)(marker)
+        if k in shown:
+            assert shown[k][0] == standing, k
+        else:
+            assert not events[k], k  # nothing appeared or vanished without a new array
+    assert any("<-" in m.text for _, markers in shown.values() for m in markers)  # and it says who pursues what
+
+
+def test_inboxes_carry_every_delivered_copy(seen):
+    on, _off, reader = seen
+    types = Ros2Types()
+    received = received_bytes = 0
+    for i in range(4):
+        for _, payload, _ in reader.samples[f"/robot_{i}/radio"]:
+            msg = types.deserialize(payload, "swarmbed_msgs/msg/RadioInbox")
+            assert msg.robot == i and len(msg.senders) == len(msg.kinds) == len(msg.sizes)
+            assert i not in set(msg.senders.tolist())
+            received += len(msg.senders)
+            received_bytes += int(msg.sizes.sum())
+    # copies sent at the last tick end as run_ended: every delivered copy was handed to a robot
+    net = on.summary["network"]
+    delivered = sum(r["messages"] for r in read_ledger(on.out_dir) if r["outcome"] == "delivered")
+    assert received == delivered == net["delivered"] > 0
+    assert received_bytes == net["delivered_bytes"]
+
+
+def test_results_are_byte_identical_with_publishing_on_and_off(seen):
+    on, off, _reader = seen
+    same_results(on.out_dir, off.out_dir)
+    for name in ("trajectories.csv", "markers.csv"):
+        assert (on.out_dir / name).read_bytes() == (off.out_dir / name).read_bytes(), name
