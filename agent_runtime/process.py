@@ -260,7 +260,7 @@ class _Agent:
         if bool(self.monitors) != runtime.watched:
             runtime.monitored(bool(self.monitors))
         try:
-            action, messages, events = runtime.step(msg.tick, obs, msg.inbox)
+            action, messages, events = runtime.step(msg.tick, obs, msg.inbox, msg.decision)
         except Exception as exc:  # a plugin or node raised: stop this agent, loudly
             tb = traceback.format_exc()
             log.error("agent %d: failed at tick %d:\n%s", agent_id, msg.tick, tb)

@@ -130,7 +130,9 @@ class AgentRuntime:
                 log.warning("agent %d: malformed %r message from %d dropped: %s", self.agent_id, d.kind, d.sender, exc)
         return out
 
-    def step(self, tick: int, obs: Observation, inbox: bytes) -> tuple[list, list[RadioMessage], dict[str, int]]:
+    def step(
+        self, tick: int, obs: Observation, inbox: bytes, decision: int | None = None
+    ) -> tuple[list, list[RadioMessage], dict[str, int]]:
         tasks = {t[0]: t for t in map(TaskInfo._make, obs.tasks.tolist())}
         a, sense, ctx = self.spec.agents, self.sensing, self.context
         ctx.view = LocalView(
@@ -149,6 +151,7 @@ class AgentRuntime:
             sense.range,
             sense.angle,
             obs,
+            decision=decision,
         )
         ctx.action = ["stop"]
         st = self.stages

@@ -117,6 +117,8 @@ class Coordinator:
         self.slowest_in_interval = 0.0  # the same since a monitor last read it (and set it to 0)
         self._entities: list = []
         self.ros2: Any = None  # a Ros2Out while the run publishes ROS 2 topics
+        self.commands: Any = None  # a Ros2Commands while the allocator takes its decisions from ROS 2
+        self.decision_source = getattr(allocator, "decision_source", None)
         self.pursuing: dict[int, list] = {}  # the actions the world was last given (for ROS 2's task markers)
 
     # -- setup -----------------------------------------------------------------------------------
@@ -153,6 +155,17 @@ class Coordinator:
                 self.ros2 = Ros2Out(s, self.exp.ros2, self.n, self.scenario.actions)
             except ImportError as exc:  # the ros2 extra is not installed: say so before any process starts
                 raise RunError(str(exc)) from None
+            if self.decision_source == "ros2":
+                from swarmbed.coordinator.ros2 import Ros2Commands
+
+                self.commands = Ros2Commands(
+                    self.ros2, self.n, self.exp.ros2.command_timeout, self.realtime, self._malformed
+                )
+        elif self.decision_source == "ros2":
+            raise RunError(
+                f"allocator {self.exp.allocator.name!r} takes its decisions from ROS 2 topics: the experiment "
+                "needs a ros2: section (docs/ros2.md)"
+            )
 
     def _on_monitor(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -186,6 +199,9 @@ class Coordinator:
         return 2.0 * float(getattr(self.scenario.params, "arrival_radius", 0.5))
 
     def close(self) -> None:
+        if self.commands is not None:
+            self.commands.close()
+            self.commands = None
         if self.ros2 is not None:
             self.ros2.close()
             self.ros2 = None
@@ -268,8 +284,9 @@ class Coordinator:
             observed = w.observations()
             if st is not None:
                 st.mark("observations")
+            decisions = self.commands.decide(w.time, observed) if self.commands is not None else {}
             for i, obs in observed.items():
-                self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX)))
+                self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX), decisions.get(i)))
             if st is not None:
                 st.mark("encode and put")
             if self.ros2 is not None:  # while the agents think

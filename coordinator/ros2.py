@@ -20,8 +20,11 @@ with publishing on or off (tests/test_ros2.py holds them byte-identical).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import zenoh
@@ -32,6 +35,9 @@ from swarmbed.wire.ros2 import (
     PUBLISHER,
     RADIO_INBOX,
     SENSOR_QOS,
+    SUBSCRIPTION,
+    TASK_COMMAND,
+    TASK_OBSERVATION,
     Qos,
     Ros2Types,
     encode_attachment,
@@ -245,3 +251,121 @@ class Ros2Out:
 
 def _no_bytes() -> np.ndarray:
     return np.zeros(0, dtype=np.uint8)
+
+
+MAX_COMMAND_BYTES = 1024  # a TaskCommand is about 40 bytes; anything far larger is not one
+
+
+class Ros2Commands:
+    """Decisions from ROS 2 for a run whose allocator is ``ros2``: before each tick, every robot's
+    observation goes out on ``/robot_<i>/observation``, and the decision for that tick comes back on
+    ``/robot_<i>/cmd``, stamped with the observation's stamp.
+
+    Lock-step: the tick waits until every robot has its decision, at most ``command_timeout`` wall
+    seconds; a robot without one then keeps its last decision (counted: a run with such ticks is
+    not reproducible, and the count says so). Real-time clock: no waiting, the last decision holds.
+    A command is decoded into its declared type only, from a bounded payload, for the robot its key
+    names; anything else is dropped and counted, never fatal."""
+
+    def __init__(
+        self,
+        out: Ros2Out,
+        n_agents: int,
+        timeout: float,
+        realtime: bool,
+        malformed: Callable[[str, Exception], None],
+    ) -> None:
+        self.out, self.n, self.timeout, self.realtime, self.malformed = out, n_agents, timeout, realtime, malformed
+        self.observations = [out._declare(f"/robot_{i}/observation", TASK_OBSERVATION, Qos()) for i in range(n_agents)]
+        d, cmd_hash = out.settings.domain, out.types.hash(TASK_COMMAND)
+        self.cmd_suffix = topic_key(d, "/x/cmd", TASK_COMMAND, cmd_hash).split("/", 3)[3]  # <dds type>/<hash>
+        self.tokens = []
+        for i in range(n_agents):  # a subscription per robot in the graph: ros2 topic info shows who listens
+            token = endpoint_token(
+                SUBSCRIPTION, d, out.zid, 0, out._next_id, NODE_NAME, f"/robot_{i}/cmd", TASK_COMMAND, cmd_hash, Qos()
+            )
+            out._next_id += 1
+            self.tokens.append(out.session.liveliness().declare_token(token))
+        self.subscriber = out.session.declare_subscriber(f"{d}/robot_$*/cmd/{self.cmd_suffix}", self._on_command)
+        self.cond = threading.Condition()
+        self.latest: dict[int, tuple[tuple[int, int], int]] = {}  # robot -> (stamp, decision)
+        self.held: dict[int, int] = {}  # robot -> the decision it acts on
+        self.timeouts = 0  # robot-ticks that kept their last decision because none came in time
+
+    def _on_command(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        try:
+            robot = _robot_of(key, self.n)
+            data = sample.payload.to_bytes()
+            if len(data) > MAX_COMMAND_BYTES:
+                raise WireError(f"a command of {len(data)} bytes")
+            msg = self.out.types.deserialize(data, TASK_COMMAND)
+            if msg.robot != robot:
+                raise WireError(f"a command for robot {msg.robot} on robot {robot}'s topic")
+            if not -3 <= msg.task < 2**31:
+                raise WireError(f"task {msg.task}: a task id, -1 (none), -2 (hold) or -3 (halt)")
+            stamp_key = (int(msg.header.stamp.sec), int(msg.header.stamp.nanosec))
+        except (WireError, AttributeError, TypeError, ValueError) as exc:
+            self.malformed(key, exc if isinstance(exc, WireError) else WireError(str(exc)))
+            return
+        with self.cond:
+            if robot not in self.latest or stamp_key >= self.latest[robot][0]:
+                self.latest[robot] = (stamp_key, int(msg.task))
+                self.cond.notify_all()
+
+    def decide(self, sim_time: float, observed: Mapping[int, Any]) -> dict[int, int]:
+        """Publish the observations of this tick and gather the decisions for it."""
+        t = self.out.types
+        now = stamp(t, sim_time)
+        header = self.out.Header(stamp=now, frame_id=self.out.settings.frame_id)
+        Msg = t.cls(TASK_OBSERVATION)
+        for i, obs in observed.items():
+            tasks = obs.tasks
+            self.out._put(
+                self.observations[i],
+                Msg(
+                    header=header,
+                    robot=i,
+                    x=float(obs.x),
+                    y=float(obs.y),
+                    heading=float(obs.heading),
+                    speed=float(obs.speed),
+                    task_ids=np.ascontiguousarray(tasks["id"], dtype=np.int32),
+                    task_x=np.ascontiguousarray(tasks["x"], dtype=np.float64),
+                    task_y=np.ascontiguousarray(tasks["y"], dtype=np.float64),
+                    task_remaining=np.ascontiguousarray(tasks["remaining"], dtype=np.float64),
+                ),
+            )
+        wanted = (int(now.sec), int(now.nanosec))
+        deadline = time.monotonic() + (0.0 if self.realtime else self.timeout)
+        with self.cond:
+            while not self.realtime and not all(self.latest.get(i, ((-1, -1), 0))[0] == wanted for i in observed):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    break
+                self.cond.wait(left)
+            for i in observed:
+                got = self.latest.get(i)
+                if got is not None and (self.realtime or got[0] == wanted):
+                    self.held[i] = got[1]
+                elif not self.realtime:
+                    self.timeouts += 1  # lock-step without its decision in time: the last one holds
+        return {i: self.held[i] for i in observed if i in self.held}
+
+    def close(self) -> None:
+        entities: list[Any] = [self.subscriber, *self.tokens, *(o.token for o in self.observations)]
+        for entity in entities:
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+
+
+def _robot_of(key: str, n: int) -> int:
+    """The robot a command key names (``<domain>/robot_<i>/cmd/...``), within the run's robots."""
+    chunks = key.split("/")
+    name = chunks[1] if len(chunks) > 2 else ""
+    digits = name.removeprefix("robot_")
+    if not name.startswith("robot_") or not digits.isdigit() or len(digits) > 6 or int(digits) >= n:
+        raise WireError(f"not a robot of this run: {name[:40]!r}")
+    return int(digits)

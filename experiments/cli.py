@@ -774,14 +774,17 @@ def main(argv: list[str] | None = None) -> int:
     so.add_argument("--no-auth", action="store_true", help="no authentication or access control on the hub")
     so.set_defaults(func=cmd_soak)
 
+    from swarmbed.wire.credentials import ROLES
+
     cr = sub.add_parser("credentials", help="make a credentials file for a host daemon or an operator (watch, swap)")
     cr.add_argument("file", help="the file to write (created with mode 600)")
     cr.add_argument("--user", required=True, help="the user name (letters, digits, no ':' or spaces)")
     cr.add_argument(
         "--role",
-        choices=["operator", "host"],
+        choices=list(ROLES),
         default="operator",
-        help="operator: watch a run and ask for swaps; host: a host daemon (default: operator)",
+        help="operator: watch a run and ask for swaps; host: a host daemon; commander: an operator that may "
+        "also publish the robots' decisions on ROS 2 (allocator ros2, docs/ros2.md) (default: operator)",
     )
     cr.add_argument(
         "--host",

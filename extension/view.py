@@ -72,6 +72,9 @@ class LocalView(Generic[ObsT]):
     vision_angle: float = 2 * math.pi  # full angle of the sensing cone around ``heading``
     obs: ObsT = None  # type: ignore[assignment]  # the scenario's typed observation (its extra fields)
     outbox: list[Outgoing] = field(default_factory=list)
+    #: a decision made outside the agent for this tick (a ROS 2 node's, a learner's), for allocators
+    #: that take their decisions from outside (:class:`~swarmbed.plugins.external.Ros2Allocator`)
+    decision: int | None = None
 
     def sees(self, x: float, y: float) -> bool:
         """Whether a point is in the sensing region (an open task there would be in ``tasks``)."""

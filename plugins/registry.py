@@ -199,6 +199,8 @@ register_scenario("sar", "swarmbed.scenarios.sar:SAR")
 
 register("fcg", "swarmbed.plugins.fcg:FirstClaimedGreedy", "mtsr")
 register("noop", "swarmbed.plugins.noop:NoopAllocator")
+register("nearest", "swarmbed.plugins.nearest:NearestTask")
+register("ros2", "swarmbed.plugins.external:Ros2Allocator")
 register("cbba", "swarmbed.plugins.cbba:CBBA", "mtsr")
 register("grape", "swarmbed.plugins.grape:GRAPE", "mtsr")
 # the six coordination strategies of the CBBA-ETC evaluation (search and rescue)

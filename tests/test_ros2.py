@@ -89,10 +89,47 @@ def test_payloads_are_cdr_with_the_encapsulation_header(types):
         types.deserialize(data[:5], "geometry_msgs/msg/PoseStamped")
 
 
-def test_the_shipped_ros2_package_defines_the_type_the_run_publishes():
+def test_the_shipped_ros2_package_defines_the_types_the_run_uses(types):
     from pathlib import Path
 
-    from swarmbed.wire.ros2 import RADIO_INBOX_MSG
+    from swarmbed.wire.ros2 import OUR_TYPES
 
-    shipped = Path(__file__).resolve().parent.parent / "docs" / "ros2" / "swarmbed_msgs" / "msg" / "RadioInbox.msg"
-    assert shipped.read_text() == RADIO_INBOX_MSG  # what a ROS 2 machine builds is what its hash names
+    folder = Path(__file__).resolve().parent.parent / "docs" / "ros2" / "swarmbed_msgs" / "msg"
+    assert {p.stem for p in folder.glob("*.msg")} == {name.rsplit("/", 1)[1] for name in OUR_TYPES}
+    for name, text in OUR_TYPES.items():  # what a ROS 2 machine builds is what the hashes name
+        assert (folder / f"{name.rsplit('/', 1)[1]}.msg").read_text() == text, name
+        assert types.hash(name).startswith("RIHS01_")
+    from swarmbed.extension.allocator import HALT, HOLD
+    from swarmbed.plugins.external import NONE
+
+    command = types.cls("swarmbed_msgs/msg/TaskCommand")
+    assert (command.NONE, command.HOLD, command.HALT) == (NONE, HOLD, HALT)  # the codes the allocator reads
+
+
+def test_a_decision_travels_in_the_tick_sample_only_when_there_is_one():
+    from swarmbed.wire.codec import EMPTY_INBOX, decode_agent_in, encode_tick, pack
+
+    plain = encode_tick(3, {"x": 1.0}, EMPTY_INBOX)
+    assert plain == pack([0, 3, {"x": 1.0}, EMPTY_INBOX])  # unchanged for every other allocator
+    assert decode_agent_in(plain).decision is None
+    for decision in (0, 17, -1, -2, -3):
+        assert decode_agent_in(encode_tick(3, {}, EMPTY_INBOX, decision)).decision == decision
+    for bad in (2**31, "12", 1.5, None, [1]):
+        with pytest.raises(WireError):
+            decode_agent_in(pack([0, 3, {}, EMPTY_INBOX, bad]))
+
+
+def test_a_command_key_names_a_robot_of_the_run():
+    from swarmbed.coordinator.ros2 import _robot_of
+
+    assert _robot_of("7/robot_3/cmd/swarmbed_msgs::msg::dds_::TaskCommand_/RIHS01_x", 5) == 3
+    for key in (
+        "7/robot_5/cmd/t/h",
+        "7/robot_-1/cmd/t/h",
+        "7/robotx/cmd/t/h",
+        "7/robot_/cmd/t/h",
+        "7",
+        "7/robot_9999999/cmd",
+    ):
+        with pytest.raises(WireError):
+            _robot_of(key, 5)

@@ -3,15 +3,20 @@ rmw_zenoh's keys and graph tokens, as rmw_zenoh would, and decodes every sample 
 it reads is checked against the run's own record (trajectories, markers, ledger)."""
 
 import csv
+import json
+import subprocess
+import sys
 import threading
 import time
 from collections import defaultdict
+from pathlib import Path
 
 import pytest
 import zenoh
 
 from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.wire.credentials import Identity, write_credentials
 from swarmbed.wire.ros2 import Ros2Types, decode_attachment, gid
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 from tests.conftest import experiment, read_ledger, same_results
@@ -177,3 +182,91 @@ def test_results_are_byte_identical_with_publishing_on_and_off(seen):
     same_results(on.out_dir, off.out_dir)
     for name in ("trajectories.csv", "markers.csv"):
         assert (on.out_dir / name).read_bytes() == (off.out_dir / name).read_bytes(), name
+
+
+NODE = Path(__file__).resolve().parent.parent / "docs" / "ros2" / "nearest_node.py"
+DRIVEN = ("agents.count=5", "run.duration=400", "run.seed=4")
+
+
+@pytest.fixture(scope="module")
+def driven(tmp_path_factory):
+    """The quick start decided by the example ROS 2 node through the ros2 allocator, while an
+    operator tries to halt robot 0 at every tick; and the same run with the built-in nearest."""
+    base = tmp_path_factory.mktemp("ros2_driven")
+    commander = Identity.new("commander", "commander")
+    write_credentials(base / "commander.json", commander)
+    operator = Identity.new("meddler", "operator")
+    endpoint = free_loopback_endpoint()
+    held: dict = {}
+
+    def on_ready(_keys, _endpoint) -> None:
+        node = subprocess.Popen(
+            [
+                sys.executable,
+                str(NODE),
+                "--connect",
+                endpoint,
+                "--credentials",
+                str(base / "commander.json"),
+                "--domain",
+                str(DOMAIN),
+            ],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        held["node"] = node
+        assert node.stdout.readline().strip() == "ready"
+        meddler = zenoh.open(
+            zenoh_config(
+                "client",
+                [endpoint],
+                settings={"transport/auth/usrpwd": {"user": operator.user, "password": operator.password}},
+            )
+        )
+        held["meddler"] = meddler
+        types = Ros2Types()
+        halt_key = (
+            f"{DOMAIN}/robot_0/cmd/swarmbed_msgs::msg::dds_::TaskCommand_/{types.hash('swarmbed_msgs/msg/TaskCommand')}"
+        )
+        Command, Header = types.cls("swarmbed_msgs/msg/TaskCommand"), types.cls("std_msgs/msg/Header")
+
+        def halt_robot_0(sample) -> None:  # an operator may read the observations, not decide
+            obs = types.deserialize(sample.payload.to_bytes(), "swarmbed_msgs/msg/TaskObservation")
+            forged = Command(header=Header(stamp=obs.header.stamp, frame_id="map"), robot=0, task=-3)
+            meddler.put(halt_key, types.serialize(forged, "swarmbed_msgs/msg/TaskCommand"))
+
+        held["sub"] = meddler.declare_subscriber(
+            f"{DOMAIN}/robot_0/observation/swarmbed_msgs::msg::dds_::TaskObservation_/**", halt_robot_0
+        )
+        time.sleep(0.5)  # the node's and the meddler's subscriptions reach the hub before tick 0
+
+    exp = experiment(*DRIVEN, "allocator.name=ros2", f"ros2={{domain: {DOMAIN}, command_timeout: 2}}")
+    try:
+        ros = run_experiment(
+            exp,
+            base / "ros2",
+            progress=False,
+            hub=HubOptions(listen=[endpoint], admit=[commander, operator]),
+            on_ready=on_ready,
+        )
+        assert held["node"].wait(timeout=30) == 0  # it leaves when the run's node leaves the graph
+    finally:
+        if "node" in held and held["node"].poll() is None:
+            held["node"].kill()
+            held["node"].wait()
+        if "meddler" in held:
+            held["meddler"].close()
+    builtin = run_experiment(experiment(*DRIVEN, "allocator.name=nearest"), base / "nearest", progress=False)
+    return ros, builtin
+
+
+def test_a_ros2_node_in_the_loop_gives_the_builtin_allocators_results(driven):
+    ros, builtin = driven
+    assert ros.timings["ros2_command_timeouts"] == 0  # every robot had its decision at every tick
+    assert ros.summary["tasks_completed"] > 0
+    # the forged halts changed nothing: every result file is the built-in run's, but for the name
+    for name in ("timeseries.csv", "agents.csv", "network_ledger.csv"):
+        assert (ros.out_dir / name).read_bytes() == (builtin.out_dir / name).read_bytes(), name
+    ours, theirs = (json.loads((run.out_dir / "summary.json").read_text()) for run in (ros, builtin))
+    assert (ours.pop("allocator"), theirs.pop("allocator")) == ("ros2", "nearest")
+    assert ours == theirs

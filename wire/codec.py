@@ -142,8 +142,12 @@ def decode_task_table(data: object) -> np.ndarray:
     return np.frombuffer(data, dtype=TASK_DTYPE)
 
 
-def encode_tick(tick: int, obs: dict, inbox: bytes) -> bytes:
-    return pack([TAG_TICK, tick, obs, inbox])
+def encode_tick(tick: int, obs: dict, inbox: bytes, decision: int | None = None) -> bytes:
+    """A tick's input; ``decision``: what an outside decision maker chose for this agent's tick
+    (only for allocators that take their decisions from outside; the sample is unchanged otherwise)."""
+    if decision is None:
+        return pack([TAG_TICK, tick, obs, inbox])
+    return pack([TAG_TICK, tick, obs, inbox, decision])
 
 
 # --- launcher -> netem proxy: the radio's parameters changed (chaos) --------------------------
@@ -192,6 +196,7 @@ class TickIn:
     tick: int
     obs: dict
     inbox: bytes
+    decision: int | None = None  # a decision made outside the agent (the ``ros2`` allocator's), if any
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,12 +217,16 @@ def decode_agent_in(data: bytes) -> TickIn | StopIn | ControlIn:
     msg = unpack(data, MAX_AGENT_SAMPLE_BYTES)
     _expect(isinstance(msg, list) and bool(msg) and _is_int(msg[0]), "agent input must be [tag, ...]")
     if msg[0] == TAG_TICK:
-        _expect(len(msg) == 4, "tick must be [0, tick, obs, inbox]")
-        _, tick, obs, inbox = msg
+        _expect(len(msg) in (4, 5), "tick must be [0, tick, obs, inbox] or [0, tick, obs, inbox, decision]")
+        tick, obs, inbox = msg[1:4]
         _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
         _expect(isinstance(obs, dict), "obs must be a map")
         _expect(isinstance(inbox, bytes), "inbox must be bytes")
-        return TickIn(tick, obs, inbox)
+        if len(msg) == 4:
+            return TickIn(tick, obs, inbox)
+        decision = msg[4]
+        _expect(_is_int(decision) and -(2**31) <= decision < 2**31, "a decision must be a 32-bit int")
+        return TickIn(tick, obs, inbox, decision)
     if msg[0] == TAG_STOP:
         _expect(len(msg) == 2 and isinstance(msg[1], str), "stop must be [1, reason]")
         return StopIn(msg[1])

@@ -20,7 +20,7 @@ from typing import IO
 
 # roles a credentials file made by ``swarmbed credentials`` may have; the processes a run spawns
 # itself get their own identities (netem, agent-<id>) from the launcher
-ROLES = ("operator", "host")
+ROLES = ("operator", "host", "commander")  # commander: an operator that may publish ROS 2 decisions
 #: every role an identity may hold: the admitted ones and those of the processes a run spawns
 ALL_ROLES = (*ROLES, "netem", "agent")
 #: user and host names: one line of the hub's ``user:password`` dictionary and one key chunk of

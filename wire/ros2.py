@@ -166,6 +166,40 @@ uint32[] sizes
 """
 
 
+#: ``swarmbed_msgs/msg/TaskObservation``: what a robot commanded from ROS 2 senses at a tick (the
+#: observation its agent process is handed), published before the tick for the node that decides.
+TASK_OBSERVATION = "swarmbed_msgs/msg/TaskObservation"
+TASK_OBSERVATION_MSG = """\
+# What one robot senses at the tick stamped in the header (simulated time): itself and the tasks in view
+std_msgs/Header header
+int32 robot
+float64 x
+float64 y
+float64 heading
+float64 speed
+int32[] task_ids
+float64[] task_x
+float64[] task_y
+float64[] task_remaining
+"""
+
+#: ``swarmbed_msgs/msg/TaskCommand``: a ROS 2 node's decision for one robot at one tick.
+TASK_COMMAND = "swarmbed_msgs/msg/TaskCommand"
+TASK_COMMAND_MSG = """\
+# The decision for one robot at the tick stamped in the header (the stamp of the observation it answers)
+std_msgs/Header header
+int32 robot
+# a task id to pursue; NONE lets the robot's tree explore; HOLD stays put; HALT stays put, stopping at once
+int32 task
+int32 NONE=-1
+int32 HOLD=-2
+int32 HALT=-3
+"""
+
+#: every type of ours, by name: what ``docs/ros2/swarmbed_msgs`` defines for a ROS 2 machine
+OUR_TYPES = {RADIO_INBOX: RADIO_INBOX_MSG, TASK_OBSERVATION: TASK_OBSERVATION_MSG, TASK_COMMAND: TASK_COMMAND_MSG}
+
+
 class Ros2Types:
     """CDR and type hashes for the messages a run publishes: rosbags' Jazzy type store plus ours."""
 
@@ -175,7 +209,8 @@ class Ros2Types:
         except ImportError as exc:
             raise ImportError(EXTRA_HINT) from exc
         self.store = get_typestore(Stores.ROS2_JAZZY)
-        self.store.register(get_types_from_msg(RADIO_INBOX_MSG, RADIO_INBOX))
+        for name, text in OUR_TYPES.items():
+            self.store.register(get_types_from_msg(text, name))
         self._hashes: dict[str, str] = {}
 
     def hash(self, ros_type: str) -> str:

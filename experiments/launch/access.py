@@ -93,12 +93,14 @@ def access_rules(
     operators: Iterable[str],
     hosts: Mapping[str, tuple[str, Iterable[int]]],
     ros2_domain: int | None = None,
+    commanders: Iterable[str] = (),
 ) -> dict:
     """The hub's ``access_control`` section for one run (default deny). ``hosts``: each admitted
     host's user name -> (the host name it is bound to, the agents it may carry, as
     :func:`~swarmbed.wire.schema.carriers` gives them). ``ros2_domain``: the ROS 2 domain the run
     publishes on, if it does; operators may then read its topics and join its graph (a ROS 2 node
-    of theirs holds its own tokens), and publish on none of its topics."""
+    of theirs holds its own tokens), and publish on none of its topics. ``commanders``: operators
+    who may also publish the robots' decisions (``/robot_<i>/cmd``, for the ``ros2`` allocator)."""
     k, root = keys, keys.root
     alive = f"{root}/alive/**"
     rules = [
@@ -128,6 +130,7 @@ def access_rules(
             _allow("ros2-deliver", EVERY_MESSAGE, [graph], flow="egress"),
         ]
         operator_rules += ["ros2-read", "ros2-graph", "ros2-deliver"]
+        rules.append(_allow("ros2-command", ["put"], [f"{ros2_domain}/robot_$*/cmd/**"]))
     subjects: list[dict] = [{"id": "netem", "usernames": ["netem"]}]
     policies: list[dict] = [
         {
@@ -149,15 +152,14 @@ def access_rules(
         rules += own
         subjects.append({"id": user, "usernames": [user]})
         policies.append({"subjects": [user], "rules": ["deliver", "watch-alive", *(r["id"] for r in own)]})
-    operators = list(operators)
+    commanders = list(commanders) if ros2_domain is not None else []  # without ROS 2, operators like any
+    if commanders:
+        subjects.append({"id": "commanders", "usernames": commanders})
+        policies.append({"subjects": ["commanders"], "rules": ["deliver", *operator_rules, "ros2-command"]})
+    operators = [user for user in operators if user not in commanders]
     if operators:
         subjects.append({"id": "operators", "usernames": operators})
-        policies.append(
-            {
-                "subjects": ["operators"],
-                "rules": ["deliver", *operator_rules],
-            }
-        )
+        policies.append({"subjects": ["operators"], "rules": ["deliver", *operator_rules]})
     for user, (host, ids) in sorted(hosts.items()):
         subject = f"host-{user}"
         own = _agent_rules(k, subject, ids)
@@ -216,6 +218,7 @@ class RunAccess:
                 self.keys,
                 self.agent_ids,
                 operators=[i.user for i in self.admitted if i.role != "host"],
+                commanders=[i.user for i in self.admitted if i.role == "commander"],
                 hosts={
                     i.user: (i.host_name, self.carriers.get(i.host_name, [])) for i in self.admitted if i.role == "host"
                 },

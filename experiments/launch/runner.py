@@ -299,6 +299,8 @@ def _execute(
         exit_codes = children.wait(timeout=15.0)
         timings = _timings(usage, coord, marks, hub_cpu_before, children.forked, exit_codes)
         timings.update(run_id=keys.run_id, endpoint=endpoint, auth=access is not None)
+        if coord.commands is not None:  # robot-ticks without a ROS 2 decision in time: not reproducible
+            timings["ros2_command_timeouts"] = coord.commands.timeouts
         timings["per_agent_tick"] = _per_agent_tick(loop_start, loop_end, exp.agents.count, coord.last_tick + 1)
         summary = coord.write_results(timings)
         return RunResult(out_dir, summary, timings)
