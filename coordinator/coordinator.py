@@ -199,9 +199,7 @@ class Coordinator:
         return 2.0 * float(getattr(self.scenario.params, "arrival_radius", 0.5))
 
     def close(self) -> None:
-        if self.commands is not None:
-            self.commands.close()
-            self.commands = None
+        self.commands = None  # its entities are the node's, closed with it
         if self.ros2 is not None:
             self.ros2.close()
             self.ros2 = None

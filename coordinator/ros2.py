@@ -9,13 +9,17 @@ topic                      type                                    what
 ``/clock``                 ``rosgraph_msgs/msg/Clock``             simulated time (for ``use_sim_time``)
 ``/robot_<i>/pose``        ``geometry_msgs/msg/PoseStamped``       robot i's position, simulated time
 ``/tasks``                 ``visualization_msgs/msg/MarkerArray``  every task on the map, its holders
-``/robot_<i>/radio``       ``swarmbed_msgs/msg/RadioInbox``        what robot i received this tick
+``/robot_<i>/radio/       ``swarmbed_msgs/msg/RadioInbox``        what robot i received this tick
+received``
 =========================  ======================================  ==================================
+
+(The proxy's node publishes ``/robot_<i>/radio/sent``: ``netem/ros2.py``.) With the ``ros2``
+allocator, :class:`Ros2Commands` also publishes each robot's observation and gathers its decision.
 
 Keys, payloads, attachments and tokens follow rmw_zenoh (:mod:`swarmbed.wire.ros2`). Samples go out
 with congestion control DROP, as every view of a run does: a ROS 2 reader that stops reading loses
 samples and never holds up a tick. Nothing here feeds back into the run: the results are the same
-with publishing on or off (tests/test_ros2.py holds them byte-identical).
+with publishing on or off (tests/test_ros2_run.py holds them byte-identical).
 """
 
 from __future__ import annotations
@@ -23,7 +27,6 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -31,23 +34,8 @@ import zenoh
 
 from swarmbed.extension.actions import ActionSpec
 from swarmbed.wire.codec import EMPTY_INBOX, WireError, decode_inbox
-from swarmbed.wire.ros2 import (
-    PUBLISHER,
-    RADIO_INBOX,
-    SENSOR_QOS,
-    SUBSCRIPTION,
-    TASK_COMMAND,
-    TASK_OBSERVATION,
-    Qos,
-    Ros2Types,
-    encode_attachment,
-    endpoint_token,
-    gid,
-    node_token,
-    stamp,
-    topic_key,
-    wall_ns,
-)
+from swarmbed.wire.ros2 import RADIO_INBOX, SENSOR_QOS, TASK_COMMAND, TASK_OBSERVATION, stamp
+from swarmbed.wire.ros2_node import Ros2Node
 from swarmbed.wire.schema import Ros2Section
 
 NODE_NAME = "swarmbed"
@@ -56,34 +44,19 @@ TASK_HEIGHT = 2.0  # metres of a task's cylinder; its diameter is the arrival ra
 FREE, HELD = (0.6, 0.6, 0.6, 0.8), (1.0, 0.55, 0.0, 0.9)  # RGBA of a task nobody / somebody pursues
 
 
-@dataclass
-class _Topic:
-    """One publisher: its Zenoh publisher, token, GID and sequence number."""
-
-    ros_type: str
-    publisher: zenoh.Publisher
-    token: zenoh.LivelinessToken
-    gid: bytes
-    sequence: int = 0
-
-
 class Ros2Out:
     """The ``/swarmbed`` node of one run, on the hub's session."""
 
     def __init__(self, session: zenoh.Session, settings: Ros2Section, n_agents: int, actions: ActionSpec) -> None:
-        self.types = Ros2Types()
+        self.node = Ros2Node(session, settings.domain, NODE_NAME)
+        self.types = t = self.node.types
         self.settings = settings
-        self.session = session
-        self.zid = str(session.zid())
-        self.node = session.liveliness().declare_token(node_token(settings.domain, self.zid, 0, NODE_NAME))
-        self._next_id = 1
-        self.clock = self._declare("/clock", CLOCK, SENSOR_QOS)
-        self.tasks = self._declare("/tasks", MARKERS, Qos())
-        self.poses = [self._declare(f"/robot_{i}/pose", POSE, Qos()) for i in range(n_agents)]
-        self.radio = [self._declare(f"/robot_{i}/radio", RADIO_INBOX, Qos()) for i in range(n_agents)]
+        self.clock = self.node.publisher("/clock", CLOCK, SENSOR_QOS)
+        self.tasks = self.node.publisher("/tasks", MARKERS)
+        self.poses = [self.node.publisher(f"/robot_{i}/pose", POSE) for i in range(n_agents)]
+        self.radio = [self.node.publisher(f"/robot_{i}/radio/received", RADIO_INBOX) for i in range(n_agents)]
         # the actions that name a task or victim by its id (["goto_task", 12]): who pursues what
         self.aiming = frozenset(name for name, kinds in actions.items() if kinds == (int,))
-        t = self.types
         self.Header, self.Pose, self.PoseStamped = (
             t.cls("std_msgs/msg/Header"),
             t.cls("geometry_msgs/msg/Pose"),
@@ -92,26 +65,6 @@ class Ros2Out:
         self.Point, self.Quaternion = t.cls("geometry_msgs/msg/Point"), t.cls("geometry_msgs/msg/Quaternion")
         self.malformed = 0
         self._tasks_shown: tuple[dict, dict] | None = None  # the task markers last published, and who pursued each
-
-    def _declare(self, topic: str, ros_type: str, qos: Qos) -> _Topic:
-        d, type_hash = self.settings.domain, self.types.hash(ros_type)
-        token = endpoint_token(PUBLISHER, d, self.zid, 0, self._next_id, NODE_NAME, topic, ros_type, type_hash, qos)
-        self._next_id += 1
-        return _Topic(
-            ros_type,
-            self.session.declare_publisher(
-                topic_key(d, topic, ros_type, type_hash), congestion_control=zenoh.CongestionControl.DROP
-            ),
-            self.session.liveliness().declare_token(token),
-            gid(token),
-        )
-
-    def _put(self, topic: _Topic, msg: object) -> None:
-        topic.sequence += 1  # rmw_zenoh's publishers count from 1
-        topic.publisher.put(
-            self.types.serialize(msg, topic.ros_type),
-            attachment=encode_attachment(topic.sequence, wall_ns(), topic.gid),
-        )
 
     def publish(
         self,
@@ -127,7 +80,7 @@ class Ros2Out:
         are the encoded inboxes the proxy made for the next tick (what each robot received)."""
         t = self.types
         now = stamp(t, sim_time)
-        self._put(self.clock, t.cls(CLOCK)(clock=now))
+        self.node.put(self.clock, t.cls(CLOCK)(clock=now))
         if tick % self.settings.every:
             return
         header = self.Header(stamp=now, frame_id=self.settings.frame_id)
@@ -135,16 +88,16 @@ class Ros2Out:
             pose = self.Pose(
                 position=self.Point(x=x, y=y, z=0.0), orientation=self.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
             )
-            self._put(self.poses[i], self.PoseStamped(header=header, pose=pose))
+            self.node.put(self.poses[i], self.PoseStamped(header=header, pose=pose))
         pursuers: dict[int, list[int]] = {}
         for agent, action in sorted(actions.items()):
             if action and action[0] in self.aiming:
                 pursuers.setdefault(int(action[1]), []).append(agent)
         if (markers, pursuers) != self._tasks_shown:  # markers stay on a ROS 2 display until replaced
             self._tasks_shown = (dict(markers), pursuers)
-            self._put(self.tasks, self._markers(header, markers, pursuers, marker_size))
+            self.node.put(self.tasks, self._markers(header, markers, pursuers, marker_size))
         for i in positions[0]:  # every live robot, an empty inbox too
-            self._put(self.radio[i], self._inbox(header, i, inboxes.get(i, EMPTY_INBOX)))
+            self.node.put(self.radio[i], self._inbox(header, i, inboxes.get(i, EMPTY_INBOX)))
 
     def _inbox(self, header: object, robot: int, data: bytes) -> object:
         try:
@@ -237,16 +190,7 @@ class Ros2Out:
         return t.cls(MARKERS)(markers=out)
 
     def close(self) -> None:
-        for topic in [self.clock, self.tasks, *self.poses, *self.radio]:
-            for entity in (topic.token, topic.publisher):
-                try:
-                    entity.undeclare()
-                except Exception:
-                    pass
-        try:
-            self.node.undeclare()
-        except Exception:
-            pass
+        self.node.close()
 
 
 def _no_bytes() -> np.ndarray:
@@ -276,17 +220,13 @@ class Ros2Commands:
         malformed: Callable[[str, Exception], None],
     ) -> None:
         self.out, self.n, self.timeout, self.realtime, self.malformed = out, n_agents, timeout, realtime, malformed
-        self.observations = [out._declare(f"/robot_{i}/observation", TASK_OBSERVATION, Qos()) for i in range(n_agents)]
-        d, cmd_hash = out.settings.domain, out.types.hash(TASK_COMMAND)
-        self.cmd_suffix = topic_key(d, "/x/cmd", TASK_COMMAND, cmd_hash).split("/", 3)[3]  # <dds type>/<hash>
-        self.tokens = []
+        node = out.node
+        self.observations = [node.publisher(f"/robot_{i}/observation", TASK_OBSERVATION) for i in range(n_agents)]
         for i in range(n_agents):  # a subscription per robot in the graph: ros2 topic info shows who listens
-            token = endpoint_token(
-                SUBSCRIPTION, d, out.zid, 0, out._next_id, NODE_NAME, f"/robot_{i}/cmd", TASK_COMMAND, cmd_hash, Qos()
-            )
-            out._next_id += 1
-            self.tokens.append(out.session.liveliness().declare_token(token))
-        self.subscriber = out.session.declare_subscriber(f"{d}/robot_$*/cmd/{self.cmd_suffix}", self._on_command)
+            node.subscription(f"/robot_{i}/cmd", TASK_COMMAND)
+        command_key = node.key("/robot_0/cmd", TASK_COMMAND).split("/")
+        command_key[1] = "robot_$*"  # every robot's, its type and hash
+        node.listen("/".join(command_key), self._on_command)
         self.cond = threading.Condition()
         self.latest: dict[int, tuple[tuple[int, int], int]] = {}  # robot -> (stamp, decision)
         self.held: dict[int, int] = {}  # robot -> the decision it acts on
@@ -321,7 +261,7 @@ class Ros2Commands:
         Msg = t.cls(TASK_OBSERVATION)
         for i, obs in observed.items():
             tasks = obs.tasks
-            self.out._put(
+            self.out.node.put(
                 self.observations[i],
                 Msg(
                     header=header,
@@ -351,14 +291,6 @@ class Ros2Commands:
                 elif not self.realtime:
                     self.timeouts += 1  # lock-step without its decision in time: the last one holds
         return {i: self.held[i] for i in observed if i in self.held}
-
-    def close(self) -> None:
-        entities: list[Any] = [self.subscriber, *self.tokens, *(o.token for o in self.observations)]
-        for entity in entities:
-            try:
-                entity.undeclare()
-            except Exception:
-                pass
 
 
 def _robot_of(key: str, n: int) -> int:

@@ -21,6 +21,7 @@ import zenoh
 
 from swarmbed.netem.ledger import LEDGER_COLUMNS, Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio, drop_reasons, measured
+from swarmbed.netem.ros2 import Ros2Outboxes
 from swarmbed.wire.codec import (
     AgentOut,
     NetemControl,
@@ -102,6 +103,7 @@ class Proxy:
         self.traffic: dict[int, list[int]] = {}
         self.watched = False
         self.traffic_at = 0.0
+        self.ros2: Ros2Outboxes | None = Ros2Outboxes(session, spec) if spec.ros2 is not None else None
 
     # -- events ----------------------------------------------------------------------------------
     def _on_agent_alive(self, sample: zenoh.Sample) -> None:
@@ -364,6 +366,8 @@ class Proxy:
         self.lost_unreported = []
         self.step_pub.put(encode_netem_step(step))
         self._publish_traffic(outs)
+        if self.ros2 is not None:  # after the step: the coordinator does not wait for it
+            self.ros2.publish(w.tick, w.ids, outs)
         if st is not None:
             st.mark("step")
             st.ticks += len(w.ids)  # per agent-tick
@@ -387,6 +391,8 @@ class Proxy:
                 self._publish_traffic(outs)
 
     def _finish(self, last_tick: int) -> None:
+        if self.ros2 is not None:
+            self.ros2.close()
         if self.stages is not None:
             log.info("netem: %s", self.stages.line())
         if self.watched:  # the totals as the run ends

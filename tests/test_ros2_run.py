@@ -97,7 +97,8 @@ def test_every_topic_is_on_rmw_zenohs_key_with_its_type_hash_and_attachment(seen
         "/clock": "rosgraph_msgs/msg/Clock",
         "/tasks": "visualization_msgs/msg/MarkerArray",
         **{f"/robot_{i}/pose": "geometry_msgs/msg/PoseStamped" for i in range(4)},
-        **{f"/robot_{i}/radio": "swarmbed_msgs/msg/RadioInbox" for i in range(4)},
+        **{f"/robot_{i}/radio/received": "swarmbed_msgs/msg/RadioInbox" for i in range(4)},
+        **{f"/robot_{i}/radio/sent": "swarmbed_msgs/msg/RadioOutbox" for i in range(4)},  # the proxy's node
     }
     assert set(reader.samples) == set(expected)
     tokens = {t.split("/")[9].replace("%", "/"): t for t in reader.tokens if "/MP/" in t}
@@ -116,8 +117,12 @@ def test_every_topic_is_on_rmw_zenohs_key_with_its_type_hash_and_attachment(seen
         assert {g for _, _, g in attachments} == {gid(token)}
         for _, payload, _ in samples:
             types.deserialize(payload, ros_type)
-    zid = next(iter(tokens.values())).split("/")[2]
-    assert f"@ros2_lv/{DOMAIN}/{zid}/0/0/NN/%/%/swarmbed" in reader.tokens
+    hub, proxy = tokens["/clock"].split("/")[2], tokens["/robot_0/radio/sent"].split("/")[2]
+    assert hub != proxy  # two nodes, each on its own process's session
+    assert {
+        f"@ros2_lv/{DOMAIN}/{hub}/0/0/NN/%/%/swarmbed",
+        f"@ros2_lv/{DOMAIN}/{proxy}/0/0/NN/%/%/swarmbed_radio",
+    } <= reader.tokens
     # an operator's ROS 2 tools join the graph (their own node's token), but the pose it forged for
     # robot 0 never reached a reader: the hub refused the put
     assert any("/impostor" in t for t in reader.tokens)
@@ -164,7 +169,7 @@ def test_inboxes_carry_every_delivered_copy(seen):
     types = Ros2Types()
     received = received_bytes = 0
     for i in range(4):
-        for _, payload, _ in reader.samples[f"/robot_{i}/radio"]:
+        for _, payload, _ in reader.samples[f"/robot_{i}/radio/received"]:
             msg = types.deserialize(payload, "swarmbed_msgs/msg/RadioInbox")
             assert msg.robot == i and len(msg.senders) == len(msg.kinds) == len(msg.sizes)
             assert i not in set(msg.senders.tolist())
@@ -175,6 +180,15 @@ def test_inboxes_carry_every_delivered_copy(seen):
     delivered = sum(r["messages"] for r in read_ledger(on.out_dir) if r["outcome"] == "delivered")
     assert received == delivered == net["delivered"] > 0
     assert received_bytes == net["delivered_bytes"]
+    sent = sent_bytes = 0
+    for i in range(4):
+        for _, payload, _ in reader.samples[f"/robot_{i}/radio/sent"]:
+            msg = types.deserialize(payload, "swarmbed_msgs/msg/RadioOutbox")
+            assert msg.robot == i and len(msg.kinds) == len(msg.sizes) == len(msg.addressed)
+            assert set(msg.addressed.tolist()) <= {-1}  # the quick start's FCG broadcasts its claims
+            sent += len(msg.kinds)
+            sent_bytes += int(msg.sizes.sum())
+    assert (sent, sent_bytes) == (net["messages_sent"], net["bytes_sent"]) != (0, 0)
 
 
 def test_results_are_byte_identical_with_publishing_on_and_off(seen):

@@ -166,6 +166,18 @@ uint32[] sizes
 """
 
 
+#: ``swarmbed_msgs/msg/RadioOutbox``: what one robot handed the radio at one tick (the proxy's side).
+RADIO_OUTBOX = "swarmbed_msgs/msg/RadioOutbox"
+RADIO_OUTBOX_MSG = """\
+# The radio messages one robot sent at one tick of simulated time, in the order it sent them
+std_msgs/Header header
+int32 robot
+string[] kinds
+uint32[] sizes
+# how many robots each message named: -1 for a broadcast (every robot in range)
+int32[] addressed
+"""
+
 #: ``swarmbed_msgs/msg/TaskObservation``: what a robot commanded from ROS 2 senses at a tick (the
 #: observation its agent process is handed), published before the tick for the node that decides.
 TASK_OBSERVATION = "swarmbed_msgs/msg/TaskObservation"
@@ -197,7 +209,12 @@ int32 HALT=-3
 """
 
 #: every type of ours, by name: what ``docs/ros2/swarmbed_msgs`` defines for a ROS 2 machine
-OUR_TYPES = {RADIO_INBOX: RADIO_INBOX_MSG, TASK_OBSERVATION: TASK_OBSERVATION_MSG, TASK_COMMAND: TASK_COMMAND_MSG}
+OUR_TYPES = {
+    RADIO_INBOX: RADIO_INBOX_MSG,
+    RADIO_OUTBOX: RADIO_OUTBOX_MSG,
+    TASK_OBSERVATION: TASK_OBSERVATION_MSG,
+    TASK_COMMAND: TASK_COMMAND_MSG,
+}
 
 
 class Ros2Types:

@@ -315,6 +315,7 @@ class NetemSpec(Strict):
     agents: int
     network: NetworkSection
     answer_within: float | None = None
+    ros2: Ros2Section | None = None  # publish what each robot sent as ROS 2 topics
 
 
 def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
@@ -332,4 +333,6 @@ def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
 def netem_spec(exp: Experiment) -> NetemSpec:
     r = exp.run
     within = r.deadline * r.dt / r.speed if r.clock == "realtime" else None
-    return NetemSpec(seed=r.seed, dt=r.dt, agents=exp.agents.count, network=exp.network, answer_within=within)
+    return NetemSpec(
+        seed=r.seed, dt=r.dt, agents=exp.agents.count, network=exp.network, answer_within=within, ros2=exp.ros2
+    )

@@ -121,6 +121,7 @@ def access_rules(
         _allow("host-watch", ["declare_liveliness_subscriber", "liveliness_query"], [alive, f"{HOSTS}/**"]),
     ]
     operator_rules = ["operator-read", "operator-tokens", "operator-ask", "operator-find", "operator-monitor"]
+    netem_ros2: list[str] = []
     if ros2_domain is not None:
         graph = f"{ROS2_ADMIN_SPACE}/{ros2_domain}/**"
         rules += [
@@ -131,6 +132,11 @@ def access_rules(
         ]
         operator_rules += ["ros2-read", "ros2-graph", "ros2-deliver"]
         rules.append(_allow("ros2-command", ["put"], [f"{ros2_domain}/robot_$*/cmd/**"]))
+        rules += [  # the proxy's own ROS 2 node publishes what each robot sent
+            _allow("netem-ros2", ["put"], [f"{ros2_domain}/robot_$*/radio/sent/**"]),
+            _allow("netem-ros2-graph", ["liveliness_token"], [graph]),
+        ]
+        netem_ros2 = ["netem-ros2", "netem-ros2-graph"]
     subjects: list[dict] = [{"id": "netem", "usernames": ["netem"]}]
     policies: list[dict] = [
         {
@@ -143,6 +149,7 @@ def access_rules(
                 "netem-serve",
                 "netem-alive",
                 "watch-alive",
+                *netem_ros2,
             ],
         }
     ]
