@@ -83,6 +83,7 @@ class Coordinator:
         hosts: dict[int, str] | None = None,
         carriers: Mapping[str, frozenset[int]] | None = None,
         placement: Placement | None = None,
+        decider: Any = None,
     ) -> None:
         self.exp = exp
         self.scenario = scenario
@@ -117,8 +118,10 @@ class Coordinator:
         self.slowest_in_interval = 0.0  # the same since a monitor last read it (and set it to 0)
         self._entities: list = []
         self.ros2: Any = None  # a Ros2Out while the run publishes ROS 2 topics
-        self.commands: Any = None  # a Ros2Commands while the allocator takes its decisions from ROS 2
+        # where the decisions of an allocator that takes them from outside come from: ROS 2 topics
+        # (a Ros2Commands, made in declare) or the decider the launcher was handed (swarmbed.envs)
         self.decision_source = getattr(allocator, "decision_source", None)
+        self.commands: Any = decider if self.decision_source == "env" else None
         self.pursuing: dict[int, list] = {}  # the actions the world was last given (for ROS 2's task markers)
 
     # -- setup -----------------------------------------------------------------------------------
@@ -161,7 +164,12 @@ class Coordinator:
                 self.commands = Ros2Commands(
                     self.ros2, self.n, self.exp.ros2.command_timeout, self.realtime, self._malformed
                 )
-        elif self.decision_source == "ros2":
+        if self.decision_source == "env" and self.commands is None:
+            raise RunError(
+                f"allocator {self.exp.allocator.name!r} takes its decisions from a driver in the launching "
+                "process (swarmbed.envs): swarmbed run cannot drive it"
+            )
+        if self.decision_source == "ros2" and self.exp.ros2 is None:
             raise RunError(
                 f"allocator {self.exp.allocator.name!r} takes its decisions from ROS 2 topics: the experiment "
                 "needs a ros2: section (docs/ros2.md)"
@@ -282,7 +290,7 @@ class Coordinator:
             observed = w.observations()
             if st is not None:
                 st.mark("observations")
-            decisions = self.commands.decide(w.time, observed) if self.commands is not None else {}
+            decisions = self.commands.decide(k, w, observed, inboxes) if self.commands is not None else {}
             for i, obs in observed.items():
                 self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX), decisions.get(i)))
             if st is not None:

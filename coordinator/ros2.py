@@ -253,8 +253,11 @@ class Ros2Commands:
                 self.latest[robot] = (stamp_key, int(msg.task))
                 self.cond.notify_all()
 
-    def decide(self, sim_time: float, observed: Mapping[int, Any]) -> dict[int, int]:
-        """Publish the observations of this tick and gather the decisions for it."""
+    def decide(
+        self, tick: int, world: Any, observed: Mapping[int, Any], inboxes: Mapping[int, bytes]
+    ) -> dict[int, int]:
+        """Publish the observations of tick ``tick`` and gather the decisions for it."""
+        sim_time = world.time
         t = self.out.types
         now = stamp(t, sim_time)
         header = self.out.Header(stamp=now, frame_id=self.out.settings.frame_id)

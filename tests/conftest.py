@@ -124,6 +124,7 @@ def whole_rows(path: Path) -> int:
 SLOW_MODULES = frozenset(
     {
         "test_ros2_run",
+        "test_envs",
         "test_access",
         "test_disk_full",
         "test_e2e",

@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import zenoh
 from tqdm import tqdm
@@ -133,16 +133,19 @@ def run_experiment(
     hub: HubOptions = LOOPBACK_ONLY,
     fork_agents: bool = True,
     observers: Sequence[RunObserver] = (),
+    decider: Any = None,
 ) -> RunResult:
     """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
     (tests use it to reach the run's keys from outside). ``hub``: where the hub listens and whom it
     admits (:class:`HubOptions`; by default loopback only, the run's own processes, each held to its
     own keys by :mod:`.access`). ``fork_agents``: local agents come from a fork server that imported
     everything once (:mod:`.forkserver`); without it each is a fresh interpreter. ``observers``
-    are started once everyone joined and stopped when the ticks are over (:mod:`.soak`)."""
+    are started once everyone joined and stopped when the ticks are over (:mod:`.soak`). ``decider``:
+    for an allocator that takes its decisions from the launching process (``external``), what makes
+    them each tick (:mod:`swarmbed.envs`)."""
     plan = plan_run(exp, out_dir, hub)
     _start_result_dir(plan)
-    return _execute(plan, progress, on_ready, fork_agents, observers)
+    return _execute(plan, progress, on_ready, fork_agents, observers, decider)
 
 
 def _execute(
@@ -151,6 +154,7 @@ def _execute(
     on_ready: Callable[[Keys, str], None] | None,
     fork_agents: bool,
     observers: Sequence[RunObserver],
+    decider: Any = None,
 ) -> RunResult:
     exp, out_dir, resolved, keys, where = plan.exp, plan.out_dir, plan.resolved, plan.keys, plan.where
     options = plan.hub
@@ -216,6 +220,7 @@ def _execute(
             where,
             carriers(exp) if access else None,
             placement,
+            decider,
         )
         undo.pop_all()
     try:
@@ -299,7 +304,7 @@ def _execute(
         exit_codes = children.wait(timeout=15.0)
         timings = _timings(usage, coord, marks, hub_cpu_before, children.forked, exit_codes)
         timings.update(run_id=keys.run_id, endpoint=endpoint, auth=access is not None)
-        if coord.commands is not None:  # robot-ticks without a ROS 2 decision in time: not reproducible
+        if coord.decision_source == "ros2":  # robot-ticks without a ROS 2 decision in time: not reproducible
             timings["ros2_command_timeouts"] = coord.commands.timeouts
         timings["per_agent_tick"] = _per_agent_tick(loop_start, loop_end, exp.agents.count, coord.last_tick + 1)
         summary = coord.write_results(timings)

@@ -1,0 +1,287 @@
+"""A PettingZoo ``ParallelEnv`` whose agents are swarmbed's agent processes, over the emulated radio.
+
+``reset(seed)`` starts a lock-step run of the experiment with the ``external`` allocator (its
+processes, the hub, the netem proxy, as ``swarmbed run`` does) in a thread of this process;
+``step(actions)`` hands every agent's decision for the tick in hand to the coordinator, which puts
+it in that agent's tick sample; the agent's allocator answers with it, its tree runs it, the world
+and the radio move on one tick, and the next tick's observations come back. So the bytes, the
+ledger and the result files are those of a normal run (``docs/learning.md``).
+
+Spaces, per agent (``max_tasks`` = K, N agents):
+
+* observation, a ``Dict``: ``self`` (x, y, heading, speed), ``tasks`` (K rows of dx, dy and
+  remaining work of the tasks in view, nearest first, ties to the lower id; zeros past the last),
+  ``task_mask`` (which rows hold a task), ``heard_from`` (the agents whose radio messages it
+  received this tick: range, loss, bursts and caps shape it);
+* action, ``Discrete(K + 1)``: 0 chooses no task (the agent's tree explores), j the j-th row of
+  ``tasks``; a row the mask marks empty also chooses none.
+
+Rewards: the team's progress over the tick, the increase of the scenario's ``reward_key``
+(``tasks_completed`` in MT-SR, ``rescued`` in search and rescue), to every live agent.
+Terminations: an agent lost to a failure, or every agent when the world is done; truncations:
+every agent when the run reaches its duration.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import shutil
+import tempfile
+import threading
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+try:
+    from gymnasium import spaces
+    from pettingzoo import ParallelEnv
+except ImportError as exc:  # an optional extra
+    raise ImportError("swarmbed.envs needs the envs extra: pip install 'swarmbed[envs]'") from exc
+
+from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.runner import RunResult, run_experiment
+from swarmbed.wire.codec import WireError, decode_inbox
+
+QUICKSTART = Path(__file__).resolve().parent.parent / "experiments" / "quickstart.yaml"
+STEP_TIMEOUT = 600.0  # wall seconds a step waits for the run's next tick before calling the run stuck
+
+
+class EnvError(RuntimeError):
+    """The run under the environment failed (its processes, its configuration)."""
+
+
+class _Bridge:
+    """The coordinator's side: it hands each tick's observations to the environment and waits for
+    the decisions (``Coordinator.decide`` calls :meth:`decide` from the run's thread)."""
+
+    def __init__(self, max_tasks: int, n: int, reward_key: str) -> None:
+        self.max_tasks, self.n, self.reward_key = max_tasks, n, reward_key
+        self.to_env: queue.Queue = queue.Queue()
+        self.to_run: queue.Queue = queue.Queue()
+        self.coordinator: Any = None
+        self.stopping = False
+
+    # a run observer: the coordinator, once every process joined; the end of the ticks
+    def start(self, run: Any) -> None:
+        self.coordinator = run.coordinator
+
+    def stop(self) -> None:
+        world = self.coordinator.world if self.coordinator is not None else None
+        if world is not None:
+            self.to_env.put(("end", self._progress(world), bool(world.finished)))
+
+    def _progress(self, world: Any) -> float:
+        return float(world.row().get(self.reward_key, 0))
+
+    def decide(
+        self, tick: int, world: Any, observed: Mapping[int, Any], inboxes: Mapping[int, bytes]
+    ) -> dict[int, int]:
+        if self.stopping:
+            return {}
+        views = {i: self._view(obs, inboxes.get(i)) for i, obs in observed.items()}
+        self.to_env.put(("tick", tick, views, self._progress(world)))
+        decisions = self.to_run.get()
+        if decisions is None:  # the environment is done with this run: end it after this tick
+            self.stopping = True
+            self.coordinator.stop_requested.set()
+            return {}
+        return decisions
+
+    def _view(self, obs: Any, inbox: bytes | None) -> tuple[dict[str, np.ndarray], list[int]]:
+        tasks = obs.tasks
+        dx, dy = tasks["x"] - obs.x, tasks["y"] - obs.y
+        # nearest first, ties to the lower id, with the distance the plugins use (math.hypot, which
+        # may differ from numpy's in the last bit): action 1 is then the nearest allocator's choice
+        ids, ddx, ddy = tasks["id"].tolist(), dx.tolist(), dy.tolist()
+        order = sorted(range(len(ids)), key=lambda j: (math.hypot(ddx[j], ddy[j]), ids[j]))[: self.max_tasks]
+        rows = np.zeros((self.max_tasks, 3), dtype=np.float32)
+        rows[: len(order), 0], rows[: len(order), 1] = dx[order], dy[order]
+        rows[: len(order), 2] = tasks["remaining"][order]
+        mask = np.zeros(self.max_tasks, dtype=np.int8)
+        mask[: len(order)] = 1
+        heard = np.zeros(self.n, dtype=np.int8)
+        if inbox:
+            try:
+                for copy in decode_inbox(inbox):
+                    if 0 <= copy.sender < self.n:
+                        heard[copy.sender] = 1
+            except WireError:  # the proxy's own encoding: never expected; heard nothing
+                pass
+        me = np.array([obs.x, obs.y, obs.heading, obs.speed], dtype=np.float32)
+        view: dict[str, np.ndarray] = {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}
+        return view, [int(t) for t in tasks["id"][order]]
+
+
+class SwarmbedParallelEnv(ParallelEnv):
+    """Any swarmbed experiment as a PettingZoo parallel environment (see the module docstring).
+
+    ``config``: an experiment file (default: the quick start); ``sets``: ``KEY=VALUE`` overrides as
+    ``swarmbed run --set`` takes them (loss, bursts, range: what the agents hear); ``out_dir``: where
+    each reset's run folder goes (``run_0``, ``run_1``, ...; default: a temporary folder removed by
+    :meth:`close`)."""
+
+    metadata = {"name": "swarmbed_v0", "render_modes": [], "is_parallelizable": True}
+
+    def __init__(
+        self,
+        config: str | Path = QUICKSTART,
+        sets: Sequence[str] = (),
+        max_tasks: int = 8,
+        reward_key: str | None = None,
+        out_dir: str | Path | None = None,
+    ) -> None:
+        self.config, self.sets = Path(config), [*sets, "allocator.name=external"]
+        self.exp = cfg.load(self.config, self.sets)
+        if self.exp.run.clock != "lockstep":
+            raise ValueError("swarmbed.envs steps the lock-step clock: run.clock must be lockstep")
+        n = self.exp.agents.count
+        self.max_tasks = max_tasks
+        self.reward_key = reward_key or ("rescued" if self.exp.scenario.kind == "sar" else "tasks_completed")
+        self.possible_agents = [f"agent_{i}" for i in range(n)]
+        self._index = {name: i for i, name in enumerate(self.possible_agents)}
+        inf = np.float32(np.inf)
+        self._observation_space = spaces.Dict(
+            {
+                "self": spaces.Box(-inf, inf, (4,), np.float32),
+                "tasks": spaces.Box(-inf, inf, (max_tasks, 3), np.float32),
+                "task_mask": spaces.MultiBinary(max_tasks),
+                "heard_from": spaces.MultiBinary(n),
+            }
+        )
+        self._action_space = spaces.Discrete(max_tasks + 1)
+        self._own_dir = out_dir is None
+        self.out_dir = Path(out_dir) if out_dir is not None else Path(tempfile.mkdtemp(prefix="swarmbed-env-"))
+        self.runs = 0
+        self.agents: list[str] = []
+        self.results: list[RunResult] = []  # every finished run of this environment, in order
+        self._bridge: _Bridge | None = None
+        self._thread: threading.Thread | None = None
+        self._failure: BaseException | None = None
+        self._choices: dict[str, list[int]] = {}
+        self._last_obs: dict[str, dict[str, np.ndarray]] = {}
+        self._progress = 0.0
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        return self._action_space
+
+    # -- the run under the environment -------------------------------------------------------------
+    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        self._end_run()
+        sets = [*self.sets, f"run.seed={seed}"] if seed is not None else self.sets
+        exp = cfg.load(self.config, sets)
+        self._bridge = bridge = _Bridge(self.max_tasks, exp.agents.count, self.reward_key)
+        out = self.out_dir / f"run_{self.runs}"
+        self.runs += 1
+        self._failure = None
+
+        def run() -> None:
+            try:
+                self.results.append(run_experiment(exp, out, progress=False, observers=[bridge], decider=bridge))
+            except BaseException as exc:  # handed to the caller of reset or step
+                self._failure = exc
+            finally:
+                bridge.to_env.put(("done",))
+
+        self._thread = threading.Thread(target=run, name=f"swarmbed-env-run-{self.runs}", daemon=True)
+        self._thread.start()
+        item = self._next()
+        if item[0] != "tick":
+            raise EnvError("the run ended before its first tick")
+        _, _tick, views, progress = item
+        self._progress = progress
+        self.agents = [self.possible_agents[i] for i in sorted(views)]
+        obs = self._observe(views)
+        return obs, {a: {"task_ids": self._choices[a]} for a in self.agents}
+
+    def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        if self._bridge is None or not self.agents:
+            raise EnvError("step() before reset(), or after every agent is done")
+        decisions = self._decisions(actions)
+        self._bridge.to_run.put(decisions)
+        item = self._next()
+        acting = list(self.agents)
+        if item[0] == "tick":
+            _, _tick, views, progress = item
+            reward = progress - self._progress
+            self._progress = progress
+            alive = {self.possible_agents[i] for i in views}
+            obs = self._observe(views)
+            terminations = {a: a not in alive for a in acting}
+            truncations = dict.fromkeys(acting, False)
+            self.agents = [a for a in acting if a in alive]
+        else:  # the run is over: its duration (truncation) or a finished world (termination)
+            progress, finished = (item[1], item[2]) if item[0] == "end" else (self._progress, False)
+            reward = progress - self._progress
+            self._progress = progress
+            obs = {a: self._last_obs[a] for a in acting}
+            terminations = dict.fromkeys(acting, finished)
+            truncations = dict.fromkeys(acting, not finished)
+            self.agents = []
+            self._end_run()
+            if self._failure is not None:  # the ticks were over, writing the results failed
+                failure, self._failure = self._failure, None
+                raise EnvError(f"the run failed: {failure}") from failure
+        rewards = dict.fromkeys(acting, float(reward))
+        infos = {a: {"task_ids": self._choices.get(a, [])} for a in acting}
+        return {a: obs[a] for a in acting if a in obs}, rewards, terminations, truncations, infos
+
+    def _decisions(self, actions: Mapping[str, Any]) -> dict[int, int]:
+        """Each agent's task id (-1: none) from its action; one line naming the agent and the value
+        for anything outside the action space, before the tick is sent."""
+        decisions = {}
+        for agent, action in actions.items():
+            if agent not in self._index or agent not in self.agents:
+                raise ValueError(f"{agent!r}: not an agent of this step ({', '.join(self.agents[:5])} ...)")
+            if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
+                raise ValueError(f"{agent}: action {action!r} is not an integer in 0..{self.max_tasks}")
+            choice = int(action)
+            if not 0 <= choice <= self.max_tasks:
+                raise ValueError(f"{agent}: action {choice} is not in 0..{self.max_tasks}")
+            ids = self._choices[agent]
+            decisions[self._index[agent]] = ids[choice - 1] if 0 < choice <= len(ids) else -1
+        return decisions
+
+    def _observe(self, views: Mapping[int, tuple[dict, list[int]]]) -> dict[str, dict[str, np.ndarray]]:
+        obs = {}
+        for i, (view, ids) in views.items():
+            name = self.possible_agents[i]
+            obs[name], self._choices[name] = view, ids
+        self._last_obs.update(obs)
+        return obs
+
+    def _next(self) -> tuple:
+        assert self._bridge is not None
+        try:
+            item = self._bridge.to_env.get(timeout=STEP_TIMEOUT)
+        except queue.Empty:
+            raise EnvError(f"no tick from the run within {STEP_TIMEOUT:.0f} s") from None
+        if item[0] == "done" and self._failure is not None:
+            failure, self._failure = self._failure, None
+            raise EnvError(f"the run failed: {failure}") from failure
+        return item
+
+    def _end_run(self) -> None:
+        """Stop the run under way, if any, and wait for its processes to leave."""
+        bridge, thread = self._bridge, self._thread
+        if thread is not None and thread.is_alive() and bridge is not None:
+            bridge.to_run.put(None)  # the coordinator may wait for decisions: let it stop
+        if thread is not None:
+            thread.join(timeout=120)
+        self._thread = None
+
+    def close(self) -> None:
+        self._end_run()
+        self.agents = []
+        if self._own_dir:
+            shutil.rmtree(self.out_dir, ignore_errors=True)
+
+
+def parallel_env(**kwargs: Any) -> SwarmbedParallelEnv:
+    """PettingZoo's usual constructor name."""
+    return SwarmbedParallelEnv(**kwargs)

@@ -1,0 +1,90 @@
+"""swarmbed.envs: PettingZoo's own checks on real runs (processes, Zenoh, the proxy), byte identity
+with a run swarmbed itself drives, and bad actions refused while the run goes on."""
+
+import json
+
+import numpy as np
+import pytest
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+from swarmbed.envs import SwarmbedParallelEnv
+from swarmbed.experiments.launch.runner import run_experiment
+from tests.conftest import ROOT, experiment
+
+RADIO = ("network.loss=0.2", "network.burst={mean_loss: 0.2, mean_burst: 4}")
+SMALL = ("agents.count=3", "run.duration=40", *RADIO)
+
+
+@pytest.mark.parametrize(
+    "config, sets",
+    [
+        (ROOT / "experiments" / "quickstart.yaml", SMALL),
+        (ROOT / "experiments" / "sar" / "_base.yaml", ("agents.count=3", "run.duration=40", *RADIO)),
+    ],
+    ids=["mtsr", "sar"],
+)
+def test_pettingzoos_api_and_seed_tests_pass_on_real_runs(config, sets):
+    env = SwarmbedParallelEnv(config, sets)
+    try:
+        parallel_api_test(env, num_cycles=30)
+    finally:
+        env.close()
+    parallel_seed_test(lambda: SwarmbedParallelEnv(config, sets), num_cycles=30)
+
+
+def _drive(tmp_path, name, policy, seed=5, sets=SMALL):
+    env = SwarmbedParallelEnv(sets=sets, out_dir=tmp_path / name)
+    rng = np.random.default_rng(0)
+    try:
+        obs, _ = env.reset(seed=seed)
+        total = 0.0
+        while env.agents:
+            obs, rewards, *_ = env.step({a: policy(obs[a], rng) for a in env.agents})
+            total += sum(rewards.values())
+        return env.results[-1], total
+    finally:
+        env.close()
+
+
+def test_the_same_seed_and_actions_give_byte_identical_result_files(tmp_path):
+    a, _ = _drive(tmp_path, "a", lambda o, rng: int(rng.integers(0, 9)))
+    b, _ = _drive(tmp_path, "b", lambda o, rng: int(rng.integers(0, 9)))
+    for name in ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv", "config.yaml"):
+        assert (a.out_dir / name).read_bytes() == (b.out_dir / name).read_bytes(), name
+
+
+def test_a_run_driven_through_the_env_is_the_run_swarmbed_drives(tmp_path):
+    """Always the first row (the nearest task) is the built-in nearest allocator's policy: the
+    learner's decisions travel the path a plugin's do, so the files are the same."""
+    sets = ("agents.count=4", "run.duration=300")
+    driven, total = _drive(tmp_path, "env", lambda o, rng: 1 if o["task_mask"][0] else 0, seed=3, sets=sets)
+    builtin = run_experiment(
+        experiment(*sets, "run.seed=3", "allocator.name=nearest"), tmp_path / "run", progress=False
+    )
+    for name in ("timeseries.csv", "agents.csv", "network_ledger.csv"):
+        assert (driven.out_dir / name).read_bytes() == (builtin.out_dir / name).read_bytes(), name
+    ours, theirs = (json.loads((r.out_dir / "summary.json").read_text()) for r in (driven, builtin))
+    assert (ours.pop("allocator"), theirs.pop("allocator")) == ("external", "nearest")
+    assert ours == theirs
+    assert total == ours["tasks_completed"] * 4  # the team's progress, to each of the 4 agents
+
+
+def test_bad_actions_are_refused_with_one_line_and_the_run_goes_on(tmp_path):
+    env = SwarmbedParallelEnv(sets=SMALL, out_dir=tmp_path / "bad")
+    try:
+        env.reset(seed=1)
+        good = dict.fromkeys(env.agents, 0)
+        for bad, words in (
+            ({**good, "agent_1": 99}, ["agent_1", "99"]),
+            ({**good, "agent_2": float("nan")}, ["agent_2", "nan"]),
+            ({**good, "agent_7": 0}, ["agent_7"]),
+            ({**good, "agent_0": -1}, ["agent_0", "-1"]),
+        ):
+            with pytest.raises(ValueError) as err:
+                env.step(bad)
+            line = str(err.value)
+            assert "\n" not in line and all(w in line for w in words), line
+        obs, *_ = env.step(good)  # the tick was never sent: the run is where it was
+        assert set(obs) == set(env.agents) == {"agent_0", "agent_1", "agent_2"}
+    finally:
+        env.close()
