@@ -75,6 +75,9 @@ class AgentRuntime:
         self.sent: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # kind -> [messages, payload bytes]
         self.malformed = 0
         self.ticks = 0
+        # the tasks in view at the last tick, as records and as the view's TaskInfo (see _tasks_in_view)
+        self._table_bytes, self._table_ids = b"", b""
+        self._tasks: dict[int, TaskInfo] = {}
         self.stages: Stages | None = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
         self._last_action: list | None = None
         self._last_tasks = b""
@@ -130,10 +133,30 @@ class AgentRuntime:
                 log.warning("agent %d: malformed %r message from %d dropped: %s", self.agent_id, d.kind, d.sender, exc)
         return out
 
+    def _tasks_in_view(self, table: np.ndarray) -> dict[int, TaskInfo]:
+        """The view's task table. From one tick to the next most rows are the same (only the tasks
+        being worked change, and the set in view changes now and then), so only the rows whose bytes
+        changed are rebuilt: the same dict, in the same order, as rebuilding it all. Each view gets
+        its own copy (a plugin may change it)."""
+        raw = table.tobytes()
+        if raw != self._table_bytes:
+            ids = table["id"].tobytes()
+            if ids == self._table_ids and len(self._tasks) == len(table):  # same ids, none repeated
+                size, old = table.dtype.itemsize, self._table_bytes
+                for row in range(len(table)):
+                    at = row * size
+                    if raw[at : at + size] != old[at : at + size]:
+                        record = TaskInfo._make(table[row].tolist())
+                        self._tasks[record[0]] = record
+            else:
+                self._tasks = {t[0]: t for t in map(TaskInfo._make, table.tolist())}
+            self._table_bytes, self._table_ids = raw, ids
+        return dict(self._tasks)
+
     def step(
         self, tick: int, obs: Observation, inbox: bytes, decision: int | None = None
     ) -> tuple[list, list[RadioMessage], dict[str, int]]:
-        tasks = {t[0]: t for t in map(TaskInfo._make, obs.tasks.tolist())}
+        tasks = self._tasks_in_view(obs.tasks)
         a, sense, ctx = self.spec.agents, self.sensing, self.context
         ctx.view = LocalView(
             self.agent_id,
