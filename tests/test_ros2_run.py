@@ -252,7 +252,22 @@ def driven(tmp_path_factory):
         held["sub"] = meddler.declare_subscriber(
             f"{DOMAIN}/robot_0/observation/swarmbed_msgs::msg::dds_::TaskObservation_/**", halt_robot_0
         )
+        # a commander's malformed commands: dropped and counted, never fatal, never a decision
+        sloppy = zenoh.open(zenoh_config("client", [endpoint], credentials=str(base / "commander.json")))
+        wrong_robot = Command(
+            header=Header(stamp=types.cls("builtin_interfaces/msg/Time")(sec=0, nanosec=0), frame_id="map"),
+            robot=2,
+            task=-3,
+        )
+        for key, payload in (
+            (halt_key.replace("robot_0", "robot_1"), b"\x00\x01\x00\x00garbage"),  # not CDR of a TaskCommand
+            (halt_key.replace("robot_0", "robot_1"), types.serialize(wrong_robot, "swarmbed_msgs/msg/TaskCommand")),
+            (halt_key.replace("robot_0", "robot_1"), b"\x00" * 4096),  # oversized
+            (halt_key.replace("robot_0", "robot_99"), types.serialize(wrong_robot, "swarmbed_msgs/msg/TaskCommand")),
+        ):
+            sloppy.put(key, payload)
         time.sleep(0.5)  # the node's and the meddler's subscriptions reach the hub before tick 0
+        sloppy.close()
 
     exp = experiment(*DRIVEN, "allocator.name=ros2", f"ros2={{domain: {DOMAIN}, command_timeout: 2}}")
     try:
@@ -283,4 +298,7 @@ def test_a_ros2_node_in_the_loop_gives_the_builtin_allocators_results(driven):
         assert (ros.out_dir / name).read_bytes() == (builtin.out_dir / name).read_bytes(), name
     ours, theirs = (json.loads((run.out_dir / "summary.json").read_text()) for run in (ros, builtin))
     assert (ours.pop("allocator"), theirs.pop("allocator")) == ("ros2", "nearest")
+    # the commander's four malformed commands, counted where the run counts what it dropped
+    assert (ours["network"]["malformed"]["coordinator"], theirs["network"]["malformed"]["coordinator"]) == (4, 0)
+    ours["network"]["malformed"]["coordinator"] = 0
     assert ours == theirs
