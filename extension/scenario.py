@@ -123,9 +123,10 @@ class Scenario(abc.ABC):
     #: the actions its agents may send (:mod:`swarmbed.extension.actions`); the coordinator hands
     #: the world ``["invalid"]`` for any other
     actions: ClassVar[ActionSpec] = MOVE_ACTIONS
-    #: behavior-tree nodes its agents' trees may use, and the tree used when the allocator has none
+    #: behavior-tree nodes its agents' trees may use
     bt_nodes: ClassVar[tuple[type, ...]] = ()
-    #: (None: SPACE's default tree, ``swarmbed.agent_runtime.nodes.SPACE_TREE``)
+    #: the tree used when the allocator has none (None: SPACE's default tree,
+    #: ``swarmbed.agent_runtime.nodes.SPACE_TREE``)
     default_tree: ClassVar[Path | None] = None
     #: summary keys that measure the outcome, first the headline (sweep tables, printed summaries)
     outcome_metrics: ClassVar[tuple[str, ...]] = ()

@@ -1,7 +1,7 @@
 """The plugin author's API: subclass :class:`Allocator`, read a :class:`LocalView`, return a task.
 
-Defined in ``swarmbed.agent_runtime`` (plugins build on the agent runtime, not the reverse) and
-gathered here, where plugin authors look for it.
+Defined in the extension contract (``swarmbed.extension``, below every process role) and gathered
+here, where plugin authors look for it.
 """
 
 from swarmbed.extension.allocator import HALT, HOLD, Allocator, NoParams
