@@ -215,6 +215,8 @@ class SwarmbedParallelEnv(ParallelEnv):
             terminations = {a: a not in alive for a in acting}
             truncations = dict.fromkeys(acting, False)
             self.agents = [a for a in acting if a in alive]
+            if not self.agents:  # every agent lost: the run has no one left to step for
+                self._end_run()
         else:  # the run is over: its duration (truncation) or a finished world (termination)
             progress, finished = (item[1], item[2]) if item[0] == "end" else (self._progress, False)
             reward = progress - self._progress

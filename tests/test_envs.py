@@ -88,3 +88,25 @@ def test_bad_actions_are_refused_with_one_line_and_the_run_goes_on(tmp_path):
         assert set(obs) == set(env.agents) == {"agent_0", "agent_1", "agent_2"}
     finally:
         env.close()
+
+
+def test_an_agent_lost_to_a_failure_is_terminated_and_leaves(tmp_path):
+    sets = ("agents.count=4", "run.duration=30", "scenario.agent_loss=0.02", "scenario.agent_loss_grace=0")
+    env = SwarmbedParallelEnv(ROOT / "experiments" / "sar" / "_base.yaml", sets, out_dir=tmp_path / "loss")
+    try:
+        env.reset(seed=2)
+        terminated_at, steps = {}, 0
+        while env.agents:
+            acting = list(env.agents)
+            obs, rewards, terminations, truncations, infos = env.step(dict.fromkeys(acting, 0))
+            steps += 1
+            assert set(terminations) == set(acting)  # every agent that acted hears its outcome
+            ended = {a for a, t in terminations.items() if t}
+            assert ended.isdisjoint(env.agents) and set(env.agents) == set(acting) - ended  # the others go on
+            terminated_at.update(dict.fromkeys(ended, steps))
+        summary = env.results[-1].summary
+    finally:
+        env.close()
+    # step k returns tick k: each robot's episode ended at the tick the world lost it, and only those
+    lost = {f"agent_{i}": tick for i, tick in summary["agents_lost"].items()}
+    assert terminated_at == lost and len(lost) == 4
