@@ -302,3 +302,21 @@ def test_a_ros2_node_in_the_loop_gives_the_builtin_allocators_results(driven):
     assert (ours["network"]["malformed"]["coordinator"], theirs["network"]["malformed"]["coordinator"]) == (4, 0)
     ours["network"]["malformed"]["coordinator"] = 0
     assert ours == theirs
+
+
+def test_on_the_real_time_clock_no_tick_waits_for_a_command(tmp_path):
+    """Nobody commands: in lock-step each tick would wait command_timeout (5 s) for every robot; on
+    the real-time clock the last command (none: the tree explores) holds and the clock goes on."""
+    exp = experiment(
+        "agents.count=3",
+        "run.duration=60",
+        "run.stop_when_done=false",
+        "run.clock=realtime",
+        "run.speed=20",
+        "allocator.name=ros2",
+        f"ros2={{domain: {DOMAIN + 1}, command_timeout: 5}}",
+    )
+    result = run_experiment(exp, tmp_path / "rt", progress=False)
+    assert result.summary["ticks"] == 60
+    assert result.timings["run_s"] < 15  # 60 ticks at 20x: 3 s; waiting would take 300 s
+    assert result.timings["ros2_command_timeouts"] == 0  # nothing is waited for, so nothing times out
