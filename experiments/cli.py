@@ -645,7 +645,7 @@ def cmd_swap(args: argparse.Namespace) -> int:
         except CredentialsError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
-        if role != "operator":
+        if role not in ("operator", "commander"):
             print(
                 f"error: {args.credentials} is a {role}'s credentials: swaps are asked by an operator "
                 "(swarmbed credentials FILE --user NAME, admitted with swarmbed run --admit FILE)",
