@@ -14,7 +14,8 @@ Spaces, per agent (``max_tasks`` = K, N agents):
   ``task_mask`` (which rows hold a task), ``heard_from`` (the agents whose radio messages it
   received this tick: range, loss, bursts and caps shape it);
 * action, ``Discrete(K + 1)``: 0 chooses no task (the agent's tree explores), j the j-th row of
-  ``tasks``; a row the mask marks empty also chooses none.
+  ``tasks``; a row the mask marks empty also chooses none. With a ``fallback`` allocator,
+  ``Discrete(K + 2)``: K + 1 lets it decide.
 
 Rewards: the team's progress over the tick, the increase of the scenario's ``reward_key``
 (``tasks_completed`` in MT-SR, ``rescued`` in search and rescue), to every live agent.
@@ -24,6 +25,7 @@ every agent when the run reaches its duration.
 
 from __future__ import annotations
 
+import json
 import math
 import queue
 import shutil
@@ -43,6 +45,7 @@ except ImportError as exc:  # an optional extra
 
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.runner import RunResult, run_experiment
+from swarmbed.plugins.external import DEFER
 from swarmbed.wire.codec import WireError, decode_inbox
 
 QUICKSTART = Path(__file__).resolve().parent.parent / "experiments" / "quickstart.yaml"
@@ -121,7 +124,10 @@ class SwarmbedParallelEnv(ParallelEnv):
     ``config``: an experiment file (default: the quick start); ``sets``: ``KEY=VALUE`` overrides as
     ``swarmbed run --set`` takes them (loss, bursts, range: what the agents hear); ``out_dir``: where
     each reset's run folder goes (``run_0``, ``run_1``, ...; default: a temporary folder removed by
-    :meth:`close`)."""
+    :meth:`close`). ``fallback``: a registered allocator (``fcg``, ``cbba``, ``grape``) that runs in
+    every agent beside the learner's decisions, observing and talking over the radio as in a run of
+    its own; the action :attr:`defer` (K + 1) lets it decide, so it plays as a policy on the same
+    seeds (its parameters: the experiment's ``allocator:`` keys when it names the same allocator)."""
 
     metadata = {"name": "swarmbed_v0", "render_modes": [], "is_parallelizable": True}
 
@@ -132,8 +138,15 @@ class SwarmbedParallelEnv(ParallelEnv):
         max_tasks: int = 8,
         reward_key: str | None = None,
         out_dir: str | Path | None = None,
+        fallback: str | None = None,
     ) -> None:
-        self.config, self.sets = Path(config), [*sets, "allocator.name=external"]
+        self.config = Path(config)
+        given = cfg.load(self.config, list(sets))
+        external: dict[str, Any] = {"name": "external"}
+        if fallback is not None:
+            own = given.allocator.model_dump(exclude={"name"}) if given.allocator.name == fallback else {}
+            external.update(fallback=fallback, fallback_scenario=given.scenario.kind, fallback_params=own)
+        self.sets = [*sets, f"allocator={json.dumps(external)}"]
         self.exp = cfg.load(self.config, self.sets)
         if self.exp.run.clock != "lockstep":
             raise ValueError("swarmbed.envs steps the lock-step clock: run.clock must be lockstep")
@@ -151,7 +164,9 @@ class SwarmbedParallelEnv(ParallelEnv):
                 "heard_from": spaces.MultiBinary(n),
             }
         )
-        self._action_space = spaces.Discrete(max_tasks + 1)
+        #: the action that lets the fallback allocator decide (only with ``fallback``)
+        self.defer: int | None = max_tasks + 1 if fallback is not None else None
+        self._action_space = spaces.Discrete(max_tasks + (2 if fallback is not None else 1))
         self._own_dir = out_dir is None
         self.out_dir = Path(out_dir) if out_dir is not None else Path(tempfile.mkdtemp(prefix="swarmbed-env-"))
         self.runs = 0
@@ -240,13 +255,17 @@ class SwarmbedParallelEnv(ParallelEnv):
         for agent, action in actions.items():
             if agent not in self._index or agent not in self.agents:
                 raise ValueError(f"{agent!r}: not an agent of this step ({', '.join(self.agents[:5])} ...)")
+            top = self._action_space.n - 1
             if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
-                raise ValueError(f"{agent}: action {action!r} is not an integer in 0..{self.max_tasks}")
+                raise ValueError(f"{agent}: action {action!r} is not an integer in 0..{top}")
             choice = int(action)
-            if not 0 <= choice <= self.max_tasks:
-                raise ValueError(f"{agent}: action {choice} is not in 0..{self.max_tasks}")
+            if not 0 <= choice <= top:
+                raise ValueError(f"{agent}: action {choice} is not in 0..{top}")
             ids = self._choices[agent]
-            decisions[self._index[agent]] = ids[choice - 1] if 0 < choice <= len(ids) else -1
+            if choice == self.defer:
+                decisions[self._index[agent]] = DEFER
+            else:
+                decisions[self._index[agent]] = ids[choice - 1] if 0 < choice <= len(ids) else -1
         return decisions
 
     def _observe(self, views: Mapping[int, tuple[dict, list[int]]]) -> dict[str, dict[str, np.ndarray]]:

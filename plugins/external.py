@@ -11,20 +11,82 @@ none (-1, or no decision yet) lets the tree explore. Where the decisions come fr
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.plugins.base import Allocator, LocalView
 
 NONE = -1  # a decision that chooses no task (the tree explores)
+DEFER = -4  # a decision that asks the fallback allocator what it would do
+
+
+class ExternalParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    fallback: str | None = Field(
+        None,
+        description="a registered allocator that runs beside the outside decisions (it observes, talks over "
+        "the radio, and decides whenever the decision is DEFER = -4): a built-in allocator as a policy",
+    )
+    fallback_scenario: str = Field("mtsr", description="the scenario whose implementation of `fallback` runs")
+    fallback_params: dict[str, Any] = Field(default_factory=dict, description="the fallback allocator's own keys")
 
 
 class ExternalAllocator(Allocator):
-    """Decisions from a driver in the launching process (a PettingZoo environment's learner)."""
+    """Decisions from a driver in the launching process (a PettingZoo environment's learner). With
+    ``fallback``, a built-in allocator lives inside it with its own parameters and stream: it is
+    shown every tick's view (``observe``) and, where the decision is :data:`DEFER`, it decides (and
+    sends what its ``decide`` sends), so "CBBA as a policy" is DEFER at every tick and gives CBBA's
+    run."""
 
+    Params = ExternalParams
+    params: ExternalParams
     decision_source: ClassVar[str] = "env"
+    CONSTRUCTED = (*Allocator.CONSTRUCTED, "inner")  # the fallback travels as its own snapshot
+
+    def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator, run_seed: int = 0) -> None:
+        super().__init__(agent_id, params, rng, run_seed)
+        self.inner: Allocator | None = None
+        p = self.params
+        if p.fallback is not None:
+            from swarmbed.plugins import registry
+
+            cls = registry.resolve(p.fallback, p.fallback_scenario)
+            self.inner = cls(agent_id, cls.Params.model_validate(p.fallback_params), rng, run_seed)
+
+    def observe(self, view: LocalView) -> None:
+        if self.inner is not None:
+            self.inner.observe(view)
+            self._take_events()
 
     def decide(self, view: LocalView) -> int | None:
+        if view.decision == DEFER:
+            if self.inner is None:
+                return None
+            chosen = self.inner.decide(view)
+            self._take_events()
+            return chosen
         return None if view.decision is None or view.decision == NONE else view.decision
+
+    def _take_events(self) -> None:
+        assert self.inner is not None
+        for name, n in self.inner.events.items():
+            self.count(name, n)
+        self.inner.events = {}
+
+    def snapshot(self) -> dict[str, Any]:
+        state = super().snapshot()
+        if self.inner is not None:
+            state["inner"] = self.inner.snapshot()
+        return state
+
+    def restore(self, state: dict[str, Any]) -> None:
+        inner = state.pop("inner", None)
+        super().restore(state)
+        if self.inner is not None and inner is not None:
+            self.inner.restore(inner)
+            self.inner.rng = self.rng  # one stream, as in the fallback's own run
 
 
 class Ros2Allocator(ExternalAllocator):

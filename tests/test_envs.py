@@ -110,3 +110,24 @@ def test_an_agent_lost_to_a_failure_is_terminated_and_leaves(tmp_path):
     # step k returns tick k: each robot's episode ended at the tick the world lost it, and only those
     lost = {f"agent_{i}": tick for i, tick in summary["agents_lost"].items()}
     assert terminated_at == lost and len(lost) == 4
+
+
+def test_a_built_in_allocator_plays_as_a_policy_through_the_env(tmp_path):
+    """fallback="fcg" runs FCG in every agent beside the learner; deferring at every tick gives
+    FCG's own run, messages and all: a learned policy and FCG compared on the same seeds."""
+    sets = ("agents.count=4", "run.duration=200", "network.loss=0.1")
+    env = SwarmbedParallelEnv(sets=sets, out_dir=tmp_path / "env", fallback="fcg")
+    assert env.defer == 9 and env.action_space("agent_0").n == 10
+    try:
+        env.reset(seed=6)
+        while env.agents:
+            env.step(dict.fromkeys(env.agents, env.defer))
+        driven = env.results[-1]
+    finally:
+        env.close()
+    builtin = run_experiment(experiment(*sets, "run.seed=6"), tmp_path / "run", progress=False)
+    for name in ("timeseries.csv", "agents.csv", "network_ledger.csv"):
+        assert (driven.out_dir / name).read_bytes() == (builtin.out_dir / name).read_bytes(), name
+    ours, theirs = (json.loads((r.out_dir / "summary.json").read_text()) for r in (driven, builtin))
+    assert (ours.pop("allocator"), theirs.pop("allocator")) == ("external", "fcg")
+    assert ours == theirs and ours["network"]["messages_sent"] > 0
