@@ -7,13 +7,15 @@ simulated seconds and at 200 and 500 over a shorter horizon (``--large-duration`
     python benchmarks/allocators.py --n 10 --duration 500
     python benchmarks/allocators.py --n 200 --allocators grape --set allocator.full_every=10
 
-Printed next to the public SPACE simulator's own figures, measured on this machine kind
-(single process, v1.2.12): 50 agents CBBA 130, GRAPE 230, FCG 640; 100 agents 19, 84, 264;
-200 agents CBBA 3.3, GRAPE 27 (as the speed issue quotes them). Those were measured on another
-day, and this machine kind's speed varies by a quarter from day to day; so each N also gets the
-bare barrier measured in the same run (``lockstep.py``'s floor: one sample in and one out per
-process per tick, no message, no Python work). At 1 Hz its ticks per second are the most
-simulated seconds per wall second any design with a process per agent can reach here today.
+Printed next to the public SPACE simulator's own figures, measured with SPACE's code on this
+machine kind on 2026-11-27 (``../shared/tools/space-bench/``, its example configs at range 100,
+300 simulated s, mean of seeds 11-13, idle): 50 agents CBBA 245, GRAPE 212, FCG 374; 100 agents
+89, 83, 174 (docs/benchmarks.md; the figures printed here before, CBBA 19 at 100 agents among
+them, were not what SPACE's code does on these cells). This machine kind's speed varies by a
+quarter from day to day, so each N also gets the bare barrier measured in the same run
+(``lockstep.py``'s floor: one sample in and one out per process per tick, no message, no Python
+work). At 1 Hz its ticks per second are the most simulated seconds per wall second any design
+with a process per agent can reach here today.
 """
 
 from __future__ import annotations
@@ -30,14 +32,12 @@ from swarmbed.experiments.launch.runner import run_experiment
 ROOT = Path(__file__).resolve().parent.parent
 
 SPACE_REFERENCE = {
-    (50, "cbba"): 130,
-    (50, "grape"): 230,
-    (50, "fcg"): 640,
-    (100, "cbba"): 19,
-    (100, "grape"): 84,
-    (100, "fcg"): 264,
-    (200, "cbba"): 3.3,
-    (200, "grape"): 27,
+    (50, "cbba"): 245,
+    (50, "grape"): 212,
+    (50, "fcg"): 374,
+    (100, "cbba"): 89,
+    (100, "grape"): 83,
+    (100, "fcg"): 174,
 }
 LARGE = 200  # from this many agents on, the shorter horizon
 
