@@ -57,6 +57,7 @@ from swarmbed.wire.reports import (
 )
 from swarmbed.wire.schema import LOCAL, Experiment, Targets, agent_spec, netem_spec
 from swarmbed.wire.seeds import WORLD, component_rng
+from swarmbed.wire.session import undeclare_all
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 
@@ -211,12 +212,7 @@ class Coordinator:
         if self.ros2 is not None:
             self.ros2.close()
             self.ros2 = None
-        for e in reversed(self._entities):
-            try:
-                e.undeclare()
-            except Exception:
-                pass
-        self._entities.clear()
+        undeclare_all(self._entities)
 
     def _who(self, key: str) -> str:
         return "netem" if key == self.keys.alive_netem else f"agent_{agent_id_of(key)}"

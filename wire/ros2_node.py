@@ -25,6 +25,7 @@ from swarmbed.wire.ros2 import (
     topic_key,
     wall_ns,
 )
+from swarmbed.wire.session import undeclare_all
 
 
 @dataclass
@@ -88,9 +89,4 @@ class Ros2Node:
         )
 
     def close(self) -> None:
-        for entity in reversed(self._entities):
-            try:
-                entity.undeclare()
-            except Exception:
-                pass
-        self._entities.clear()
+        undeclare_all(self._entities)

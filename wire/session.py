@@ -184,3 +184,15 @@ def free_loopback_endpoint() -> str:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def undeclare_all(entities: list) -> None:
+    """Undeclare Zenoh entities (publishers, subscribers, queryables, tokens) in reverse order of
+    declaration, each on its own: one already gone with its session does not keep the others
+    declared. Empties ``entities``."""
+    for entity in reversed(entities):
+        try:
+            entity.undeclare()
+        except Exception:
+            pass
+    entities.clear()

@@ -43,7 +43,7 @@ from swarmbed.wire.keys import HOSTS, HostKeys, Keys
 from swarmbed.wire.membership import is_alive
 from swarmbed.wire.process import process_name, tune_malloc
 from swarmbed.wire.reports import HostAnswer, StartAgents, StopAgents, decode_start, decode_stop, encode_json
-from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
+from swarmbed.wire.session import free_loopback_endpoint, undeclare_all, zenoh_config
 
 log = logging.getLogger("swarmbed.host")
 
@@ -170,11 +170,7 @@ class Host:
                 self.runs.pop(run_id).kill_all()  # nothing left to kill but the run's fork server
 
     def close(self) -> None:
-        for entity in reversed(self._entities):
-            try:
-                entity.undeclare()
-            except Exception:
-                pass
+        undeclare_all(self._entities)
         with self.lock:
             runs = list(self.runs.values())
         for children in runs:

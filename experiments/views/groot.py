@@ -27,6 +27,7 @@ from swarmbed.experiments.views.watch import WatchError, running_runs
 from swarmbed.wire.btlog import decode_tree_changes, tree_size
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import Keys
+from swarmbed.wire.session import undeclare_all
 
 
 class Gateway:
@@ -76,12 +77,7 @@ class Gateway:
             self.bytes += len(data)
 
     def _drop(self) -> None:
-        for entity in reversed(self._entities):
-            try:
-                entity.undeclare()
-            except Exception:
-                pass
-        self._entities = []
+        undeclare_all(self._entities)
 
     def close(self) -> None:
         with self.lock:
