@@ -58,7 +58,7 @@ class EnvError(RuntimeError):
 
 class _Bridge:
     """The coordinator's side: it hands each tick's observations to the environment and waits for
-    the decisions (``Coordinator.decide`` calls :meth:`decide` from the run's thread)."""
+    the decisions (the coordinator calls :meth:`decide` from the run's thread before each tick)."""
 
     def __init__(self, max_tasks: int, n: int, reward_key: str) -> None:
         self.max_tasks, self.n, self.reward_key = max_tasks, n, reward_key
@@ -115,7 +115,7 @@ class _Bridge:
                 pass
         me = np.array([obs.x, obs.y, obs.heading, obs.speed], dtype=np.float32)
         view: dict[str, np.ndarray] = {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}
-        return view, [int(t) for t in tasks["id"][order]]
+        return view, [ids[j] for j in order]
 
 
 class SwarmbedParallelEnv(ParallelEnv):
