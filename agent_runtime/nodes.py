@@ -9,7 +9,16 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmbed.agent_runtime.bt import InputPort, NodeRegistry, OutputPort, StatefulAction, Status, SyncAction
+from swarmbed.agent_runtime.bt import (
+    FAILURE,
+    RUNNING,
+    SUCCESS,
+    InputPort,
+    NodeRegistry,
+    OutputPort,
+    StatefulAction,
+    SyncAction,
+)
 from swarmbed.extension.allocator import HALT, HOLD, DecisionError
 from swarmbed.extension.context import NodeContext
 
@@ -30,7 +39,7 @@ class LocalSensingNode(SyncAction):
         view = self.config.context.view
         self.set_output("tasks", view.tasks)
         self.set_output("messages", view.inbox)
-        return Status.SUCCESS
+        return SUCCESS
 
 
 class DecisionMakingNode(SyncAction):
@@ -49,9 +58,9 @@ class DecisionMakingNode(SyncAction):
             self.set_output("task_id", None)
             if task == HALT:
                 ctx.act(["halt"])  # and stop at once (the executing node, with no task, leaves it)
-            return Status.SUCCESS
+            return SUCCESS
         self.set_output("task_id", task)
-        return Status.FAILURE if task is None else Status.SUCCESS
+        return FAILURE if task is None else SUCCESS
 
 
 def _task_id(value: object, ctx: NodeContext) -> int | None:
@@ -85,9 +94,9 @@ class TaskExecutingNode(StatefulAction):
         task = self.get_input("task_id")
         ctx = self.config.context
         if task is None:
-            return Status.SUCCESS
+            return SUCCESS
         ctx.act(["goto_task", int(task)])
-        return Status.RUNNING
+        return RUNNING
 
 
 class ExplorationNode(StatefulAction):
@@ -113,9 +122,9 @@ class ExplorationNode(StatefulAction):
         view = ctx.view
         near = math.hypot(self.waypoint[0] - view.x, self.waypoint[1] - view.y) <= self.get_input("reach")
         if view.time >= self.until or near:
-            return Status.SUCCESS
+            return SUCCESS
         ctx.act(["goto", *self.waypoint])
-        return Status.RUNNING
+        return RUNNING
 
 
 SPACE_NODES = (LocalSensingNode, DecisionMakingNode, TaskExecutingNode, ExplorationNode)

@@ -23,13 +23,13 @@ from swarmbed.wire.codec import (
     StopIn,
     TickIn,
     WireError,
-    decode_agent_in,
     encode_agent_out,
     encode_handover,
     encode_stop,
 )
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_over, is_alive
+from swarmbed.wire.observation import Observation
 from swarmbed.wire.process import child_args, pin_thread_state
 from swarmbed.wire.reports import (
     Checkpoint,
@@ -43,6 +43,7 @@ from swarmbed.wire.reports import (
 from swarmbed.wire.schema import AgentSpec
 from swarmbed.wire.session import open_from_args, single_worker
 from swarmbed.wire.state import StateError
+from swarmbed.wire.tickdecode import TickDecoder
 from swarmbed.wire.transport import tcp_counters
 
 log = logging.getLogger("swarmbed.agent")
@@ -98,6 +99,7 @@ class _Agent:
         self.pending = 0
         self.lock = threading.Lock()
         self.in_key = keys.agent_in(runtime.agent_id)
+        self.decoder = TickDecoder(runtime.scenario.Observation)
 
     def __enter__(self) -> _Agent:
         s, keys, agent_id = self.session, self.keys, self.runtime.agent_id
@@ -200,7 +202,7 @@ class _Agent:
     def _decode(self, data: bytes) -> TickIn | ControlIn | StopIn | None:
         self.sample_bytes["in"] += len(data)
         try:
-            return decode_agent_in(data)
+            return self.decoder.decode(data)
         except WireError as exc:
             self.malformed += 1
             log.warning("agent %d: malformed sample on %s dropped: %s", self.runtime.agent_id, self.in_key, exc)
@@ -249,7 +251,7 @@ class _Agent:
         if st is not None:
             st.mark("decode")
         try:
-            obs = runtime.decode_observation(msg.obs)
+            obs = msg.obs if isinstance(msg.obs, Observation) else runtime.decode_observation(msg.obs)
         except WireError as exc:  # blind for one tick: answer it (the clock must go on), count it
             self.malformed += 1
             log.warning("agent %d: malformed observation of tick %d dropped: %s", agent_id, msg.tick, exc)

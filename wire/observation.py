@@ -80,7 +80,7 @@ class Observation:
                 raise WireError(f"observation field {name}: missing")
         unknown = set(obj) - {"t", "me", "tasks"} - {n for n, _ in cls.extra_fields()}
         if unknown:
-            raise WireError(f"observation has unknown fields: {', '.join(sorted(unknown))}")
+            raise WireError(f"observation has unknown fields: {', '.join(sorted(map(str, unknown)))}")
         return cls(float(t), float(me[0]), float(me[1]), float(me[2]), float(me[3]), tasks, **extras)
 
 

@@ -16,10 +16,14 @@ from swarmbed.agent_runtime.bt.node import (
 )
 from swarmbed.agent_runtime.bt.palette import palette_xml
 from swarmbed.agent_runtime.bt.registry import NodeRegistry
-from swarmbed.agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 from swarmbed.agent_runtime.bt.tree import Tree, load_tree
 
 __all__ = [
+    "FAILURE",
+    "IDLE",
+    "RUNNING",
+    "SUCCESS",
     "Blackboard",
     "BTError",
     "Condition",

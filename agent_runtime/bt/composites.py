@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from swarmbed.agent_runtime.bt.node import BTError, ControlNode, InputPort, Port
-from swarmbed.agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 
 
 class _Ordered(ControlNode):
@@ -11,19 +11,19 @@ class _Ordered(ControlNode):
     returns ``NEXT`` moves on to the following child; any other completion ends the node with that
     status; when every child returned ``NEXT`` the node returns ``NEXT`` too."""
 
-    NEXT = Status.SUCCESS
+    NEXT = SUCCESS
 
     def __init__(self, name, config):
         super().__init__(name, config)
         self.current = 0
 
     def tick(self) -> Status:
-        self.status = Status.RUNNING
+        self.status = RUNNING
         while self.current < len(self._children):
             child_status = self._children[self.current].execute_tick()
-            if child_status == Status.RUNNING:
-                return Status.RUNNING
-            if child_status != self.NEXT:
+            if child_status is RUNNING:
+                return RUNNING
+            if child_status is not self.NEXT:
                 self.reset_children()
                 self.current = 0
                 return child_status
@@ -41,32 +41,32 @@ class Sequence(_Ordered):
     """Succeeds when every child succeeds; fails (and resets) at the first FAILURE."""
 
     ID = "Sequence"
-    NEXT = Status.SUCCESS
+    NEXT = SUCCESS
 
 
 class Fallback(_Ordered):
     """Succeeds at the first child that succeeds; fails when all fail."""
 
     ID = "Fallback"
-    NEXT = Status.FAILURE
+    NEXT = FAILURE
 
 
 class _Reactive(ControlNode):
     """Reactive variants: every tick starts again from the first child; a RUNNING child halts all
     the others (BT.CPP v4 halts every child but the running one)."""
 
-    NEXT = Status.SUCCESS
+    NEXT = SUCCESS
 
     def tick(self) -> Status:
-        self.status = Status.RUNNING
+        self.status = RUNNING
         for index, child in enumerate(self._children):
             child_status = child.execute_tick()
-            if child_status == Status.RUNNING:
-                for i in range(len(self._children)):
-                    if i != index:
+            if child_status is RUNNING:
+                for i, other in enumerate(self._children):
+                    if i != index and other.status is not IDLE:
                         self.halt_child(i)
-                return Status.RUNNING
-            if child_status != self.NEXT:
+                return RUNNING
+            if child_status is not self.NEXT:
                 self.reset_children()
                 return child_status
         self.reset_children()
@@ -75,12 +75,12 @@ class _Reactive(ControlNode):
 
 class ReactiveSequence(_Reactive):
     ID = "ReactiveSequence"
-    NEXT = Status.SUCCESS
+    NEXT = SUCCESS
 
 
 class ReactiveFallback(_Reactive):
     ID = "ReactiveFallback"
-    NEXT = Status.FAILURE
+    NEXT = FAILURE
 
 
 class Parallel(ControlNode):
@@ -119,25 +119,25 @@ class Parallel(ControlNode):
             raise BTError(f"{self.config.path}: fewer children than success_count: can never succeed")
         if n < need_failure:
             raise BTError(f"{self.config.path}: fewer children than failure_count: can never fail")
-        self.status = Status.RUNNING
+        self.status = RUNNING
         for i, child in enumerate(self._children):
             if i not in self._completed:
                 child_status = child.execute_tick()
-                if child_status == Status.SUCCESS:
+                if child_status is SUCCESS:
                     self._completed.add(i)
                     self._successes += 1
-                elif child_status == Status.FAILURE:
+                elif child_status is FAILURE:
                     self._completed.add(i)
                     self._failures += 1
             if self._successes >= need_success:
                 self._clear()
                 self.reset_children()
-                return Status.SUCCESS
+                return SUCCESS
             if n - self._failures < need_success or self._failures == need_failure:
                 self._clear()
                 self.reset_children()
-                return Status.FAILURE
-        return Status.RUNNING
+                return FAILURE
+        return RUNNING
 
     def halt(self) -> None:
         self._clear()

@@ -9,31 +9,31 @@ with one tick per control step, as here, that means one cycle per tick for synch
 from __future__ import annotations
 
 from swarmbed.agent_runtime.bt.node import DecoratorNode, InputPort, Port
-from swarmbed.agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 
 
 class Inverter(DecoratorNode):
     ID = "Inverter"
 
     def tick(self) -> Status:
-        self.status = Status.RUNNING
+        self.status = RUNNING
         s = self.child.execute_tick()
-        if s == Status.SUCCESS:
+        if s is SUCCESS:
             self.reset_child()
-            return Status.FAILURE
-        if s == Status.FAILURE:
+            return FAILURE
+        if s is FAILURE:
             self.reset_child()
-            return Status.SUCCESS
+            return SUCCESS
         return s
 
 
 class _Force(DecoratorNode):
-    RESULT = Status.SUCCESS
+    RESULT = SUCCESS
 
     def tick(self) -> Status:
-        self.status = Status.RUNNING
+        self.status = RUNNING
         s = self.child.execute_tick()
-        if s.completed:
+        if s is SUCCESS or s is FAILURE:
             self.reset_child()
             return self.RESULT
         return s
@@ -41,19 +41,19 @@ class _Force(DecoratorNode):
 
 class ForceSuccess(_Force):
     ID = "ForceSuccess"
-    RESULT = Status.SUCCESS
+    RESULT = SUCCESS
 
 
 class ForceFailure(_Force):
     ID = "ForceFailure"
-    RESULT = Status.FAILURE
+    RESULT = FAILURE
 
 
 class _Loop(DecoratorNode):
     """Shared loop of Repeat (continues on SUCCESS) and RetryUntilSuccessful (continues on FAILURE)."""
 
     PORT = ""
-    CONTINUE_ON = Status.SUCCESS
+    CONTINUE_ON = SUCCESS
 
     def __init__(self, name, config):
         super().__init__(name, config)
@@ -62,21 +62,21 @@ class _Loop(DecoratorNode):
     def tick(self) -> Status:
         limit = self.get_input(self.PORT)
         do_loop = limit == -1 or self.count < limit
-        self.status = Status.RUNNING
+        self.status = RUNNING
         while do_loop:
             prev = self.child.status
             s = self.child.execute_tick()
-            if s == Status.RUNNING:
-                return Status.RUNNING
-            if s != self.CONTINUE_ON:
+            if s is RUNNING:
+                return RUNNING
+            if s is not self.CONTINUE_ON:
                 self.count = 0
                 self.reset_child()
                 return s
             self.count += 1
             do_loop = limit == -1 or self.count < limit
             self.reset_child()
-            if prev == Status.IDLE and do_loop:
-                return Status.RUNNING
+            if prev is IDLE and do_loop:
+                return RUNNING
         self.count = 0
         return self.CONTINUE_ON
 
@@ -88,7 +88,7 @@ class _Loop(DecoratorNode):
 class Repeat(_Loop):
     ID = "Repeat"
     PORT = "num_cycles"
-    CONTINUE_ON = Status.SUCCESS
+    CONTINUE_ON = SUCCESS
 
     @classmethod
     def provided_ports(cls) -> dict[str, Port]:
@@ -98,7 +98,7 @@ class Repeat(_Loop):
 class RetryUntilSuccessful(_Loop):
     ID = "RetryUntilSuccessful"
     PORT = "num_attempts"
-    CONTINUE_ON = Status.FAILURE
+    CONTINUE_ON = FAILURE
 
     @classmethod
     def provided_ports(cls) -> dict[str, Port]:
@@ -109,14 +109,14 @@ class KeepRunningUntilFailure(DecoratorNode):
     ID = "KeepRunningUntilFailure"
 
     def tick(self) -> Status:
-        self.status = Status.RUNNING
+        self.status = RUNNING
         s = self.child.execute_tick()
-        if s == Status.FAILURE:
+        if s is FAILURE:
             self.reset_child()
-            return Status.FAILURE
-        if s == Status.SUCCESS:
+            return FAILURE
+        if s is SUCCESS:
             self.reset_child()
-        return Status.RUNNING
+        return RUNNING
 
 
 DECORATORS = (Inverter, ForceSuccess, ForceFailure, Repeat, RetryUntilSuccessful, KeepRunningUntilFailure)

@@ -3,21 +3,21 @@
 from __future__ import annotations
 
 from swarmbed.agent_runtime.bt.node import BTError, InputPort, Port, SyncAction
-from swarmbed.agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.status import FAILURE, SUCCESS, Status
 
 
 class AlwaysSuccess(SyncAction):
     ID = "AlwaysSuccess"
 
     def tick(self) -> Status:
-        return Status.SUCCESS
+        return SUCCESS
 
 
 class AlwaysFailure(SyncAction):
     ID = "AlwaysFailure"
 
     def tick(self) -> Status:
-        return Status.FAILURE
+        return FAILURE
 
 
 class SetBlackboard(SyncAction):
@@ -37,7 +37,7 @@ class SetBlackboard(SyncAction):
         if not key:
             raise BTError(f"{self.config.path}: output_key is empty")
         self.config.blackboard.set(key, self.get_input("value"))
-        return Status.SUCCESS
+        return SUCCESS
 
 
 LEAVES = (AlwaysSuccess, AlwaysFailure, SetBlackboard)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from swarmbed.agent_runtime.bt.blackboard import Blackboard
-from swarmbed.agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 
 StatusWatcher = Callable[["TreeNode", Status, Status], None]
 """Called with (node, previous status, new status) on every change, as BehaviorTree.CPP's
@@ -115,7 +115,7 @@ class TreeNode:
     def __init__(self, name: str, config: NodeConfig) -> None:
         self.name = name
         self.config = config
-        self.status = Status.IDLE
+        self.status = IDLE
         self.uid = 0  # BehaviorTree.CPP's UID: 1, 2, ... in the order the tree's nodes were built
         self._literals: dict[str, Any] = {}
         # a port's blackboard key, resolved once: the ports are fixed when the tree is built, and
@@ -181,10 +181,10 @@ class TreeNode:
         raise NotImplementedError
 
     def halt(self) -> None:
-        self.status = Status.IDLE
+        self.status = IDLE
 
     def reset_status(self) -> None:
-        self.status = Status.IDLE
+        self.status = IDLE
 
     def children(self) -> list[TreeNode]:
         return []
@@ -195,7 +195,7 @@ class SyncAction(TreeNode):
 
     def execute_tick(self) -> Status:
         status = self.tick()
-        if status not in (Status.SUCCESS, Status.FAILURE):
+        if status not in (SUCCESS, FAILURE):
             raise BTError(f"{self.config.path}: a synchronous action must return SUCCESS or FAILURE, not {status.name}")
         self.status = status
         return status
@@ -209,13 +209,13 @@ class StatefulAction(TreeNode):
     """An action that may take several ticks: on_start, then on_running while RUNNING."""
 
     def tick(self) -> Status:
-        if self.status == Status.IDLE:
+        if self.status is IDLE:
             status = self.on_start()
-        elif self.status == Status.RUNNING:
+        elif self.status is RUNNING:
             status = self.on_running()
         else:
             return self.status
-        if status == Status.IDLE:
+        if status is IDLE:
             raise BTError(f"{self.config.path}: on_start/on_running must not return IDLE")
         return status
 
@@ -229,9 +229,9 @@ class StatefulAction(TreeNode):
         pass
 
     def halt(self) -> None:
-        if self.status == Status.RUNNING:
+        if self.status is RUNNING:
             self.on_halted()
-        self.status = Status.IDLE
+        self.status = IDLE
 
 
 class ControlNode(TreeNode):
@@ -250,17 +250,21 @@ class ControlNode(TreeNode):
 
     def halt_child(self, i: int) -> None:
         child = self._children[i]
-        if child.status == Status.RUNNING:
+        status = child.status
+        if status is IDLE:  # nothing to halt; resetting an idle node changes nothing (as BT.CPP's resetStatus)
+            return
+        if status is RUNNING:
             child.halt()
         child.reset_status()
 
     def reset_children(self) -> None:
-        for i in range(len(self._children)):
-            self.halt_child(i)
+        for i, child in enumerate(self._children):
+            if child.status is not IDLE:
+                self.halt_child(i)
 
     def halt(self) -> None:
         self.reset_children()
-        self.status = Status.IDLE
+        self.status = IDLE
 
 
 class DecoratorNode(TreeNode):
@@ -274,10 +278,13 @@ class DecoratorNode(TreeNode):
         return [self.child] if hasattr(self, "child") else []
 
     def reset_child(self) -> None:
-        if self.child.status == Status.RUNNING:
+        status = self.child.status
+        if status is IDLE:
+            return
+        if status is RUNNING:
             self.child.halt()
         self.child.reset_status()
 
     def halt(self) -> None:
         self.reset_child()
-        self.status = Status.IDLE
+        self.status = IDLE

@@ -25,7 +25,7 @@ from swarmbed.agent_runtime.bt.node import (
     watch_node,
 )
 from swarmbed.agent_runtime.bt.registry import NodeRegistry
-from swarmbed.agent_runtime.bt.status import Status
+from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 
 GENERIC_TAGS = ("Action", "Condition", "Control", "Decorator")
 SPECIAL_ATTRS = ("name", "ID")
@@ -40,10 +40,10 @@ class SubTree(DecoratorNode):
     fullpath = ""  # Groot2's name of this instance: parent instances' paths, then its name or ID::uid
 
     def tick(self) -> Status:
-        if self.status == Status.IDLE:
-            self.status = Status.RUNNING
+        if self.status is IDLE:
+            self.status = RUNNING
         s = self.child.execute_tick()
-        if s.completed:
+        if s is SUCCESS or s is FAILURE:
             self.reset_child()
         return s
 
@@ -58,7 +58,7 @@ class Tree:
     def tick_once(self) -> Status:
         """Tick the root exactly once (BT.CPP ``tickExactlyOnce``)."""
         status = self.root.execute_tick()
-        if status.completed:
+        if status is SUCCESS or status is FAILURE:
             self.root.reset_status()
         return status
 

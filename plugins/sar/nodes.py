@@ -6,11 +6,20 @@ robot's action for this tick (``config.context.act``). Wandering reuses the SPAC
 
 from __future__ import annotations
 
-from swarmbed.agent_runtime.bt import Condition, NodeConfig, StatefulAction, Status, SyncAction
+from swarmbed.agent_runtime.bt import (
+    FAILURE,
+    RUNNING,
+    SUCCESS,
+    Condition,
+    NodeConfig,
+    StatefulAction,
+    Status,
+    SyncAction,
+)
 
 
 def _ok(flag: bool) -> Status:
-    return Status.SUCCESS if flag else Status.FAILURE
+    return SUCCESS if flag else FAILURE
 
 
 class _SARNode:
@@ -58,9 +67,9 @@ class MoveToTarget(_SARNode, StatefulAction):
 
     def on_running(self):
         if self.strategy.in_reach(self.view):
-            return Status.SUCCESS
+            return SUCCESS
         self.config.context.act(["goto_task", self.strategy.target])
-        return Status.RUNNING
+        return RUNNING
 
 
 class Inspect(_SARNode, SyncAction):
@@ -70,7 +79,7 @@ class Inspect(_SARNode, SyncAction):
 
     def tick(self):
         self.config.context.act(["inspect", self.strategy.target])
-        return Status.SUCCESS
+        return SUCCESS
 
 
 class Rescue(_SARNode, SyncAction):
@@ -78,7 +87,7 @@ class Rescue(_SARNode, SyncAction):
 
     def tick(self):
         self.config.context.act(["rescue", self.strategy.target])
-        return Status.SUCCESS
+        return SUCCESS
 
 
 class Abandon(_SARNode, SyncAction):
@@ -88,7 +97,7 @@ class Abandon(_SARNode, SyncAction):
         target = self.strategy.target
         self.strategy.abandon(self.view)
         self.config.context.act(["abandon", target])
-        return Status.SUCCESS
+        return SUCCESS
 
 
 class SelectNearestVictim(_SARNode, SyncAction):
@@ -123,7 +132,7 @@ class RunConsensus(_SARNode, SyncAction):
 
     def tick(self):
         self.strategy.run_consensus(self.view)
-        return Status.SUCCESS
+        return SUCCESS
 
 
 class AdaptInterval(_SARNode, SyncAction):
@@ -133,7 +142,7 @@ class AdaptInterval(_SARNode, SyncAction):
 
     def tick(self):
         self.strategy.adapt_interval()
-        return Status.SUCCESS
+        return SUCCESS
 
 
 class SelectNewTarget(_SARNode, SyncAction):
@@ -158,7 +167,7 @@ class StateMachine(_SARNode, SyncAction):
         else:
             self.waypoint = None
         ctx.act(action)
-        return Status.SUCCESS
+        return SUCCESS
 
     def _reached(self) -> bool:
         v = self.view
