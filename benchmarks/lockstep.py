@@ -34,6 +34,7 @@ import time
 from importlib.metadata import version
 from pathlib import Path
 
+import psutil
 import zenoh
 
 import swarmbed
@@ -48,6 +49,15 @@ ROOT = Path(__file__).resolve().parent.parent
 BLOCK = zenoh.CongestionControl.BLOCK
 FLOORS = ("B0", "B1", "B2")
 DRIFT = 0.10
+
+
+def _cpu(pids: list[int]) -> list[float]:
+    """User and system CPU seconds so far of each process (every thread)."""
+    out = []
+    for pid in pids:
+        t = psutil.Process(pid).cpu_times()
+        out.append(t.user + t.system)
+    return out
 
 
 def floor(kind: str, n: int, ticks: int) -> dict:
@@ -77,6 +87,7 @@ def floor(kind: str, n: int, ticks: int) -> dict:
         for _ in range(len(procs)):
             alive.get(timeout=120)
         woke0 = sum(wakeups(pid) for pid in pids)
+        cpu0 = _cpu(pids)
         t0 = time.perf_counter()
         for k in range(ticks):
             payload = struct.pack("<q", k)
@@ -86,13 +97,17 @@ def floor(kind: str, n: int, ticks: int) -> dict:
                 done.get(timeout=60)
         rate = ticks / (time.perf_counter() - t0)
         woke = (sum(wakeups(pid) for pid in pids) - woke0) / (n * ticks)
+        cpu = [(b - a) * 1e6 / (n * ticks) for a, b in zip(cpu0, _cpu(pids))]
         for p in tick_pubs:
             p.put(struct.pack("<q", -1))
         session.put(f"{ns}/relay", struct.pack("<qq", -1, 0))
         session.put(f"{ns}/stop", b"")
         for p in procs:
             p.wait(timeout=30)
-        return {"ticks_per_s": rate, "wakeups": woke}
+        # CPU per client-tick: the clients (B2: its agents), the proxy (B2 only), this process (the hub)
+        clients = cpu[2:] if kind in ("B2", "relay") else cpu[1:]
+        helper = cpu[1] if kind in ("B2", "relay") else 0.0
+        return {"ticks_per_s": rate, "wakeups": woke, "cpu_us": (sum(clients), helper, cpu[0])}
     finally:
         for p in procs:
             if p.poll() is None:
@@ -128,10 +143,11 @@ def swarmbed_run(n: int, ticks: int, threads: str = "default", auth: bool = True
     }
 
 
-def _pair(first: dict, second: dict) -> tuple[float, float, bool]:
-    """A floor's mean rate and wake-ups over its two interleaved runs, and whether they drifted."""
+def _pair(first: dict, second: dict) -> tuple[float, float, bool, list[float]]:
+    """A floor's mean rate, wake-ups and CPU over its two interleaved runs, and whether they drifted."""
     a, b = first["ticks_per_s"], second["ticks_per_s"]
-    return (a + b) / 2, (first["wakeups"] + second["wakeups"]) / 2, abs(a - b) > DRIFT * max(a, b)
+    cpu = [(x + y) / 2 for x, y in zip(first["cpu_us"], second["cpu_us"])]
+    return (a + b) / 2, (first["wakeups"] + second["wakeups"]) / 2, abs(a - b) > DRIFT * max(a, b), cpu
 
 
 def main() -> None:
@@ -155,10 +171,12 @@ def main() -> None:
         print(f"  {'case':<18} {'ticks/s':>8} {'wake-ups/agent-tick':>20}   swarmbed default / single")
         rates = {}
         for kind in FLOORS:
-            rate, woke, drift = _pair(*runs[kind])
+            rate, woke, drift, cpu = _pair(*runs[kind])
             rates[kind] = rate
             ratios = f"{ours['default']['ticks_per_s'] / rate:.2f} / {ours['single']['ticks_per_s'] / rate:.2f}"
             print(f"  {kind + (' !' if drift else ''):<18} {rate:>8.1f} {woke:>20.2f}   {ratios}", flush=True)
+            proxy = f", proxy {cpu[1]:.0f}" if kind == "B2" else ""
+            print(f"      per agent-tick: CPU us clients {cpu[0]:.0f}{proxy}, hub {cpu[2]:.0f}", flush=True)
         if relay:
             print(f"  {'relay':<18} {relay['ticks_per_s']:>8.1f} {relay['wakeups']:>20.2f}")
         for t, r in ours.items():

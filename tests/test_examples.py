@@ -1,10 +1,15 @@
 """Every shipped file is an example, and every example is a test (as Mesa runs its examples): each
 behavior tree loads with the node set the CLI and the runtime share, each experiment and sweep file
-expands to valid experiments, and each runs a few ticks through real processes; each chaos file
-(faults for swarmbed soak) loads."""
+expands to valid experiments and builds its world, and each kind of experiment runs a few ticks
+through real processes; each chaos file (faults for swarmbed soak) loads.
+
+Files of one kind (the same scenario, allocator, radio and tree, every text and switch alike: they
+differ in numbers only, as the 14 search-and-rescue series files do) run the same code; one of each
+kind runs, the others are loaded and their worlds built."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -56,8 +61,44 @@ def _first_experiment(path: Path) -> cfg.Experiment:
     return cfg.load(path)
 
 
+def _leaves(tree: object, prefix: str = "") -> dict[str, object]:
+    if isinstance(tree, dict):
+        return {k: v for key, sub in tree.items() for k, v in _leaves(sub, f"{prefix}.{key}").items()}
+    return {prefix: tree}
+
+
+def _kind(path: Path) -> tuple:
+    """What picks code in a file's first experiment: its texts, switches and unset keys (not its name)."""
+    leaves = _leaves(_first_experiment(path).model_dump(mode="json"))
+    return tuple(
+        sorted((k, v) for k, v in leaves.items() if k != ".name" and (v is None or isinstance(v, (str, bool))))
+    )
+
+
+KINDS = list({_kind(f): f for f in reversed(FILES)}.values())  # the first file of each kind
+
+
+def test_files_of_one_kind_differ_in_numbers_only():
+    assert 5 <= len(KINDS) < len(FILES)
+    for f in FILES:
+        run = next(k for k in KINDS if _kind(k) == _kind(f))
+        a, b = (
+            _leaves(_first_experiment(f).model_dump(mode="json")),
+            _leaves(_first_experiment(run).model_dump(mode="json")),
+        )
+        assert set(a) == set(b)
+        assert all(isinstance(a[k], (int, float)) for k in a if k != ".name" and a[k] != b[k]), f
+
+
 @pytest.mark.parametrize("path", FILES, ids=_id)
-def test_every_shipped_file_runs_a_few_ticks(path, tmp_path):
+def test_every_shipped_file_builds_its_world(path):
+    exp = _first_experiment(path)
+    world = cfg.resolve_experiment(exp).scenario().make_world(np.random.default_rng(exp.run.seed))
+    assert len(world.observations()) == exp.agents.count
+
+
+@pytest.mark.parametrize("path", KINDS, ids=_id)
+def test_every_kind_of_shipped_file_runs_a_few_ticks(path, tmp_path):
     exp = _first_experiment(path)
     exp = exp.model_copy(update={"run": exp.run.model_copy(update={"duration": 3 * exp.run.dt})})
     result = run_experiment(exp, tmp_path, progress=False)
