@@ -35,8 +35,10 @@ class TaskInfo(NamedTuple):
 
 
 @state_type
-@dataclass(frozen=True, slots=True)
-class Message:
+class Message(NamedTuple):
+    """A message that reached this agent. A named tuple, as TaskInfo and for the same reason: an
+    agent builds one per message it hears, every tick."""
+
     sender: int
     kind: str
     data: Any  # the decoded payload

@@ -37,8 +37,25 @@ METRICS = {
 
 
 def _allocator(value: object) -> str:
+    """The allocator's name, with the parameters a sweep sets beside it (``cbba execute=first``)."""
     text = str(value)
-    return str(json.loads(text)["name"]) if text.startswith("{") else text
+    if not text.startswith("{"):
+        return text
+    spec = json.loads(text)
+    rest = " ".join(f"{k}={v}" for k, v in sorted(spec.items()) if k != "name")
+    return f"{spec['name']} {rest}" if rest else str(spec["name"])
+
+
+def _allocators(df: pd.DataFrame) -> list[str]:
+    """The allocators of the runs: SPACE's three in the paper's order, then any other, sorted."""
+    present = set(df["allocator"])
+    known = [a for a in ALLOCATORS if a in present]
+    return known + sorted(present - set(known))
+
+
+def _label(allocator: str) -> str:
+    name, _, rest = allocator.partition(" ")
+    return f"{name.upper()} {rest}".strip()
 
 
 def runs(sweep: Path) -> pd.DataFrame:
@@ -66,12 +83,12 @@ def cells(df: pd.DataFrame) -> list[tuple[int, float]]:
 
 
 def tables(df: pd.DataFrame) -> None:
-    allocators = [a for a in ALLOCATORS if a in set(df["allocator"])]
+    allocators = _allocators(df)
     for metric, label in METRICS.items():
         if metric not in df.columns:
             continue
         print(f"\n{label} (mean of the runs, 95 % t-interval in brackets; runs per cell in the last column):\n")
-        print("| agents | range | " + " | ".join(a.upper() for a in allocators) + " | runs |")
+        print("| agents | range | " + " | ".join(_label(a) for a in allocators) + " | runs |")
         print("| ---: | ---: | " + " | ".join("---:" for _ in allocators) + " | --- |")
         for agents, rng in cells(df):
             cell = df[(df["agents.count"] == agents) & (df["network.range"] == rng)]
@@ -97,7 +114,7 @@ def _paired(first: pd.Series, second: pd.Series) -> str | None:
 
 
 def orderings(df: pd.DataFrame, metric: str) -> None:
-    allocators = [a for a in ALLOCATORS if a in set(df["allocator"])]
+    allocators = _allocators(df)
     print(f"\n{METRICS[metric]}: paired by seed, first minus second (mean, 95 % t-interval, p):\n")
     print("| agents | range | pair | seeds | difference (95 % CI) | p |")
     print("| ---: | ---: | --- | ---: | --- | ---: |")
@@ -107,13 +124,13 @@ def orderings(df: pd.DataFrame, metric: str) -> None:
         for first, second in itertools.combinations(allocators, 2):
             row = _paired(by[first], by[second])
             if row:
-                print(f"| {agents} | {rng:.0f} | {first.upper()} - {second.upper()} {row}")
+                print(f"| {agents} | {rng:.0f} | {_label(first)} - {_label(second)} {row}")
 
 
 def range_effect(df: pd.DataFrame, metric: str) -> None:
     """Per agent count and allocator: each range against the shortest, paired by seed (the issue's
     question whether range slows GRAPE, as SPACE's code does)."""
-    allocators = [a for a in ALLOCATORS if a in set(df["allocator"])]
+    allocators = _allocators(df)
     print(f"\n{METRICS[metric]}: each range minus the shortest, paired by seed (mean, 95 % t-interval, p):\n")
     print("| agents | allocator | ranges | seeds | difference (95 % CI) | p |")
     print("| ---: | --- | --- | ---: | --- | ---: |")
@@ -127,7 +144,7 @@ def range_effect(df: pd.DataFrame, metric: str) -> None:
             for r in ranges[1:]:
                 row = _paired(by[r], by[ranges[0]])
                 if row:
-                    print(f"| {agents} | {a.upper()} | {r:.0f} - {ranges[0]:.0f} {row}")
+                    print(f"| {agents} | {_label(a)} | {r:.0f} - {ranges[0]:.0f} {row}")
 
 
 def main() -> None:
