@@ -126,6 +126,12 @@ def test_errors_blame_the_flag_that_gave_the_value(tmp_path, capsys):
     assert rc == 2 and "none of them empty" in err and "share a name" not in err, err
     rc, _, err = _main(capsys, "sweep", QUICKSTART, "--grid", "allocator.name=fcg,fcg", "--check")
     assert rc == 2 and "given twice" in err, err
+    sweep = tmp_path / "two_cbbas.yaml"  # two values of one name: the clash and the way out are named
+    sweep.write_text(
+        f"name: two\nbase: {QUICKSTART}\ngrid:\n  allocator: [{{name: cbba}}, {{name: cbba, execute: first}}]\n"
+    )
+    rc, _, err = _main(capsys, "sweep", sweep, "--check")
+    assert rc == 2 and "share the name 'allocator-cbba'" in err and "allocator.execute" in err, err
 
 
 def test_check_validates_and_plans_without_starting_anything(tmp_path, capsys):

@@ -173,7 +173,11 @@ def load_sweep(
             scenarios.append(SweepScenario("_".join(parts) or "base", overrides))
     names = [s.name for s in scenarios]
     if len(set(names)) != len(names):
-        raise cfg.ConfigError(f"{path}: two scenarios share a name")
+        twice = next(n for n in names if names.count(n) > 1)
+        raise cfg.ConfigError(
+            f"{path}: two scenarios share the name {twice!r} (a value of the grid is named by its 'name' "
+            "alone: vary the parameter that differs as its own grid key, e.g. allocator.execute)"
+        )
     varying = {
         k
         for s in scenarios
