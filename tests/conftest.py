@@ -1,5 +1,8 @@
 import csv
+import multiprocessing.process
+import os
 import signal
+import subprocess
 from collections import defaultdict
 from pathlib import Path
 
@@ -63,6 +66,25 @@ def ledger_outcomes(rows: list[dict]) -> dict[str, int]:
     for r in rows:
         out[r["outcome"]] += r["messages"]
     return dict(out)
+
+
+@pytest.fixture(autouse=True)
+def fast_lane_starts_no_process(request, monkeypatch):
+    """A test of the fast lane (``-m "not slow"``) starts no process: one that does (a run, a sweep,
+    a command) is marked slow, by its module in SLOW_MODULES or by ``@pytest.mark.slow`` itself."""
+    if request.node.get_closest_marker("slow") is None:
+
+        def refuse(*args, **kwargs):
+            raise AssertionError(
+                f"{request.node.nodeid} started a process but is not marked slow "
+                "(tests/conftest.py SLOW_MODULES, or @pytest.mark.slow on the test)"
+            )
+
+        monkeypatch.setattr(subprocess.Popen, "_execute_child", refuse)
+        monkeypatch.setattr(os, "fork", refuse)
+        monkeypatch.setattr(os, "posix_spawn", refuse)
+        monkeypatch.setattr(multiprocessing.process.BaseProcess, "start", refuse)
+    yield
 
 
 @pytest.fixture(autouse=True)

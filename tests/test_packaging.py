@@ -7,6 +7,8 @@ import sys
 import tomllib
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -59,14 +61,16 @@ def test_benchmarks_import_the_installed_package():
         assert "sys.path.insert" not in path.read_text(), f"{path.name} patches sys.path"
 
 
+@pytest.mark.slow  # starts processes
 def test_import_directions_hold():
-    """The layers and independence rules of pyproject's ``[tool.importlinter]`` (run by CI too;
-    here so that the fast lane catches an upward import)."""
+    """The layers and independence rules of pyproject's ``[tool.importlinter]`` (run by CI too).
+    Slow: import-linter runs on the installed layout that ``.ci/installed-view`` builds, a process."""
     run = subprocess.run([str(ROOT / ".ci" / "importlint")], capture_output=True, text=True)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
     assert "0 broken" in run.stdout
 
 
+@pytest.mark.slow  # starts processes
 def test_the_proxy_process_loads_no_plugin_and_no_tree_engine():
     code = "import sys, swarmbed.netem.proxy; print('\\n'.join(m for m in sys.modules if m.startswith('swarmbed.')))"
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
@@ -86,6 +90,7 @@ def test_the_proxy_process_loads_no_plugin_and_no_tree_engine():
     ], loaded
 
 
+@pytest.mark.slow  # starts processes
 def test_agents_and_the_proxy_import_no_analysis_library():
     """What the fork server preloads for every agent (the agent runtime and every shipped
     allocator) and the proxy process stay lean: none of the launcher's and the reports'
@@ -101,6 +106,7 @@ def test_agents_and_the_proxy_import_no_analysis_library():
     assert not [m for m in heavy if m in loaded], sorted(m for m in heavy if m in loaded)
 
 
+@pytest.mark.slow  # starts processes
 def test_old_module_names_still_import_with_a_warning_naming_the_new_one():
     """A plugin or scenario written against a name issue 30 moved keeps working, told where it went."""
     code = (

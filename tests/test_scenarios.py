@@ -84,6 +84,7 @@ def test_the_checker_catches_lost_items_and_a_crash_on_bad_actions():
         check_scenario(Fragile, ticks=1)
 
 
+@pytest.mark.slow  # starts processes
 def test_an_action_the_scenario_does_not_declare_never_reaches_the_world(tmp_path):
     """Agents whose exploration waypoints are NaN send ``["goto", nan, nan]``: the coordinator hands
     the world ``["invalid"]`` instead (counted), and no position becomes NaN."""
@@ -124,6 +125,7 @@ network: {{range: 40}}
     return cfg.load(path, list(overrides))
 
 
+@pytest.mark.slow  # starts processes
 def test_a_third_scenario_runs_end_to_end_with_no_change_to_swarmbed(tmp_path):
     exp = _pickup_experiment(tmp_path)
     result = run_experiment(exp, tmp_path / "run", progress=False)
@@ -138,6 +140,7 @@ def test_a_third_scenario_runs_end_to_end_with_no_change_to_swarmbed(tmp_path):
     assert again.summary["delivered"] == s["delivered"]
 
 
+@pytest.mark.slow  # starts processes
 def test_analyze_draws_the_figures_a_third_scenario_names(tmp_path):
     """``Scenario.figures`` and ``metric_labels``: the analysis tabulates and draws a scenario it
     has never heard of, with no edit of its own."""
@@ -155,6 +158,7 @@ def test_analyze_draws_the_figures_a_third_scenario_names(tmp_path):
     assert ",delivered,2," in summary and ",distance_total,2," in summary, summary
 
 
+@pytest.mark.slow  # starts processes
 def test_an_installed_package_adds_a_scenario_and_an_allocator_through_entry_points(tmp_path):
     dist = tmp_path / "pickup_plugin-0.1.dist-info"
     dist.mkdir()

@@ -40,6 +40,7 @@ def test_cohens_d_uses_the_pooled_standard_deviation():
     assert cohens_d(a, b) == pytest.approx(0.5)  # means differ by 1, pooled sd is 2
 
 
+@pytest.mark.slow  # starts processes
 def test_sar_analysis_of_two_sweeps(tmp_path):
     base = ROOT / "experiments" / "sar" / "_base.yaml"
     dirs = []
@@ -76,6 +77,7 @@ def test_sar_analysis_of_two_sweeps(tmp_path):
     assert row["mean"] == 0 and row["control_mean"] > 0 and row["cohens_d"] < 0
 
 
+@pytest.mark.slow  # starts processes
 def test_strategies_are_compared_within_each_setting_of_a_sweeps_other_factors(tmp_path):
     """A sweep over strategies and a loss level: the statistics and the per-strategy bars are made
     per loss level, never over both pooled."""

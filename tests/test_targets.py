@@ -4,6 +4,8 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
 from swarmbed.extension.allocator import Allocator
 from swarmbed.wire.state import pack_state, unpack_state
 from swarmbed.wire.targets import load_target
@@ -41,6 +43,7 @@ def test_two_files_of_one_name_stay_two_plugins(tmp_path):
     assert a.__module__ != b.__module__
 
 
+@pytest.mark.slow  # starts processes
 def test_a_copied_file_restores_a_snapshot_made_from_the_original(tmp_path):
     """Another host loads its own copy of the file: same bytes, same module name, so a snapshot's
     type names resolve there (checked in a fresh interpreter standing in for that host)."""
