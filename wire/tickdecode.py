@@ -16,7 +16,6 @@ is dropped and counted, and the one-line error that names why, stay as they were
 
 from __future__ import annotations
 
-import types
 import typing
 from typing import Annotated, Any
 
@@ -32,7 +31,7 @@ from swarmbed.wire.codec import (
     TickIn,
     decode_agent_in,
 )
-from swarmbed.wire.observation import Observation
+from swarmbed.wire.observation import Observation, _is_union, _optional
 
 _TICK = Annotated[int, msgspec.Meta(ge=0)]
 _DECISION = Annotated[int, msgspec.Meta(ge=-(2**31), lt=2**31)]
@@ -45,7 +44,7 @@ def _typed(annotation: Any) -> bool:
     if annotation in _SCALARS:
         return True
     origin, args = typing.get_origin(annotation), typing.get_args(annotation)
-    if origin in (typing.Union, types.UnionType):
+    if _is_union(annotation):
         rest = [a for a in args if a is not type(None)]
         return len(args) == 2 and len(rest) == 1 and _typed(rest[0])
     if origin is list:
@@ -55,11 +54,6 @@ def _typed(annotation: Any) -> bool:
             return _typed(args[0])
         return bool(args) and all(_typed(a) for a in args)
     return False
-
-
-def _optional(annotation: Any) -> bool:
-    origin = typing.get_origin(annotation)
-    return origin in (typing.Union, types.UnionType) and type(None) in typing.get_args(annotation)
 
 
 class TickDecoder:
