@@ -22,6 +22,14 @@ consensus round, and hands its agent the first task of its path only after a con
 left the bundle as it was; on the other ticks the agent has no task and its tree explores
 (``execute: settled``, the default). ``execute: first`` heads for the first task of the path on
 every tick, as swarmbed's published section 7 did.
+
+Which tasks a consensus round touches: Table 1 is applied to every task a neighbour's message
+names (``consensus_scope: all``, the CBBA paper). SPACE's code applies it only to the tasks the agent
+senses, and of those only to the ones both it and the neighbour hold a bid for (``if y_k.get(j) is
+None or y_i.get(j) is None: continue``; an agent's ``y`` gains keys only by its own bids):
+``consensus_scope: local_bids`` does that, with what our messages carry: the tasks in view that this
+agent has bid on since its knowledge was last cleared and that the message names. (SPACE's message
+also names the tasks a sender bid on and has since reset; ours does not carry those.)
 """
 
 from __future__ import annotations
@@ -49,6 +57,11 @@ class CBBAParams(BaseModel):
         "settled",
         description="settled: work on the path's first task only on a tick whose consensus left a non-empty "
         "bundle as it was (SPACE's code), else explore; first: on every tick (the published section 7)",
+    )
+    consensus_scope: Literal["all", "local_bids"] = Field(
+        "all",
+        description="all: Table 1 on every task a neighbour names (the CBBA paper); local_bids: only on tasks in "
+        "view that this agent bid on and the neighbour names (SPACE's code)",
     )
     full_every: int = Field(
         10,
@@ -81,9 +94,12 @@ class CBBA(Allocator):
         for task in self.book.update(view):
             st.forget(task)
         before = list(st.bundle)
+        within = None
+        if self.params.consensus_scope == "local_bids":
+            within = {t for t in view.tasks if t in st.bid_on}
         for msg in view.inbox:
             if msg.kind == KIND:
-                st.receive(msg.sender, msg.data, ignore=self.book.done)
+                st.receive(msg.sender, msg.data, ignore=self.book.done, within=within)
         st.release()
         settled = bool(before) and st.bundle == before
         self.build_bundle(view)
@@ -149,4 +165,5 @@ class CBBA(Allocator):
         elif now - self.empty_since >= self.params.reset_after:
             st.y.clear()
             st.z.clear()
+            st.bid_on.clear()
             self.empty_since = now

@@ -88,6 +88,7 @@ class ConsensusState:
         self.sent = 0  # messages made
         self.told: dict[int, tuple[int, float]] = {}  # task -> (winner, bid) as the last message had it
         self.told_s: dict[int, float] = {}  # agent -> timestamp as the last message had it
+        self.bid_on: set[int] = set()  # tasks this agent bid on since its knowledge was last cleared
 
     def message(self) -> dict:
         """The state for neighbours: whole, or (``full_every`` > 1) what changed since the last one."""
@@ -113,8 +114,11 @@ class ConsensusState:
             "s": [[a, _compact(ts)] for a, ts in sorted(self.s.items())],
         }
 
-    def receive(self, sender: int, data: dict, ignore: Iterable[int] = ()) -> None:
-        """Apply Table 1 to every task in a neighbour's message, then merge its timestamps."""
+    def receive(self, sender: int, data: dict, ignore: Iterable[int] = (), within: set[int] | None = None) -> None:
+        """Apply Table 1 to every task in a neighbour's message, then merge its timestamps.
+
+        ``within`` (SPACE's code's scope, ``consensus: bid``): apply it only to the tasks in ``within``
+        that the message names, leaving alone those the sender holds no winner for."""
         i, k = self.agent_id, sender
         delta = bool(data.get("d"))
         entries = set(map(tuple, data["w"]))
@@ -124,6 +128,8 @@ class ConsensusState:
             mine = {(t, w, y_t) for (t, w), y_t in zip(self.z.items(), (self.y[t] for t in self.z))}
             differing = {e[0] for e in entries ^ mine}  # identical entries leave every table case unchanged
         theirs = {t: (w, b) for t, w, b in entries if t in differing}
+        if within is not None:
+            differing = {t for t in differing if t in within and t in theirs}
         sk = dict(data["s"])
         sk[k] = data["t"]
         skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
@@ -161,6 +167,7 @@ class ConsensusState:
     def forget(self, task: int) -> None:
         """The task is gone (done): drop it everywhere."""
         self.reset(task)
+        self.bid_on.discard(task)
         if task in self.bundle:
             self.bundle.remove(task)
             self.path.remove(task)
@@ -182,6 +189,7 @@ class ConsensusState:
 
     def add(self, task: int, bid: float, position: int | None = None) -> None:
         self.bundle.append(task)
+        self.bid_on.add(task)
         self.path.insert(len(self.path) if position is None else position, task)
         self.y[task] = bid
         self.z[task] = self.agent_id

@@ -328,3 +328,33 @@ def test_cbba_works_only_on_a_bundle_a_consensus_round_left_alone_as_spaces_code
     built, settled = decide(0), decide(1)
     assert settled == cbba.path[0] and built == (None if execute == "settled" else cbba.path[0])
     assert decide(2) == cbba.path[0]  # nothing heard: still settled
+
+
+def test_cbba_consensus_scope_of_spaces_code_touches_only_sensed_tasks_both_sides_bid_on():
+    """SPACE's code skips a task in a consensus round unless it is in the agent's local tasks and
+    both it and the neighbour hold a bid for it (``consensus_scope: local_bids``); the CBBA paper's
+    round (``all``, the default) takes every task the neighbour names."""
+    theirs = {"t": 1, "w": [[10, 1, 9.0], [11, 1, 9.0], [12, 1, 9.0]], "s": []}
+    paper, space = ConsensusState(0), ConsensusState(0)
+    for st in (paper, space):
+        st.add(10, 5.0)
+        st.add(11, 4.0)  # bid on, but out of view below
+    paper.receive(1, theirs)
+    in_view = {10, 12, 13}
+    space.receive(1, theirs, within=in_view & space.bid_on)
+    assert paper.z == {10: 1, 11: 1, 12: 1}
+    assert space.z == {10: 1, 11: 0}  # 11: not sensed; 12: never bid on by agent 0
+
+    tasks = {0: TaskInfo(0, 10.0, 0.0, 30.0), 1: TaskInfo(1, 200.0, 0.0, 30.0)}
+    heard = [Message(1, "cbba", {"t": 0, "w": [[0, 1, 0.5], [1, 1, 9.0]], "s": []})]
+    winners = {}
+    for scope in ("all", "local_bids"):
+        cbba = make("cbba", {"consensus_scope": scope, "max_tasks": 1}, 0, np.random.default_rng(0), 0)
+        view = LocalView(0, 2, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, tasks, [], 1.0, 300.0)
+        cbba.decide(view)  # bids on task 0, the nearer
+        assert cbba.bundle == [0]
+        view = LocalView(0, 2, 1, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, tasks, heard, 1.0, 300.0)
+        cbba.decide(view)
+        winners[scope] = dict(cbba.z)
+    assert winners["all"][1] == 1  # learnt who wins task 1, which it never bid on
+    assert 1 not in winners["local_bids"] and winners["local_bids"][0] == 0  # 0 kept: its bid is higher

@@ -2,6 +2,7 @@
 
     python docs/scripts/fig3.py runs/space_fig3_code
     python docs/scripts/fig3.py runs/space_fig3_code --agents 50 --orderings
+    python docs/scripts/fig3.py runs/space_cbba_range runs/space_cbba_scope --orderings   # sweeps together
 
 Per cell (agent count, range) and allocator: runs, and for mission time, time to 95 % and 99 % of
 the tasks, the mean travel distance per agent and the Gini coefficient of work per agent, the mean
@@ -151,11 +152,11 @@ def range_effect(df: pd.DataFrame, metric: str) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("sweep", type=Path)
+    parser.add_argument("sweep", type=Path, nargs="+", help="sweep folders, read as one (pairs by seed across them)")
     parser.add_argument("--agents", type=int, nargs="*", help="only these agent counts")
     parser.add_argument("--orderings", action="store_true", help="paired comparisons between allocators")
     args = parser.parse_args()
-    df = runs(args.sweep)
+    df = pd.concat([runs(folder) for folder in args.sweep], ignore_index=True)
     if args.agents:
         df = df[df["agents.count"].isin(args.agents)]
     tables(df)
