@@ -10,8 +10,10 @@ runs at once as it has threads. Dask runs a task again elsewhere when its worker
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Iterator, Sequence
 from typing import Any
+from urllib.parse import urlsplit
 
 import distributed
 
@@ -22,6 +24,8 @@ class DaskExecutor(Executor):
     name = "dask"
 
     def __init__(self, scheduler: str | distributed.LocalCluster, timeout: float = 30.0) -> None:
+        if isinstance(scheduler, str):
+            _refuse_unreachable(scheduler, timeout)
         try:
             self.client = distributed.Client(scheduler, timeout=timeout, set_as_default=False)
         except (OSError, TimeoutError) as exc:
@@ -66,6 +70,19 @@ class DaskExecutor(Executor):
 
     def close(self) -> None:
         self.client.close()
+
+
+def _refuse_unreachable(scheduler: str, timeout: float) -> None:
+    """Fail at once on an address nobody listens at: Dask's client retries a refused connection
+    until its timeout (30 s), which a mistyped port should not cost."""
+    parts = urlsplit(scheduler)
+    if parts.scheme not in ("tcp", "") or not parts.hostname or parts.port is None:
+        return  # another transport (tls://, inproc://): Dask's own connect says what is wrong
+    try:
+        with socket.create_connection((parts.hostname, parts.port), timeout=timeout):
+            pass
+    except OSError as exc:
+        raise ExecutorError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {exc}") from None
 
 
 def make(scheduler: str | None = None, **_ignored: Any) -> DaskExecutor:
