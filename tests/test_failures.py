@@ -308,9 +308,17 @@ def test_a_coordinator_that_fails_while_being_built_leaves_no_process_or_credent
             raise RuntimeError("the world cannot be built")
 
     monkeypatch.setattr(runner, "Coordinator", Broken)
-    before = set(Path(tempfile.gettempdir()).glob("swarmbed-*-*"))
+    made: list[Path] = []  # this run's private folders (a test beside this one may make its own)
+    mkdtemp = tempfile.mkdtemp
+
+    def recorded_mkdtemp(*args, **kwargs):
+        made.append(Path(mkdtemp(*args, **kwargs)))
+        return str(made[-1])
+
+    monkeypatch.setattr(tempfile, "mkdtemp", recorded_mkdtemp)
     with pytest.raises(RuntimeError, match="cannot be built"):
         run_experiment(experiment(), tmp_path / "run", progress=False)
-    assert set(Path(tempfile.gettempdir()).glob("swarmbed-*-*")) <= before
+    private = [f for f in made if f.name.startswith("swarmbed-")]
+    assert private and not any(f.exists() for f in private)
     _, alive = psutil.wait_procs(psutil.Process().children(recursive=True), timeout=5)
     assert not alive, [cmdline(p) for p in alive]
