@@ -12,6 +12,7 @@ import sys
 import textwrap
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -24,6 +25,8 @@ from swarmbed.wire.session import add_zenoh_args
 
 if TYPE_CHECKING:
     from swarmbed.experiments.campaigns.executors import Executor
+
+    Subparsers = argparse._SubParsersAction[argparse.ArgumentParser]  # what add_subparsers returns
 
 
 def _keys_epilog() -> str:
@@ -136,6 +139,51 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def register_run(sub: Subparsers) -> None:
+    """``swarmbed run``: its arguments, run by :func:`cmd_run`."""
+    run = sub.add_parser(
+        "run", help="run one experiment", epilog=_keys_epilog(), formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    run.add_argument("experiment", help="experiment YAML file")
+    run.add_argument("--seed", type=int, help="run seed (overrides run.seed)")
+    run.add_argument("--out", help="run directory (default: runs/<name>/seed<seed>-<time>); it must be empty")
+    run.add_argument("--force", action="store_true", help="clear --out first if it holds anything")
+    run.add_argument(
+        "--check",
+        action="store_true",
+        help="validate everything (files, plugins, trees and port values, ticks, credentials) and print the plan "
+        "with an estimate of its wall time; start nothing",
+    )
+    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument(
+        "--listen",
+        "-l",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="also listen here, for the routers of hosts in the placement (e.g. tcp/0.0.0.0:7447)",
+    )
+    run.add_argument(
+        "--admit",
+        action="append",
+        default=[],
+        metavar="CREDENTIALS",
+        help="a credentials file (swarmbed credentials) of a host or an operator the hub admits "
+        "besides the run's own processes (repeatable)",
+    )
+    run.add_argument(
+        "--no-auth",
+        action="store_true",
+        help="no authentication or access control: anyone who reaches the hub may join and publish",
+    )
+    run.add_argument("--tls", metavar="DIR", help="certificates (swarmbed certs) for --listen tls/HOST:PORT endpoints")
+    run.add_argument(
+        "--tls-name", metavar="NAME", default="hub", help="the certificate in --tls DIR the hub presents (default: hub)"
+    )
+    run.set_defaults(func=cmd_run)
+
+
 def cmd_soak(args: argparse.Namespace) -> int:
     from swarmbed.experiments.campaigns.chaos import ChaosError, load_chaos
     from swarmbed.experiments.campaigns.soak import Thresholds, format_verdict, parse_duration, soak
@@ -161,6 +209,41 @@ def cmd_soak(args: argparse.Namespace) -> int:
     return 0 if result["passed"] else 1
 
 
+def register_soak(sub: Subparsers) -> None:
+    """``swarmbed soak``: its arguments, run by :func:`cmd_soak`."""
+    so = sub.add_parser(
+        "soak",
+        help="run an experiment for a wall-clock duration under faults; every process "
+        "watched; a verdict at the end (exit 1 on a breach)",
+    )
+    so.add_argument("experiment", help="experiment YAML file")
+    so.add_argument("--duration", required=True, help="wall time: 90s, 30m, 2h, 1h30m")
+    so.add_argument("--chaos", metavar="CHAOS.yaml", help="faults to inject (see docs/soak.md)")
+    so.add_argument("--out", help="soak directory (default: runs/soak-<name>/seed<seed>-<time>)")
+    so.add_argument("--seed", type=int, help="run seed (overrides run.seed; also seeds the chaos)")
+    so.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
+    so.add_argument("--interval", type=float, default=5.0, help="wall seconds between samples (default 5)")
+    so.add_argument(
+        "--max-rss-slope",
+        type=float,
+        default=10.0,
+        metavar="PCT_PER_H",
+        help="largest RSS growth of any process over the second half, %% per hour (default 10)",
+    )
+    so.add_argument(
+        "--max-fd-growth",
+        type=float,
+        default=10.0,
+        metavar="PER_H",
+        help="largest growth of open file descriptors of any process, per hour (default 10)",
+    )
+    so.add_argument(
+        "--max-stall", type=float, default=10.0, metavar="S", help="longest a tick may take, wall seconds (default 10)"
+    )
+    so.add_argument("--no-auth", action="store_true", help="no authentication or access control on the hub")
+    so.set_defaults(func=cmd_soak)
+
+
 def cmd_credentials(args: argparse.Namespace) -> int:
     from swarmbed.wire.credentials import CredentialsError, Identity, write_credentials
 
@@ -175,6 +258,28 @@ def cmd_credentials(args: argparse.Namespace) -> int:
     return 0
 
 
+def register_credentials(sub: Subparsers) -> None:
+    """``swarmbed credentials``: its arguments, run by :func:`cmd_credentials`."""
+    from swarmbed.wire.credentials import ROLES
+
+    cr = sub.add_parser("credentials", help="make a credentials file for a host daemon or an operator (watch, swap)")
+    cr.add_argument("file", help="the file to write (created with mode 600)")
+    cr.add_argument("--user", required=True, help="the user name (letters, digits, no ':' or spaces)")
+    cr.add_argument(
+        "--role",
+        choices=list(ROLES),
+        default="operator",
+        help="operator: watch a run and ask for swaps; host: a host daemon; commander: an operator that may "
+        "also publish the robots' decisions on ROS 2 (allocator ros2, docs/ros2.md) (default: operator)",
+    )
+    cr.add_argument(
+        "--host",
+        help="role host: the host name the daemon runs as (swarmbed host --name); "
+        "the hub lets this identity act as that host only (default: the user name)",
+    )
+    cr.set_defaults(func=cmd_credentials)
+
+
 def cmd_certs(args: argparse.Namespace) -> int:
     from swarmbed.experiments.launch.certs import CertError, make_certs
 
@@ -187,6 +292,20 @@ def cmd_certs(args: argparse.Namespace) -> int:
         print(path)
     print("copy ca.pem and a machine's NAME.pem and NAME.key to it (never ca.key); see the README's TLS section")
     return 0
+
+
+def register_certs(sub: Subparsers) -> None:
+    """``swarmbed certs``: its arguments, run by :func:`cmd_certs`."""
+    ce = sub.add_parser("certs", help="a certificate authority and per-machine certificates for TLS between machines")
+    ce.add_argument("folder", help="where the CA (ca.pem, ca.key) and the certificates go; the CA is reused")
+    ce.add_argument(
+        "machines",
+        nargs="+",
+        metavar="NAME[=ADDR,...]",
+        help="a machine and the addresses others reach it by, e.g. hub=192.0.2.10 labpc2=labpc2.lab",
+    )
+    ce.add_argument("--days", type=_positive, default=365, help="validity (default 365 days)")
+    ce.set_defaults(func=cmd_certs)
 
 
 def _node_owners(allocator: str | None, scenario: str | None) -> list[type]:
@@ -219,6 +338,19 @@ def cmd_bt(args: argparse.Namespace) -> int:
             bad += 1
             print(f"error: {exc}", file=sys.stderr)
     return 2 if bad else 0
+
+
+def register_bt(sub: Subparsers) -> None:
+    """``swarmbed bt``: its arguments, run by :func:`cmd_bt`."""
+    bt = sub.add_parser("bt", help="behavior-tree tools")
+    bt_sub = bt.add_subparsers(dest="bt_command", required=True)
+    palette = bt_sub.add_parser("palette", help="print a Groot2 <TreeNodesModel> of the custom nodes")
+    check = bt_sub.add_parser("check", help="load behavior-tree XML files and report every error")
+    check.add_argument("files", nargs="+")
+    for p in (palette, check):
+        p.add_argument("--allocator", help="only the nodes this allocator's trees may use (default: every one)")
+        p.add_argument("--scenario", help="only the nodes of this scenario (default: every one)")
+    bt.set_defaults(func=cmd_bt)
 
 
 def _positive(text: str) -> int:
@@ -299,6 +431,17 @@ def cmd_params(args: argparse.Namespace) -> int:
             print(f"  {key:<{width[0]}}  {typ:<{width[1]}}  {default:<{width[2]}}  {meaning}".rstrip())
         print()
     return 0
+
+
+def register_params(sub: Subparsers) -> None:
+    """``swarmbed params``: its arguments, run by :func:`cmd_params`."""
+    par = sub.add_parser(
+        "params", help="every key of an experiment, a scenario or an allocator: type, default, meaning"
+    )
+    par.add_argument(
+        "name", nargs="?", help="a section (network, run, ...), a scenario or an allocator; none: every section"
+    )
+    par.set_defaults(func=cmd_params)
 
 
 def _sweep_executor(args: argparse.Namespace, out: Path) -> Executor:
@@ -397,6 +540,64 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return 0 if len(ok) == len(table) else 1
 
 
+def register_sweep(sub: Subparsers) -> None:
+    """``swarmbed sweep``: its arguments, run by :func:`cmd_sweep`."""
+    sw = sub.add_parser("sweep", help="Monte Carlo runs over scenarios, in parallel and resumable")
+    sw.add_argument("sweep", nargs="?", help="sweep YAML (base + scenarios/grid + runs) or a plain experiment")
+    sw.add_argument(
+        "--status", metavar="DIR", help="print ok / running / failed / interrupted / missing runs per scenario"
+    )
+    sw.add_argument("--out", help="sweep directory (default: runs/<name>)")
+    sw.add_argument(
+        "--jobs",
+        "-j",
+        type=_positive,
+        help="runs at once (local: default one per core; slurm: the array's parallelism)",
+    )
+    sw.add_argument(
+        "--executor",
+        choices=["local", "slurm", "dask"],
+        default="local",
+        help="where runs execute (default local; slurm needs swarmbed[slurm], dask swarmbed[dask])",
+    )
+    sw.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="the Dask scheduler (--executor dask)")
+    sw.add_argument("--slurm-partition", help="Slurm partition (--executor slurm)")
+    sw.add_argument("--slurm-time", default="120", help="time limit per run: minutes or H:MM:SS (default 120)")
+    sw.add_argument(
+        "--slurm-cluster",
+        choices=["slurm", "local"],
+        help="'local': submitit's stand-in, one process per array task on this machine (a dry run)",
+    )
+    sw.add_argument("--detach", action="store_true", help="submit the array job and return (--executor slurm)")
+    sw.add_argument(
+        "--stale-after",
+        type=float,
+        default=120.0,
+        metavar="S",
+        help="a run claimed by a process that has not shown life for S seconds is taken over "
+        "(default 120; a dead process on this host at once)",
+    )
+    sw.add_argument(
+        "--redo-mismatched",
+        action="store_true",
+        help="run again the completed runs in --out that were made under another configuration than "
+        "this sweep plans (without it the sweep refuses to reuse or mix them)",
+    )
+    sw.add_argument("--runs", "-n", type=_positive, help="runs per scenario (overrides the file)")
+    sw.add_argument("--seed", type=int, help="sweep seed (overrides the file)")
+    sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")
+    sw.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every run")
+    sw.add_argument("--no-progress", action="store_true")
+    sw.add_argument("--yes", action="store_true", help=f"start a sweep of more than {1000:,} runs without asking")
+    sw.add_argument(
+        "--check",
+        action="store_true",
+        help="validate the sweep and every scenario's experiment, print the plan and a wall-time estimate; "
+        "start nothing",
+    )
+    sw.set_defaults(func=cmd_sweep)
+
+
 def cmd_analyze(args: argparse.Namespace) -> int:
     from swarmbed.experiments.views.analyze import AnalyzeError, analyze
 
@@ -413,6 +614,25 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     for path in written:
         print(path)
     return 0
+
+
+def register_analyze(sub: Subparsers) -> None:
+    """``swarmbed analyze``: its arguments, run by :func:`cmd_analyze`."""
+    an = sub.add_parser("analyze", help="tables and figures from a sweep directory")
+    an.add_argument("sweep_dir", nargs="+", help="sweep directories (outputs go to the first)")
+    an.add_argument("--control", help="control strategy for Dunnett and Cohen's d (default: cbba-etc where present)")
+    an.add_argument(
+        "--mixed-versions",
+        action="store_true",
+        help="pool runs of a scenario or allocator made in different versions (provenance.json)",
+    )
+    an.add_argument(
+        "--trust-plugins",
+        action="store_true",
+        help="import the scenario classes the runs name as module:Class or file.py:Class (only for folders you "
+        "made yourself: a received folder could name any code); registered scenarios need no trust",
+    )
+    an.set_defaults(func=cmd_analyze)
 
 
 def cmd_check_allocator(args: argparse.Namespace) -> int:
@@ -444,6 +664,18 @@ def cmd_check_allocator(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def register_check_allocator(sub: Subparsers) -> None:
+    """``swarmbed check-allocator``: its arguments, run by :func:`cmd_check_allocator`."""
+    chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
+    chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")
+    chk.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="an allocator parameter")
+    chk.add_argument(
+        "--scenario",
+        help="the scenario it is for (a registered name; default: the one it is registered for, else mtsr)",
+    )
+    chk.set_defaults(func=cmd_check_allocator)
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     from swarmbed.experiments.views.report import ReportError, report
 
@@ -459,6 +691,14 @@ def cmd_report(args: argparse.Namespace) -> int:
             return 2
         print(f"{path}  ({path.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
     return 0
+
+
+def register_report(sub: Subparsers) -> None:
+    """``swarmbed report``: its arguments, run by :func:`cmd_report`."""
+    rep = sub.add_parser("report", help="a run's or a sweep's bandwidth accounting as one self-contained HTML page")
+    rep.add_argument("folders", nargs="+", metavar="RUN_DIR|SWEEP_DIR")
+    rep.add_argument("-o", "--output", help="the HTML file (default: report.html in the folder)")
+    rep.set_defaults(func=cmd_report)
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -484,6 +724,23 @@ def cmd_replay(args: argparse.Namespace) -> int:
         return 2
     print(f"{path}  ({frames} frames, {path.stat().st_size / 1e6:.1f} MB, {time.perf_counter() - t0:.1f} s)")
     return 0
+
+
+def register_replay(sub: Subparsers) -> None:
+    """``swarmbed replay``: its arguments, run by :func:`cmd_replay`."""
+    rp = sub.add_parser("replay", help="a movie of a run recorded with run.record_trajectories")
+    rp.add_argument("run_dir", metavar="RUN_DIR")
+    rp.add_argument("-o", "--output", help="run.gif or run.mp4 (mp4 needs ffmpeg; default: replay.gif in RUN_DIR)")
+    rp.add_argument("--from", type=float, help="simulated second to start at")
+    rp.add_argument("--to", type=float, help="simulated second to end at")
+    rp.add_argument("--fps", type=_positive, default=10, help="frames per second of the movie (default 10)")
+    rp.add_argument("--every", type=_positive, help="ticks per frame (default: at most 600 frames)")
+    rp.add_argument(
+        "--mcap",
+        metavar="FILE.mcap",
+        help="write an MCAP recording for Foxglove-class viewers instead of a movie (needs swarmbed[viewers])",
+    )
+    rp.set_defaults(func=cmd_replay)
 
 
 def _replay_mcap(run: Path, out: Path) -> int:
@@ -517,6 +774,24 @@ def cmd_check_scenario(args: argparse.Namespace) -> int:
     return 0
 
 
+def register_check_scenario(sub: Subparsers) -> None:
+    """``swarmbed check-scenario``: its arguments, run by :func:`cmd_check_scenario`."""
+    chs = sub.add_parser(
+        "check-scenario", help="run the scenario checker (determinism, observations, results, conservation, robustness)"
+    )
+    chs.add_argument("scenario", help="registered name, module:Class or path/to/file.py:Class")
+    chs.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="a scenario parameter")
+    chs.add_argument(
+        "--agents",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an agents-section key for the check (e.g. max_speed=5)",
+    )
+    chs.add_argument("--ticks", type=int, default=60, help="ticks per checked run (default 60)")
+    chs.set_defaults(func=cmd_check_scenario)
+
+
 def cmd_host(args: argparse.Namespace) -> int:
     from swarmbed.experiments.hosts.client import HostError
     from swarmbed.experiments.hosts.daemon import serve
@@ -541,6 +816,21 @@ def cmd_host(args: argparse.Namespace) -> int:
     except (CredentialsError, HostError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+
+
+def register_host(sub: Subparsers) -> None:
+    """``swarmbed host``: its arguments, run by :func:`cmd_host`."""
+    host = sub.add_parser("host", help="run this machine's host daemon: a Zenoh router that starts agents for runs")
+    host.add_argument("--name", required=True, help="this host's name in placements (letters, digits, _ . -)")
+    host.add_argument("--logs", help="where its agents log (default: runs/hosts/<name>)")
+    host.add_argument(
+        "--insecure",
+        action="store_true",
+        help="run without --credentials: no authentication, anyone who reaches the router may start "
+        "agents (their code included); allowed with loopback endpoints only",
+    )
+    add_zenoh_args(host, default_mode="router")
+    host.set_defaults(func=cmd_host)
 
 
 def _client_session(args: argparse.Namespace, connect_timeout_s: float | None = None):
@@ -596,6 +886,14 @@ def cmd_hosts(args: argparse.Namespace) -> int:
     return 0
 
 
+def register_hosts(sub: Subparsers) -> None:
+    """``swarmbed hosts``: its arguments, run by :func:`cmd_hosts`."""
+    hosts = sub.add_parser("hosts", help="list the hosts visible from an endpoint")
+    hosts.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
+    add_zenoh_args(hosts)
+    hosts.set_defaults(func=cmd_hosts)
+
+
 def cmd_watch(args: argparse.Namespace) -> int:
 
     from swarmbed.experiments.views.watch import WatchError, watch
@@ -609,6 +907,18 @@ def cmd_watch(args: argparse.Namespace) -> int:
         except WatchError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+
+
+def register_watch(sub: Subparsers) -> None:
+    """``swarmbed watch``: its arguments, run by :func:`cmd_watch`."""
+    wat = sub.add_parser("watch", help="a live view of a running experiment (read-only)")
+    wat.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
+    wat.add_argument(
+        "--wait", type=float, default=10.0, help="seconds to wait for the hub to listen and the run to answer"
+    )
+    wat.add_argument("--map", metavar="FILE.html", help="also keep a map of the run in FILE.html (reloads itself)")
+    add_zenoh_args(wat)
+    wat.set_defaults(func=cmd_watch)
 
 
 def cmd_groot(args: argparse.Namespace) -> int:
@@ -629,6 +939,20 @@ def cmd_groot(args: argparse.Namespace) -> int:
         except WatchError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+
+
+def register_groot(sub: Subparsers) -> None:
+    """``swarmbed groot``: its arguments, run by :func:`cmd_groot`."""
+    gr = sub.add_parser("groot", help="watch an agent's behavior tree of a running run in Groot2, live")
+    gr.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
+    gr.add_argument("--agent", type=int, default=0, help="the agent to show first (type another id to switch)")
+    gr.add_argument("--port", type=int, default=1667, help="Groot2's port (and the next one), as BehaviorTree.CPP")
+    gr.add_argument("--bind", default="127.0.0.1", help="the address Groot2 connects to (default: this machine only)")
+    gr.add_argument(
+        "--wait", type=float, default=10.0, help="seconds to wait for the hub to listen and the run to answer"
+    )
+    add_zenoh_args(gr)
+    gr.set_defaults(func=cmd_groot)
 
 
 def cmd_swap(args: argparse.Namespace) -> int:
@@ -696,283 +1020,8 @@ def cmd_swap(args: argparse.Namespace) -> int:
     return 1
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
-    sub = ap.add_subparsers(dest="command", required=True)
-
-    run = sub.add_parser(
-        "run", help="run one experiment", epilog=_keys_epilog(), formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    run.add_argument("experiment", help="experiment YAML file")
-    run.add_argument("--seed", type=int, help="run seed (overrides run.seed)")
-    run.add_argument("--out", help="run directory (default: runs/<name>/seed<seed>-<time>); it must be empty")
-    run.add_argument("--force", action="store_true", help="clear --out first if it holds anything")
-    run.add_argument(
-        "--check",
-        action="store_true",
-        help="validate everything (files, plugins, trees and port values, ticks, credentials) and print the plan "
-        "with an estimate of its wall time; start nothing",
-    )
-    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
-    run.add_argument("--no-progress", action="store_true", help="no progress bar")
-    run.add_argument(
-        "--listen",
-        "-l",
-        action="append",
-        default=[],
-        metavar="ENDPOINT",
-        help="also listen here, for the routers of hosts in the placement (e.g. tcp/0.0.0.0:7447)",
-    )
-    run.add_argument(
-        "--admit",
-        action="append",
-        default=[],
-        metavar="CREDENTIALS",
-        help="a credentials file (swarmbed credentials) of a host or an operator the hub admits "
-        "besides the run's own processes (repeatable)",
-    )
-    run.add_argument(
-        "--no-auth",
-        action="store_true",
-        help="no authentication or access control: anyone who reaches the hub may join and publish",
-    )
-    run.add_argument("--tls", metavar="DIR", help="certificates (swarmbed certs) for --listen tls/HOST:PORT endpoints")
-    run.add_argument(
-        "--tls-name", metavar="NAME", default="hub", help="the certificate in --tls DIR the hub presents (default: hub)"
-    )
-    run.set_defaults(func=cmd_run)
-
-    so = sub.add_parser(
-        "soak",
-        help="run an experiment for a wall-clock duration under faults; every process "
-        "watched; a verdict at the end (exit 1 on a breach)",
-    )
-    so.add_argument("experiment", help="experiment YAML file")
-    so.add_argument("--duration", required=True, help="wall time: 90s, 30m, 2h, 1h30m")
-    so.add_argument("--chaos", metavar="CHAOS.yaml", help="faults to inject (see docs/soak.md)")
-    so.add_argument("--out", help="soak directory (default: runs/soak-<name>/seed<seed>-<time>)")
-    so.add_argument("--seed", type=int, help="run seed (overrides run.seed; also seeds the chaos)")
-    so.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
-    so.add_argument("--interval", type=float, default=5.0, help="wall seconds between samples (default 5)")
-    so.add_argument(
-        "--max-rss-slope",
-        type=float,
-        default=10.0,
-        metavar="PCT_PER_H",
-        help="largest RSS growth of any process over the second half, %% per hour (default 10)",
-    )
-    so.add_argument(
-        "--max-fd-growth",
-        type=float,
-        default=10.0,
-        metavar="PER_H",
-        help="largest growth of open file descriptors of any process, per hour (default 10)",
-    )
-    so.add_argument(
-        "--max-stall", type=float, default=10.0, metavar="S", help="longest a tick may take, wall seconds (default 10)"
-    )
-    so.add_argument("--no-auth", action="store_true", help="no authentication or access control on the hub")
-    so.set_defaults(func=cmd_soak)
-
-    from swarmbed.wire.credentials import ROLES
-
-    cr = sub.add_parser("credentials", help="make a credentials file for a host daemon or an operator (watch, swap)")
-    cr.add_argument("file", help="the file to write (created with mode 600)")
-    cr.add_argument("--user", required=True, help="the user name (letters, digits, no ':' or spaces)")
-    cr.add_argument(
-        "--role",
-        choices=list(ROLES),
-        default="operator",
-        help="operator: watch a run and ask for swaps; host: a host daemon; commander: an operator that may "
-        "also publish the robots' decisions on ROS 2 (allocator ros2, docs/ros2.md) (default: operator)",
-    )
-    cr.add_argument(
-        "--host",
-        help="role host: the host name the daemon runs as (swarmbed host --name); "
-        "the hub lets this identity act as that host only (default: the user name)",
-    )
-    cr.set_defaults(func=cmd_credentials)
-
-    ce = sub.add_parser("certs", help="a certificate authority and per-machine certificates for TLS between machines")
-    ce.add_argument("folder", help="where the CA (ca.pem, ca.key) and the certificates go; the CA is reused")
-    ce.add_argument(
-        "machines",
-        nargs="+",
-        metavar="NAME[=ADDR,...]",
-        help="a machine and the addresses others reach it by, e.g. hub=192.0.2.10 labpc2=labpc2.lab",
-    )
-    ce.add_argument("--days", type=_positive, default=365, help="validity (default 365 days)")
-    ce.set_defaults(func=cmd_certs)
-
-    bt = sub.add_parser("bt", help="behavior-tree tools")
-    bt_sub = bt.add_subparsers(dest="bt_command", required=True)
-    palette = bt_sub.add_parser("palette", help="print a Groot2 <TreeNodesModel> of the custom nodes")
-    check = bt_sub.add_parser("check", help="load behavior-tree XML files and report every error")
-    check.add_argument("files", nargs="+")
-    for p in (palette, check):
-        p.add_argument("--allocator", help="only the nodes this allocator's trees may use (default: every one)")
-        p.add_argument("--scenario", help="only the nodes of this scenario (default: every one)")
-    bt.set_defaults(func=cmd_bt)
-
-    par = sub.add_parser(
-        "params", help="every key of an experiment, a scenario or an allocator: type, default, meaning"
-    )
-    par.add_argument(
-        "name", nargs="?", help="a section (network, run, ...), a scenario or an allocator; none: every section"
-    )
-    par.set_defaults(func=cmd_params)
-
-    sw = sub.add_parser("sweep", help="Monte Carlo runs over scenarios, in parallel and resumable")
-    sw.add_argument("sweep", nargs="?", help="sweep YAML (base + scenarios/grid + runs) or a plain experiment")
-    sw.add_argument(
-        "--status", metavar="DIR", help="print ok / running / failed / interrupted / missing runs per scenario"
-    )
-    sw.add_argument("--out", help="sweep directory (default: runs/<name>)")
-    sw.add_argument(
-        "--jobs",
-        "-j",
-        type=_positive,
-        help="runs at once (local: default one per core; slurm: the array's parallelism)",
-    )
-    sw.add_argument(
-        "--executor",
-        choices=["local", "slurm", "dask"],
-        default="local",
-        help="where runs execute (default local; slurm needs swarmbed[slurm], dask swarmbed[dask])",
-    )
-    sw.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="the Dask scheduler (--executor dask)")
-    sw.add_argument("--slurm-partition", help="Slurm partition (--executor slurm)")
-    sw.add_argument("--slurm-time", default="120", help="time limit per run: minutes or H:MM:SS (default 120)")
-    sw.add_argument(
-        "--slurm-cluster",
-        choices=["slurm", "local"],
-        help="'local': submitit's stand-in, one process per array task on this machine (a dry run)",
-    )
-    sw.add_argument("--detach", action="store_true", help="submit the array job and return (--executor slurm)")
-    sw.add_argument(
-        "--stale-after",
-        type=float,
-        default=120.0,
-        metavar="S",
-        help="a run claimed by a process that has not shown life for S seconds is taken over "
-        "(default 120; a dead process on this host at once)",
-    )
-    sw.add_argument(
-        "--redo-mismatched",
-        action="store_true",
-        help="run again the completed runs in --out that were made under another configuration than "
-        "this sweep plans (without it the sweep refuses to reuse or mix them)",
-    )
-    sw.add_argument("--runs", "-n", type=_positive, help="runs per scenario (overrides the file)")
-    sw.add_argument("--seed", type=int, help="sweep seed (overrides the file)")
-    sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")
-    sw.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every run")
-    sw.add_argument("--no-progress", action="store_true")
-    sw.add_argument("--yes", action="store_true", help=f"start a sweep of more than {1000:,} runs without asking")
-    sw.add_argument(
-        "--check",
-        action="store_true",
-        help="validate the sweep and every scenario's experiment, print the plan and a wall-time estimate; "
-        "start nothing",
-    )
-    sw.set_defaults(func=cmd_sweep)
-
-    an = sub.add_parser("analyze", help="tables and figures from a sweep directory")
-    an.add_argument("sweep_dir", nargs="+", help="sweep directories (outputs go to the first)")
-    an.add_argument("--control", help="control strategy for Dunnett and Cohen's d (default: cbba-etc where present)")
-    an.add_argument(
-        "--mixed-versions",
-        action="store_true",
-        help="pool runs of a scenario or allocator made in different versions (provenance.json)",
-    )
-    an.add_argument(
-        "--trust-plugins",
-        action="store_true",
-        help="import the scenario classes the runs name as module:Class or file.py:Class (only for folders you "
-        "made yourself: a received folder could name any code); registered scenarios need no trust",
-    )
-    an.set_defaults(func=cmd_analyze)
-
-    rep = sub.add_parser("report", help="a run's or a sweep's bandwidth accounting as one self-contained HTML page")
-    rep.add_argument("folders", nargs="+", metavar="RUN_DIR|SWEEP_DIR")
-    rep.add_argument("-o", "--output", help="the HTML file (default: report.html in the folder)")
-    rep.set_defaults(func=cmd_report)
-
-    rp = sub.add_parser("replay", help="a movie of a run recorded with run.record_trajectories")
-    rp.add_argument("run_dir", metavar="RUN_DIR")
-    rp.add_argument("-o", "--output", help="run.gif or run.mp4 (mp4 needs ffmpeg; default: replay.gif in RUN_DIR)")
-    rp.add_argument("--from", type=float, help="simulated second to start at")
-    rp.add_argument("--to", type=float, help="simulated second to end at")
-    rp.add_argument("--fps", type=_positive, default=10, help="frames per second of the movie (default 10)")
-    rp.add_argument("--every", type=_positive, help="ticks per frame (default: at most 600 frames)")
-    rp.add_argument(
-        "--mcap",
-        metavar="FILE.mcap",
-        help="write an MCAP recording for Foxglove-class viewers instead of a movie (needs swarmbed[viewers])",
-    )
-    rp.set_defaults(func=cmd_replay)
-
-    chk = sub.add_parser("check-allocator", help="run the allocator conformance kit on a plugin")
-    chk.add_argument("allocator", help="registered name, module:Class or path/to/file.py:Class")
-    chk.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="an allocator parameter")
-    chk.add_argument(
-        "--scenario",
-        help="the scenario it is for (a registered name; default: the one it is registered for, else mtsr)",
-    )
-    chk.set_defaults(func=cmd_check_allocator)
-
-    chs = sub.add_parser(
-        "check-scenario", help="run the scenario checker (determinism, observations, results, conservation, robustness)"
-    )
-    chs.add_argument("scenario", help="registered name, module:Class or path/to/file.py:Class")
-    chs.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE", help="a scenario parameter")
-    chs.add_argument(
-        "--agents",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="an agents-section key for the check (e.g. max_speed=5)",
-    )
-    chs.add_argument("--ticks", type=int, default=60, help="ticks per checked run (default 60)")
-    chs.set_defaults(func=cmd_check_scenario)
-
-    host = sub.add_parser("host", help="run this machine's host daemon: a Zenoh router that starts agents for runs")
-    host.add_argument("--name", required=True, help="this host's name in placements (letters, digits, _ . -)")
-    host.add_argument("--logs", help="where its agents log (default: runs/hosts/<name>)")
-    host.add_argument(
-        "--insecure",
-        action="store_true",
-        help="run without --credentials: no authentication, anyone who reaches the router may start "
-        "agents (their code included); allowed with loopback endpoints only",
-    )
-    add_zenoh_args(host, default_mode="router")
-    host.set_defaults(func=cmd_host)
-
-    hosts = sub.add_parser("hosts", help="list the hosts visible from an endpoint")
-    hosts.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
-    add_zenoh_args(hosts)
-    hosts.set_defaults(func=cmd_hosts)
-
-    wat = sub.add_parser("watch", help="a live view of a running experiment (read-only)")
-    wat.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
-    wat.add_argument(
-        "--wait", type=float, default=10.0, help="seconds to wait for the hub to listen and the run to answer"
-    )
-    wat.add_argument("--map", metavar="FILE.html", help="also keep a map of the run in FILE.html (reloads itself)")
-    add_zenoh_args(wat)
-    wat.set_defaults(func=cmd_watch)
-
-    gr = sub.add_parser("groot", help="watch an agent's behavior tree of a running run in Groot2, live")
-    gr.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
-    gr.add_argument("--agent", type=int, default=0, help="the agent to show first (type another id to switch)")
-    gr.add_argument("--port", type=int, default=1667, help="Groot2's port (and the next one), as BehaviorTree.CPP")
-    gr.add_argument("--bind", default="127.0.0.1", help="the address Groot2 connects to (default: this machine only)")
-    gr.add_argument(
-        "--wait", type=float, default=10.0, help="seconds to wait for the hub to listen and the run to answer"
-    )
-    add_zenoh_args(gr)
-    gr.set_defaults(func=cmd_groot)
-
+def register_swap(sub: Subparsers) -> None:
+    """``swarmbed swap``: its arguments, run by :func:`cmd_swap`."""
     swap = sub.add_parser("swap", help="move a running agent to another host, with its state")
     swap.add_argument("--run", help="the run id (deployment.json names it; default: the only run visible)")
     swap.add_argument("--agent", type=int, required=True, help="the agent to move")
@@ -980,6 +1029,35 @@ def main(argv: list[str] | None = None) -> int:
     swap.add_argument("--wait", type=float, default=60.0, help="seconds to wait for the outcome")
     add_zenoh_args(swap)
     swap.set_defaults(func=cmd_swap)
+
+
+#: every verb, in the order ``swarmbed --help`` lists them
+VERBS: tuple[Callable[[Subparsers], None], ...] = (
+    register_run,
+    register_soak,
+    register_credentials,
+    register_certs,
+    register_bt,
+    register_params,
+    register_sweep,
+    register_analyze,
+    register_report,
+    register_replay,
+    register_check_allocator,
+    register_check_scenario,
+    register_host,
+    register_hosts,
+    register_watch,
+    register_groot,
+    register_swap,
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
+    sub = ap.add_subparsers(dest="command", required=True)
+    for register in VERBS:
+        register(sub)
 
     for name, module in (("agent", "swarmbed.agent_runtime.process"), ("netem", "swarmbed.netem.proxy")):
         p = sub.add_parser(name, help=f"start one {name} process by hand (e.g. on another host)", add_help=False)
