@@ -272,20 +272,9 @@ def fault_breaches(faults: list[dict[str, Any]]) -> list[str]:
     return [f"{f['action']} at {f['wall_s']} s: {f['outcome']}" for f in faults if str(f["outcome"]).startswith(bad)]
 
 
-def verdict(
-    out_dir: Path,
-    limits: Thresholds,
-    chaos_rows: list[list[Any]],
-    summary: dict | None,
-    failure: str | None,
-    slowest_tick: tuple[float, int],
-) -> dict[str, Any]:
-    """The soak's verdict from its files (see the module docstring)."""
-    import pandas as pd
-
-    procs = pd.read_csv(out_dir / PROCESSES)
-    counters = pd.read_csv(out_dir / RUN)
-    end = float(procs["wall_s"].max()) if len(procs) else 0.0
+def _process_trends(procs: Any, limits: Thresholds, end: float) -> list[dict[str, Any]]:
+    """Per process: its RSS and open-file trends over the second half of its life (a process that
+    lived too short a time is marked so, with its last RSS)."""
     per_process = []
     for name, life in procs.groupby("process"):
         first, last = float(life["wall_s"].min()), float(life["wall_s"].max())
@@ -313,6 +302,11 @@ def verdict(
                 "fds_last": int(fds[-1]) if len(fds) else 0,
             }
         )
+    return per_process
+
+
+def _worst_by_kind(per_process: list[dict[str, Any]], procs: Any) -> dict[str, dict[str, Any]]:
+    """Per process kind: how many, its worst RSS trend and open-file growth and which process had them."""
     by_kind: dict[str, dict[str, Any]] = {}
     for p in per_process:
         if p.get("short_lived"):
@@ -341,13 +335,18 @@ def verdict(
     for kind, rows in procs.groupby("kind"):
         if kind in by_kind:
             by_kind[kind]["rss_mb_peak"] = round(float(rows["rss_mb"].max()), 2)
-    tenth = max(1, len(counters) // 10)
-    steady = counters[counters["wall_s"] > 0]
-    rate_start = float(steady["ticks_per_s"].head(tenth).mean()) if len(steady) else 0.0
-    rate_end = float(steady["ticks_per_s"].tail(tenth).mean()) if len(steady) else 0.0
-    net = (summary or {}).get("network", {})
-    conserved = bool(net) and net["copies"] == net["delivered"] + net["dropped_total"]
-    faults = [dict(zip(["wall_s", "tick", "action", "target", "detail", "outcome"], row)) for row in chaos_rows]
+    return by_kind
+
+
+def _breaches(
+    by_kind: dict[str, dict[str, Any]],
+    limits: Thresholds,
+    slowest_tick: tuple[float, int],
+    failure: str | None,
+    conserved: bool,
+    faults: list[dict[str, Any]],
+) -> list[str]:
+    """Every breach of the thresholds, one line each, in the order the soak's page lists them."""
     breaches = []
     for _kind, worst in sorted(by_kind.items()):
         if worst["rss"] == "grows":
@@ -368,6 +367,33 @@ def verdict(
     elif not conserved:
         breaches.append("the ledger does not balance (copies != delivered + dropped)")
     breaches += fault_breaches(faults)
+    return breaches
+
+
+def verdict(
+    out_dir: Path,
+    limits: Thresholds,
+    chaos_rows: list[list[Any]],
+    summary: dict | None,
+    failure: str | None,
+    slowest_tick: tuple[float, int],
+) -> dict[str, Any]:
+    """The soak's verdict from its files (see the module docstring)."""
+    import pandas as pd
+
+    procs = pd.read_csv(out_dir / PROCESSES)
+    counters = pd.read_csv(out_dir / RUN)
+    end = float(procs["wall_s"].max()) if len(procs) else 0.0
+    per_process = _process_trends(procs, limits, end)
+    by_kind = _worst_by_kind(per_process, procs)
+    tenth = max(1, len(counters) // 10)
+    steady = counters[counters["wall_s"] > 0]
+    rate_start = float(steady["ticks_per_s"].head(tenth).mean()) if len(steady) else 0.0
+    rate_end = float(steady["ticks_per_s"].tail(tenth).mean()) if len(steady) else 0.0
+    net = (summary or {}).get("network", {})
+    conserved = bool(net) and net["copies"] == net["delivered"] + net["dropped_total"]
+    faults = [dict(zip(["wall_s", "tick", "action", "target", "detail", "outcome"], row)) for row in chaos_rows]
+    breaches = _breaches(by_kind, limits, slowest_tick, failure, conserved, faults)
     return {
         "passed": not breaches,
         "breaches": breaches,
