@@ -18,8 +18,6 @@ EXCEPTIONS: dict[str, str] = {
     "what the page shows, drawn by short functions (issue 45 item 5), its text held identical",
     "experiments/views/recording.py:_write_mcap": "every MCAP channel declared and written in one pass; "
     "splitting waits for a byte-identity test of the recording over several runs",
-    "experiments/launch/runner.py:_execute": "a run's start, watch and clean-up in the order they must "
-    "unwind (each try/finally guards what the one before made)",
     "experiments/views/replay.py:replay": "the movie's frames drawn in one matplotlib loop",
     "experiments/views/soak_page.py:soak_report": "one HTML page, as run_report",
 }

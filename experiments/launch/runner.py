@@ -148,21 +148,26 @@ def run_experiment(
     return _execute(plan, progress, on_ready, fork_agents, observers, decider)
 
 
-def _execute(
-    plan: RunPlan,
-    progress: bool,
-    on_ready: Callable[[Keys, str], None] | None,
-    fork_agents: bool,
-    observers: Sequence[RunObserver],
-    decider: Any = None,
-) -> RunResult:
-    exp, out_dir, resolved, keys, where = plan.exp, plan.out_dir, plan.resolved, plan.keys, plan.where
-    options = plan.hub
-    listen, log_dir, remote = list(options.listen), out_dir / "logs", plan.remote_hosts
-    t_start = time.perf_counter()
-    hub_cpu_before = own_cpu_s()  # a sweep's pool worker hosts one run after another: count this one's
-    reset_peak_rss()
-    with ExitStack() as undo:  # what is set up before the run's own try: undone if a later step fails
+@dataclass
+class _Setup:
+    """What a run sets up before its processes start, each undone by ``_execute``'s ``finally``."""
+
+    access: RunAccess | None
+    children: Children
+    session: zenoh.Session
+    endpoint: str
+    placement: AgentPlacement
+    coord: Coordinator
+    t_server: float  # when the fork server was up
+    identity: Callable[[str], list[str]]  # a process's credentials arguments
+
+
+def _set_up(plan: RunPlan, fork_agents: bool, decider: Any) -> _Setup:
+    """The run's identities, its fork server, the hub's session and the coordinator; if a step
+    fails, what the steps before it made is undone before the error leaves."""
+    exp, options, keys = plan.exp, plan.hub, plan.keys
+    listen = list(options.listen)
+    with ExitStack() as undo:
         access = (
             RunAccess(
                 keys,
@@ -178,7 +183,7 @@ def _execute(
             undo.callback(access.close)
         # the fork server first: it is spawned, never forked, but it needs no session of ours
         try:
-            children = Children(log_dir, fork_agents=fork_agents, env=zenoh_env(exp.run.zenoh_threads))
+            children = Children(plan.out_dir / "logs", fork_agents=fork_agents, env=zenoh_env(exp.run.zenoh_threads))
         except ForkServerError as exc:
             raise RunError(str(exc)) from None
         t_server = time.perf_counter()
@@ -209,6 +214,7 @@ def _execute(
             auth=access is not None,
             join_timeout=exp.run.join_timeout,
         )
+        resolved = plan.resolved
         coord = Coordinator(
             exp,
             resolved.scenario(),
@@ -216,37 +222,106 @@ def _execute(
             resolved.targets,
             keys,
             session,
-            out_dir,
-            where,
+            plan.out_dir,
+            plan.where,
             carriers(exp) if access else None,
             placement,
             decider,
         )
         undo.pop_all()
+    return _Setup(access, children, session, endpoint, placement, coord, t_server, identity)
+
+
+def _start_processes(plan: RunPlan, setup: _Setup) -> dict[str, Any]:
+    """The proxy and the local agents started, the remote hosts waited for and given their agents;
+    returns each remote host's information."""
+    exp, children, placement = plan.exp, setup.children, setup.placement
+    try:
+        children.spawn(
+            "netem", "swarmbed.netem", [*placement.common, *setup.identity("netem"), "--out", str(plan.out_dir)]
+        )
+        for i in range(exp.agents.count):
+            if plan.where[i] == LOCAL:
+                placement.first(i)
+    except ForkServerError as exc:
+        raise RunError(str(exc)) from None
+    hosts: dict[str, Any] = {}
+    if plan.remote_hosts:
+        try:
+            wait_for_hosts(
+                setup.session, plan.remote_hosts, exp.run.join_timeout, placement.hub, auth=setup.access is not None
+            )
+            for host in plan.remote_hosts:
+                hosts[host] = host_info(setup.session, host)
+                placement.on_host(host, [i for i, h in plan.where.items() if h == host])
+        except HostError as exc:
+            raise RunError(str(exc)) from None
+    return hosts
+
+
+def _progress_bar(exp: Experiment, progress: bool) -> tuple[Any, Callable[[int, float], None]]:
+    """A bar of simulated seconds and the tick callback that moves it (every 1/200 of the run)."""
+    bar = tqdm(
+        total=exp.run.duration,
+        unit="sim s",
+        desc=exp.name,
+        disable=not progress,
+        leave=False,
+        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]",
+    )
+    shown = [0.0]
+
+    def on_tick(_tick: int, sim_time: float) -> None:
+        if sim_time - shown[0] >= exp.run.duration / 200:
+            bar.update(sim_time - shown[0])
+            shown[0] = sim_time
+
+    return bar, on_tick
+
+
+def _record_swaps(plan: RunPlan, setup: _Setup, deployment: dict[str, Any], hosts: dict[str, Any]) -> None:
+    """After a run whose agents moved: where each ran at the end, and what each host ran then."""
+    agents = setup.coord.agents
+    for host in sorted({h for h in agents.hosts.values() if h != LOCAL}):
+        hosts[host] = host_info(setup.session, host) or hosts.get(host)
+    results.write_json(
+        plan.out_dir / DEPLOYMENT,
+        {
+            **deployment,
+            "hosts": hosts,
+            "placement_at_end": {str(i): agents.hosts.get(i, LOCAL) for i in range(plan.exp.agents.count)},
+        },
+    )
+
+
+def _execute(
+    plan: RunPlan,
+    progress: bool,
+    on_ready: Callable[[Keys, str], None] | None,
+    fork_agents: bool,
+    observers: Sequence[RunObserver],
+    decider: Any = None,
+) -> RunResult:
+    exp, out_dir, keys = plan.exp, plan.out_dir, plan.keys
+    t_start = time.perf_counter()
+    hub_cpu_before = own_cpu_s()  # a sweep's pool worker hosts one run after another: count this one's
+    reset_peak_rss()
+    setup = _set_up(plan, fork_agents, decider)
+    access, children, session, endpoint, coord = (
+        setup.access,
+        setup.children,
+        setup.session,
+        setup.endpoint,
+        setup.coord,
+    )
     try:
         coord.declare()
-        try:
-            children.spawn("netem", "swarmbed.netem", [*placement.common, *identity("netem"), "--out", str(out_dir)])
-            for i in range(exp.agents.count):
-                if where[i] == LOCAL:
-                    placement.first(i)
-        except ForkServerError as exc:
-            raise RunError(str(exc)) from None
-        hosts = {}
-        if remote:
-            try:
-                wait_for_hosts(session, remote, exp.run.join_timeout, placement.hub, auth=access is not None)
-                for host in remote:
-                    hosts[host] = host_info(session, host)
-                    placement.on_host(host, [i for i, h in where.items() if h == host])
-            except HostError as exc:
-                raise RunError(str(exc)) from None
-
+        hosts = _start_processes(plan, setup)
         t_spawned = time.perf_counter()
         deployment = {
             "run_id": keys.run_id,
-            "hub": [endpoint, *listen],
-            "placement": {str(i): h for i, h in where.items()},
+            "hub": [endpoint, *plan.hub.listen],
+            "placement": {str(i): h for i, h in plan.where.items()},
             "hosts": hosts,
             **({"ros2": exp.ros2.model_dump(mode="json")} if exp.ros2 else {}),
         }
@@ -259,21 +334,7 @@ def _execute(
         if on_ready:
             on_ready(keys, endpoint)
 
-        bar = tqdm(
-            total=exp.run.duration,
-            unit="sim s",
-            desc=exp.name,
-            disable=not progress,
-            leave=False,
-            bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]",
-        )
-        shown = [0.0]
-
-        def on_tick(_tick: int, sim_time: float) -> None:
-            if sim_time - shown[0] >= exp.run.duration / 200:
-                bar.update(sim_time - shown[0])
-                shown[0] = sim_time
-
+        bar, on_tick = _progress_bar(exp, progress)
         live = LiveRun(exp, out_dir, coord, children, session, keys, hosts)
         running: list[RunObserver] = []
         try:
@@ -283,22 +344,13 @@ def _execute(
             loop_start = _tick_costs(children)
             coord.run(on_tick)
             loop_end = _tick_costs(children)
-            if coord.agents.swap_log:  # where agents ran at the end, and what each host ran then
-                for host in sorted({h for h in coord.agents.hosts.values() if h != LOCAL}):
-                    hosts[host] = host_info(session, host) or hosts.get(host)
-                results.write_json(
-                    out_dir / DEPLOYMENT,
-                    {
-                        **deployment,
-                        "hosts": hosts,
-                        "placement_at_end": {str(i): coord.agents.hosts.get(i, LOCAL) for i in range(exp.agents.count)},
-                    },
-                )
+            if coord.agents.swap_log:
+                _record_swaps(plan, setup, deployment, hosts)
         finally:
             bar.close()
             for observer in reversed(running):
                 observer.stop()
-        marks = {"start": t_start, "server": t_server, "spawned": t_spawned, "joined": t_joined}
+        marks = {"start": t_start, "server": setup.t_server, "spawned": t_spawned, "joined": t_joined}
         usage = _usage(children)  # read while the agents still run
         coord.stop_and_collect()
         exit_codes = children.wait(timeout=15.0)
@@ -312,7 +364,7 @@ def _execute(
     except TableWriteError as exc:  # a full disk: one line, the first error, not what clean-up meets next
         raise RunError(str(exc)) from None
     finally:
-        placement.stop_all()
+        setup.placement.stop_all()
         children.kill_all()
         coord.close()
         session.close()
