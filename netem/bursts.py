@@ -20,9 +20,15 @@ so on (a link's own copies stay in order, and the rounds keep the work vectorise
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
+from swarmbed.netem.stage import Stage, TickCopies
 from swarmbed.wire.radio import BurstSection
+
+if TYPE_CHECKING:
+    from swarmbed.netem.radio import Radio
 
 BURST = "burst"
 
@@ -73,3 +79,11 @@ class Bursts:
             lost[rows] = u[:, 1] < np.where(state, self.b.loss_bad, self.b.loss_good)
             flat[link[rows]] = np.where(state, u[:, 0] >= self.p_bg, u[:, 0] < self.p_gb)
         return lost
+
+
+def _burst(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray:
+    assert radio.bursts is not None
+    return radio.bursts.lose(copies.senders[at], copies.receivers[at])
+
+
+BURST_STAGE = Stage(BURST, "#1f3b73", lambda p: p.burst is not None, _burst)

@@ -16,9 +16,15 @@ addressed to everyone).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
+from swarmbed.netem.stage import Stage, TickCopies
 from swarmbed.wire.radio import ChannelSection
+
+if TYPE_CHECKING:
+    from swarmbed.netem.radio import Radio
 
 CHANNEL_BUSY = "channel_busy"
 _EPS = 1e-9
@@ -39,3 +45,11 @@ class SharedChannel:
         busy = np.empty(len(receivers), dtype=bool)
         busy[order] = used - before > self.budget + _EPS
         return busy
+
+
+def _channel_busy(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray:
+    assert radio.channel is not None
+    return radio.channel.busy(copies.receivers[at], copies.sizes[at])
+
+
+CHANNEL_STAGE = Stage(CHANNEL_BUSY, "#98df8a", lambda p: p.channel is not None, _channel_busy)

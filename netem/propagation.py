@@ -29,11 +29,16 @@ order: messages in sender order, then receivers in id order).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from swarmbed.netem.normal import erfc
+from swarmbed.netem.stage import Stage, TickCopies
 from swarmbed.wire.radio import PropagationSection
+
+if TYPE_CHECKING:
+    from swarmbed.netem.radio import Radio
 
 BELOW_SENSITIVITY, PACKET_ERROR = "below_sensitivity", "packet_error"
 
@@ -158,3 +163,22 @@ class Propagation:
         ber = bit_error_rate(self.p, power_dbm - self.p.noise_floor_dbm)
         survive = np.exp(bits * np.log1p(-np.minimum(ber, 0.5)))
         return self.reception_rng.random(len(power_dbm)) >= survive
+
+
+def _below_sensitivity(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray:
+    """Computes the received power of the copies in play (kept in ``copies.power`` for the error
+    stage and the receiver ledger) and drops those under the sensitivity."""
+    model = radio.propagation
+    assert model is not None
+    copies.power = np.full(len(copies.rows), np.nan)
+    copies.power[at] = model.received_dbm(copies.senders[at], copies.receivers[at], copies.distance[at])
+    return ~model.detected(copies.power[at])
+
+
+def _packet_error(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray:
+    assert radio.propagation is not None and copies.power is not None
+    return radio.propagation.errors(copies.power[at], copies.sizes[at])
+
+
+SENSITIVITY_STAGE = Stage(BELOW_SENSITIVITY, "#e377c2", lambda p: p.propagation is not None, _below_sensitivity)
+ERROR_STAGE = Stage(PACKET_ERROR, "#f781bf", lambda p: p.propagation is not None, _packet_error)

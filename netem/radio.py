@@ -44,15 +44,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from swarmbed.netem.bursts import BURST, Bursts
-from swarmbed.netem.channel import CHANNEL_BUSY, SharedChannel
+from swarmbed.netem.bursts import BURST_STAGE, Bursts
+from swarmbed.netem.channel import CHANNEL_STAGE, SharedChannel
 from swarmbed.netem.delay import Delays
 from swarmbed.netem.ledger import DELIVERED, DROP_REASONS, MEASURE_COLUMNS, Ledger
-from swarmbed.netem.propagation import BELOW_SENSITIVITY, PACKET_ERROR, Propagation
+from swarmbed.netem.propagation import ERROR_STAGE, SENSITIVITY_STAGE, Propagation
+from swarmbed.netem.stage import EPS as _EPS
+from swarmbed.netem.stage import Stage, TickCopies
 from swarmbed.wire.codec import BROADCAST, RadioMessage
 from swarmbed.wire.schema import NetworkSection
-
-_EPS = 1e-9
 
 
 def _seed_sequence(rng: np.random.Generator) -> np.random.SeedSequence:
@@ -68,16 +68,31 @@ def measured(params: NetworkSection) -> bool:
     return params.propagation is not None or params.delay is not None
 
 
+def _out_of_range(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray:
+    return copies.distance[at] > radio.params.range + _EPS  # type: ignore[operator]
+
+
+def _loss(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray:
+    return radio.rng.random(len(at)) < radio.params.loss
+
+
+#: what may drop a copy after it is addressed and queued, in the order a copy meets them (the
+#: module's docstring); each stage's reason, legend colour and whether ``network:`` turns it on.
+#: A new model adds its stage here, where its copies should meet it.
+STAGES: tuple[Stage, ...] = (
+    Stage("out_of_range", "#9467bd", lambda p: p.range is not None, _out_of_range),
+    SENSITIVITY_STAGE,
+    CHANNEL_STAGE,
+    ERROR_STAGE,
+    BURST_STAGE,
+    Stage("loss", "#d62728", lambda p: p.loss > 0.0, _loss),
+)
+
+
 def drop_reasons(params: NetworkSection) -> tuple[str, ...]:
-    """Every reason a copy may be dropped for under ``params``: the disk's, and those of the models
+    """Every reason a copy may be dropped for under ``params``: the disk's, and those of the stages
     it turns on (a run's summary lists these, each with its count)."""
-    extra = (
-        ((BELOW_SENSITIVITY,) if params.propagation else ())
-        + ((CHANNEL_BUSY,) if params.channel else ())
-        + ((PACKET_ERROR,) if params.propagation else ())
-        + ((BURST,) if params.burst else ())
-    )
-    return DROP_REASONS + extra
+    return DROP_REASONS + tuple(s.reason for s in STAGES if s.reason not in DROP_REASONS and s.on(params))
 
 
 class _Send(NamedTuple):
@@ -115,6 +130,7 @@ class Radio:
         self.channel = SharedChannel(params.channel, dt) if params.channel else None
         # per-copy distance, power, SNR and delay in the receiver ledger, where a model computes them
         self.measuring = self.ledger.per_receiver and measured(params)
+        self.stages = tuple(stage for stage in STAGES if stage.on(params))
 
     @property
     def pending_copies(self) -> int:
@@ -132,9 +148,10 @@ class Radio:
     ) -> None:
         """Take every message sent at ``tick``. ``ids``/``xs``/``ys``: agents alive at ``tick``.
 
-        Three passes: each message is addressed and queued (Python, per message); range, the models
-        and loss are decided for every copy of the tick at once (arrays, in the order of the
-        module's docstring); then each message is booked, in order, and what survives is scheduled."""
+        Three passes: each message is addressed and queued (Python, per message); the drop stages
+        (:data:`STAGES`: range, the models, loss) decide for every copy of the tick at once, each on
+        the copies the stages before it left in play; then each message is booked, in order, and
+        what survives is scheduled."""
         order = np.argsort(np.asarray(ids, dtype=np.int64), kind="stable")
         alive = np.asarray(ids, dtype=np.int64)[order]
         every_row = np.arange(len(alive))
@@ -157,61 +174,22 @@ class Radio:
         counts = np.fromiter((len(s.rows) for s in sends), dtype=np.int64, count=len(sends))
         rows = np.concatenate([s.rows for s in sends])
         from_rows = np.repeat(np.fromiter((s.sender_row for s in sends), dtype=np.int64, count=len(sends)), counts)
+        copies = TickCopies(alive, x, y, rows, from_rows, sends, counts)
         in_play = np.ones(len(rows), dtype=bool)
         drops: list[tuple[str, np.ndarray]] = []  # (reason, which copies), in booking order
-        distance: np.ndarray | None = None
-        if (self.params.range is not None or self.propagation is not None or self.measuring) and len(rows):
-            distance = np.hypot(x[from_rows] - x[rows], y[from_rows] - y[rows])
-        if self.params.range is not None and len(rows):
-            assert distance is not None
-            far = distance > self.params.range + _EPS
-            in_play &= ~far
-            drops.append(("out_of_range", far))
-        sizes = np.zeros(0, dtype=np.int64)
-        if self.propagation is not None or self.channel is not None:  # per-copy payload sizes
-            sizes = np.fromiter((len(s.msg.payload) for s in sends), dtype=np.int64, count=len(sends))
-            sizes = np.repeat(sizes, counts)
-        power = np.zeros(0)
-        if self.propagation is not None and len(rows):
-            assert distance is not None
-            power = np.full(len(rows), np.nan)
-            at = np.flatnonzero(in_play)
-            power[at] = self.propagation.received_dbm(alive[from_rows[at]], alive[rows[at]], distance[at])
-            hit = np.zeros(len(rows), dtype=bool)
-            hit[at[~self.propagation.detected(power[at])]] = True
-            in_play &= ~hit
-            drops.append((BELOW_SENSITIVITY, hit))
-        if self.channel is not None and len(rows):
+        for stage in self.stages if len(rows) else ():
             at = np.flatnonzero(in_play)
             hit = np.zeros(len(rows), dtype=bool)
-            hit[at[self.channel.busy(alive[rows[at]], sizes[at])]] = True
+            hit[at[stage.drop(self, copies, at)]] = True
             in_play &= ~hit
-            drops.append((CHANNEL_BUSY, hit))
-        if self.propagation is not None and len(rows):
-            at = np.flatnonzero(in_play)
-            hit = np.zeros(len(rows), dtype=bool)
-            hit[at[self.propagation.errors(power[at], sizes[at])]] = True
-            in_play &= ~hit
-            drops.append((PACKET_ERROR, hit))
-        if self.bursts is not None and len(rows):
-            at = np.flatnonzero(in_play)
-            hit = np.zeros(len(rows), dtype=bool)
-            hit[at[self.bursts.lose(alive[from_rows[at]], alive[rows[at]])]] = True
-            in_play &= ~hit
-            drops.append((BURST, hit))
-        if self.params.loss > 0.0:
-            at = np.flatnonzero(in_play)
-            hit = np.zeros(len(rows), dtype=bool)
-            hit[at] = self.rng.random(len(at)) < self.params.loss
-            in_play &= ~hit
-            drops.append(("loss", hit))
+            drops.append((stage.reason, hit))
         measures = None
         if self.measuring and len(rows):
             measures = np.full((len(rows), len(MEASURE_COLUMNS)), np.nan)
-            measures[:, 0] = distance
-            if len(power):
-                measures[:, 1] = power
-                measures[:, 2] = power - self.propagation.p.noise_floor_dbm  # type: ignore[union-attr]
+            measures[:, 0] = copies.distance
+            if copies.power is not None:
+                measures[:, 1] = copies.power
+                measures[:, 2] = copies.power - self.propagation.p.noise_floor_dbm  # type: ignore[union-attr]
         self._book_and_schedule(tick, sends, counts, alive, rows, from_rows, drops, in_play, measures)
 
     def _address(

@@ -410,3 +410,24 @@ def test_the_model_curve_is_the_delivery_ratio_the_radio_draws(extra):
         # shadowing draws are shared per pair across ticks: the spread is of 40 pairs, not of all copies
         n = at.sum() if params.shadowing_db > 0 else ticks * at.sum()
         assert abs(e - f) <= binomial_tolerance(f, n) + 0.01, f"at {d:.0f} m: {e:.4f} vs {f:.4f}"
+
+
+def test_every_reason_a_radio_may_drop_for_has_its_colour_in_every_view():
+    """The stages name their reasons and colours; a model whose reason had no colour was left out
+    of the replay's legend and drawn in the report's default colour (channel_busy was)."""
+    from swarmbed.experiments.views.colours import DROP_COLORS
+    from swarmbed.netem.radio import STAGES
+
+    every = NetworkSection(
+        range=100,
+        loss=0.1,
+        propagation={},
+        burst={"mean_loss": 0.2, "mean_burst": 5.0},
+        channel={"capacity": 1000},
+        delay={"mean": 0.1},
+    )
+    reasons = drop_reasons(every)
+    assert [s.reason for s in STAGES if s.on(every)] == [s.reason for s in STAGES]  # each stage on
+    assert set(reasons) == set(DROP_COLORS)
+    assert len(set(DROP_COLORS.values())) == len(DROP_COLORS)  # no two reasons look alike
+    assert drop_reasons(NetworkSection()) == reasons[: reasons.index("late") + 1]  # the disk's alone

@@ -1,5 +1,5 @@
-"""The radio's parameters beyond the disk: propagation, burst loss, delay and a shared channel
-(``network:`` sections).
+"""The radio's parameters (the ``network:`` section): the disk's, and the models beyond it:
+propagation, burst loss, delay and a shared channel.
 
 Each is optional: left out (the default), the radio is today's disk with independent loss, and an
 experiment that names none gives the same result files, byte for byte, as before they existed.
@@ -11,9 +11,9 @@ does not; every default says where it comes from (docs/radio.md has the formulas
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Any, Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer, model_validator
 
 
 class _Section(BaseModel):
@@ -157,3 +157,42 @@ class ChannelSection(_Section):
     """A receiver's airtime per tick, shared by the copies it hears (``swarmbed.netem.channel``)."""
 
     capacity: float = Field(gt=0, description="bytes per second a receiver hears, all senders together")
+
+
+class NetworkSection(BaseModel):
+    """The radio's parameters, named as tc-netem names them; the one definition of their bounds."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    range: float | None = Field(None, ge=0, description="communication range; null = unlimited")
+    loss: float = Field(0.0, ge=0, le=1, description="probability a copy is lost")
+    rate: float | None = Field(None, gt=0, description="per-sender cap in bytes per simulated second; null = none")
+    limit: int | None = Field(None, ge=1, description="messages that may wait behind the rate cap (tail drop)")
+    latency: int = Field(0, ge=0, description="extra ticks of delay on top of the one-tick minimum")
+    ledger: Literal["per_sender", "per_receiver"] = Field(
+        "per_sender", description="per_receiver adds network_ledger_receivers.parquet: one row per copy"
+    )
+    # the models beyond the disk (docs/radio.md); left out, the radio is the disk above
+    propagation: PropagationSection | None = Field(
+        None, description="log-distance path loss, shadowing, fading and SNR-based reception"
+    )
+    burst: BurstSection | None = Field(None, description="Gilbert-Elliott burst loss per link or receiver")
+    delay: DelaySection | None = Field(None, description="seconds added to each copy's arrival, with jitter")
+    channel: ChannelSection | None = Field(None, description="a receiver's airtime per tick, shared by what it hears")
+
+    @model_serializer(mode="wrap")
+    def _models_left_out_stay_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """A resolved config names only the models it turns on: an experiment that uses none
+        writes the config.yaml it wrote before they existed."""
+        data = handler(self)
+        for key in _MODEL_KEYS:
+            if data.get(key) is None:
+                data.pop(key, None)
+        return data
+
+
+def _is_model(annotation: object) -> bool:
+    return any(isinstance(a, type) and issubclass(a, _Section) for a in get_args(annotation))
+
+
+#: the keys of the models beyond the disk (each a section that is None when left out)
+_MODEL_KEYS = tuple(key for key, field in NetworkSection.model_fields.items() if _is_model(field.annotation))

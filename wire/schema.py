@@ -16,9 +16,9 @@ from __future__ import annotations
 import re
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from swarmbed.wire.radio import BurstSection, ChannelSection, DelaySection, PropagationSection
+from swarmbed.wire.radio import NetworkSection
 
 #: a name that becomes a folder (experiments, sweeps, their scenarios): no path separators, no ``..``
 SAFE_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.+=-]{0,99}$"
@@ -121,37 +121,6 @@ class AllocatorSection(BaseModel):
 
     def params(self) -> dict[str, Any]:
         return dict(self.model_extra or {})
-
-
-class NetworkSection(Strict):
-    """The radio's parameters, named as tc-netem names them; the one definition of their bounds."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    range: float | None = Field(None, ge=0, description="communication range; null = unlimited")
-    loss: float = Field(0.0, ge=0, le=1, description="probability a copy is lost")
-    rate: float | None = Field(None, gt=0, description="per-sender cap in bytes per simulated second; null = none")
-    limit: int | None = Field(None, ge=1, description="messages that may wait behind the rate cap (tail drop)")
-    latency: int = Field(0, ge=0, description="extra ticks of delay on top of the one-tick minimum")
-    ledger: Literal["per_sender", "per_receiver"] = Field(
-        "per_sender", description="per_receiver adds network_ledger_receivers.parquet: one row per copy"
-    )
-    # the models beyond the disk (docs/radio.md); left out, the radio is the disk above
-    propagation: PropagationSection | None = Field(
-        None, description="log-distance path loss, shadowing, fading and SNR-based reception"
-    )
-    burst: BurstSection | None = Field(None, description="Gilbert-Elliott burst loss per link or receiver")
-    delay: DelaySection | None = Field(None, description="seconds added to each copy's arrival, with jitter")
-    channel: ChannelSection | None = Field(None, description="a receiver's airtime per tick, shared by what it hears")
-
-    @model_serializer(mode="wrap")
-    def _models_left_out_stay_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
-        """A resolved config names only the models it turns on: an experiment that uses none
-        writes the config.yaml it wrote before they existed."""
-        data = handler(self)
-        for key in ("propagation", "burst", "delay", "channel"):
-            if data.get(key) is None:
-                data.pop(key, None)
-        return data
 
 
 HOST_NAME = r"^[A-Za-z0-9_.-]+$"

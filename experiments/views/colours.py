@@ -1,17 +1,21 @@
 """The colours every view of a run shares (report, replay, live map), so that a reason or a label
 looks the same in each."""
 
-DROP_COLORS = {
-    "out_of_range": "#9467bd",
-    "loss": "#d62728",
+from swarmbed.netem.ledger import DROP_REASONS
+from swarmbed.netem.radio import STAGES
+
+_OTHER_DROPS = {  # the reasons that are not a radio stage's (a stage names its own colour)
     "queue_full": "#ff7f0e",
     "receiver_dead": "#7f7f7f",
     "no_such_receiver": "#8c564b",
     "run_ended": "#bcbd22",
     "late": "#17becf",
-    "below_sensitivity": "#e377c2",
-    "packet_error": "#f781bf",
-    "burst": "#1f3b73",
+}
+_STAGE_COLORS = {stage.reason: stage.colour for stage in STAGES}
+#: every drop reason's colour: the disk's reasons in the ledger's order, then the models' stages
+DROP_COLORS = {
+    reason: _STAGE_COLORS.get(reason) or _OTHER_DROPS[reason]
+    for reason in DROP_REASONS + tuple(r for r in _STAGE_COLORS if r not in DROP_REASONS)
 }
 LABEL_COLORS = {"red": "#d62728", "green": "#2ca02c", "blue": "#1f77b4"}  # SAR's robot and victim colours
 
