@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from swarmbed.agent_runtime.bt import Blackboard, Status, load_tree
-from swarmbed.agent_runtime.bt.btlog import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
-from swarmbed.agent_runtime.node_sets import node_registry, tree_path
+from swarmbed.bt import Blackboard, Status, load_tree
+from swarmbed.bt.btlog import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.context import NodeContext
+from swarmbed.extension.node_sets import node_registry, tree_path
 from swarmbed.extension.scenario import Scenario
 from swarmbed.extension.view import LocalView, Message, TaskInfo
 from swarmbed.wire.btlog import TreeChanges

@@ -16,10 +16,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from swarmbed.agent_runtime.bt import BTError, load_tree, palette_xml
-from swarmbed.agent_runtime.node_sets import node_registry
+from swarmbed.bt import BTError, load_tree, palette_xml
 from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments.launch import config as cfg
+from swarmbed.extension.node_sets import node_registry
 from swarmbed.plugins import registry
 from swarmbed.wire.session import add_zenoh_args
 

@@ -16,8 +16,8 @@ import math
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from swarmbed.agent_runtime.nodes import SPACE_NODES
 from swarmbed.extension.figures import Figure
+from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World, within
 from swarmbed.scenarios.kinematics import Limits, step
 from swarmbed.wire.codec import TASK_DTYPE

@@ -36,9 +36,9 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.agent_runtime.nodes import SPACE_NODES
 from swarmbed.extension.actions import MOVE_ACTIONS
 from swarmbed.extension.figures import Figure
+from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation

@@ -25,6 +25,15 @@ RENAMED = {
     "swarmbed.agent_runtime.view": "swarmbed.extension.view",
     "swarmbed.agent_runtime.context": "swarmbed.extension.context",
     "swarmbed.plugins.conformance": "swarmbed.plugins.checks.allocator",
+    # issue 45: the BT engine is its own package; SPACE's nodes, the node sets and trees sit below the roles
+    "swarmbed.agent_runtime.bt": "swarmbed.bt",
+    **{
+        f"swarmbed.agent_runtime.bt.{m}": f"swarmbed.bt.{m}"
+        for m in ("blackboard", "btlog", "composites", "decorators", "leaves", "node", "palette", "registry", "status")
+    },
+    "swarmbed.agent_runtime.bt.tree": "swarmbed.bt.tree",
+    "swarmbed.agent_runtime.nodes": "swarmbed.extension.nodes",
+    "swarmbed.agent_runtime.node_sets": "swarmbed.extension.node_sets",
 }
 
 
@@ -53,5 +62,7 @@ class RenamedFinder(importlib.abc.MetaPathFinder):
 
 
 def install() -> None:
+    """First on the path: an old name whose parent is an alias (``swarmbed.agent_runtime.bt.btlog``)
+    would otherwise be found again through the new package's folder and run as a second module."""
     if not any(isinstance(f, RenamedFinder) for f in sys.meta_path):
-        sys.meta_path.append(RenamedFinder())
+        sys.meta_path.insert(0, RenamedFinder())

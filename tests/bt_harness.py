@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import random
 
-from swarmbed.agent_runtime.bt import Condition, NodeRegistry, StatefulAction, Status, load_tree
+from swarmbed.bt import Condition, NodeRegistry, StatefulAction, Status, load_tree
 
 
 class Script:

@@ -4,9 +4,9 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from swarmbed.agent_runtime.bt import BTError, load_tree
-from swarmbed.agent_runtime.nodes import SPACE_TREE, space_registry
+from swarmbed.bt import BTError, load_tree
 from swarmbed.experiments.cli import main
+from swarmbed.extension.nodes import SPACE_TREE, space_registry
 
 
 def load(text):

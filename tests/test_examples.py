@@ -20,7 +20,7 @@ from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
-TREES = sorted([*(ROOT / "agent_runtime" / "trees").glob("*.xml"), *(ROOT / "plugins").rglob("*.xml")])
+TREES = sorted([*(ROOT / "extension" / "trees").glob("*.xml"), *(ROOT / "plugins").rglob("*.xml")])
 YAML = sorted((ROOT / "experiments").rglob("*.yaml"))
 CHAOS = [f for f in YAML if "events" in (yaml.safe_load(f.read_text()) or {})]  # faults for swarmbed soak
 FILES = [f for f in YAML if f not in CHAOS]

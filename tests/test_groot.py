@@ -13,8 +13,8 @@ import time
 import msgpack
 import pytest
 
-from swarmbed.agent_runtime.bt import NodeRegistry, Status, load_tree
-from swarmbed.agent_runtime.bt.btlog import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
+from swarmbed.bt import NodeRegistry, Status, load_tree
+from swarmbed.bt.btlog import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
 from swarmbed.experiments.views.groot2 import MonitoredTree, serve, tree_identity
 from tests.bt_harness import Act, Cond, Script, btcpp_tree
 from tests.test_btlog import CASES, TICKS, shape

@@ -7,14 +7,14 @@ import json
 import pandas as pd
 import pytest
 
-from swarmbed.agent_runtime.bt import BTError, load_tree
-from swarmbed.agent_runtime.nodes import space_registry
+from swarmbed.bt import BTError, load_tree
 from swarmbed.experiments import cli
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import RunError, plan_run
 from swarmbed.experiments.views.analyze import scenario_summary
 from swarmbed.experiments.views.groot import agent_command
+from swarmbed.extension.nodes import space_registry
 from swarmbed.plugins.registry import PluginError, resolve
 from tests.conftest import QUICKSTART, experiment
 

@@ -84,6 +84,7 @@ def test_the_proxy_process_loads_no_plugin_and_no_tree_engine():
                 "swarmbed.experiments",
                 "swarmbed.scenarios",
                 "swarmbed.agent_runtime",
+                "swarmbed.bt",
                 "swarmbed.coordinator",
             )
         )
@@ -119,10 +120,16 @@ def test_old_module_names_still_import_with_a_warning_naming_the_new_one():
         "print(Scenario is e.Scenario, Allocator is e.Allocator)\n"
         "from swarmbed.wire.targets import load_target\n"
         "print(load_target('swarmbed.coordinator.sar:SAR', e.Scenario).__module__)\n"
+        "from swarmbed.agent_runtime.bt import load_tree, Status\n"  # issue 45: the BT engine's own package
+        "from swarmbed.agent_runtime.bt.btlog import tree_xml\n"
+        "from swarmbed.agent_runtime.nodes import ExplorationNode\n"
+        "import swarmbed.bt as b, swarmbed.bt.btlog as log, swarmbed.extension.nodes as n\n"
+        "print(load_tree is b.load_tree, tree_xml is log.tree_xml, ExplorationNode is n.ExplorationNode)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.splitlines()
     assert out == [
         "swarmbed.coordinator.scenario is now swarmbed.extension.scenario; the old name goes in a later release",
         "True True",
         "swarmbed.scenarios.sar",
+        "True True True",
     ], out

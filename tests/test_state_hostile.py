@@ -57,7 +57,7 @@ def hostile_payloads(canary) -> dict[str, bytes]:
             ext(st.EXT_OBJECT, ["swarmbed.plugins.taskbook:TaskBook", {"__class__": 1}])
         ),
         "non-string attribute name": crafted(ext(st.EXT_OBJECT, ["swarmbed.plugins.taskbook:TaskBook", {1: 2}])),
-        "an enum as an object": crafted(ext(st.EXT_OBJECT, ["swarmbed.agent_runtime.bt.status:Status", {}])),
+        "an enum as an object": crafted(ext(st.EXT_OBJECT, ["swarmbed.bt.status:Status", {}])),
         "a plain class as an enum": crafted(ext(st.EXT_ENUM, ["swarmbed.plugins.taskbook:TaskBook", 1])),
         "class reference not a string": crafted(ext(st.EXT_OBJECT, [["os", "system"], {}])),
         # the random-generator path: np.random.<name>() with a chosen name

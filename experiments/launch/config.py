@@ -19,10 +19,10 @@ from typing import Any, Literal, get_args, get_origin
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from swarmbed.agent_runtime.bt import BTError, load_tree
-from swarmbed.agent_runtime.node_sets import node_registry, tree_path
+from swarmbed.bt import BTError, load_tree
 from swarmbed.experiments.launch.yamlfile import YamlFileError, non_finite, parse_yaml, read_yaml
 from swarmbed.extension.allocator import Allocator
+from swarmbed.extension.node_sets import node_registry, tree_path
 from swarmbed.extension.scenario import Scenario
 from swarmbed.plugins.registry import (
     PluginError,

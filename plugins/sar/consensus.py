@@ -22,7 +22,7 @@ from typing import ClassVar, Literal
 
 from pydantic import Field
 
-from swarmbed.agent_runtime.nodes import ExplorationNode
+from swarmbed.extension.nodes import ExplorationNode
 from swarmbed.plugins.base import LocalView
 from swarmbed.plugins.consensus import ConsensusState
 from swarmbed.plugins.sar.base import TREES, SARStrategy, StrategyParams

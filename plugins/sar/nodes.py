@@ -6,7 +6,7 @@ robot's action for this tick (``config.context.act``). Wandering reuses the SPAC
 
 from __future__ import annotations
 
-from swarmbed.agent_runtime.bt import (
+from swarmbed.bt import (
     FAILURE,
     RUNNING,
     SUCCESS,

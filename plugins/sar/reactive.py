@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from swarmbed.agent_runtime.nodes import ExplorationNode
+from swarmbed.extension.nodes import ExplorationNode
 from swarmbed.plugins.base import LocalView
 from swarmbed.plugins.sar.base import TREES, SARStrategy, StrategyParams
 from swarmbed.plugins.sar.nodes import SAR_NODES

@@ -2,8 +2,8 @@
 and follows BT.CPP's semantics for the nodes it supports; ``tests/test_bt_conformance.py`` checks
 it tick by tick against BehaviorTree.CPP itself."""
 
-from swarmbed.agent_runtime.bt.blackboard import Blackboard
-from swarmbed.agent_runtime.bt.node import (
+from swarmbed.bt.blackboard import Blackboard
+from swarmbed.bt.node import (
     BTError,
     Condition,
     InputPort,
@@ -14,10 +14,10 @@ from swarmbed.agent_runtime.bt.node import (
     SyncAction,
     TreeNode,
 )
-from swarmbed.agent_runtime.bt.palette import palette_xml
-from swarmbed.agent_runtime.bt.registry import NodeRegistry
-from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
-from swarmbed.agent_runtime.bt.tree import Tree, load_tree
+from swarmbed.bt.palette import palette_xml
+from swarmbed.bt.registry import NodeRegistry
+from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
+from swarmbed.bt.tree import Tree, load_tree
 
 __all__ = [
     "FAILURE",

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from swarmbed.agent_runtime.bt.node import BTError, InputPort, Port, SyncAction
-from swarmbed.agent_runtime.bt.status import FAILURE, SUCCESS, Status
+from swarmbed.bt.node import BTError, InputPort, Port, SyncAction
+from swarmbed.bt.status import FAILURE, SUCCESS, Status
 
 
 class AlwaysSuccess(SyncAction):

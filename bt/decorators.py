@@ -8,8 +8,8 @@ with one tick per control step, as here, that means one cycle per tick for synch
 
 from __future__ import annotations
 
-from swarmbed.agent_runtime.bt.node import DecoratorNode, InputPort, Port
-from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
+from swarmbed.bt.node import DecoratorNode, InputPort, Port
+from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 
 
 class Inverter(DecoratorNode):

@@ -9,14 +9,16 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmbed.agent_runtime.bt import (
+from swarmbed.bt import (
     FAILURE,
     RUNNING,
     SUCCESS,
     InputPort,
     NodeRegistry,
     OutputPort,
+    Port,
     StatefulAction,
+    Status,
     SyncAction,
 )
 from swarmbed.extension.allocator import HALT, HOLD, DecisionError
@@ -29,13 +31,13 @@ class LocalSensingNode(SyncAction):
     ID = "LocalSensingNode"
 
     @classmethod
-    def provided_ports(cls):
+    def provided_ports(cls) -> dict[str, Port]:
         return {
             "tasks": OutputPort(default="{local_tasks}", description="visible open tasks {id: TaskInfo}"),
             "messages": OutputPort(default="{messages}", description="messages received this tick"),
         }
 
-    def tick(self):
+    def tick(self) -> Status:
         view = self.config.context.view
         self.set_output("tasks", view.tasks)
         self.set_output("messages", view.inbox)
@@ -48,10 +50,10 @@ class DecisionMakingNode(SyncAction):
     ID = "DecisionMakingNode"
 
     @classmethod
-    def provided_ports(cls):
+    def provided_ports(cls) -> dict[str, Port]:
         return {"task_id": OutputPort(default="{assigned_task}", description="task chosen by the allocator")}
 
-    def tick(self):
+    def tick(self) -> Status:
         ctx = self.config.context
         task = _task_id(ctx.allocator.decide(ctx.view), ctx)
         if task in (HOLD, HALT):  # stay put: no task to execute, and no exploring either
@@ -84,13 +86,13 @@ class TaskExecutingNode(StatefulAction):
     ID = "TaskExecutingNode"
 
     @classmethod
-    def provided_ports(cls):
+    def provided_ports(cls) -> dict[str, Port]:
         return {"task_id": InputPort(int, "{assigned_task}", "task to execute")}
 
-    def on_start(self):
+    def on_start(self) -> Status:
         return self.on_running()
 
-    def on_running(self):
+    def on_running(self) -> Status:
         task = self.get_input("task_id")
         ctx = self.config.context
         if task is None:
@@ -105,19 +107,19 @@ class ExplorationNode(StatefulAction):
     ID = "ExplorationNode"
 
     @classmethod
-    def provided_ports(cls):
+    def provided_ports(cls) -> dict[str, Port]:
         return {
             "duration": InputPort(float, "{exploration_duration}", "seconds before a new waypoint"),
             "reach": InputPort(float, "{arrival_radius}", "distance at which the waypoint counts as reached"),
         }
 
-    def on_start(self):
+    def on_start(self) -> Status:
         ctx = self.config.context
         self.waypoint = ctx.scenario.random_point(ctx.rng)
         self.until = ctx.view.time + self.get_input("duration")
         return self.on_running()
 
-    def on_running(self):
+    def on_running(self) -> Status:
         ctx = self.config.context
         view = ctx.view
         near = math.hypot(self.waypoint[0] - view.x, self.waypoint[1] - view.y) <= self.get_input("reach")
@@ -129,7 +131,7 @@ class ExplorationNode(StatefulAction):
 
 SPACE_NODES = (LocalSensingNode, DecisionMakingNode, TaskExecutingNode, ExplorationNode)
 #: SPACE's tree over these nodes: what an agent runs when neither its allocator nor its scenario names one
-SPACE_TREE = Path(str(resources.files("swarmbed.agent_runtime") / "trees" / "space_default.xml"))
+SPACE_TREE = Path(str(resources.files("swarmbed.extension") / "trees" / "space_default.xml"))
 
 
 def space_registry() -> NodeRegistry:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from swarmbed.agent_runtime.bt.composites import CONTROLS
-from swarmbed.agent_runtime.bt.decorators import DECORATORS
-from swarmbed.agent_runtime.bt.leaves import LEAVES
-from swarmbed.agent_runtime.bt.node import TreeNode
+from swarmbed.bt.composites import CONTROLS
+from swarmbed.bt.decorators import DECORATORS
+from swarmbed.bt.leaves import LEAVES
+from swarmbed.bt.node import TreeNode
 
 BUILTIN_TYPES: tuple[type[TreeNode], ...] = CONTROLS + DECORATORS + LEAVES
 

@@ -7,12 +7,12 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from swarmbed.agent_runtime.bt.blackboard import Blackboard
-from swarmbed.agent_runtime.bt.node import ControlNode, DecoratorNode, TreeNode
-from swarmbed.agent_runtime.bt.palette import model_lines
-from swarmbed.agent_runtime.bt.registry import BUILTIN_TYPES
-from swarmbed.agent_runtime.bt.status import Status
-from swarmbed.agent_runtime.bt.tree import SubTree, Tree
+from swarmbed.bt.blackboard import Blackboard
+from swarmbed.bt.node import ControlNode, DecoratorNode, TreeNode
+from swarmbed.bt.palette import model_lines
+from swarmbed.bt.registry import BUILTIN_TYPES
+from swarmbed.bt.status import Status
+from swarmbed.bt.tree import SubTree, Tree
 from swarmbed.wire.btlog import MAX_ENTRIES, MAX_ITEMS, MAX_TEXT, BlackboardValue
 
 STATUS_CODE = {Status.IDLE: 0, Status.RUNNING: 1, Status.SUCCESS: 2, Status.FAILURE: 3}

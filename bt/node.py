@@ -11,8 +11,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from swarmbed.agent_runtime.bt.blackboard import Blackboard
-from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
+from swarmbed.bt.blackboard import Blackboard
+from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 
 StatusWatcher = Callable[["TreeNode", Status, Status], None]
 """Called with (node, previous status, new status) on every change, as BehaviorTree.CPP's

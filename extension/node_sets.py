@@ -9,8 +9,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from pathlib import Path
 
-from swarmbed.agent_runtime.bt import NodeRegistry
-from swarmbed.agent_runtime.nodes import SPACE_TREE
+from swarmbed.bt import NodeRegistry
+from swarmbed.extension.nodes import SPACE_TREE
 
 
 def node_registry(owners: Iterable[type]) -> NodeRegistry:

@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from xml.sax.saxutils import escape, quoteattr
 
-from swarmbed.agent_runtime.bt.node import TreeNode
-from swarmbed.agent_runtime.bt.registry import NodeRegistry
+from swarmbed.bt.node import TreeNode
+from swarmbed.bt.registry import NodeRegistry
 
 _PORT_TAG = {"input": "input_port", "output": "output_port", "inout": "inout_port"}
 _TYPE_NAME = {str: "std::string", int: "int", float: "double", bool: "bool"}

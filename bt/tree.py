@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import Any
 from xml.parsers import expat
 
-from swarmbed.agent_runtime.bt.blackboard import Blackboard
-from swarmbed.agent_runtime.bt.node import (
+from swarmbed.bt.blackboard import Blackboard
+from swarmbed.bt.node import (
     BTError,
     ControlNode,
     DecoratorNode,
@@ -24,8 +24,8 @@ from swarmbed.agent_runtime.bt.node import (
     convert_port,
     watch_node,
 )
-from swarmbed.agent_runtime.bt.registry import NodeRegistry
-from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
+from swarmbed.bt.registry import NodeRegistry
+from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 
 GENERIC_TAGS = ("Action", "Condition", "Control", "Decorator")
 SPECIAL_ATTRS = ("name", "ID")

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from swarmbed.agent_runtime.bt.node import BTError, ControlNode, InputPort, Port
-from swarmbed.agent_runtime.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
+from swarmbed.bt.node import BTError, ControlNode, InputPort, Port
+from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 
 
 class _Ordered(ControlNode):
