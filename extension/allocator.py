@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import abc
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
 from swarmbed.extension.view import LocalView
+
+if TYPE_CHECKING:
+    from swarmbed.bt import TreeNode
 
 
 class DecisionError(ValueError):
@@ -42,7 +45,7 @@ class Allocator(abc.ABC):
     #: counters this plugin reports through ``events``
     event_names: ClassVar[tuple[str, ...]] = ()
     #: behavior-tree node classes this plugin's trees use, and its default tree (a path)
-    bt_nodes: ClassVar[tuple[type, ...]] = ()
+    bt_nodes: ClassVar[tuple[type[TreeNode], ...]] = ()
     default_tree: ClassVar[str | None] = None
     #: whether a running instance can move to another process (snapshot / restore); a plugin that
     #: holds what cannot move (open files, threads, sockets) sets False, and swaps are refused

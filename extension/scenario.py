@@ -18,7 +18,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from pydantic import BaseModel
@@ -27,6 +27,9 @@ from swarmbed.extension.actions import MOVE_ACTIONS, ActionSpec
 from swarmbed.extension.figures import Figure
 from swarmbed.wire.observation import Observation as BaseObservation
 from swarmbed.wire.schema import AgentsSection, Experiment
+
+if TYPE_CHECKING:
+    from swarmbed.bt import TreeNode
 
 
 @dataclass(frozen=True)
@@ -124,7 +127,7 @@ class Scenario(abc.ABC):
     #: the world ``["invalid"]`` for any other
     actions: ClassVar[ActionSpec] = MOVE_ACTIONS
     #: behavior-tree nodes its agents' trees may use
-    bt_nodes: ClassVar[tuple[type, ...]] = ()
+    bt_nodes: ClassVar[tuple[type[TreeNode], ...]] = ()
     #: the tree used when the allocator has none (None: SPACE's default tree,
     #: ``swarmbed.extension.nodes.SPACE_TREE``)
     default_tree: ClassVar[Path | None] = None

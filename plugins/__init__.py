@@ -1,6 +1,6 @@
-"""Allocation-algorithm plugins. Write one against :mod:`swarmbed.plugins.base`; register it in
+"""Allocation-algorithm plugins. Write one against :mod:`swarmbed.extension`; register it in
 :mod:`swarmbed.plugins.registry` (or through the ``swarmbed.allocators`` entry-point group)."""
 
-from swarmbed.plugins.base import Allocator, LocalView, Message, TaskInfo
+from swarmbed.extension import Allocator, LocalView, Message, TaskInfo
 
 __all__ = ["Allocator", "LocalView", "Message", "TaskInfo"]

@@ -40,7 +40,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.plugins.base import Allocator, LocalView, TaskInfo
+from swarmbed.extension import Allocator, LocalView, TaskInfo
 from swarmbed.plugins.consensus import ConsensusState
 from swarmbed.plugins.taskbook import TaskBook
 

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.plugins.base import Allocator, LocalView
+from swarmbed.extension import Allocator, LocalView
 
 NONE = -1  # a decision that chooses no task (the tree explores)
 DEFER = -4  # a decision that asks the fallback allocator what it would do

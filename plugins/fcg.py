@@ -19,7 +19,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.plugins.base import Allocator, LocalView, TaskInfo
+from swarmbed.extension import Allocator, LocalView, TaskInfo
 
 CLAIM = "claim"
 

@@ -47,7 +47,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.plugins.base import HALT, HOLD, Allocator, LocalView
+from swarmbed.extension import HALT, HOLD, Allocator, LocalView
 from swarmbed.plugins.taskbook import TaskBook
 
 KIND = "grape"

@@ -4,7 +4,7 @@ ROS 2 example node (``examples/ros2_nearest.py``) plays through the ``ros2`` all
 
 from __future__ import annotations
 
-from swarmbed.plugins.base import Allocator, LocalView
+from swarmbed.extension import Allocator, LocalView
 
 
 class NearestTask(Allocator):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.plugins.base import Allocator, LocalView
+from swarmbed.extension import Allocator, LocalView
 
 
 class NoopParams(BaseModel):

@@ -6,7 +6,7 @@ longer among the visible open tasks has been completed.
 
 from __future__ import annotations
 
-from swarmbed.plugins.base import LocalView, TaskInfo
+from swarmbed.extension import LocalView, TaskInfo
 from swarmbed.wire.state import state_type
 
 

@@ -33,6 +33,7 @@ RENAMED = {
     },
     "swarmbed.agent_runtime.bt.tree": "swarmbed.bt.tree",
     "swarmbed.agent_runtime.nodes": "swarmbed.extension.nodes",
+    "swarmbed.plugins.base": "swarmbed.extension",  # the plugin author's names, all in the extension contract
     "swarmbed.agent_runtime.node_sets": "swarmbed.extension.node_sets",
 }
 

@@ -18,9 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.extension import Figure, Scenario, Sensing, World
+from swarmbed.extension import Allocator, Figure, LocalView, Scenario, Sensing, World
 from swarmbed.extension.nodes import SPACE_NODES
-from swarmbed.plugins.base import Allocator, LocalView
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 

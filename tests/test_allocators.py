@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.plugins.base import HALT, HOLD, LocalView, Message, TaskInfo
+from swarmbed.extension import HALT, HOLD, LocalView, Message, TaskInfo
 from swarmbed.plugins.cbba import CBBA
 from swarmbed.plugins.checks.allocator import CLEAN_NETWORK as CLEAN
 from swarmbed.plugins.checks.allocator import random_instance, run_all, simulate

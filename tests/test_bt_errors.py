@@ -87,7 +87,7 @@ def test_check_allocator_command(capsys, tmp_path):
     assert capsys.readouterr().out.count("PASS") == 5  # check_snapshot among them
     bad = tmp_path / "bad.py"
     bad.write_text(
-        "from swarmbed.plugins.base import Allocator\n"
+        "from swarmbed.extension import Allocator\n"
         "class Liar(Allocator):\n"
         "    def decide(self, view):\n"
         "        return 10**6\n"

@@ -201,7 +201,7 @@ def test_errors_name_what_the_user_wrote_not_our_classes(tmp_path, capsys):
     with pytest.raises(cfg.ConfigError) as info:
         load_text(tmp_path, "scenario:\n  workload: [60, 6]\n")
     assert "scenario.kind" not in str(info.value) and "workload must be" in str(info.value)
-    (tmp_path / "broken.py").write_text("from swarmbed.plugins.base import Allocator\nclass A(Allocator)\n")
+    (tmp_path / "broken.py").write_text("from swarmbed.extension import Allocator\nclass A(Allocator)\n")
     assert main(["run", str(QUICKSTART), "--set", f"allocator.name={tmp_path / 'broken.py'}:A"]) == 2
     err = capsys.readouterr().err.strip()
     assert "SyntaxError" in err and "broken.py, line 2" in err and len(err.splitlines()) == 1, err

@@ -133,7 +133,7 @@ def test_crashed_proxy_stops_the_run_with_a_clear_message(tmp_path):
 
 
 BOOM = textwrap.dedent("""
-    from swarmbed.plugins.base import Allocator
+    from swarmbed.extension import Allocator
 
     class Boom(Allocator):
         def decide(self, view):
@@ -157,7 +157,7 @@ def test_plugin_that_raises_stops_the_run_with_its_traceback(tmp_path, threads):
 
 
 GARBAGE = textwrap.dedent("""
-    from swarmbed.plugins.base import Allocator
+    from swarmbed.extension import Allocator
 
     class Garbage(Allocator):
         def decide(self, view):
@@ -179,7 +179,7 @@ def test_a_decision_that_is_no_task_id_names_the_agent_the_tick_and_the_value(tm
 
 STUCK = textwrap.dedent("""
     import time
-    from swarmbed.plugins.base import Allocator
+    from swarmbed.extension import Allocator
 
     class Stuck(Allocator):
         def decide(self, view):
@@ -200,7 +200,7 @@ def test_a_stuck_tick_names_the_agents_that_did_not_answer(tmp_path):
 
 LONG_TICK = textwrap.dedent("""
     import time
-    from swarmbed.plugins.base import Allocator
+    from swarmbed.extension import Allocator
 
     class LongTick(Allocator):
         def decide(self, view):

@@ -123,8 +123,10 @@ def test_old_module_names_still_import_with_a_warning_naming_the_new_one():
         "from swarmbed.agent_runtime.bt import load_tree, Status\n"  # issue 45: the BT engine's own package
         "from swarmbed.agent_runtime.bt.btlog import tree_xml\n"
         "from swarmbed.agent_runtime.nodes import ExplorationNode\n"
+        "from swarmbed.plugins.base import Allocator as PluginAllocator\n"
         "import swarmbed.bt as b, swarmbed.bt.btlog as log, swarmbed.extension.nodes as n\n"
         "print(load_tree is b.load_tree, tree_xml is log.tree_xml, ExplorationNode is n.ExplorationNode)\n"
+        "print(PluginAllocator is e.Allocator)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.splitlines()
     assert out == [
@@ -132,4 +134,5 @@ def test_old_module_names_still_import_with_a_warning_naming_the_new_one():
         "True True",
         "swarmbed.scenarios.sar",
         "True True True",
+        "True",
     ], out

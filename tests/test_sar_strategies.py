@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.plugins.base import LocalView, Message, TaskInfo
+from swarmbed.extension import LocalView, Message, TaskInfo
 from swarmbed.plugins.checks.allocator import random_instance, simulate
 from swarmbed.plugins.registry import make
 from swarmbed.plugins.sar.ccbba import ClusteringCBBA, kmeans_pp

@@ -330,7 +330,7 @@ def test_a_run_that_stops_keeps_its_rows_as_partial_files(tmp_path):
     plugin = tmp_path / "boom.py"
     plugin.write_text(
         textwrap.dedent("""
-        from swarmbed.plugins.base import Allocator
+        from swarmbed.extension import Allocator
 
         class Boom(Allocator):
             def decide(self, view):

@@ -12,7 +12,7 @@ from swarmbed.experiments.views.analyze import analyze
 from tests.conftest import QUICKSTART
 
 BOOM = textwrap.dedent("""
-    from swarmbed.plugins.base import Allocator
+    from swarmbed.extension import Allocator
 
     class Boom(Allocator):
         def decide(self, view):

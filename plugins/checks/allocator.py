@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from swarmbed.extension import HALT, HOLD, Allocator, LocalView, Message, TaskInfo
 from swarmbed.netem import Radio
-from swarmbed.plugins.base import HALT, HOLD, Allocator, LocalView, Message, TaskInfo
 from swarmbed.plugins.registry import make, resolve, resolve_scenario
 from swarmbed.wire.codec import TASK_DTYPE, unpack
 from swarmbed.wire.observation import Observation

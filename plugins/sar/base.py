@@ -15,7 +15,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmbed.plugins.base import Allocator, LocalView, TaskInfo
+from swarmbed.extension import Allocator, LocalView, TaskInfo
 from swarmbed.scenarios.sar import SARObservation
 
 TREES = Path(__file__).resolve().parent / "trees"

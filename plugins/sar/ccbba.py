@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from swarmbed.plugins.base import LocalView
+from swarmbed.extension import LocalView
 from swarmbed.plugins.sar.consensus import ConsensusParams, ReactiveCBBA
 
 BIDS, LEADERS, RESULT = "bids", "leaders", "result"

@@ -22,8 +22,8 @@ from typing import ClassVar, Literal
 
 from pydantic import Field
 
+from swarmbed.extension import LocalView
 from swarmbed.extension.nodes import ExplorationNode
-from swarmbed.plugins.base import LocalView
 from swarmbed.plugins.consensus import ConsensusState
 from swarmbed.plugins.sar.base import TREES, SARStrategy, StrategyParams
 from swarmbed.plugins.sar.interval import IntervalParams, next_interval

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from pydantic import Field
 
+from swarmbed.extension import LocalView
 from swarmbed.extension.nodes import ExplorationNode
-from swarmbed.plugins.base import LocalView
 from swarmbed.plugins.sar.base import TREES, SARStrategy, StrategyParams
 from swarmbed.plugins.sar.nodes import SAR_NODES
 
