@@ -1,0 +1,35 @@
+"""docs/EXTENDING.md's worked example runs as written: its allocator passes the conformance kit,
+and an experiment naming it checks, both in this process."""
+
+import re
+
+from swarmbed.experiments import cli
+from tests.conftest import ROOT
+
+GUIDE = ROOT / "docs" / "EXTENDING.md"
+
+
+def _files() -> dict[str, str]:
+    """Every fenced block the guide names a file for (```python file=NAME)."""
+    return dict(re.findall(r"```\w+ file=(\S+)\n(.*?)```", GUIDE.read_text(), flags=re.S))
+
+
+def test_the_guides_allocator_passes_the_kit_and_its_experiment_checks(tmp_path, monkeypatch, capsys):
+    files = _files()
+    assert "claim_nearest.py" in files
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["check-allocator", "claim_nearest.py:ClaimNearest"]) == 0, capsys.readouterr().out
+    assert "FAIL" not in capsys.readouterr().out
+    command = re.search(
+        r"`swarmbed (run \S+ --set allocator.name=claim_nearest.py:ClaimNearest --check)`", GUIDE.read_text()
+    )
+    argv = command.group(1).split()
+    argv[1] = str(ROOT / argv[1])
+    assert cli.main(argv) == 0, capsys.readouterr()
+    assert "claim_nearest.py:ClaimNearest" in capsys.readouterr().out
+    # the kit is not a rubber stamp: an allocator that returns a task it does not see fails it
+    broken = files["claim_nearest.py"].replace("return task.id", "return task.id + 10_000")
+    (tmp_path / "broken.py").write_text(broken)
+    assert cli.main(["check-allocator", "broken.py:ClaimNearest"]) == 1
