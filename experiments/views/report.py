@@ -88,10 +88,28 @@ def run_report(run: Path) -> tuple[str, int]:
         series = runfiles.table(run, TIMESERIES, ticks) if (run / TIMESERIES).exists() else None
     except RunFileError as exc:
         raise ReportError(str(exc)) from None
+    sent = ledger[ledger["outcome"] == "sent"]
+    copies = ledger[ledger["outcome"] != "sent"]  # one row per outcome of the copies
+    page = _totals(summary, sent, copies, ticks, dt)
+    if wire is not None:
+        _on_the_wire(page, run, wire, agents)
+    _per_agent(page, agents)
+    _per_kind(page, summary["network"], sent)
+    _over_time(page, sent, copies, ticks, dt)
+    _who_to_whom(page, receivers, copies, int(summary["agents"]))
+    radio_pages(page, receivers, config)
+    _outcome_beside_traffic(page, _benefit(summary.get("scenario_kind", "")), series)
+    subtitle = (
+        f"run {run} · seed {summary['seed']} · swarmbed {swarmbed.__version__} · "
+        f"report made {time.strftime('%Y-%m-%d %H:%M')}"
+    )
+    return page.render(subtitle), page.figures
+
+
+def _totals(summary: dict, sent: pd.DataFrame, copies: pd.DataFrame, ticks: int, dt: float) -> Page:
+    """The page, opened with the run's totals (each with the file it comes from)."""
     net = summary["network"]
     page = Page(f"{summary['name']}: bandwidth accounting")
-    sent = ledger[ledger["outcome"] == "sent"]
-    copies = ledger[ledger["outcome"] != "sent"]
     delivered = int(copies.loc[copies["outcome"] == "delivered", "messages"].sum())
     dropped = copies[copies["outcome"] != "delivered"].groupby("outcome")["messages"].sum()
     balanced = int(copies["messages"].sum()) == delivered + int(dropped.sum()) == net["copies"]
@@ -119,63 +137,68 @@ def run_report(run: Path) -> tuple[str, int]:
             (f"{benefit.replace('_', ' ')} per kB sent", summary[benefit] / kb, "summary.json"),
         ]
     page.table(rows)
+    return page
 
-    if wire is not None:
-        t = wire.get("totals")
-        if not isinstance(t, dict):
-            raise ReportError(f"{run / TRANSPORT}: no totals object")
-        page.heading(
-            "On the wire",
-            "Payload: the radio messages as agents encode them (reproducible). Samples: "
-            "the per-tick Zenoh samples agents publish (actions, radio messages, framing of ours) and "
-            "receive (observation, inbox). TCP: what each process's sockets sent and received, as the "
-            "kernel counts it (Zenoh framing, control traffic, keep-alives; not IP/TCP headers). "
-            "Measured, so not reproducible byte for byte.",
-        )
-        page.table(
-            [
-                ("radio payload bytes sent", t["radio_payload_bytes"], "transport.json, summary.json"),
-                ("per-tick sample bytes agents published", t["agent_sample_bytes_out"], "transport.json"),
-                ("per-tick sample bytes agents received", t["agent_sample_bytes_in"], "transport.json"),
-                ("TCP bytes agents sent", t["agent_tcp_bytes_sent"], "transport.json"),
-                ("TCP bytes agents received", t["agent_tcp_bytes_received"], "transport.json"),
-                ("overhead: TCP bytes agents sent / radio payload bytes", t["overhead_ratio"], "transport.json"),
-                (
-                    "TCP bytes all processes sent / received",
-                    f"{_fmt(t['tcp_bytes_sent'])} / {_fmt(t['tcp_bytes_received'])}",
-                    "transport.json",
-                ),
-            ]
-        )
-        procs = {
-            n: wire["processes"][n]
-            for n in sorted(
-                (n for n in wire["processes"] if n.startswith("agent_")),
-                key=lambda n: tuple(int(x) for x in n.removeprefix("agent_").split(".") if x.isdigit()),
-            )
-        }
-        names = [n.removeprefix("agent_") for n in procs]  # agent 2 before agent 10, as every other chart
-        sent_by = agents.set_index("agent")["bytes_sent"]
-        fig = go.Figure(
-            [
-                go.Bar(x=names, y=[sent_by.get(int(n), 0) for n in names], name="radio payload"),
-                go.Bar(
-                    x=names,
-                    y=[(p.get("samples") or {}).get("out") for p in procs.values()],
-                    name="per-tick samples published",
-                ),
-                go.Bar(x=names, y=[(p.get("tcp") or {}).get("sent") for p in procs.values()], name="TCP bytes sent"),
-            ]
-        )
-        fig.update_layout(
-            title="What each agent sent, layer by layer",
-            xaxis_title="agent",
-            yaxis_title="bytes",
-            barmode="group",
-            xaxis={"type": "category", "categoryorder": "array", "categoryarray": names},
-        )
-        page.figure(fig, "transport.json, agents.csv")
 
+def _on_the_wire(page: Page, run: Path, wire: dict, agents: pd.DataFrame) -> None:
+    """What agents' samples and sockets carried, beside the radio payload (transport.json)."""
+    t = wire.get("totals")
+    if not isinstance(t, dict):
+        raise ReportError(f"{run / TRANSPORT}: no totals object")
+    page.heading(
+        "On the wire",
+        "Payload: the radio messages as agents encode them (reproducible). Samples: "
+        "the per-tick Zenoh samples agents publish (actions, radio messages, framing of ours) and "
+        "receive (observation, inbox). TCP: what each process's sockets sent and received, as the "
+        "kernel counts it (Zenoh framing, control traffic, keep-alives; not IP/TCP headers). "
+        "Measured, so not reproducible byte for byte.",
+    )
+    page.table(
+        [
+            ("radio payload bytes sent", t["radio_payload_bytes"], "transport.json, summary.json"),
+            ("per-tick sample bytes agents published", t["agent_sample_bytes_out"], "transport.json"),
+            ("per-tick sample bytes agents received", t["agent_sample_bytes_in"], "transport.json"),
+            ("TCP bytes agents sent", t["agent_tcp_bytes_sent"], "transport.json"),
+            ("TCP bytes agents received", t["agent_tcp_bytes_received"], "transport.json"),
+            ("overhead: TCP bytes agents sent / radio payload bytes", t["overhead_ratio"], "transport.json"),
+            (
+                "TCP bytes all processes sent / received",
+                f"{_fmt(t['tcp_bytes_sent'])} / {_fmt(t['tcp_bytes_received'])}",
+                "transport.json",
+            ),
+        ]
+    )
+    procs = {
+        n: wire["processes"][n]
+        for n in sorted(
+            (n for n in wire["processes"] if n.startswith("agent_")),
+            key=lambda n: tuple(int(x) for x in n.removeprefix("agent_").split(".") if x.isdigit()),
+        )
+    }
+    names = [n.removeprefix("agent_") for n in procs]  # agent 2 before agent 10, as every other chart
+    sent_by = agents.set_index("agent")["bytes_sent"]
+    fig = go.Figure(
+        [
+            go.Bar(x=names, y=[sent_by.get(int(n), 0) for n in names], name="radio payload"),
+            go.Bar(
+                x=names,
+                y=[(p.get("samples") or {}).get("out") for p in procs.values()],
+                name="per-tick samples published",
+            ),
+            go.Bar(x=names, y=[(p.get("tcp") or {}).get("sent") for p in procs.values()], name="TCP bytes sent"),
+        ]
+    )
+    fig.update_layout(
+        title="What each agent sent, layer by layer",
+        xaxis_title="agent",
+        yaxis_title="bytes",
+        barmode="group",
+        xaxis={"type": "category", "categoryorder": "array", "categoryarray": names},
+    )
+    page.figure(fig, "transport.json, agents.csv")
+
+
+def _per_agent(page: Page, agents: pd.DataFrame) -> None:
     page.heading("Per agent")
     fig = go.Figure(
         _side_by_side(
@@ -193,6 +216,8 @@ def run_report(run: Path) -> tuple[str, int]:
     )
     page.figure(fig, "agents.csv")
 
+
+def _per_kind(page: Page, net: dict, sent: pd.DataFrame) -> None:
     page.heading("Per message kind")
     kinds = pd.DataFrame(net["per_kind"]).T.reset_index(names="kind") if net["per_kind"] else pd.DataFrame()
     if len(kinds):
@@ -215,6 +240,8 @@ def run_report(run: Path) -> tuple[str, int]:
         )
         page.figure(fig, "network_ledger.csv (sent rows)")
 
+
+def _over_time(page: Page, sent: pd.DataFrame, copies: pd.DataFrame, ticks: int, dt: float) -> None:
     page.heading("Over simulated time")
     for by, what in (("kind", "message kind"), ("sender", "sending agent")):
         rate = _binned(sent, ticks, dt, by, "bytes")
@@ -241,13 +268,15 @@ def run_report(run: Path) -> tuple[str, int]:
         )
         page.figure(fig, "network_ledger.csv (drop rows)")
 
+
+def _who_to_whom(page: Page, receivers: pd.DataFrame | None, copies: pd.DataFrame, agents: int) -> None:
     if receivers is not None:
         page.heading(
             "Who sent what to whom, and what became of it",
             "One cell per sender and receiver: copies delivered, and copies dropped (any reason).",
         )
         per_copy = receivers
-        ids = [str(i) for i in range(int(summary["agents"]))]
+        ids = [str(i) for i in range(agents)]
         for title, rows in (
             ("delivered", per_copy["outcome"] == "delivered"),
             ("dropped", per_copy["outcome"] != "delivered"),
@@ -288,8 +317,8 @@ def run_report(run: Path) -> tuple[str, int]:
         fig.update_layout(title="Copies by sender and outcome", xaxis_title="sender")
         page.figure(fig, "network_ledger.csv")
 
-    radio_pages(page, receivers, config)
 
+def _outcome_beside_traffic(page: Page, benefit: str | None, series: pd.DataFrame | None) -> None:
     if benefit and series is not None and {benefit, "time", "bytes_sent"} <= set(series.columns):
         fig = go.Figure(
             [
@@ -305,11 +334,6 @@ def run_report(run: Path) -> tuple[str, int]:
             legend=LEGEND_BELOW,
         )
         page.figure(fig, "timeseries.csv")
-    subtitle = (
-        f"run {run} · seed {summary['seed']} · swarmbed {swarmbed.__version__} · "
-        f"report made {time.strftime('%Y-%m-%d %H:%M')}"
-    )
-    return page.render(subtitle), page.figures
 
 
 #: a legend under the plot: at the right it covers the title of a second y axis
