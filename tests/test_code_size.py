@@ -16,7 +16,6 @@ EXCEPTIONS: dict[str, str] = {
     "the tick body into an engine above the roles, which takes it under 400",
     "experiments/views/recording.py:_write_mcap": "every MCAP channel declared and written in one pass; "
     "splitting waits for a byte-identity test of the recording over several runs",
-    "experiments/views/replay.py:replay": "the movie's frames drawn in one matplotlib loop",
     "experiments/views/soak_page.py:soak_report": "one HTML page, as run_report",
 }
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -31,6 +32,78 @@ def _segments(rows: pd.DataFrame, pos: dict[int, tuple[float, float]]) -> list[l
     return [[pos[s], pos[r]] for s, r in zip(rows["sender"], rows["receiver"]) if s in pos and r in pos]
 
 
+def _checked_output(
+    run: Path, out: Path | None, start: float | None, end: float | None, fps: int, every: int | None
+) -> Path:
+    """The movie's path, once the run and the request are fit to make one (else a ReplayError)."""
+    if not (run / SUMMARY).exists():
+        raise ReplayError(f"{run}: not a completed run (no {SUMMARY})")
+    if not (run / TRAJECTORIES).exists() or not (run / MARKERS).exists():
+        raise ReplayError(f"{run}: no {TRAJECTORIES}/{MARKERS}; run it again with --set run.record_trajectories=true")
+    out = out or run / "replay.gif"
+    if out.suffix not in (".gif", ".mp4"):
+        raise ReplayError(f"{out}: a replay is a .gif or an .mp4")
+    if out.suffix == ".mp4" and shutil.which("ffmpeg") is None:
+        raise ReplayError("an .mp4 needs ffmpeg (not installed here); ask for a .gif instead")
+    if fps < 1 or (every is not None and every < 1):
+        raise ReplayError(f"--fps {fps} / --every {every}: both must be at least 1")
+    for name, value in (("--from", start), ("--to", end)):
+        if value is not None and not np.isfinite(value):
+            raise ReplayError(f"{name} {value}: give a time in simulated seconds")
+    return out
+
+
+def _recorded(run: Path) -> tuple[float, int, pd.DataFrame, pd.DataFrame, pd.DataFrame | None]:
+    """The run's tick length and ticks, its trajectories, its markers and (per-receiver ledger) its copies."""
+    try:
+        dt, ticks = runfiles.dt_of(run), runfiles.ticks_of(run)
+        traj = runfiles.table(run, TRAJECTORIES, ticks, ("x", "y"), ("agent",), keep_default_na=False)
+        markers = runfiles.table(run, MARKERS, ticks, columns=MARKER_COLUMNS, keep_default_na=False)
+        copies = (
+            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
+            if (run / RECEIVER_LEDGER).exists()
+            else None
+        )
+    except RunFileError as exc:
+        raise ReplayError(str(exc)) from None
+    if traj.empty:
+        raise ReplayError(f"{run / TRAJECTORIES}: no row")
+    if "label" not in traj:  # recorded before agents had labels
+        traj["label"] = ""
+    return dt, ticks, traj, markers, copies
+
+
+def _frame_ticks(traj: pd.DataFrame, dt: float, start: float | None, end: float | None, every: int | None) -> list[int]:
+    """The ticks drawn: within --from/--to, every ``every``-th (default: at most MAX_FRAMES)."""
+    first, last = int(traj["tick"].min()), int(traj["tick"].max())
+    lo = first if start is None else max(first, int(np.ceil(start / dt)))
+    hi = last if end is None else min(last, int(end / dt))
+    if hi < lo:
+        raise ReplayError(f"no tick between {start} s and {end} s (the run has {first * dt}-{last * dt} s)")
+    every = every or max(1, int(np.ceil((hi - lo + 1) / MAX_FRAMES)))
+    return list(range(lo, hi + 1, every))
+
+
+def _legend(ax: Any, copies: pd.DataFrame | None) -> None:
+    """Delivered and each drop reason the run has, or a note that links need the per-receiver ledger."""
+    if copies is not None:
+        from matplotlib.lines import Line2D
+
+        reasons = [r for r in DROP_COLORS if r != "run_ended" and r in set(copies["outcome"])]
+        handles = [Line2D([], [], color="#1f77b4", lw=1, label="delivered")]
+        handles += [Line2D([], [], color=DROP_COLORS[r], lw=1, ls="--", label=r.replace("_", " ")) for r in reasons]
+        ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
+    else:
+        ax.text(
+            0.01,
+            0.01,
+            "links: run with network.ledger: per_receiver",
+            transform=ax.transAxes,
+            fontsize=8,
+            color="#777777",
+        )
+
+
 def replay(
     run: Path,
     out: Path | None = None,
@@ -47,43 +120,9 @@ def replay(
     from matplotlib import animation
     from matplotlib.collections import LineCollection
 
-    if not (run / SUMMARY).exists():
-        raise ReplayError(f"{run}: not a completed run (no {SUMMARY})")
-    if not (run / TRAJECTORIES).exists() or not (run / MARKERS).exists():
-        raise ReplayError(f"{run}: no {TRAJECTORIES}/{MARKERS}; run it again with --set run.record_trajectories=true")
-    out = out or run / "replay.gif"
-    if out.suffix not in (".gif", ".mp4"):
-        raise ReplayError(f"{out}: a replay is a .gif or an .mp4")
-    if out.suffix == ".mp4" and shutil.which("ffmpeg") is None:
-        raise ReplayError("an .mp4 needs ffmpeg (not installed here); ask for a .gif instead")
-    if fps < 1 or (every is not None and every < 1):
-        raise ReplayError(f"--fps {fps} / --every {every}: both must be at least 1")
-    for name, value in (("--from", start), ("--to", end)):
-        if value is not None and not np.isfinite(value):
-            raise ReplayError(f"{name} {value}: give a time in simulated seconds")
-    try:
-        dt, ticks = runfiles.dt_of(run), runfiles.ticks_of(run)
-        traj = runfiles.table(run, TRAJECTORIES, ticks, ("x", "y"), ("agent",), keep_default_na=False)
-        markers = runfiles.table(run, MARKERS, ticks, columns=MARKER_COLUMNS, keep_default_na=False)
-        copies = (
-            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
-            if (run / RECEIVER_LEDGER).exists()
-            else None
-        )
-    except RunFileError as exc:
-        raise ReplayError(str(exc)) from None
-    if traj.empty:
-        raise ReplayError(f"{run / TRAJECTORIES}: no row")
-    if "label" not in traj:  # recorded before agents had labels
-        traj["label"] = ""
-
-    first, last = int(traj["tick"].min()), int(traj["tick"].max())
-    lo = first if start is None else max(first, int(np.ceil(start / dt)))
-    hi = last if end is None else min(last, int(end / dt))
-    if hi < lo:
-        raise ReplayError(f"no tick between {start} s and {end} s (the run has {first * dt}-{last * dt} s)")
-    every = every or max(1, int(np.ceil((hi - lo + 1) / MAX_FRAMES)))
-    frames = list(range(lo, hi + 1, every))
+    out = _checked_output(run, out, start, end, fps, every)
+    dt, ticks, traj, markers, copies = _recorded(run)
+    frames = _frame_ticks(traj, dt, start, end, every)
 
     marker_xy = markers.assign(
         x=pd.to_numeric(markers["x"], errors="coerce"), y=pd.to_numeric(markers["y"], errors="coerce")
@@ -109,22 +148,7 @@ def replay(
     marks = ax.scatter([], [], s=24, marker="s")
     agents = ax.scatter([], [], s=40, c="#222222", edgecolors="black", linewidths=1.2, zorder=3)
     label = ax.text(0.01, 0.99, "", transform=ax.transAxes, va="top", family="monospace")
-    if copies is not None:
-        from matplotlib.lines import Line2D
-
-        reasons = [r for r in DROP_COLORS if r != "run_ended" and r in set(copies["outcome"])]
-        handles = [Line2D([], [], color="#1f77b4", lw=1, label="delivered")]
-        handles += [Line2D([], [], color=DROP_COLORS[r], lw=1, ls="--", label=r.replace("_", " ")) for r in reasons]
-        ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
-    else:
-        ax.text(
-            0.01,
-            0.01,
-            "links: run with network.ledger: per_receiver",
-            transform=ax.transAxes,
-            fontsize=8,
-            color="#777777",
-        )
+    _legend(ax, copies)
     present: dict[int, tuple[float, float, str]] = {}
     applied = [-1]  # last tick whose marker events are in `present`
 
