@@ -27,6 +27,7 @@ import math
 import os
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -118,22 +119,7 @@ def _write_mcap(run: Path, out: Path) -> dict:
     try:
         import foxglove
         from foxglove import channels
-        from foxglove.messages import (
-            ArrowPrimitive,
-            CubePrimitive,
-            KeyValuePair,
-            LinePrimitive,
-            LinePrimitiveLineType,
-            Point3,
-            PosesInFrame,
-            SceneEntity,
-            SceneEntityDeletion,
-            SceneEntityDeletionType,
-            SceneUpdate,
-            SpherePrimitive,
-            TextPrimitive,
-            Vector3,
-        )
+        from foxglove.messages import PosesInFrame, SceneUpdate
     except ImportError:
         raise RecordingError("an MCAP recording needs Foxglove's SDK: pip install 'swarmbed[viewers]'") from None
     if not (run / SUMMARY).exists():
@@ -141,26 +127,7 @@ def _write_mcap(run: Path, out: Path) -> dict:
     if not (run / TRAJECTORIES).exists():
         raise RecordingError(f"{run}: no {TRAJECTORIES}; run it again with --set run.record_trajectories=true")
     started = time.perf_counter()
-    try:
-        dt, ticks = runfiles.dt_of(run), runfiles.ticks_of(run)
-        traj = runfiles.table(run, TRAJECTORIES, ticks, ("x", "y"), ("agent",), keep_default_na=False)
-        markers = (
-            runfiles.table(run, MARKERS, ticks, columns=("marker", "x", "y", "label", "event"), keep_default_na=False)
-            if (run / MARKERS).exists()
-            else None
-        )
-        counters = runfiles.table(run, TIMESERIES, ticks)
-        copies = (
-            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
-            if (run / RECEIVER_LEDGER).exists()
-            else None
-        )
-        trees = _tree_changes(run, dt, ticks)
-    except RunFileError as exc:
-        raise RecordingError(str(exc)) from None
-    if markers is not None:  # a marker where no number is (a crafted file) is left out
-        xy = markers[["x", "y"]].apply(pd.to_numeric, errors="coerce")
-        markers = markers[(markers["event"] != "appear") | np.isfinite(xy.to_numpy(dtype=float)).all(axis=1)]
+    dt, traj, markers, counters, copies, trees = _recorded(run)
     traj["heading"] = _headings(traj)
     span = max(float(np.ptp(traj["x"])), float(np.ptp(traj["y"])), 1.0)
     size = span / 100  # an agent's sphere: a hundredth of the arena's extent
@@ -186,7 +153,6 @@ def _write_mcap(run: Path, out: Path) -> dict:
     marker_rows = {int(t): r for t, r in markers.groupby("tick")} if markers is not None else {}
     copy_rows = {int(t): r for t, r in copies.groupby("tick")} if copies is not None else {}
     counter_rows = {int(row["tick"]): row for row in counters.to_dict("records")}
-    agent_colour = _rgba("#222222")
     traj_rows = {int(t): rows for t, rows in traj.groupby("tick")}
     where: dict[int, tuple[float, float]] = {}  # each agent's last known position, for the radio's lines
     for tick in sorted(set(traj_rows) | set(counter_rows) | set(marker_rows) | set(copy_rows) | set(trees)):
@@ -194,94 +160,16 @@ def _write_mcap(run: Path, out: Path) -> dict:
         rows = traj_rows.get(tick)
         if rows is not None:
             where.update((int(a), (float(x), float(y))) for a, x, y in zip(rows["agent"], rows["x"], rows["y"]))
-            entities, poses = [], []
-            for agent, x, y, heading, label in zip(rows["agent"], rows["x"], rows["y"], rows["heading"], rows["label"]):
-                pose = _pose(float(x), float(y), float(heading))
-                poses.append(pose)
-                entities.append(
-                    SceneEntity(
-                        timestamp=stamp,
-                        frame_id=FRAME,
-                        id=f"agent/{agent}",
-                        metadata=[KeyValuePair(key="label", value=str(label))],
-                        spheres=[SpherePrimitive(pose=pose, size=Vector3(x=size, y=size, z=size), color=agent_colour)],
-                        arrows=[
-                            ArrowPrimitive(
-                                pose=pose,
-                                shaft_length=2 * size,
-                                shaft_diameter=size / 4,
-                                head_length=size,
-                                head_diameter=size / 2,
-                                color=agent_colour,
-                            )
-                        ],
-                        texts=[
-                            TextPrimitive(
-                                pose=_pose(float(x), float(y) + size, 0.0),
-                                billboard=True,
-                                font_size=12,
-                                scale_invariant=True,
-                                color=agent_colour,
-                                text=f"{agent} {label}".strip(),
-                            )
-                        ],
-                    )
-                )
+            entities, poses = _agent_entities(rows, stamp, size)
             agents_ch.log(SceneUpdate(entities=entities), log_time=log_time)
             poses_ch.log(PosesInFrame(timestamp=stamp, frame_id=FRAME, poses=poses), log_time=log_time)
             sent["/agents"] += 1
             sent["/agents/poses"] += 1
         if tick in marker_rows:
-            appeared, vanished = [], []
-            for marker, x, y, label, event in marker_rows[tick][["marker", "x", "y", "label", "event"]].itertuples(
-                index=False
-            ):
-                if event == "appear":
-                    cube = CubePrimitive(
-                        pose=_pose(float(x), float(y), 0.0),
-                        size=Vector3(x=size, y=size, z=size),
-                        color=_rgba("#2ca02c"),
-                    )
-                    appeared.append(
-                        SceneEntity(
-                            timestamp=stamp,
-                            frame_id=FRAME,
-                            id=f"marker/{marker}",
-                            metadata=[KeyValuePair(key="label", value=str(label))],
-                            cubes=[cube],
-                        )
-                    )
-                else:
-                    vanished.append(
-                        SceneEntityDeletion(
-                            timestamp=stamp, type=SceneEntityDeletionType.MatchingId, id=f"marker/{marker}"
-                        )
-                    )
-            markers_ch.log(SceneUpdate(entities=appeared, deletions=vanished), log_time=log_time)
+            markers_ch.log(_marker_update(marker_rows[tick], stamp, size), log_time=log_time)
             sent["/markers"] += 1
         if tick in copy_rows:
-            lines = []
-            for outcome, group in copy_rows[tick].groupby("outcome", sort=True):
-                points = [
-                    Point3(x=p[0], y=p[1], z=0.0)
-                    for s, r in zip(group["sender"], group["receiver"])
-                    if int(s) in where and int(r) in where
-                    for p in (where[int(s)], where[int(r)])
-                ]
-                if points:
-                    colour = DELIVERED if outcome == "delivered" else DROP_COLORS.get(str(outcome), "#7f7f7f")
-                    lines.append(
-                        LinePrimitive(
-                            type=LinePrimitiveLineType.LineList,
-                            thickness=1.0,
-                            scale_invariant=True,
-                            points=points,
-                            color=_rgba(colour, 0.6),
-                        )
-                    )
-            lifetime = _duration(dt)
-            entity = SceneEntity(timestamp=stamp, frame_id=FRAME, id="radio", lifetime=lifetime, lines=lines)
-            radio_ch.log(SceneUpdate(entities=[entity]), log_time=log_time)
+            radio_ch.log(_radio_update(copy_rows[tick], where, stamp, dt), log_time=log_time)
             sent["/radio"] += 1
         if tick in counter_rows:
             counters_ch.log({k: _plain(v) for k, v in counter_rows[tick].items()}, log_time=log_time)
@@ -292,6 +180,136 @@ def _write_mcap(run: Path, out: Path) -> dict:
             sent["/agents/tree"] += 1
     writer.close()
     return {"messages": sent, "bytes": out.stat().st_size, "seconds": time.perf_counter() - started}
+
+
+def _recorded(run: Path) -> tuple[float, pd.DataFrame, pd.DataFrame | None, pd.DataFrame, pd.DataFrame | None, dict]:
+    """What a recording is made of: the tick length, trajectories, markers (those with a position),
+    the counters, the per-receiver copies and the trees' changes, each read as a crafted file may be."""
+    try:
+        dt, ticks = runfiles.dt_of(run), runfiles.ticks_of(run)
+        traj = runfiles.table(run, TRAJECTORIES, ticks, ("x", "y"), ("agent",), keep_default_na=False)
+        markers = (
+            runfiles.table(run, MARKERS, ticks, columns=("marker", "x", "y", "label", "event"), keep_default_na=False)
+            if (run / MARKERS).exists()
+            else None
+        )
+        counters = runfiles.table(run, TIMESERIES, ticks)
+        copies = (
+            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
+            if (run / RECEIVER_LEDGER).exists()
+            else None
+        )
+        trees = _tree_changes(run, dt, ticks)
+    except RunFileError as exc:
+        raise RecordingError(str(exc)) from None
+    if markers is not None:  # a marker where no number is (a crafted file) is left out
+        xy = markers[["x", "y"]].apply(pd.to_numeric, errors="coerce")
+        markers = markers[(markers["event"] != "appear") | np.isfinite(xy.to_numpy(dtype=float)).all(axis=1)]
+    return dt, traj, markers, counters, copies, trees
+
+
+def _agent_entities(rows: pd.DataFrame, stamp: Any, size: float) -> tuple[list, list]:
+    """Each agent of a tick as a sphere, a heading arrow and its id and label, and its pose."""
+    from foxglove.messages import ArrowPrimitive, KeyValuePair, SceneEntity, SpherePrimitive, TextPrimitive, Vector3
+
+    agent_colour = _rgba("#222222")
+    entities, poses = [], []
+    for agent, x, y, heading, label in zip(rows["agent"], rows["x"], rows["y"], rows["heading"], rows["label"]):
+        pose = _pose(float(x), float(y), float(heading))
+        poses.append(pose)
+        entities.append(
+            SceneEntity(
+                timestamp=stamp,
+                frame_id=FRAME,
+                id=f"agent/{agent}",
+                metadata=[KeyValuePair(key="label", value=str(label))],
+                spheres=[SpherePrimitive(pose=pose, size=Vector3(x=size, y=size, z=size), color=agent_colour)],
+                arrows=[
+                    ArrowPrimitive(
+                        pose=pose,
+                        shaft_length=2 * size,
+                        shaft_diameter=size / 4,
+                        head_length=size,
+                        head_diameter=size / 2,
+                        color=agent_colour,
+                    )
+                ],
+                texts=[
+                    TextPrimitive(
+                        pose=_pose(float(x), float(y) + size, 0.0),
+                        billboard=True,
+                        font_size=12,
+                        scale_invariant=True,
+                        color=agent_colour,
+                        text=f"{agent} {label}".strip(),
+                    )
+                ],
+            )
+        )
+    return entities, poses
+
+
+def _marker_update(rows: pd.DataFrame, stamp: Any, size: float) -> Any:
+    """A tick's markers: a cube for each that appeared, a deletion for each that vanished."""
+    from foxglove.messages import (
+        CubePrimitive,
+        KeyValuePair,
+        SceneEntity,
+        SceneEntityDeletion,
+        SceneEntityDeletionType,
+        SceneUpdate,
+        Vector3,
+    )
+
+    appeared, vanished = [], []
+    for marker, x, y, label, event in rows[["marker", "x", "y", "label", "event"]].itertuples(index=False):
+        if event == "appear":
+            cube = CubePrimitive(
+                pose=_pose(float(x), float(y), 0.0),
+                size=Vector3(x=size, y=size, z=size),
+                color=_rgba("#2ca02c"),
+            )
+            appeared.append(
+                SceneEntity(
+                    timestamp=stamp,
+                    frame_id=FRAME,
+                    id=f"marker/{marker}",
+                    metadata=[KeyValuePair(key="label", value=str(label))],
+                    cubes=[cube],
+                )
+            )
+        else:
+            vanished.append(
+                SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.MatchingId, id=f"marker/{marker}")
+            )
+    return SceneUpdate(entities=appeared, deletions=vanished)
+
+
+def _radio_update(rows: pd.DataFrame, where: dict[int, tuple[float, float]], stamp: Any, dt: float) -> Any:
+    """A tick's copies as lines from sender to receiver, one colour per outcome, living one tick."""
+    from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity, SceneUpdate
+
+    lines = []
+    for outcome, group in rows.groupby("outcome", sort=True):
+        points = [
+            Point3(x=p[0], y=p[1], z=0.0)
+            for s, r in zip(group["sender"], group["receiver"])
+            if int(s) in where and int(r) in where
+            for p in (where[int(s)], where[int(r)])
+        ]
+        if points:
+            colour = DELIVERED if outcome == "delivered" else DROP_COLORS.get(str(outcome), "#7f7f7f")
+            lines.append(
+                LinePrimitive(
+                    type=LinePrimitiveLineType.LineList,
+                    thickness=1.0,
+                    scale_invariant=True,
+                    points=points,
+                    color=_rgba(colour, 0.6),
+                )
+            )
+    entity = SceneEntity(timestamp=stamp, frame_id=FRAME, id="radio", lifetime=_duration(dt), lines=lines)
+    return SceneUpdate(entities=[entity])
 
 
 def _json_schema(name: str, schema: dict):
