@@ -14,7 +14,6 @@ MAX_CLASS = 400
 EXCEPTIONS: dict[str, str] = {
     "coordinator/coordinator.py:Coordinator": "the lock-step loop and its lifecycle; issue 45 item 1 carves "
     "the tick body into an engine above the roles, which takes it under 400",
-    "experiments/views/soak_page.py:soak_report": "one HTML page, as run_report",
 }
 
 

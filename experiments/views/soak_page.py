@@ -5,6 +5,7 @@ event marked on the same time axis. A soak that was killed is reported from its 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pandas as pd
@@ -42,6 +43,19 @@ def soak_report(folder: Path) -> tuple[str, int]:
     assert procs is not None, f"{folder}: no {PROCESSES}"
     page = Page(f"{folder.name}: soak")
     verdict = read_json_member(folder, VERDICT) if (folder / VERDICT).exists() else None
+    _verdict(page, verdict)
+    if chaos is not None and len(chaos):
+        _faults(page, chaos, chaos_file)
+    mark = _marker(chaos)
+    _processes(page, procs, procs_file, mark)
+    if run is not None:
+        _the_run(page, run, run_file, mark)
+    subtitle = f"soak {folder} · swarmbed {swarmbed.__version__} · report made {time.strftime('%Y-%m-%d %H:%M')}"
+    return page.render(subtitle), page.figures
+
+
+def _verdict(page: Page, verdict: dict | None) -> None:
+    """The verdict and its figures, or a note that the soak did not finish."""
     if verdict is None:
         page.heading(
             "No verdict", f"The soak did not finish (no {VERDICT}); what follows is read from the files it was writing."
@@ -74,15 +88,21 @@ def soak_report(folder: Path) -> tuple[str, int]:
                 )
             )
         page.table(rows)
-    if chaos is not None and len(chaos):
-        page.heading("Faults", "Each injected fault and how it ended.")
-        page.table(
-            [
-                (f"{r.wall_s:.1f} s, tick {r.tick}: {r.action} {r.target}", r.outcome, chaos_file)
-                for r in chaos.itertuples()
-            ],
-            ("fault", "outcome", "from"),
-        )
+
+
+def _faults(page: Page, chaos: pd.DataFrame, chaos_file: str) -> None:
+    page.heading("Faults", "Each injected fault and how it ended.")
+    page.table(
+        [
+            (f"{r.wall_s:.1f} s, tick {r.tick}: {r.action} {r.target}", r.outcome, chaos_file)
+            for r in chaos.itertuples()
+        ],
+        ("fault", "outcome", "from"),
+    )
+
+
+def _marker(chaos: pd.DataFrame | None) -> Callable[[go.Figure], go.Figure]:
+    """A function that marks each injected fault on a figure over wall time."""
 
     def mark(fig: go.Figure) -> go.Figure:
         if chaos is not None:
@@ -98,6 +118,10 @@ def soak_report(folder: Path) -> tuple[str, int]:
         fig.update_layout(xaxis_title="wall time (s)")
         return fig
 
+    return mark
+
+
+def _processes(page: Page, procs: pd.DataFrame, procs_file: str, mark: Callable[[go.Figure], go.Figure]) -> None:
     page.heading(
         "Processes",
         "Every local process of the run, sampled with psutil (agents thin and grey; a "
@@ -124,52 +148,52 @@ def soak_report(folder: Path) -> tuple[str, int]:
                 )
             )
         page.figure(mark(fig.update_layout(title=title, yaxis_title=title)), procs_file)
-    if run is not None:
-        page.heading("The run", "Tick rate, how long ticks took, traffic and the ledger over wall time.")
-        lag = "start_lag_ms" if run["start_lag_ms"].notna().any() else "slowest_tick_ms"
-        fig = go.Figure(
-            [
-                go.Scatter(x=run["wall_s"], y=run["ticks_per_s"], name="ticks/s"),
-                go.Scatter(x=run["wall_s"], y=run[lag], name=lag.replace("_", " "), yaxis="y2"),
-            ]
-        )
-        fig.update_layout(
-            title="Ticks per second and " + lag.replace("_", " "),
-            yaxis_title="ticks/s",
-            yaxis2={"title": "ms", "overlaying": "y", "side": "right"},
-        )
-        page.figure(mark(fig), run_file)
-        fig = go.Figure(
-            [
-                go.Scatter(x=run["wall_s"], y=run["messages_per_s"], name="messages/s"),
-                go.Scatter(x=run["wall_s"], y=run["bytes_per_s"] / 1000, name="kB/s", yaxis="y2"),
-            ]
-        )
-        fig.update_layout(
-            title="Radio traffic",
-            yaxis_title="messages/s",
-            yaxis2={"title": "kB/s", "overlaying": "y", "side": "right"},
-        )
-        page.figure(mark(fig), run_file)
-        fig = go.Figure(
-            [
-                go.Scatter(x=run["wall_s"], y=run["in_flight"], name="copies in flight"),
-                go.Scatter(
-                    x=run["wall_s"],
-                    y=run["dropped"].diff().fillna(0),
-                    name="dropped per sample",
-                    line={"color": DROP_COLORS.get("loss", "#0072B2")},
-                ),
-                go.Scatter(
-                    x=run["wall_s"], y=run["agents_down"] + run["agents_lost"], name="agents down or lost", yaxis="y2"
-                ),
-            ]
-        )
-        fig.update_layout(
-            title="Ledger and agents",
-            yaxis_title="copies",
-            yaxis2={"title": "agents", "overlaying": "y", "side": "right"},
-        )
-        page.figure(mark(fig), run_file)
-    subtitle = f"soak {folder} · swarmbed {swarmbed.__version__} · report made {time.strftime('%Y-%m-%d %H:%M')}"
-    return page.render(subtitle), page.figures
+
+
+def _the_run(page: Page, run: pd.DataFrame, run_file: str, mark: Callable[[go.Figure], go.Figure]) -> None:
+    page.heading("The run", "Tick rate, how long ticks took, traffic and the ledger over wall time.")
+    lag = "start_lag_ms" if run["start_lag_ms"].notna().any() else "slowest_tick_ms"
+    fig = go.Figure(
+        [
+            go.Scatter(x=run["wall_s"], y=run["ticks_per_s"], name="ticks/s"),
+            go.Scatter(x=run["wall_s"], y=run[lag], name=lag.replace("_", " "), yaxis="y2"),
+        ]
+    )
+    fig.update_layout(
+        title="Ticks per second and " + lag.replace("_", " "),
+        yaxis_title="ticks/s",
+        yaxis2={"title": "ms", "overlaying": "y", "side": "right"},
+    )
+    page.figure(mark(fig), run_file)
+    fig = go.Figure(
+        [
+            go.Scatter(x=run["wall_s"], y=run["messages_per_s"], name="messages/s"),
+            go.Scatter(x=run["wall_s"], y=run["bytes_per_s"] / 1000, name="kB/s", yaxis="y2"),
+        ]
+    )
+    fig.update_layout(
+        title="Radio traffic",
+        yaxis_title="messages/s",
+        yaxis2={"title": "kB/s", "overlaying": "y", "side": "right"},
+    )
+    page.figure(mark(fig), run_file)
+    fig = go.Figure(
+        [
+            go.Scatter(x=run["wall_s"], y=run["in_flight"], name="copies in flight"),
+            go.Scatter(
+                x=run["wall_s"],
+                y=run["dropped"].diff().fillna(0),
+                name="dropped per sample",
+                line={"color": DROP_COLORS.get("loss", "#0072B2")},
+            ),
+            go.Scatter(
+                x=run["wall_s"], y=run["agents_down"] + run["agents_lost"], name="agents down or lost", yaxis="y2"
+            ),
+        ]
+    )
+    fig.update_layout(
+        title="Ledger and agents",
+        yaxis_title="copies",
+        yaxis2={"title": "agents", "overlaying": "y", "side": "right"},
+    )
+    page.figure(mark(fig), run_file)
