@@ -1,4 +1,5 @@
 import csv
+import json
 import multiprocessing.process
 import os
 import signal
@@ -171,7 +172,36 @@ SLOW_MODULES = frozenset(
 )
 
 
+#: seconds each test file took in a recorded run (``pytest --record-durations``); the suite runs
+#: the longest files first, so that on two workers no long file starts last (longest first is
+#: what a greedy split of unequal jobs over workers wants)
+FILE_DURATIONS = Path(__file__).with_name("file_durations.json")
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--record-durations", action="store_true", help=f"write each test file's seconds to {FILE_DURATIONS.name}"
+    )
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.module is not None and item.module.__name__.rsplit(".", 1)[-1] in SLOW_MODULES:
             item.add_marker(pytest.mark.slow)
+    seconds = json.loads(FILE_DURATIONS.read_text()) if FILE_DURATIONS.exists() else {}
+    items.sort(key=lambda item: -seconds.get(item.nodeid.split("::", 1)[0], 0.0))  # stable within a file
+
+
+_recorded: dict[str, float] = defaultdict(float)
+
+
+def pytest_runtest_logreport(report):
+    _recorded[report.nodeid.split("::", 1)[0]] += report.duration  # setup, call and teardown
+
+
+def pytest_sessionfinish(session):
+    """With ``--record-durations``, on the process that ran or gathered every test (not an xdist
+    worker), write the seconds of each file."""
+    if session.config.getoption("--record-durations") and not hasattr(session.config, "workerinput"):
+        table = {name: round(seconds, 1) for name, seconds in sorted(_recorded.items(), key=lambda kv: -kv[1])}
+        FILE_DURATIONS.write_text(json.dumps(table, indent=1) + "\n")
