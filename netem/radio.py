@@ -111,7 +111,7 @@ class Radio:
     def __init__(
         self, params: NetworkSection, n_agents: int, dt: float, rng: np.random.Generator, ledger: Ledger | None = None
     ) -> None:
-        self.params = params
+        self.params = params  # also the stages it turns on (see the setter)
         self.n_agents = n_agents
         self.dt = dt
         self.rng = rng
@@ -130,6 +130,16 @@ class Radio:
         self.channel = SharedChannel(params.channel, dt) if params.channel else None
         # per-copy distance, power, SNR and delay in the receiver ledger, where a model computes them
         self.measuring = self.ledger.per_receiver and measured(params)
+
+    @property
+    def params(self) -> NetworkSection:
+        return self._params
+
+    @params.setter
+    def params(self, params: NetworkSection) -> None:
+        """The radio's parameters, and with them the stages they turn on: a soak's chaos replaces
+        them mid-run (a loss burst turns loss on from 0, a rate cap sets ``rate``)."""
+        self._params = params
         self.stages = tuple(stage for stage in STAGES if stage.on(params))
 
     @property

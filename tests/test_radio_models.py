@@ -431,3 +431,24 @@ def test_every_reason_a_radio_may_drop_for_has_its_colour_in_every_view():
     assert set(reasons) == set(DROP_COLORS)
     assert len(set(DROP_COLORS.values())) == len(DROP_COLORS)  # no two reasons look alike
     assert drop_reasons(NetworkSection()) == reasons[: reasons.index("late") + 1]  # the disk's alone
+
+
+def test_parameters_replaced_mid_run_turn_their_stages_on_and_off():
+    """A soak's loss burst replaces the radio's parameters (loss 0 -> 0.6 -> 0) between ticks: the
+    loss stage must follow them, as a radio built with those parameters would."""
+    params = NetworkSection()
+    radio = Radio(params, 3, 1.0, np.random.default_rng(1), Ledger(reasons=drop_reasons(params)))
+    msg = RadioMessage(BROADCAST, "x", b"p" * 10)
+
+    def lost_at(tick: int) -> int:
+        before = radio.ledger.dropped["loss"]
+        radio.route(tick, [0, 1, 2], [0.0, 1.0, 2.0], [0.0, 0.0, 0.0], {0: [msg] * 20})
+        radio.deliver(tick + 1, [0, 1, 2])
+        radio.confirm()
+        return radio.ledger.dropped["loss"] - before
+
+    assert lost_at(0) == 0
+    radio.params = params.model_copy(update={"loss": 1.0})
+    assert lost_at(1) == 40  # every copy of 20 broadcasts to 2 receivers
+    radio.params = params
+    assert lost_at(2) == 0
