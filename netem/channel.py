@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from swarmbed.netem.stage import EPS as _EPS
 from swarmbed.netem.stage import Stage, TickCopies
 from swarmbed.wire.radio import ChannelSection
 
@@ -27,7 +28,6 @@ if TYPE_CHECKING:
     from swarmbed.netem.radio import Radio
 
 CHANNEL_BUSY = "channel_busy"
-_EPS = 1e-9
 
 
 class SharedChannel:

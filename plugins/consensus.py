@@ -117,8 +117,9 @@ class ConsensusState:
     def receive(self, sender: int, data: dict, ignore: Iterable[int] = (), within: set[int] | None = None) -> None:
         """Apply Table 1 to every task in a neighbour's message, then merge its timestamps.
 
-        ``within`` (SPACE's code's scope, ``consensus: bid``): apply it only to the tasks in ``within``
-        that the message names, leaving alone those the sender holds no winner for."""
+        ``within`` (SPACE's code's scope, CBBA's ``consensus_scope: local_bids``): apply it only to
+        the tasks in ``within`` that the message names, leaving alone those the sender holds no
+        winner for."""
         i, k = self.agent_id, sender
         delta = bool(data.get("d"))
         entries = set(map(tuple, data["w"]))
