@@ -21,10 +21,12 @@ from typing import Any
 
 import numpy as np
 import zenoh
+from pydantic import ValidationError
 
 from swarmbed.coordinator.errors import RunError
 from swarmbed.coordinator.events import CONSUMED, EventQueue
 from swarmbed.coordinator.lifecycle import AgentLifecycle
+from swarmbed.coordinator.live import Interval, LiveStatus
 from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.recorder import Recorder
 from swarmbed.coordinator.trees import TreeRecorder
@@ -37,7 +39,6 @@ from swarmbed.wire.codec import (
     WorldSample,
     decode_netem_step,
     encode_netem_stop,
-    encode_status,
     encode_stop,
     encode_tick,
     encode_world,
@@ -60,6 +61,8 @@ from swarmbed.wire.seeds import WORLD, component_rng
 from swarmbed.wire.session import undeclare_all
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
+from swarmbed.wire.status import NetworkCounters, RunStatus, encode_status
+from swarmbed.wire.summary import RunSummary
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
@@ -116,7 +119,11 @@ class Coordinator:
         self.stop_requested = threading.Event()  # end the run after the tick under way (soak's duration)
         self.tick_started = 0.0  # perf_counter at the start of the tick under way
         self.slowest_tick = (0.0, -1)  # (wall seconds, tick): the longest a tick took from start to start
-        self.slowest_in_interval = 0.0  # the same since a monitor last read it (and set it to 0)
+        self.slowest_in_interval = 0.0  # the same since a monitor last took it (take_interval)
+        self._lags_taken = 0  # start lags a monitor has taken (take_interval)
+        self._interval_lock = threading.Lock()
+        self._live: LiveStatus | None = None  # published after every tick once a monitor asked (live)
+        self.status_refused = False  # a progress sample failed its model (logged once)
         self._entities: list = []
         self.ros2: Any = None  # a Ros2Out while the run publishes ROS 2 topics
         # where the decisions of an allocator that takes them from outside come from: ROS 2 topics
@@ -261,7 +268,8 @@ class Coordinator:
             now = time.perf_counter()
             if k:
                 took = now - self.tick_started
-                self.slowest_in_interval = max(self.slowest_in_interval, took)
+                with self._interval_lock:
+                    self.slowest_in_interval = max(self.slowest_in_interval, took)
                 if took > self.slowest_tick[0]:
                     self.slowest_tick = (took, k - 1)
             self.tick_started = now
@@ -322,6 +330,8 @@ class Coordinator:
             if st is not None:
                 st.mark("apply and record")
                 st.ticks += len(ids)  # per agent-tick, as the other processes count
+            if self._live is not None:
+                self._publish_live()
             if on_tick:
                 on_tick(w.tick, w.time)
             if time.perf_counter() - status_at >= STATUS_EVERY:
@@ -329,35 +339,74 @@ class Coordinator:
                 self._publish_status(status_at - t0)
                 rec.flush()
         self._publish_status(time.perf_counter() - t0)
+        if self._live is not None:
+            self._publish_live()
         self.wall["run_s"] = time.perf_counter() - t0
         if st is not None:
             log.info("coordinator: %s", st.line())
 
+    # -- for monitors in this process (soak, chaos): see coordinator/live.py --------------------------
+    def live(self) -> LiveStatus:
+        """The run as of its last tick. The first call makes the coordinator publish a status after
+        every tick from then on (a run nobody monitors builds none)."""
+        if self._live is None:
+            self._publish_live()
+        assert self._live is not None
+        return self._live
+
+    def _publish_live(self) -> None:
+        alive = frozenset(int(a) for a in np.flatnonzero(self.world.alive))
+        r = self.recorder
+        self._live = LiveStatus.of(
+            self.last_tick,
+            self.world.time,
+            r.net_cum,
+            r.drops_cum,
+            alive,
+            self.agents,
+            self.late_ticks,
+            self.slowest_tick,
+        )
+
+    def take_interval(self) -> Interval:
+        """The slowest tick and the latest start since the last call (a soak's sample interval)."""
+        with self._interval_lock:
+            slowest, self.slowest_in_interval = self.slowest_in_interval, 0.0
+        lags = self.start_lags[self._lags_taken :]
+        self._lags_taken += len(lags)
+        return Interval(slowest, max(lags) if len(lags) else None)
+
     def _publish_status(self, wall_s: float) -> None:
         """Where the run is, for ``swarmbed watch`` (wall-clock paced: never part of the results)."""
-        w = self.world
-        self.status_pub.put(
-            encode_status(
-                {
-                    "name": self.exp.name,
-                    "scenario": self.exp.scenario.kind,
-                    "allocator": self.exp.allocator.name,
-                    "tick": self.last_tick,
-                    "time": w.time,
-                    "ticks": self.exp.ticks,
-                    "wall_s": wall_s,
-                    "row": w.row(),
-                    "network": dict(
-                        zip(("messages_sent", "bytes_sent", "copies", "delivered", "dropped"), self.recorder.net_cum)
-                    ),
-                    "drops": self.recorder.drops_cum,
-                    "alive": [int(a) for a in np.flatnonzero(w.alive)],
-                    "late_ticks": sum(self.late_ticks.values()),
-                    "positions": [list(p) for p in zip(*w.positions())],
-                    "labels": w.agent_labels(),
-                    "markers": [[x, y, label] for x, y, label in w.markers().values()],
-                }
-            )
+        try:
+            status = self._status(wall_s)
+        except ValidationError as exc:  # a scenario's row of another shape: the run goes on, unwatched
+            if not self.status_refused:
+                log.warning("coordinator: progress sample not published (%s)", str(exc).splitlines()[0])
+            self.status_refused = True
+            return
+        self.status_pub.put(encode_status(status))
+
+    def _status(self, wall_s: float) -> RunStatus:
+        w, net = self.world, self.recorder.net_cum
+        return RunStatus(
+            name=self.exp.name,
+            scenario=self.exp.scenario.kind,
+            allocator=self.exp.allocator.name,
+            tick=self.last_tick,
+            time=w.time,
+            ticks=self.exp.ticks,
+            wall_s=wall_s,
+            row=w.row(),
+            network=NetworkCounters(
+                messages_sent=net[0], bytes_sent=net[1], copies=net[2], delivered=net[3], dropped=net[4]
+            ),
+            drops=self.recorder.drops_cum,
+            alive=[int(a) for a in np.flatnonzero(w.alive)],
+            late_ticks=sum(self.late_ticks.values()),
+            positions=list(zip(*w.positions())),
+            labels=dict(w.agent_labels()),
+            markers=list(w.markers().values()),
         )
 
     def _stuck(self) -> str:
@@ -520,7 +569,7 @@ class Coordinator:
                     raise RunError(f"the netem proxy failed at the end of the run: {report.error}; see logs/netem.log")
                 self.netem_report = report
 
-    def summary(self) -> dict:
+    def summary(self) -> RunSummary:
         assert self.netem_report is not None, "summary() before the proxy's final report"
         clock = self.clock_summary() if self.realtime else None
         return self.recorder.summary(
@@ -544,7 +593,7 @@ class Coordinator:
             "start_lag_ms": dict(zip(("p50", "p99", "max"), spread)),
         }
 
-    def write_results(self, timings: dict) -> dict:
+    def write_results(self, timings: dict) -> RunSummary:
         summary = self.summary()
         assert self.netem_report is not None
         self.recorder.write(summary, timings, self.agents, self.reports, self.netem_report)

@@ -19,9 +19,9 @@ from swarmbed.extension.scenario import World
 from swarmbed.wire.codec import NetemStep
 from swarmbed.wire.reports import Final, NetemFinal, Transport
 from swarmbed.wire.rowfile import RowFile
-from swarmbed.wire.rundir import RESTARTS, SWAPS
+from swarmbed.wire.rundir import MARKER_COLUMNS, RESTARTS, SWAPS
 from swarmbed.wire.schema import Experiment
-from swarmbed.wire.summary import check_summary
+from swarmbed.wire.summary import RunSummary
 
 NETWORK_COLUMNS = ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
 
@@ -52,7 +52,7 @@ class Recorder:
         columns = {results.TIMESERIES: self.columns}
         if self.exp.run.record_trajectories:
             columns[results.TRAJECTORIES] = ["tick", "agent", "x", "y", "label"]
-            columns[results.MARKERS] = ["tick", "marker", "x", "y", "label", "event"]
+            columns[results.MARKERS] = list(MARKER_COLUMNS)
         self.tables = {name: RowFile(self.out_dir / name, cols) for name, cols in columns.items()}
 
     def positions(self, k: int, ids: list[int], xs: list[float], ys: list[float]) -> None:
@@ -102,14 +102,15 @@ class Recorder:
         netem_report: NetemFinal,
         malformed: int,
         clock: dict | None,
-    ) -> dict:
-        """The content of ``summary.json``."""
+    ) -> RunSummary:
+        """The run's summary, checked against its model here: a run never completes with a summary
+        its readers refuse."""
         exp, n = self.exp, self.exp.agents.count
         net = netem_report.totals
         agent_bytes = sum(b for r in reports.values() for _, b in r.sent.values())
         # a restarted agent's own counters begin again (or at its checkpoint): only the ledger has them all
         all_reported = len(reports) == n and not agents.restart_log
-        return {
+        document = {
             "name": exp.name,
             "scenario_kind": exp.scenario.kind,
             "seed": exp.run.seed,
@@ -134,9 +135,10 @@ class Recorder:
                 },
             },
         }
+        return RunSummary.of(document)
 
     @staticmethod
-    def transport(summary: dict, reports: dict[int, Final], netem_report: NetemFinal) -> dict:
+    def transport(summary: RunSummary, reports: dict[int, Final], netem_report: NetemFinal) -> dict:
         """TCP bytes each process of the run measured on its own sockets, beside the radio payload
         bytes of the ledger (see :mod:`swarmbed.wire.transport` for what they count).
 
@@ -151,7 +153,7 @@ class Recorder:
         for i in sorted(reports):
             processes[f"agent_{i}"] = measured(reports[i].transport)
         agents = [p for name, p in processes.items() if name.startswith("agent_")]
-        payload = summary["network"]["bytes_sent"]
+        payload = summary.network.bytes_sent
 
         def total(of: list[dict], layer: str, field: str) -> int | None:
             values = [(p.get(layer) or {}).get(field) for p in of]
@@ -174,10 +176,14 @@ class Recorder:
         return {"totals": totals, "processes": processes}
 
     def write(
-        self, summary: dict, timings: dict, agents: AgentLifecycle, reports: dict[int, Final], netem_report: NetemFinal
+        self,
+        summary: RunSummary,
+        timings: dict,
+        agents: AgentLifecycle,
+        reports: dict[int, Final],
+        netem_report: NetemFinal,
     ) -> None:
         """Close the streamed tables and write the rest, ``summary.json`` last."""
-        check_summary(summary)  # never complete a run with a summary its readers refuse
         out, n = self.out_dir, self.exp.agents.count
         per_sender = netem_report.per_sender
         for table in self.tables.values():
@@ -206,4 +212,4 @@ class Recorder:
             results.write_csv(
                 out / RESTARTS, RESTART_COLUMNS, [[r[c] for c in RESTART_COLUMNS] for r in agents.restart_log]
             )
-        results.write_json(out / results.SUMMARY, summary)
+        results.write_json(out / results.SUMMARY, summary.document)

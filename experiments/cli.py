@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 from swarmbed.bt import BTError, load_tree, palette_xml
 from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.rundir import RunDir
 from swarmbed.extension.node_sets import node_registry
 from swarmbed.plugins import registry
 from swarmbed.wire.session import add_zenoh_args
@@ -96,7 +97,7 @@ def _taken(out: Path, force: bool) -> str | None:
     if not out.exists() or not any(out.iterdir()):
         return None
     if not force:
-        what = "a finished run" if (out / "summary.json").exists() else "files"
+        what = "a finished run" if RunDir(out).complete else "files"
         return f"--out {out}: holds {what} already; give another --out, or --force to clear it first"
     shutil.rmtree(out)
     return None
@@ -486,7 +487,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.check:
         from swarmbed.experiments.launch.check import describe_sweep
 
-        left = sum(1 for spec in planned if not (Path(spec.out_dir) / "summary.json").exists())
+        left = sum(1 for spec in planned if not RunDir(spec.out_dir).complete)
         first = {spec.scenario.name: spec for spec in reversed(planned)}
         every = {name: experiment_for(spec.base, spec.scenario, spec.seed, spec.extra) for name, spec in first.items()}
         print(describe_sweep(len(planned), left, every, args.jobs or 1))

@@ -22,13 +22,12 @@ from typing import Any
 import numpy as np
 
 from swarmbed.wire.rowfile import RowFile
+from swarmbed.wire.rundir import RECEIVER_COLUMNS
 
 SENT = "sent"
 DELIVERED = "delivered"
 DROP_REASONS = ("out_of_range", "loss", "queue_full", "receiver_dead", "no_such_receiver", "run_ended", "late")
 OUTCOMES = (SENT, DELIVERED) + DROP_REASONS
-LEDGER_COLUMNS = ("tick", "sender", "kind", "outcome", "messages", "bytes")
-RECEIVER_COLUMNS = ("tick", "sender", "receiver", "kind", "outcome", "bytes")
 #: per-copy figures the radio's models compute, in the receiver ledger when a model is on
 MEASURE_COLUMNS = ["distance", "power_dbm", "snr_db", "delay_s"]
 
@@ -100,7 +99,7 @@ class ReceiverLog:
 
 class Ledger:
     """Accumulates rows tick by tick and streams finished ticks to a :class:`RowFile` (whose
-    columns are :data:`LEDGER_COLUMNS`)."""
+    columns are :data:`~swarmbed.wire.rundir.LEDGER_COLUMNS`)."""
 
     def __init__(
         self, sink: RowFile | None = None, receivers: ReceiverLog | None = None, reasons: Sequence[str] = DROP_REASONS

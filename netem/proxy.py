@@ -19,7 +19,7 @@ from typing import Any
 
 import zenoh
 
-from swarmbed.netem.ledger import LEDGER_COLUMNS, Ledger, ReceiverLog
+from swarmbed.netem.ledger import Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio, drop_reasons, measured
 from swarmbed.netem.ros2 import Ros2Outboxes
 from swarmbed.wire.codec import (
@@ -42,7 +42,7 @@ from swarmbed.wire.membership import fetch_spec, hand_over
 from swarmbed.wire.process import child_args, pin_thread_state
 from swarmbed.wire.reports import NetemFatal, NetemFinal, Transport, encode_report
 from swarmbed.wire.rowfile import RowFile, TableWriteError
-from swarmbed.wire.rundir import LEDGER, RECEIVER_LEDGER
+from swarmbed.wire.rundir import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER
 from swarmbed.wire.schema import NetemSpec
 from swarmbed.wire.seeds import NETEM, component_rng
 from swarmbed.wire.session import open_from_args

@@ -113,8 +113,9 @@ def test_receiver_ledger_books_each_copy_once_and_sums_to_the_sender_ledger(tmp_
     the per-copy Parquet rows add up, per (tick, sender, kind, outcome), to the sender ledger."""
     import pandas as pd
 
-    from swarmbed.netem.ledger import LEDGER_COLUMNS, Ledger, ReceiverLog
+    from swarmbed.netem.ledger import Ledger, ReceiverLog
     from swarmbed.wire.rowfile import RowFile
+    from swarmbed.wire.rundir import LEDGER_COLUMNS
 
     rng = np.random.default_rng(7)
     sink = RowFile(tmp_path / "ledger.csv", LEDGER_COLUMNS, chunk_rows=7)  # small chunks: several writes

@@ -116,11 +116,14 @@ def test_every_run_writes_a_summary_its_model_accepts_and_a_crafted_one_is_named
     from swarmbed.wire.summary import read_summary
 
     summary = read_summary(runs["a"] / "summary.json")
-    assert summary["network"]["per_kind"]["claim"]["delivered"] > 0
+    assert summary.network.per_kind["claim"].model_extra["delivered"] > 0
+    assert summary.outcome("tasks_completed") == summary.document["tasks_completed"] > 0
+    assert (runs["a"] / "summary.json").read_text() == json.dumps(summary.document, indent=2, sort_keys=True) + "\n"
+    document = summary.document
     bad = tmp_path / "bad"
     shutil.copytree(runs["a"], bad)
-    summary["network"]["per_kind"]["claim"]["loss"] = "many"
-    (bad / "summary.json").write_text(json.dumps(summary))
+    document["network"]["per_kind"]["claim"]["loss"] = "many"
+    (bad / "summary.json").write_text(json.dumps(document))
     assert cli(["report", str(bad)]) == 2
     assert "network.per_kind.claim.loss: Input should be a valid integer" in capsys.readouterr().err
 

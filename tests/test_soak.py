@@ -19,6 +19,7 @@ import pandas as pd
 import pytest
 
 from swarmbed.coordinator import results
+from swarmbed.coordinator.live import LiveStatus
 from swarmbed.experiments.campaigns.chaos import CHAOS_COLUMNS, CUT_SHORT, Chaos, ChaosError, ChaosPlan, load_chaos
 from swarmbed.experiments.campaigns.soak import (
     PROCESSES,
@@ -122,7 +123,8 @@ def test_faults_are_scheduled_only_where_their_window_ends_in_the_run_and_one_cu
     assert [t for t in caps if t <= 70] == [d.at for d in long if d.event.action == "rate_cap"]  # the same draws
     assert max(caps) > 70  # some were left out of the long-window plan
     chaos = Chaos(plan(1), 100, 0)
-    chaos.run = SimpleNamespace(coordinator=SimpleNamespace(agents=SimpleNamespace(restart_log=[], lost={})))
+    quiet = LiveStatus(8, 8.0, (0,) * 5, {}, frozenset(range(4)), frozenset(), {}, {}, {}, ())  # no restart, no loss
+    chaos.run = SimpleNamespace(coordinator=SimpleNamespace(live=lambda: quiet))
     chaos.table = RowFile(tmp_path / "chaos.csv", CHAOS_COLUMNS, chunk_rows=1)
     for give_up in (time.monotonic() + 20, time.monotonic() - 1):
         chaos._pending.append(

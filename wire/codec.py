@@ -354,24 +354,6 @@ def decode_netem_step(data: bytes) -> NetemStep:
     return NetemStep(tick, actions, inboxes, counters, lost, events, drops, late)
 
 
-STATUS_KEYS = ("name", "tick", "time", "ticks", "wall_s", "row", "network", "drops", "alive")
-
-
-def encode_status(status: dict) -> bytes:
-    return pack(status)
-
-
-def decode_status(data: bytes) -> dict:
-    """The coordinator's progress sample (for ``swarmbed watch``): a map with ``STATUS_KEYS``."""
-    msg = unpack(data)
-    _expect(
-        isinstance(msg, dict) and all(k in msg for k in STATUS_KEYS),
-        f"status must be a map with {', '.join(STATUS_KEYS)}",
-    )
-    _expect(isinstance(msg["row"], dict) and isinstance(msg["drops"], dict), "bad status")
-    return msg
-
-
 def encode_traffic(totals: dict[int, list[int]]) -> bytes:
     """Proxy -> watchers: agent -> [messages, payload bytes] it sent since the proxy began counting."""
     return pack(totals)

@@ -32,6 +32,13 @@ LOGS = "logs"
 BT = "bt"  # with run.record_bt: one Groot2-replayable file per agent
 
 
+#: the columns of network_ledger.csv (one row per tick, sender, kind and outcome), of the receiver
+#: ledger (one row per copy; the radio's models add their measured columns) and of markers.csv
+LEDGER_COLUMNS = ("tick", "sender", "kind", "outcome", "messages", "bytes")
+RECEIVER_COLUMNS = ("tick", "sender", "receiver", "kind", "outcome", "bytes")
+MARKER_COLUMNS = ("tick", "marker", "x", "y", "label", "event")
+
+
 def btlog_name(agent: int) -> str:
     """An agent's behavior tree log in :data:`BT` (BehaviorTree.CPP's file-logger format)."""
     return f"agent_{agent}.btlog"

@@ -3,8 +3,10 @@ and the sweeps, reports and soak pages that read it.
 
 The keys every run has are declared here; the scenario's own outcome keys (its ``summary_keys``)
 and the allocator's event counters sit beside them at the top level (``extra``). The coordinator
-validates the summary against this model before it writes it, so a run never completes with a
-summary its readers cannot read; readers validate what they load with :func:`read_summary`.
+builds the summary as this model (:meth:`RunSummary.of`) before it writes it, so a run never
+completes with a summary its readers cannot read; readers load it with :func:`read_summary`, which
+checks it the same way. The model keeps the document it was made from (:attr:`RunSummary.document`):
+``summary.json`` is that document, key for key, and a sweep's table flattens it as written.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError
 
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.rundir import RunFileError, read_json_member
@@ -70,27 +72,43 @@ class RunSummary(BaseModel):
     agent_restarts: int | None = Field(None, ge=0, description="restarts that succeeded (runs that restart agents)")
     realtime: dict[str, Any] | None = Field(None, description="how the real-time clock was kept (real-time runs)")
     network: NetworkSummary
+    _document: dict[str, Any] = PrivateAttr(default_factory=dict)
+
+    @classmethod
+    def of(cls, document: dict[str, Any]) -> RunSummary:
+        """``document`` checked against the model; a WireError names its first refused field."""
+        try:
+            summary = cls.model_validate(document)
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            where = ".".join(map(str, err["loc"]))
+            raise WireError(f"summary.json: {where}: {err['msg']}") from None
+        summary._document = document
+        return summary
+
+    @property
+    def document(self) -> dict[str, Any]:
+        """The summary as ``summary.json`` holds it: the declared keys, the scenario's outcome keys
+        and the allocator's counters (a sweep's row flattens this)."""
+        return self._document
+
+    def outcome(self, key: str) -> Any:
+        """One of the scenario's outcome keys or the allocator's counters (see ``summary_keys``);
+        KeyError if this run has none of that name."""
+        extra = self.model_extra or {}
+        if key not in extra:
+            raise KeyError(key)
+        return extra[key]
 
 
-def check_summary(summary: dict[str, Any]) -> None:
-    """Raise ``WireError`` naming the first field of ``summary`` the model refuses."""
+def read_summary(path: Path) -> RunSummary:
+    """A run's ``summary.json``, checked against :class:`RunSummary`; a WireError naming the file for
+    anything else (a link out of its folder, a huge or torn file, another shape)."""
     try:
-        RunSummary.model_validate(summary)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        where = ".".join(map(str, err["loc"]))
-        raise WireError(f"summary.json: {where}: {err['msg']}") from None
-
-
-def read_summary(path: Path) -> dict[str, Any]:
-    """A run's ``summary.json`` as a dict, checked against :class:`RunSummary`; a WireError naming the
-    file for anything else (a link out of its folder, a huge or torn file, another shape)."""
-    try:
-        summary = read_json_member(path.parent, path.name)
+        document = read_json_member(path.parent, path.name)
     except RunFileError as exc:
         raise WireError(str(exc)) from None
     try:
-        check_summary(summary)
+        return RunSummary.of(document)
     except WireError as exc:
         raise WireError(f"{path}: {exc}") from None
-    return summary

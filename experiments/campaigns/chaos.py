@@ -207,19 +207,19 @@ class Chaos:
             self._stop.wait(0.05)
 
     def _act(self, due: _Due) -> dict[str, Any] | None:
-        event, coord = due.event, self.run.coordinator
+        event, live = due.event, self.run.coordinator.live()
         if due.kind == "end":
             if event.action == "stop_agent":
                 self._signal(due.data["pid"], signal.SIGCONT)
-                due.data["record"]["resumed_tick"] = coord.last_tick
+                due.data["record"]["resumed_tick"] = live.tick
             elif event.action == "cut_host":
                 netns.reconnect(due.data["cut"])
                 self._cut.pop(due.data["record"]["target"], None)
-                due.data["record"]["end_tick"] = coord.last_tick
+                due.data["record"]["end_tick"] = live.tick
             else:
-                self._radio(NetemControl(coord.last_tick + 2, {}, f"end of {event.action}"))
-                due.data["record"]["end_tick"] = coord.last_tick + 2
-                due.data["record"]["drops_end"] = dict(coord.recorder.drops_cum)
+                self._radio(NetemControl(live.tick + 2, {}, f"end of {event.action}"))
+                due.data["record"]["end_tick"] = live.tick + 2
+                due.data["record"]["drops_end"] = dict(live.drops)
             due.data["record"]["ended"] = True
             return None
         if event.action in ("kill_agent", "stop_agent"):
@@ -230,38 +230,38 @@ class Chaos:
             agent, pid = target
             if event.action == "kill_agent":
                 self._signal(pid, signal.SIGKILL)
-                self._pend(due, agent, f"SIGKILL pid {pid}", {"kind": "kill", "agent": agent, "tick": coord.last_tick})
+                self._pend(due, agent, f"SIGKILL pid {pid}", {"kind": "kill", "agent": agent, "tick": live.tick})
                 return None
             self._signal(pid, signal.SIGSTOP)
-            late_before = coord.late_ticks.get(agent, 0)
+            late_before = live.late_ticks.get(agent, 0)
             record = self._pend(
                 due,
                 agent,
                 f"SIGSTOP pid {pid} for {event.duration:g} s",
-                {"kind": "stop", "agent": agent, "tick": coord.last_tick, "late_before": late_before, "ended": False},
+                {"kind": "stop", "agent": agent, "tick": live.tick, "late_before": late_before, "ended": False},
             )
             return {"pid": pid, "record": record}
         if event.action == "cut_host":
             return self._cut_host(due)
         overrides = {"loss": event.loss} if event.action == "loss_burst" else {"rate": event.rate}
-        start = coord.last_tick + 2
+        start = live.tick + 2
         self._radio(NetemControl(start, overrides, event.action))
         detail = ", ".join(f"{k} {v:g}" for k, v in overrides.items()) + f" for {event.duration:g} s"
         record = self._pend(
             due,
             "netem",
             detail,
-            {"kind": "radio", "start_tick": start, "ended": False, "drops_start": dict(coord.recorder.drops_cum)},
+            {"kind": "radio", "start_tick": start, "ended": False, "drops_start": dict(live.drops)},
         )
         return {"record": record}
 
     def _draw_agent(self, event: ChaosEvent) -> tuple[int, int] | None:
-        coord, procs = self.run.coordinator, self.run.children.procs
+        live, procs = self.run.coordinator.live(), self.run.children.procs
         candidates = []
-        for agent in event.agents if event.agents is not None else range(coord.n):
-            if agent in coord.agents.lost or agent in coord.agents.down or not coord.world.alive[agent]:
+        for agent in event.agents if event.agents is not None else range(self.run.coordinator.n):
+            if agent in live.lost or agent in live.down or agent not in live.alive:
                 continue
-            proc = procs.get(process_name(agent, coord.agents.incarnation.get(agent, 0)))
+            proc = procs.get(process_name(agent, live.incarnation.get(agent, 0)))
             if proc is not None and proc.poll() is None and proc.pid not in self._stopped:
                 candidates.append((agent, proc.pid))
         if not candidates:
@@ -269,7 +269,7 @@ class Chaos:
         return candidates[int(self.rng.integers(len(candidates)))]
 
     def _cut_host(self, due: _Due) -> dict[str, Any] | None:
-        coord = self.run.coordinator
+        live = self.run.coordinator.live()
         candidates = []
         for host, info in sorted(self.run.hosts.items()):
             pid = (info or {}).get("pid")
@@ -282,17 +282,17 @@ class Chaos:
         host, ns = candidates[int(self.rng.integers(len(candidates)))]
         cut = netns.cut_off(ns)
         self._cut[host] = cut
-        agents = sorted(a for a, h in coord.agents.hosts.items() if h == host)
+        agents = sorted(a for a, h in live.hosts.items() if h == host)
         record = self._pend(
             due,
             host,
             f"{', '.join(cut.links)} of {ns} down for {due.event.duration:g} s",
             {
                 "kind": "cut",
-                "tick": coord.last_tick,
+                "tick": live.tick,
                 "agents": agents,
                 "ended": False,
-                "restarts_before": len(coord.agents.restart_log),
+                "restarts_before": len(live.restarts),
             },
         )
         return {"cut": cut, "record": record}
@@ -318,12 +318,12 @@ class Chaos:
 
     def _cut_outcome(self, record: dict[str, Any]) -> str | None:
         """Once ticks go on after the window: what became of the host's agents."""
-        coord = self.run.coordinator
-        if coord.last_tick <= record["end_tick"] + 1 or any(a in coord.agents.down for a in record["agents"]):
+        live = self.run.coordinator.live()
+        if live.tick <= record["end_tick"] + 1 or any(a in live.down for a in record["agents"]):
             return None
-        restarts = [r for r in coord.agents.restart_log[record["restarts_before"] :] if r["agent"] in record["agents"]]
+        restarts = [r for r in live.restarts[record["restarts_before"] :] if r["agent"] in record["agents"]]
         ok = sorted({r["agent"] for r in restarts if r["outcome"] == "ok"})
-        lost = sorted(a for a in record["agents"] if coord.agents.lost.get(a, -1) >= record["tick"])
+        lost = sorted(a for a in record["agents"] if live.lost.get(a, -1) >= record["tick"])
         went = f"ticks {record['tick']}-{record['end_tick']} during the cut"
         if not ok and not lost:
             return f"reconnected, every agent kept its session ({went})"
@@ -333,7 +333,7 @@ class Chaos:
         self._write(
             {
                 "wall_s": round(due.at, 3),
-                "tick": self.run.coordinator.last_tick,
+                "tick": self.run.coordinator.live().tick,
                 "action": due.event.action,
                 "target": target,
                 "detail": detail,
@@ -369,31 +369,32 @@ class Chaos:
 
     def _outcome(self, record: dict[str, Any]) -> str | None:
         coord = self.run.coordinator
+        live = coord.live()
         if record["kind"] == "kill":
             agent = record["agent"]
-            for r in coord.agents.restart_log:
+            for r in live.restarts:
                 if r["agent"] == agent and r["lost_at_tick"] >= record["tick"] and r["outcome"] != "retrying":
                     if r["outcome"] != "ok":
                         return f"restart failed: {r['reason']}"
                     source = f"checkpoint of tick {r['checkpoint_tick']}" if r["checkpoint_tick"] != "" else "fresh"
                     return f"restarted before tick {r['tick']} ({source}, {r['wait_ms']:.0f} ms)"
-            if agent in coord.agents.lost:
-                return f"lost at tick {coord.agents.lost[agent]} (on_agent_loss: {coord.exp.run.agent_loss})"
+            if agent in live.lost:
+                return f"lost at tick {live.lost[agent]} (on_agent_loss: {coord.exp.run.agent_loss})"
             return None
         if not record["ended"]:
             return None
         if record["kind"] == "stop":
             agent = record["agent"]
-            if agent in coord.agents.lost:
-                return f"lost at tick {coord.agents.lost[agent]}"
-            if coord.last_tick <= record["resumed_tick"] + 1:
+            if agent in live.lost:
+                return f"lost at tick {live.lost[agent]}"
+            if live.tick <= record["resumed_tick"] + 1:
                 return None  # resumed: wait until it answered a tick again
-            late = coord.late_ticks.get(agent, 0) - record["late_before"]
+            late = live.late_ticks.get(agent, 0) - record["late_before"]
             waited = f", {late} late ticks" if coord.realtime else ""
             return f"resumed at tick {record['resumed_tick']}{waited}"
         if record["kind"] == "cut":
             return self._cut_outcome(record)
-        if coord.last_tick < record["end_tick"]:
+        if live.tick < record["end_tick"]:
             return None
         drops = {k: v - record["drops_start"].get(k, 0) for k, v in record["drops_end"].items()}
         booked = ", ".join(f"{n} {reason}" for reason, n in sorted(drops.items()) if n) or "no drops"

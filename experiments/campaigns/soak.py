@@ -118,7 +118,7 @@ class Monitor:
         self.processes = RowFile(run.out_dir / PROCESSES, PROCESS_COLUMNS)
         self.counters = RowFile(run.out_dir / RUN, RUN_COLUMNS)
         self.started = time.monotonic()
-        self._last = (self.started, -1, [0] * 5, 0)  # (time, tick, network counters, index into start lags)
+        self._last: tuple[float, int, tuple[int, ...]] = (self.started, -1, (0,) * 5)  # (time, tick, network counters)
         self._sample()  # before the first tick: the processes as they joined
         self._thread = threading.Thread(target=self._loop, name="soak-monitor", daemon=True)
         self._thread.start()
@@ -154,7 +154,8 @@ class Monitor:
     def _sample(self) -> None:
         now = time.monotonic()
         coord = self.run.coordinator
-        tick = coord.last_tick
+        status = coord.live()
+        tick = status.tick
         wall = round(now - self.started, 3)
         for name, pid in self._watched().items():
             try:
@@ -178,33 +179,31 @@ class Monitor:
             except (psutil.Error, OSError):
                 continue  # it exited between the listing and the reading
             self.processes.write(row)
-        last_time, last_tick, last_net, lag_index = self._last
+        last_time, last_tick, last_net = self._last
         span = max(now - last_time, 1e-9)
-        net = list(coord.recorder.net_cum)
-        lags = coord.start_lags[lag_index:]
-        slowest, coord.slowest_in_interval = coord.slowest_in_interval, 0.0
-        alive = int(np.count_nonzero(coord.world.alive))
+        net = status.network
+        interval = coord.take_interval()
         self.counters.write(
             [
                 wall,
                 tick,
-                round(coord.world.time, 6),
+                round(status.time, 6),
                 round((tick - last_tick) / span, 3),
-                round(1000 * slowest, 3),
-                round(1000 * max(lags), 3) if len(lags) else "",
+                round(1000 * interval.slowest_tick_s, 3),
+                round(1000 * interval.latest_start_s, 3) if interval.latest_start_s is not None else "",
                 round((net[0] - last_net[0]) / span, 3),
                 round((net[1] - last_net[1]) / span, 3),
                 net[2],
                 net[3],
                 net[4],
                 net[2] - net[3] - net[4],
-                alive,
-                len(coord.agents.down),
-                len(coord.agents.lost),
-                sum(r["outcome"] == "ok" for r in coord.agents.restart_log),
+                len(status.alive),
+                len(status.down),
+                len(status.lost),
+                status.restarts_ok,
             ]
         )
-        self._last = (now, tick, net, lag_index + len(lags))
+        self._last = (now, tick, net)
         self.processes.flush()  # one sample, one chunk: a kill loses at most the sample under way
         self.counters.flush()
 
@@ -439,7 +438,7 @@ def soak(
     if not (out_dir / PROCESSES).exists():
         raise RunError(failure or "the soak never got under way")
     live = getattr(monitor, "run", None)  # set once the run got under way
-    slowest = live.coordinator.slowest_tick if live else (0.0, -1)
+    slowest = live.coordinator.live().slowest_tick if live else (0.0, -1)
     result = verdict(out_dir, limits or Thresholds(), injector.rows if injector else [], summary, failure, slowest)
     results.write_json(out_dir / VERDICT, result)
     return result

@@ -55,12 +55,11 @@ from swarmbed.experiments.campaigns import claims
 from swarmbed.experiments.campaigns.executors import Executor, Outcome, resources_for
 from swarmbed.experiments.folders import ATTEMPTS, DERIVED, ERROR, PARQUET, SPEC, TABLE, dotted
 from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
 from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml, read_yaml
+from swarmbed.experiments.rundir import RunDir
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.rundir import RunFileError, read_json_member, read_member
+from swarmbed.wire.rundir import PROVENANCE, RunFileError, read_json_member, read_member
 from swarmbed.wire.schema import SAFE_NAME
-from swarmbed.wire.summary import read_summary
 
 
 class ScenarioEntry(BaseModel):
@@ -236,7 +235,7 @@ def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S) -> Outcome
     if isinstance(claim, claims.Holder):
         return "claimed", f"held by {claim.describe()}"
     with claim:
-        if (out / results.SUMMARY).exists():  # completed by someone else since it was planned
+        if RunDir(out).complete:  # completed by someone else since it was planned
             return "ok", "done elsewhere"
         (out / ERROR).unlink(missing_ok=True)
         started = time.time()
@@ -293,7 +292,7 @@ CORRUPT = "unreadable"  # in sweep.csv: a completed run whose files cannot be re
 def run_status(run_dir: Path, stale_after: float = claims.STALE_AFTER_S) -> str:
     """``ok`` (summary.json), ``running`` (a live claim), ``failed`` (error.txt), ``interrupted``
     (a claim whose holder is gone: the next sweep command redoes it) or ``missing``."""
-    if (run_dir / results.SUMMARY).exists():
+    if RunDir(run_dir).complete:
         return "ok"
     holder = claims.holder(run_dir)
     if holder is not None:
@@ -316,14 +315,15 @@ def _last_attempt(run_dir: Path) -> dict[str, Any]:
 def _completed_row(run_dir: Path) -> dict[str, Any]:
     """A completed run's summary, transport totals and provenance, flattened into one table row;
     a RunFileError or WireError names the file that cannot be read."""
-    row = flatten(read_summary(run_dir / results.SUMMARY))
-    if (run_dir / results.TRANSPORT).exists():  # measured, not reproducible: in its own columns
-        totals = read_json_member(run_dir, results.TRANSPORT).get("totals")
+    run = RunDir(run_dir)
+    row = flatten(run.summary().document)
+    if run.has(results.TRANSPORT):  # measured, not reproducible: in its own columns
+        totals = run.json(results.TRANSPORT).get("totals")
         if not isinstance(totals, dict):
             raise RunFileError(f"{run_dir / results.TRANSPORT}: no totals object")
         row.update(flatten(totals, "wire."))
-    if (run_dir / PROVENANCE).exists():  # which code made it (runs of older versions have none)
-        row.update(flatten(read_json_member(run_dir, PROVENANCE), "provenance."))
+    if run.has(PROVENANCE):  # which code made it (runs of older versions have none)
+        row.update(flatten(run.json(PROVENANCE), "provenance."))
     return row
 
 
@@ -384,7 +384,7 @@ class SweepInterrupted(KeyboardInterrupt):
 
 
 def _complete(specs: list[RunSpec]) -> int:
-    return sum(1 for s in specs if (Path(s.out_dir) / results.SUMMARY).exists())
+    return sum(1 for s in specs if RunDir(s.out_dir).complete)
 
 
 def write_spec(sweep: Sweep, out: Path) -> None:
@@ -464,7 +464,7 @@ def _check_completed(specs: list[RunSpec], out: Path, redo: bool) -> None:
     mismatched = []
     for spec in specs:
         run_dir = Path(spec.out_dir)
-        if not (run_dir / results.SUMMARY).exists():
+        if not RunDir(run_dir).complete:
             continue
         planned = cfg.to_yaml(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra))
         try:
@@ -547,7 +547,7 @@ def run_sweep(
         executor.cancel()
         bar.close()
         for spec in specs:  # an incomplete run leaves no half-written file behind
-            if not (Path(spec.out_dir) / results.SUMMARY).exists():
+            if not RunDir(spec.out_dir).complete:
                 for partial_file in Path(spec.out_dir).glob("*.part"):
                     partial_file.unlink(missing_ok=True)
         done = _complete(specs)

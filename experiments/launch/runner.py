@@ -69,7 +69,7 @@ class RunObserver(Protocol):
 @dataclass
 class RunResult:
     out_dir: Path
-    summary: dict
+    summary: dict  # summary.json's document (RunDir(out_dir).summary() reads it typed)
     timings: dict
 
 
@@ -359,8 +359,7 @@ def _execute(
         if coord.decision_source == "ros2":  # robot-ticks without a ROS 2 decision in time: not reproducible
             timings["ros2_command_timeouts"] = coord.commands.timeouts
         timings["per_agent_tick"] = _per_agent_tick(loop_start, loop_end, exp.agents.count, coord.last_tick + 1)
-        summary = coord.write_results(timings)
-        return RunResult(out_dir, summary, timings)
+        return RunResult(out_dir, coord.write_results(timings).document, timings)
     except TableWriteError as exc:  # a full disk: one line, the first error, not what clean-up meets next
         raise RunError(str(exc)) from None
     finally:

@@ -33,19 +33,18 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-import yaml  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import NullLocator  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from swarmbed.experiments.folders import PARQUET, SPEC, TABLE, read_table  # noqa: E402
+from swarmbed.experiments.rundir import RunDir  # noqa: E402
 from swarmbed.experiments.views.colours import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
 from swarmbed.experiments.views.pooling import mixed_configurations, mixed_versions  # noqa: E402
 from swarmbed.experiments.views.stats import compare  # noqa: E402
 from swarmbed.extension import Figure, Scenario  # noqa: E402
 from swarmbed.plugins.registry import registered_scenario  # noqa: E402
-from swarmbed.wire.rundir import SUMMARY, RunFileError, read_json_member  # noqa: E402
-from swarmbed.wire.summary import read_summary  # noqa: E402
+from swarmbed.wire.rundir import RunFileError, read_json_member  # noqa: E402
 
 AGENTS, RANGE, ALLOCATOR = "agents.count", "network.range", "allocator"
 #: what every scenario's runs send, tabulated beside the scenario's own metrics
@@ -118,7 +117,7 @@ def _resolve_keys(df: pd.DataFrame, keys: tuple[str, ...]) -> None:
         if key in df and df[key].notna().all():
             continue
         first = df.groupby(["sweep", "scenario"])["run_dir"].first()  # a scenario's runs differ only in their seed
-        used = {group: _config_value(Path(run_dir) / "config.yaml", key) for group, run_dir in first.items()}
+        used = {group: _config_value(RunDir(run_dir), key) for group, run_dir in first.items()}
         values = pd.Series([used[(sw, sc)] for sw, sc in zip(df["sweep"], df["scenario"])], index=df.index)
         df[key] = df[key].fillna(values) if key in df else values
 
@@ -145,13 +144,13 @@ def _group_by_setting(df: pd.DataFrame) -> None:
     df["group"] = df["sweep"] + "_" + settings
 
 
-def _config_value(config: Path, key: str) -> Any:
+def _config_value(run: RunDir, key: str) -> Any:
     """The value of dotted ``key`` in a run's resolved config, or NaN where it cannot be read."""
     try:
-        value: Any = yaml.safe_load(config.read_text())
+        value: Any = run.config()
         for part in key.split("."):
             value = value[part]
-    except (OSError, KeyError, TypeError, yaml.YAMLError):
+    except (RunFileError, KeyError, TypeError):
         return np.nan
     return value
 
@@ -290,7 +289,7 @@ def _values(rows: pd.DataFrame, metric: str) -> pd.Series:
         return rows[metric].dropna()
     values: list[float] = []
     for run_dir in rows["run_dir"]:
-        values += read_summary(Path(run_dir) / SUMMARY).get(metric, [])
+        values += RunDir(run_dir).summary().document.get(metric, [])
     return pd.Series(values, dtype=float)
 
 

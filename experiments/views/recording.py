@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from swarmbed.experiments.views import runfiles
+from swarmbed.experiments.rundir import RunDir
 from swarmbed.experiments.views.colours import DROP_COLORS
 from swarmbed.wire.btlog import EPOCH_US, BtLogError, read_btlog
 from swarmbed.wire.rundir import (
@@ -40,7 +40,6 @@ from swarmbed.wire.rundir import (
     MARKERS,
     RECEIVER_LEDGER,
     SUMMARY,
-    TIMESERIES,
     TRAJECTORIES,
     RunFileError,
     btlog_name,
@@ -122,7 +121,7 @@ def _write_mcap(run: Path, out: Path) -> dict:
         from foxglove.messages import PosesInFrame, SceneUpdate
     except ImportError:
         raise RecordingError("an MCAP recording needs Foxglove's SDK: pip install 'swarmbed[viewers]'") from None
-    if not (run / SUMMARY).exists():
+    if not RunDir(run).complete:
         raise RecordingError(f"{run}: not a completed run (no {SUMMARY})")
     if not (run / TRAJECTORIES).exists():
         raise RecordingError(f"{run}: no {TRAJECTORIES}; run it again with --set run.record_trajectories=true")
@@ -185,20 +184,13 @@ def _write_mcap(run: Path, out: Path) -> dict:
 def _recorded(run: Path) -> tuple[float, pd.DataFrame, pd.DataFrame | None, pd.DataFrame, pd.DataFrame | None, dict]:
     """What a recording is made of: the tick length, trajectories, markers (those with a position),
     the counters, the per-receiver copies and the trees' changes, each read as a crafted file may be."""
+    folder = RunDir(run)
     try:
-        dt, ticks = runfiles.dt_of(run), runfiles.ticks_of(run)
-        traj = runfiles.table(run, TRAJECTORIES, ticks, ("x", "y"), ("agent",), keep_default_na=False)
-        markers = (
-            runfiles.table(run, MARKERS, ticks, columns=("marker", "x", "y", "label", "event"), keep_default_na=False)
-            if (run / MARKERS).exists()
-            else None
-        )
-        counters = runfiles.table(run, TIMESERIES, ticks)
-        copies = (
-            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
-            if (run / RECEIVER_LEDGER).exists()
-            else None
-        )
+        dt, ticks = folder.dt(), folder.ticks()
+        traj = folder.trajectories()
+        markers = folder.markers() if folder.has(MARKERS) else None
+        counters = folder.timeseries()
+        copies = folder.receivers() if folder.has(RECEIVER_LEDGER) else None
         trees = _tree_changes(run, dt, ticks)
     except RunFileError as exc:
         raise RecordingError(str(exc)) from None

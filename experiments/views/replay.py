@@ -16,11 +16,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from swarmbed.experiments.views import runfiles
+from swarmbed.experiments.rundir import RunDir
 from swarmbed.experiments.views.colours import DROP_COLORS, LABEL_COLORS
 from swarmbed.wire.rundir import MARKERS, RECEIVER_LEDGER, SUMMARY, TRAJECTORIES, RunFileError
 
-MARKER_COLUMNS = ("marker", "x", "y", "label", "event")
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
 
 
@@ -36,7 +35,7 @@ def _checked_output(
     run: Path, out: Path | None, start: float | None, end: float | None, fps: int, every: int | None
 ) -> Path:
     """The movie's path, once the run and the request are fit to make one (else a ReplayError)."""
-    if not (run / SUMMARY).exists():
+    if not RunDir(run).complete:
         raise ReplayError(f"{run}: not a completed run (no {SUMMARY})")
     if not (run / TRAJECTORIES).exists() or not (run / MARKERS).exists():
         raise ReplayError(f"{run}: no {TRAJECTORIES}/{MARKERS}; run it again with --set run.record_trajectories=true")
@@ -55,15 +54,11 @@ def _checked_output(
 
 def _recorded(run: Path) -> tuple[float, int, pd.DataFrame, pd.DataFrame, pd.DataFrame | None]:
     """The run's tick length and ticks, its trajectories, its markers and (per-receiver ledger) its copies."""
+    folder = RunDir(run)
     try:
-        dt, ticks = runfiles.dt_of(run), runfiles.ticks_of(run)
-        traj = runfiles.table(run, TRAJECTORIES, ticks, ("x", "y"), ("agent",), keep_default_na=False)
-        markers = runfiles.table(run, MARKERS, ticks, columns=MARKER_COLUMNS, keep_default_na=False)
-        copies = (
-            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
-            if (run / RECEIVER_LEDGER).exists()
-            else None
-        )
+        dt, ticks = folder.dt(), folder.ticks()
+        traj, markers = folder.trajectories(), folder.markers()
+        copies = folder.receivers() if folder.has(RECEIVER_LEDGER) else None
     except RunFileError as exc:
         raise ReplayError(str(exc)) from None
     if traj.empty:

@@ -25,24 +25,15 @@ from scipy import stats
 
 import swarmbed
 from swarmbed.experiments.folders import PARQUET, SOAK_PROCESSES, TABLE, read_table
-from swarmbed.experiments.views import runfiles
+from swarmbed.experiments.rundir import RunDir
 from swarmbed.experiments.views.colours import DROP_COLORS
 from swarmbed.experiments.views.page import Page, _fmt
 from swarmbed.experiments.views.pooling import mixed_configurations
 from swarmbed.experiments.views.radio_pages import radio_pages
 from swarmbed.experiments.views.soak_page import soak_report
-from swarmbed.netem.ledger import LEDGER_COLUMNS
 from swarmbed.plugins.registry import registered_scenario
-from swarmbed.wire.rundir import (
-    AGENTS,
-    LEDGER,
-    RECEIVER_LEDGER,
-    SUMMARY,
-    TIMESERIES,
-    TRANSPORT,
-    RunFileError,
-    read_json_member,
-)
+from swarmbed.wire.rundir import RECEIVER_LEDGER, TIMESERIES, TRANSPORT, RunFileError
+from swarmbed.wire.summary import NetworkSummary, RunSummary
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
 
@@ -74,18 +65,14 @@ def _binned(frame: pd.DataFrame, ticks: int, dt: float, by: str, value: str) -> 
 
 def run_report(run: Path) -> tuple[str, int]:
     """The HTML of one run's report and how many figures it has."""
+    folder = RunDir(run)
     try:
-        summary = runfiles.summary_of(run)
-        config, dt, ticks = runfiles.config_of(run), runfiles.dt_of(run), runfiles.ticks_of(run)
-        ledger = runfiles.table(run, LEDGER, ticks, columns=LEDGER_COLUMNS)
-        agents = runfiles.table(run, AGENTS)
-        wire = read_json_member(run, TRANSPORT) if (run / TRANSPORT).exists() else None
-        receivers = (
-            runfiles.table(run, RECEIVER_LEDGER, ticks, columns=("sender", "receiver", "outcome"))
-            if (run / RECEIVER_LEDGER).exists()
-            else None
-        )
-        series = runfiles.table(run, TIMESERIES, ticks) if (run / TIMESERIES).exists() else None
+        summary = folder.summary()
+        config, dt, ticks = folder.config(), folder.dt(), folder.ticks()
+        ledger, agents = folder.ledger(), folder.agents()
+        wire = folder.json(TRANSPORT) if folder.has(TRANSPORT) else None
+        receivers = folder.receivers() if folder.has(RECEIVER_LEDGER) else None
+        series = folder.timeseries() if folder.has(TIMESERIES) else None
     except RunFileError as exc:
         raise ReportError(str(exc)) from None
     sent = ledger[ledger["outcome"] == "sent"]
@@ -94,47 +81,47 @@ def run_report(run: Path) -> tuple[str, int]:
     if wire is not None:
         _on_the_wire(page, run, wire, agents)
     _per_agent(page, agents)
-    _per_kind(page, summary["network"], sent)
+    _per_kind(page, summary.network, sent)
     _over_time(page, sent, copies, ticks, dt)
-    _who_to_whom(page, receivers, copies, int(summary["agents"]))
+    _who_to_whom(page, receivers, copies, summary.agents)
     radio_pages(page, receivers, config)
-    _outcome_beside_traffic(page, _benefit(summary.get("scenario_kind", "")), series)
+    _outcome_beside_traffic(page, _benefit(summary.scenario_kind), series)
     subtitle = (
-        f"run {run} · seed {summary['seed']} · swarmbed {swarmbed.__version__} · "
+        f"run {run} · seed {summary.seed} · swarmbed {swarmbed.__version__} · "
         f"report made {time.strftime('%Y-%m-%d %H:%M')}"
     )
     return page.render(subtitle), page.figures
 
 
-def _totals(summary: dict, sent: pd.DataFrame, copies: pd.DataFrame, ticks: int, dt: float) -> Page:
+def _totals(summary: RunSummary, sent: pd.DataFrame, copies: pd.DataFrame, ticks: int, dt: float) -> Page:
     """The page, opened with the run's totals (each with the file it comes from)."""
-    net = summary["network"]
-    page = Page(f"{summary['name']}: bandwidth accounting")
+    net = summary.network
+    page = Page(f"{summary.name}: bandwidth accounting")
     delivered = int(copies.loc[copies["outcome"] == "delivered", "messages"].sum())
     dropped = copies[copies["outcome"] != "delivered"].groupby("outcome")["messages"].sum()
-    balanced = int(copies["messages"].sum()) == delivered + int(dropped.sum()) == net["copies"]
+    balanced = int(copies["messages"].sum()) == delivered + int(dropped.sum()) == net.copies
     page.heading(
         "Totals",
         "Messages count transmissions; copies count one per intended receiver. Payload bytes "
         "are the encoded messages as agents hand them to the radio.",
     )
-    benefit = _benefit(summary.get("scenario_kind", ""))
+    benefit = _benefit(summary.scenario_kind)
     rows = [
-        ("scenario / allocator", f"{summary.get('scenario_kind')} / {summary['allocator']}", "summary.json"),
-        ("agents, ticks, dt", f"{summary['agents']}, {ticks}, {dt} s", "summary.json, config.yaml"),
+        ("scenario / allocator", f"{summary.scenario_kind} / {summary.allocator}", "summary.json"),
+        ("agents, ticks, dt", f"{summary.agents}, {ticks}, {dt} s", "summary.json, config.yaml"),
         ("messages sent", int(sent["messages"].sum()), "network_ledger.csv (sent rows)"),
         ("payload bytes sent", int(sent["bytes"].sum()), "network_ledger.csv (sent rows)"),
         ("copies", int(copies["messages"].sum()), "network_ledger.csv (other rows)"),
         ("copies delivered", delivered, "network_ledger.csv"),
         *[(f"copies dropped: {reason}", int(n), "network_ledger.csv") for reason, n in dropped.items()],
         ("copies = delivered + dropped, and as summary.json says", balanced, "network_ledger.csv, summary.json"),
-        ("agents' and proxy's byte counts agree", net.get("bytes_agree"), "summary.json"),
+        ("agents' and proxy's byte counts agree", net.bytes_agree, "summary.json"),
     ]
-    if benefit and benefit in summary:
-        kb = max(net["bytes_sent"], 1) / 1000
+    if benefit and benefit in summary.document:
+        kb = max(net.bytes_sent, 1) / 1000
         rows += [
-            (benefit.replace("_", " "), summary[benefit], "summary.json"),
-            (f"{benefit.replace('_', ' ')} per kB sent", summary[benefit] / kb, "summary.json"),
+            (benefit.replace("_", " "), summary.outcome(benefit), "summary.json"),
+            (f"{benefit.replace('_', ' ')} per kB sent", summary.outcome(benefit) / kb, "summary.json"),
         ]
     page.table(rows)
     return page
@@ -217,9 +204,10 @@ def _per_agent(page: Page, agents: pd.DataFrame) -> None:
     page.figure(fig, "agents.csv")
 
 
-def _per_kind(page: Page, net: dict, sent: pd.DataFrame) -> None:
+def _per_kind(page: Page, net: NetworkSummary, sent: pd.DataFrame) -> None:
     page.heading("Per message kind")
-    kinds = pd.DataFrame(net["per_kind"]).T.reset_index(names="kind") if net["per_kind"] else pd.DataFrame()
+    per_kind = {kind: {"messages": t.messages, "bytes": t.bytes} for kind, t in net.per_kind.items()}
+    kinds = pd.DataFrame(per_kind).T.reset_index(names="kind") if per_kind else pd.DataFrame()
     if len(kinds):
         fig = go.Figure(_side_by_side(kinds["kind"], kinds["bytes"], "payload bytes", kinds["messages"], "messages"))
         fig.update_layout(
@@ -459,7 +447,7 @@ def is_soak(folder: Path) -> bool:
 def _report_text(folder: Path) -> str:
     if is_soak(folder):
         return soak_report(folder)[0]
-    if (folder / SUMMARY).exists():
+    if RunDir(folder).complete:
         return run_report(folder)[0]
     if (folder / TABLE).exists() or (folder / PARQUET).exists():
         return sweep_report(folder)[0]

@@ -26,8 +26,9 @@ from rich.table import Table
 from rich.text import Text
 
 from swarmbed.experiments.views.colours import LABEL_COLORS
-from swarmbed.wire.codec import WireError, decode_status, decode_traffic
+from swarmbed.wire.codec import WireError, decode_traffic
 from swarmbed.wire.keys import PREFIX, Keys, agent_id_of
+from swarmbed.wire.status import RunStatus, decode_status
 
 RATE_WINDOW = 2.0  # wall seconds over which per-agent rates are measured
 
@@ -48,7 +49,7 @@ class RunView:
     """What the watcher knows of one run, fed from Zenoh callbacks, read by the renderer."""
 
     run_id: str
-    status: dict | None = None
+    status: RunStatus | None = None
     first_status: tuple[float, int] | None = None  # (wall, tick) when watching began
     last_status_at: float = 0.0
     ticks_per_s: float = 0.0
@@ -68,8 +69,8 @@ class RunView:
             return
         now = time.monotonic()
         with self.lock:
-            if self.status is not None and status["tick"] > self.status["tick"] and now > self.last_status_at:
-                rate = (status["tick"] - self.status["tick"]) / (now - self.last_status_at)
+            if self.status is not None and status.tick > self.status.tick and now > self.last_status_at:
+                rate = (status.tick - self.status.tick) / (now - self.last_status_at)
                 self.ticks_per_s = rate if self.ticks_per_s == 0 else 0.5 * self.ticks_per_s + 0.5 * rate
             self.status, self.last_status_at = status, now
 
@@ -120,38 +121,38 @@ class RunView:
             totals = {a: list(t) for a, t in self.totals.items()}
         if s is None:
             return Group(Text(f"run {self.run_id}: waiting for its first progress sample ..."))
-        dt = s["time"] / max(s["tick"], 1) if s["tick"] else 0.0
+        dt = s.time / max(s.tick, 1) if s.tick else 0.0
         head = Table.grid(padding=(0, 2))
         head.add_row(
-            Text(f"{s['name']}", style="bold"),
+            Text(s.name, style="bold"),
             f"run {self.run_id}",
-            f"{s.get('scenario', '?')} / {s.get('allocator', '?')}",
+            f"{s.scenario} / {s.allocator}",
         )
         head.add_row(
-            f"tick {s['tick'] + 1:,} of {s['ticks']:,}",
-            f"t = {s['time']:,.1f} s",
+            f"tick {s.tick + 1:,} of {s.ticks:,}",
+            f"t = {s.time:,.1f} s",
             f"{self.ticks_per_s:,.1f} ticks/s  ({self.ticks_per_s * dt:,.1f} sim s per wall s)",
         )
         outcome = "  ".join(
             f"{k} {v:,}" if isinstance(v, int) else f"{k} {v:,.1f}"
-            for k, v in s["row"].items()
+            for k, v in s.row.items()
             if k not in ("tick", "time")
         )
         head.add_row("outcome", outcome, "")
-        net = s["network"]
+        net = s.network
         head.add_row(
             "radio",
-            f"{net['messages_sent']:,} messages, {net['bytes_sent']:,} B",
-            f"copies {net['delivered']:,} delivered / {net['copies']:,}",
+            f"{net.messages_sent:,} messages, {net.bytes_sent:,} B",
+            f"copies {net.delivered:,} delivered / {net.copies:,}",
         )
-        drops = ", ".join(f"{r} {n:,}" for r, n in sorted(s["drops"].items())) or "none"
-        head.add_row("dropped", drops, f"late ticks {s.get('late_ticks', 0):,}")
+        drops = ", ".join(f"{r} {n:,}" for r, n in sorted(s.drops.items())) or "none"
+        head.add_row("dropped", drops, f"late ticks {s.late_ticks:,}")
         agents_alive = sorted({i for k in alive if k.startswith("agent/") and (i := _agent_or_none(k)) is not None})
         procs = [("coordinator", "coordinator" in alive), ("netem", "netem" in alive)]
         head.add_row(
             "processes",
             "  ".join(f"{n} {'up' if ok else 'DOWN'}" for n, ok in procs),
-            f"agents {len(agents_alive)} up of {len(s['alive'])} in the world",
+            f"agents {len(agents_alive)} up of {len(s.alive)} in the world",
         )
         table = Table(
             title="payload each agent sent since the first watcher attached (the run totals are above; "
@@ -160,7 +161,7 @@ class RunView:
         )
         for col in ("agent", "process", "msgs/s", "B/s", "messages", "bytes"):
             table.add_column(col, justify="right")
-        for a in sorted(set(s["alive"]) | set(totals)):
+        for a in sorted(set(s.alive) | set(totals)):
             m, b = rates.get(a, (0.0, 0.0))
             t = totals.get(a, [0, 0])
             table.add_row(
@@ -174,15 +175,15 @@ class RunView:
         if s is None:
             return f"run {self.run_id}: waiting"
         return (
-            f"tick {s['tick'] + 1} t={s['time']:.1f}s {self.ticks_per_s:.1f} ticks/s "
-            + " ".join(f"{k}={v:.6g}" for k, v in s["row"].items() if k not in ("tick", "time"))
-            + f" messages={s['network']['messages_sent']} dropped={s['network']['dropped']}"
+            f"tick {s.tick + 1} t={s.time:.1f}s {self.ticks_per_s:.1f} ticks/s "
+            + " ".join(f"{k}={v:.6g}" for k, v in s.row.items() if k not in ("tick", "time"))
+            + f" messages={s.network.messages_sent} dropped={s.network.dropped}"
         )
 
 
-def write_map(status: dict, path: Path, bounds: list[float]) -> None:
+def write_map(status: RunStatus, path: Path, bounds: list[float]) -> None:
     """An HTML page with the run's map as SVG that reloads itself every second (written atomically)."""
-    points = [(x, y) for _, x, y in status.get("positions", [])] + [(x, y) for x, y, _ in status.get("markers", [])]
+    points = [(x, y) for _, x, y in status.positions] + [(x, y) for x, y, _ in status.markers]
     for x, y in points:  # the view only grows, so that the map does not jump about
         bounds[:] = [min(bounds[0], x), min(bounds[1], y), max(bounds[2], x), max(bounds[3], y)]
     x0, y0, x1, y1 = bounds if bounds[0] <= bounds[2] else (0.0, 0.0, 1.0, 1.0)
@@ -196,20 +197,20 @@ def write_map(status: dict, path: Path, bounds: list[float]) -> None:
     shapes = [
         f"<rect x='{x - r:.2f}' y='{sy(y) - r:.2f}' width='{2 * r:.2f}' height='{2 * r:.2f}' "
         f"fill='{LABEL_COLORS.get(lab, '#999')}'/>"
-        for x, y, lab in status.get("markers", [])
+        for x, y, lab in status.markers
     ]
-    labels = {int(k): v for k, v in status.get("labels", {}).items()}
+    labels = status.labels
     shapes += [
         f"<circle cx='{x:.2f}' cy='{sy(y):.2f}' r='{1.4 * r:.2f}' "
         f"fill='{LABEL_COLORS.get(labels.get(a, ''), '#222')}' "
         f"stroke='black' stroke-width='{r / 3:.2f}'><title>agent {a}</title></circle>"
-        for a, x, y in status.get("positions", [])
+        for a, x, y in status.positions
     ]
     page = (
         f"<!DOCTYPE html><html><head><meta charset='utf-8'><meta http-equiv='refresh' content='1'>"
-        f"<title>{html.escape(status['name'])}: tick {status['tick'] + 1}</title></head>"
-        f"<body style='font-family:sans-serif'><p>{html.escape(status['name'])}: tick {status['tick'] + 1:,} of "
-        f"{status['ticks']:,}, t = {status['time']:,.1f} s</p>"
+        f"<title>{html.escape(status.name)}: tick {status.tick + 1}</title></head>"
+        f"<body style='font-family:sans-serif'><p>{html.escape(status.name)}: tick {status.tick + 1:,} of "
+        f"{status.ticks:,}, t = {status.time:,.1f} s</p>"
         f"<svg viewBox='{x0 - pad:.2f} {y0 - pad:.2f} {w:.2f} {h:.2f}' style='width:90vmin;height:90vmin;"
         f"border:1px solid #ccc'>{''.join(shapes)}</svg></body></html>"
     )

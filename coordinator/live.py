@@ -1,0 +1,81 @@
+"""What a monitor in the launcher's process (a soak's sampler, chaos) sees of a running run.
+
+Monitors run in their own threads beside the tick loop. They do not read the coordinator's
+attributes (which the loop changes mid-tick); the coordinator publishes a :class:`LiveStatus`, an
+immutable record of the run between two ticks, after every tick while a monitor is attached
+(:meth:`~swarmbed.coordinator.coordinator.Coordinator.live`), and nothing when none is, so a run
+without monitors pays nothing. Wall-clock figures of the interval between two of a soak's samples
+(the slowest tick, the latest start) are taken, and reset, with
+:meth:`~swarmbed.coordinator.coordinator.Coordinator.take_interval`.
+
+Everything here is a wall-clock fact of one run on one machine: never part of a run's result files.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+
+def _frozen(mapping: Mapping) -> Mapping:
+    return MappingProxyType(dict(mapping))
+
+
+@dataclass(frozen=True)
+class LiveStatus:
+    """The run after its last tick stepped (``tick`` -1 before the first)."""
+
+    tick: int
+    time: float  # simulated seconds
+    network: tuple[int, ...]  # messages sent, bytes sent, copies, delivered, dropped: so far
+    drops: Mapping[str, int]  # copies dropped so far, by reason
+    alive: frozenset[int]  # agents alive in the world
+    down: frozenset[int]  # agents whose process was found dead and is being restarted
+    lost: Mapping[int, int]  # agent -> tick it was lost
+    incarnation: Mapping[int, int]  # agent -> its current process, where not the first (0)
+    hosts: Mapping[int, str]  # agent -> the host it runs on, where not this machine
+    restarts: tuple[Mapping[str, Any], ...]  # the restart log so far (restarts.csv's rows)
+    late_ticks: Mapping[int, int] = field(default_factory=dict)  # agent -> ticks it missed (real-time)
+    slowest_tick: tuple[float, int] = (0.0, -1)  # (wall seconds, tick): the longest a tick took, start to start
+
+    @property
+    def restarts_ok(self) -> int:
+        return sum(r["outcome"] == "ok" for r in self.restarts)
+
+    @staticmethod
+    def of(
+        tick: int,
+        time: float,
+        network: list[int],
+        drops: Mapping[str, int],
+        alive: frozenset[int],
+        agents: Any,
+        late_ticks: Mapping[int, int],
+        slowest_tick: tuple[float, int],
+    ) -> LiveStatus:
+        """A status from the run's parts (``agents``: its AgentLifecycle), each copied."""
+        return LiveStatus(
+            tick,
+            time,
+            tuple(network),
+            _frozen(drops),
+            alive,
+            frozenset(agents.down),
+            _frozen(agents.lost),
+            _frozen(agents.incarnation),
+            _frozen(agents.hosts),
+            tuple(MappingProxyType(dict(r)) for r in agents.restart_log),
+            _frozen(late_ticks),
+            slowest_tick,
+        )
+
+
+@dataclass(frozen=True)
+class Interval:
+    """Wall-clock figures since the last :meth:`take_interval`: the longest a tick took from start
+    to start, and the latest a tick started after its time (real-time clock; None otherwise)."""
+
+    slowest_tick_s: float
+    latest_start_s: float | None
