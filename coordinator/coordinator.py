@@ -31,6 +31,7 @@ from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.recorder import Recorder
 from swarmbed.coordinator.trees import TreeRecorder
 from swarmbed.extension.actions import admit
+from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.codec import (
     EMPTY_INBOX,
@@ -79,7 +80,7 @@ class Coordinator:
         self,
         exp: Experiment,
         scenario: Scenario,
-        allocator: type,
+        allocator: type[Allocator],
         targets: Targets,
         keys: Keys,
         session: zenoh.Session,
@@ -102,7 +103,7 @@ class Coordinator:
         self.agents = AgentLifecycle(
             exp, keys, self.world, self.events, hosts or {}, carriers, placement, self._decode_report, self._malformed
         )
-        self.recorder = Recorder(exp, self.world, out_dir, list(getattr(allocator, "event_names", ())))
+        self.recorder = Recorder(exp, self.world, out_dir, list(allocator.event_names))
         self.trees = TreeRecorder(out_dir, self.n, exp.run.dt, self._malformed) if exp.run.record_bt else None
         self.joined: set[str] = set()
         self.reports: dict[int, Final] = {}
@@ -128,7 +129,7 @@ class Coordinator:
         self.ros2: Any = None  # a Ros2Out while the run publishes ROS 2 topics
         # where the decisions of an allocator that takes them from outside come from: ROS 2 topics
         # (a Ros2Commands, made in declare) or the decider the launcher was handed (swarmbed.envs)
-        self.decision_source = getattr(allocator, "decision_source", None)
+        self.decision_source = allocator.decision_source
         self.commands: Any = decider if self.decision_source == "env" else None
         self.pursuing: dict[int, list] = {}  # the actions the world was last given (for ROS 2's task markers)
 

@@ -11,7 +11,6 @@ gives; the clock loop calls :meth:`AgentLifecycle.due` before each tick.
 
 from __future__ import annotations
 
-import json
 import logging
 import queue
 import time
@@ -38,23 +37,23 @@ from swarmbed.wire.codec import (
 )
 from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
 from swarmbed.wire.process import process_name
-from swarmbed.wire.reports import AgentReport, Checkpoint, Fatal, SwapQuery, decode_swap
+from swarmbed.wire.reports import (
+    AgentReport,
+    Checkpoint,
+    Fatal,
+    RestartRecord,
+    SwapAnswer,
+    SwapPending,
+    SwapQuery,
+    SwapQueued,
+    SwapRecord,
+    SwapRefused,
+    decode_swap,
+    encode_swap_answer,
+)
 from swarmbed.wire.schema import LOCAL, Experiment
 
 log = logging.getLogger("swarmbed.coordinator")
-
-RESTART_COLUMNS = [
-    "tick",
-    "agent",
-    "lost_at_tick",
-    "incarnation",
-    "host",
-    "checkpoint_tick",
-    "outcome",
-    "reason",
-    "wait_ms",
-]
-SWAP_COLUMNS = ["tick", "agent", "from", "to", "outcome", "reason", "snapshot_bytes", "pause_ms"]
 
 
 #: swap requests an operator may have waiting at once, and in one run (a flood is refused, not queued)
@@ -100,14 +99,14 @@ class AgentLifecycle:
         for entry in exp.swaps:
             self.swaps_due.setdefault(entry.tick, []).append((entry.agent, entry.to))
         self.swap_requests: queue.SimpleQueue[tuple[int, str, int]] = queue.SimpleQueue()  # (agent, host, number)
-        self.swap_log: list[dict[str, Any]] = []
-        self.requested_swaps: dict[int, dict[str, Any] | None] = {}  # number -> its record once done
+        self.swap_log: list[SwapRecord] = []
+        self.requested_swaps: dict[int, SwapRecord | None] = {}  # number -> its record once done
         # agents whose process died, started again (run.on_agent_loss: restart)
         self.down: dict[int, int] = {}  # agent -> tick its process was found dead, until it is restarted
         self.restart_tries: dict[int, tuple[int, float]] = {}  # agent down -> (failed tries, next try, monotonic s)
         self.checkpoints: dict[int, tuple[int, bytes]] = {}  # agent -> (tick, state) of its last checkpoint
         self.checkpoint_tick = -1
-        self.restart_log: list[dict[str, Any]] = []
+        self.restart_log: list[RestartRecord] = []
 
     # -- what the clock loop asks ------------------------------------------------------------------
     def due(self, k: int) -> None:
@@ -203,9 +202,10 @@ class AgentLifecycle:
         ``{"swap": N}`` answers swap N's record once it is done (``{"pending": true}`` before)."""
         try:
             req = decode_swap(query.payload.to_bytes() if query.payload is not None else None)
+            answer: SwapAnswer
             if isinstance(req, SwapQuery):
                 record = self.requested_swaps.get(req.swap)
-                answer: dict[str, Any] = record if record is not None else {"pending": True}
+                answer = record if record is not None else SwapPending(pending=True)
             elif req.agent < self.n:
                 if self.swap_requests.qsize() >= MAX_QUEUED_SWAPS:
                     raise WireError(f"{MAX_QUEUED_SWAPS} swaps are already waiting; ask again after they are done")
@@ -214,12 +214,12 @@ class AgentLifecycle:
                 number = len(self.requested_swaps)
                 self.requested_swaps[number] = None
                 self.swap_requests.put((req.agent, req.to, number))
-                answer = {"queued": number}
+                answer = SwapQueued(queued=number)
             else:
                 raise WireError(f"agent {req.agent} is not one of this run's 0..{self.n - 1}")
         except WireError as exc:
-            answer = {"error": f'{exc} (a swap request is {{"agent": 0..{self.n - 1}, "to": HOST}})'}
-        query.reply(query.key_expr, json.dumps(answer))
+            answer = SwapRefused(error=f'{exc} (a swap request is {{"agent": 0..{self.n - 1}, "to": HOST}})')
+        query.reply(query.key_expr, encode_swap_answer(answer))
 
     # -- checkpoints and restarts (run.on_agent_loss: restart) ---------------------------------------
     def _ask_checkpoints(self, k: int) -> None:
@@ -243,10 +243,10 @@ class AgentLifecycle:
             record = self._restart(agent, k, tries)
             tries += 1
             self.restart_log.append(record)
-            if record["outcome"] == "ok":
+            if record.outcome == "ok":
                 self.restart_tries.pop(agent, None)
             elif tries < r.restart_attempts:
-                record["outcome"] = "retrying"
+                record.outcome = "retrying"
                 self.restart_tries[agent] = (tries, time.monotonic() + r.restart_backoff * 2 ** (tries - 1))
             else:
                 self.restart_tries.pop(agent, None)
@@ -254,7 +254,7 @@ class AgentLifecycle:
                 self.lost[agent] = lost_at
                 self.world.kill(agent)
 
-    def _restart(self, agent: int, k: int, failed_tries: int = 0) -> dict[str, Any]:
+    def _restart(self, agent: int, k: int, failed_tries: int = 0) -> RestartRecord:
         """Start agent ``agent`` again before tick ``k``, under its id, on its host: from its last
         checkpoint if there is one, else fresh. Messages to it while it was gone were booked
         ``receiver_dead`` by the proxy. Each try is a new incarnation: a failed try's process,
@@ -263,17 +263,14 @@ class AgentLifecycle:
         new = self.incarnation.get(agent, 0) + 1 + failed_tries
         host = self.hosts.get(agent, LOCAL)
         checkpoint = self.checkpoints.get(agent)
-        record: dict[str, Any] = {
-            "tick": k,
-            "agent": agent,
-            "lost_at_tick": self.down[agent],
-            "incarnation": new,
-            "host": host,
-            "checkpoint_tick": checkpoint[0] if checkpoint else "",
-            "outcome": "failed",
-            "reason": "",
-            "wait_ms": 0.0,
-        }
+        record = RestartRecord(
+            tick=k,
+            agent=agent,
+            lost_at_tick=self.down[agent],
+            incarnation=new,
+            host=host,
+            checkpoint_tick=checkpoint[0] if checkpoint else "",
+        )
         assert self.placement is not None
         if checkpoint:
             self.snapshots[agent] = checkpoint[1]
@@ -286,13 +283,13 @@ class AgentLifecycle:
             got = f"cannot start it on {host}: {exc}"
         finally:
             self.snapshots.pop(agent, None)
-        record["wait_ms"] = round((time.perf_counter() - t0) * 1000, 3)
+        record.wait_ms = round((time.perf_counter() - t0) * 1000, 3)
         if got in ("restored", "join"):
             self.incarnation[agent] = new
             del self.down[agent]
-            record["outcome"] = "ok"
+            record.outcome = "ok"
         else:
-            record["reason"] = got
+            record.reason = got
             log.warning("coordinator: agent %d could not be restarted before tick %d: %s", agent, k, got)
             try:
                 self.placement.unplace(agent, host, new)
@@ -315,28 +312,19 @@ class AgentLifecycle:
             if number is not None:
                 self.requested_swaps[number] = record
 
-    def _swap(self, agent: int, to: str, k: int) -> dict[str, Any]:
+    def _swap(self, agent: int, to: str, k: int) -> SwapRecord:
         """Move ``agent`` to host ``to`` before tick ``k``: the old process hands its state over and
         freezes, a new process on ``to`` restores it and announces itself, the old one retires.
         Any failure resumes the old process; the record says what happened."""
         t0 = time.perf_counter()
         old = self.incarnation.get(agent, 0)
         new = old + 1
-        record: dict[str, Any] = {
-            "tick": k,
-            "agent": agent,
-            "from": self.hosts.get(agent, "local"),
-            "to": to,
-            "outcome": "failed",
-            "reason": "",
-            "snapshot_bytes": 0,
-            "pause_ms": 0.0,
-        }
+        record = SwapRecord(tick=k, agent=agent, from_host=self.hosts.get(agent, "local"), to=to)
 
-        def finish(reason: str = "") -> dict[str, Any]:
-            record["pause_ms"] = round((time.perf_counter() - t0) * 1000, 3)
+        def finish(reason: str = "") -> SwapRecord:
+            record.pause_ms = round((time.perf_counter() - t0) * 1000, 3)
             if reason:
-                record["reason"] = reason
+                record.reason = reason
                 log.warning("coordinator: swap of agent %d to %s before tick %d failed: %s", agent, to, k, reason)
             return record
 
@@ -353,7 +341,7 @@ class AgentLifecycle:
         if got != "snapshot":
             self.tickets.cancel("snapshot", agent)
             return finish(got)
-        record["snapshot_bytes"] = len(self.snapshots[agent])
+        record.snapshot_bytes = len(self.snapshots[agent])
         try:
             self.placement.place(agent, to, new)
         except Exception as exc:  # the host refused or is gone: the old process goes on
@@ -368,7 +356,7 @@ class AgentLifecycle:
         self.agent_pubs[agent].put(encode_control(TAG_RETIRE, old))
         self.hosts[agent] = to
         self.snapshots.pop(agent, None)
-        record["outcome"] = "ok"
+        record.outcome = "ok"
         return finish()
 
     def _await_swap_event(self, agent: int, old: int, new: int, wanted: tuple[str, str]) -> str:

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+from swarmbed.wire.reports import RestartRecord
+
 
 def _frozen(mapping: Mapping) -> Mapping:
     return MappingProxyType(dict(mapping))
@@ -36,13 +38,13 @@ class LiveStatus:
     lost: Mapping[int, int]  # agent -> tick it was lost
     incarnation: Mapping[int, int]  # agent -> its current process, where not the first (0)
     hosts: Mapping[int, str]  # agent -> the host it runs on, where not this machine
-    restarts: tuple[Mapping[str, Any], ...]  # the restart log so far (restarts.csv's rows)
+    restarts: tuple[RestartRecord, ...]  # the restart log so far (restarts.csv's rows), copies
     late_ticks: Mapping[int, int] = field(default_factory=dict)  # agent -> ticks it missed (real-time)
     slowest_tick: tuple[float, int] = (0.0, -1)  # (wall seconds, tick): the longest a tick took, start to start
 
     @property
     def restarts_ok(self) -> int:
-        return sum(r["outcome"] == "ok" for r in self.restarts)
+        return sum(r.outcome == "ok" for r in self.restarts)
 
     @staticmethod
     def of(
@@ -66,7 +68,7 @@ class LiveStatus:
             _frozen(agents.lost),
             _frozen(agents.incarnation),
             _frozen(agents.hosts),
-            tuple(MappingProxyType(dict(r)) for r in agents.restart_log),
+            tuple(r.model_copy() for r in agents.restart_log),
             _frozen(late_ticks),
             slowest_tick,
         )

@@ -14,10 +14,10 @@ from pathlib import Path
 from typing import Any
 
 from swarmbed.coordinator import results
-from swarmbed.coordinator.lifecycle import RESTART_COLUMNS, SWAP_COLUMNS, AgentLifecycle
+from swarmbed.coordinator.lifecycle import AgentLifecycle
 from swarmbed.extension.scenario import World
 from swarmbed.wire.codec import NetemStep
-from swarmbed.wire.reports import Final, NetemFinal, Transport
+from swarmbed.wire.reports import Final, NetemFinal, RestartRecord, SwapRecord, Transport
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.rundir import MARKER_COLUMNS, RESTARTS, SWAPS
 from swarmbed.wire.schema import Experiment
@@ -121,7 +121,7 @@ class Recorder:
             **{name: self.event_totals.get(name, 0) for name in self.event_names},
             "events": dict(sorted(self.event_totals.items())),
             "agents_lost": {str(a): t for a, t in sorted(agents.lost.items())},
-            **({"agent_restarts": sum(r["outcome"] == "ok" for r in agents.restart_log)} if agents.restart_log else {}),
+            **({"agent_restarts": sum(r.outcome == "ok" for r in agents.restart_log)} if agents.restart_log else {}),
             **({"realtime": clock} if clock is not None else {}),
             "network": {
                 **net,
@@ -207,9 +207,7 @@ class Recorder:
         results.write_json(out / results.TIMINGS, timings)
         results.write_json(out / results.TRANSPORT, self.transport(summary, reports, netem_report))
         if agents.swap_log:  # wall-clock pauses: not among the files that repeat byte for byte
-            results.write_csv(out / SWAPS, SWAP_COLUMNS, [[r[c] for c in SWAP_COLUMNS] for r in agents.swap_log])
+            results.write_csv(out / SWAPS, SwapRecord.columns(), [r.row() for r in agents.swap_log])
         if agents.restart_log:
-            results.write_csv(
-                out / RESTARTS, RESTART_COLUMNS, [[r[c] for c in RESTART_COLUMNS] for r in agents.restart_log]
-            )
+            results.write_csv(out / RESTARTS, RestartRecord.columns(), [r.row() for r in agents.restart_log])
         results.write_json(out / results.SUMMARY, summary.document)

@@ -878,11 +878,14 @@ def cmd_hosts(args: argparse.Namespace) -> int:
             print(f"no host visible from {', '.join(args.connect)}")
             return 1
         for name in names:
-            info = host_info(session, name) or {}
-            agents = ", ".join(f"{run}: {len(ids)}" for run, ids in info.get("agents", {}).items()) or "none"
+            info = host_info(session, name)
+            if info is None:
+                print(f"{name}  (no answer, or not a host's information)")
+                continue
+            agents = ", ".join(f"{run}: {len(ids)}" for run, ids in info.agents.items()) or "none"
             print(
-                f"{name}  cores {info.get('cores', '?')}  free {info.get('mem_free_mb', '?')} MB  "
-                f"router {info.get('endpoint', '?')}  agents {agents}"
+                f"{name}  cores {info.cores or '?'}  free {info.mem_free_mb} MB  "
+                f"router {info.endpoint}  agents {agents}"
             )
     return 0
 
@@ -962,7 +965,9 @@ def cmd_swap(args: argparse.Namespace) -> int:
 
     from swarmbed.experiments.views.watch import running_runs
     from swarmbed.wire.credentials import CredentialsError, read_credentials
+    from swarmbed.wire.errors import WireError
     from swarmbed.wire.keys import Keys
+    from swarmbed.wire.reports import SwapAnswer, SwapQueued, SwapRecord, SwapRefused, decode_swap_answer
 
     if args.credentials:
         try:
@@ -978,10 +983,13 @@ def cmd_swap(args: argparse.Namespace) -> int:
             )
             return 2
 
-    def ask(request: dict) -> dict | None:
+    def ask(request: dict) -> SwapAnswer | None:
         for reply in session.get(key, payload=json.dumps(request), timeout=5.0):
             if reply.ok is not None:
-                return json.loads(reply.ok.payload.to_bytes())
+                try:
+                    return decode_swap_answer(reply.ok.payload.to_bytes())
+                except WireError as exc:
+                    return SwapRefused(error=f"the coordinator's answer is malformed: {exc}")
         return None
 
     session = _client_session(args)
@@ -999,23 +1007,27 @@ def cmd_swap(args: argparse.Namespace) -> int:
             args.run = runs[0]
         key = Keys(args.run).swap
         answer = ask({"agent": args.agent, "to": args.to})
-        if answer is None or "error" in answer:
-            print(f"error: run {args.run}: {answer['error'] if answer else 'no coordinator answered'}", file=sys.stderr)
+        if not isinstance(answer, SwapQueued):
+            why = answer.error if isinstance(answer, SwapRefused) else "no coordinator answered"
+            print(f"error: run {args.run}: {why}", file=sys.stderr)
             return 2
         deadline = time.monotonic() + args.wait
         while time.monotonic() < deadline:
-            record = ask({"swap": answer["queued"]})
-            if record is not None and not record.get("pending"):
+            record = ask({"swap": answer.queued})
+            if isinstance(record, SwapRefused):
+                print(f"error: run {args.run}: {record.error}", file=sys.stderr)
+                return 2
+            if isinstance(record, SwapRecord):
                 print(
-                    f"swap of agent {record['agent']} from {record['from']} to {record['to']} before tick "
-                    f"{record['tick']}: {record['outcome']}"
+                    f"swap of agent {record.agent} from {record.from_host} to {record.to} before tick "
+                    f"{record.tick}: {record.outcome}"
                     + (
-                        f" ({record['reason']})"
-                        if record["reason"]
-                        else f", {record['snapshot_bytes']} bytes, paused {record['pause_ms']:.0f} ms"
+                        f" ({record.reason})"
+                        if record.reason
+                        else f", {record.snapshot_bytes} bytes, paused {record.pause_ms:.0f} ms"
                     )
                 )
-                return 0 if record["outcome"] == "ok" else 1
+                return 0 if record.outcome == "ok" else 1
             time.sleep(0.1)
     print(f"error: the swap was queued but not done within {args.wait:.0f} s", file=sys.stderr)
     return 1

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import abc
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict
@@ -25,6 +25,10 @@ HOLD = -2
 #: the same, and stop at once (speed to zero this tick), as SPACE's GRAPE resets an agent's movement
 #: on every tick its partition has not converged; a scenario without the ``halt`` action brakes instead.
 HALT = -3
+
+
+#: where an allocator's decisions come from when not from its own ``decide`` (see ``decision_source``)
+DecisionSource = Literal["env", "ros2"]
 
 
 class NoParams(BaseModel):
@@ -52,6 +56,12 @@ class Allocator(abc.ABC):
     snapshottable: ClassVar[bool] = True
     #: bump when a change makes the same configuration and seed give other results (provenance.json)
     version: ClassVar[str] = "1"
+    #: whether it bids knowing the tasks' colours: a scenario with coloured tasks (search and rescue,
+    #: ``colors_for_bidding: auto``) shows them to such an allocator before any inspection
+    bids_with_colors: ClassVar[bool] = False
+    #: where its decisions come from when not from its own ``decide``: a driver in the launching
+    #: process (``env``: swarmbed.envs) or ROS 2 topics (``ros2``); None for every other allocator
+    decision_source: ClassVar[DecisionSource | None] = None
 
     def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator, run_seed: int = 0) -> None:
         self.agent_id = agent_id

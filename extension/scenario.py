@@ -24,6 +24,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from swarmbed.extension.actions import MOVE_ACTIONS, ActionSpec
+from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.wire.observation import Observation as BaseObservation
 from swarmbed.wire.schema import AgentsSection, Experiment
@@ -167,9 +168,9 @@ class Scenario(abc.ABC):
         return []
 
     @abc.abstractmethod
-    def make_world(self, rng: np.random.Generator, allocator: type | None = None) -> World:
+    def make_world(self, rng: np.random.Generator, allocator: type[Allocator] | None = None) -> World:
         """The world of one run. ``allocator`` is the allocator class, for traits the scenario
-        reads from it (e.g. whether it bids with victims' colours)."""
+        reads from it (e.g. :attr:`~swarmbed.extension.allocator.Allocator.bids_with_colors`)."""
 
     @abc.abstractmethod
     def sensing(self) -> Sensing: ...

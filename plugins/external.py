@@ -17,6 +17,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.extension import Allocator, LocalView
+from swarmbed.extension.allocator import DecisionSource
 
 NONE = -1  # a decision that chooses no task (the tree explores)
 DEFER = -4  # a decision that asks the fallback allocator what it would do
@@ -42,7 +43,7 @@ class ExternalAllocator(Allocator):
 
     Params = ExternalParams
     params: ExternalParams
-    decision_source: ClassVar[str] = "env"
+    decision_source: ClassVar[DecisionSource | None] = "env"
     CONSTRUCTED = (*Allocator.CONSTRUCTED, "inner")  # the fallback travels as its own snapshot
 
     def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator, run_seed: int = 0) -> None:
@@ -93,4 +94,4 @@ class Ros2Allocator(ExternalAllocator):
     """Decisions from ``/robot_<i>/cmd`` (``swarmbed_msgs/msg/TaskCommand``), published by any ROS 2
     node that reads ``/robot_<i>/observation``. Needs the experiment's ``ros2:`` section."""
 
-    decision_source: ClassVar[str] = "ros2"
+    decision_source: ClassVar[DecisionSource | None] = "ros2"

@@ -16,6 +16,7 @@ import math
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World, within
@@ -131,7 +132,7 @@ class MTSR(Scenario):
             return [f"scenario.agent_positions: needs one [x, y] per agent ({exp.agents.count})"]
         return []
 
-    def make_world(self, rng: np.random.Generator, allocator: type | None = None) -> MTSRWorld:
+    def make_world(self, rng: np.random.Generator, allocator: type[Allocator] | None = None) -> MTSRWorld:
         return MTSRWorld(self, rng)
 
     def sensing(self) -> Sensing:

@@ -37,6 +37,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.extension.actions import MOVE_ACTIONS
+from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World
@@ -167,8 +168,8 @@ class SAR(Scenario):
     )
     params: SARParams
 
-    def make_world(self, rng: np.random.Generator, allocator: type | None = None) -> SARWorld:
-        return SARWorld(self, rng, bids_with_colors=bool(getattr(allocator, "bids_with_colors", False)))
+    def make_world(self, rng: np.random.Generator, allocator: type[Allocator] | None = None) -> SARWorld:
+        return SARWorld(self, rng, bids_with_colors=allocator is not None and allocator.bids_with_colors)
 
     def sensing(self) -> Sensing:
         return Sensing(self.params.vision_range, self.params.vision_angle)

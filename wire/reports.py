@@ -196,6 +196,90 @@ def decode_swap(data: bytes | None) -> SwapRequest | SwapQuery:
         raise WireError(f"not JSON: {str(exc)[:80]}") from None
 
 
+# -- what the coordinator did to agents: swaps and restarts ------------------------------------------
+Millis = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+HostName = Annotated[str, Field(max_length=64)]
+
+
+class _Record(BaseModel):
+    """A record the coordinator fills in as it acts (not frozen), written as one CSV row."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, populate_by_name=True)
+
+    @classmethod
+    def columns(cls) -> list[str]:
+        """The CSV header: the fields in order, by their names in the file."""
+        return [f.alias or name for name, f in cls.model_fields.items()]
+
+    def row(self) -> list[Any]:
+        return list(self.model_dump(by_alias=True).values())
+
+
+class SwapRecord(_Record):
+    """One swap (swaps.csv; the answer to an operator's query of its swap): agent ``agent`` moved,
+    or not, from host ``from`` to host ``to`` before tick ``tick``."""
+
+    tick: int = Field(ge=0)
+    agent: AgentId
+    from_host: HostName = Field(alias="from")
+    to: HostName
+    outcome: Literal["ok", "failed"] = "failed"
+    reason: Annotated[str, Field(max_length=2000)] = ""
+    snapshot_bytes: int = Field(0, ge=0)
+    pause_ms: Millis = 0.0
+
+
+class RestartRecord(_Record):
+    """One try at restarting agent ``agent`` (restarts.csv): lost at ``lost_at_tick``, started again
+    before ``tick`` as process ``incarnation`` on ``host`` from the checkpoint of
+    ``checkpoint_tick`` ("" : fresh)."""
+
+    tick: int = Field(ge=0)
+    agent: AgentId
+    lost_at_tick: int = Field(ge=0)
+    incarnation: int = Field(ge=1)
+    host: HostName
+    checkpoint_tick: int | Literal[""] = ""
+    outcome: Literal["ok", "failed", "retrying"] = "failed"
+    reason: str = ""
+    wait_ms: Millis = 0.0
+
+
+class SwapPending(_Message):
+    pending: Literal[True]
+
+
+class SwapQueued(_Message):
+    queued: int = Field(ge=0)
+
+
+class SwapRefused(_Message):
+    error: Annotated[str, Field(max_length=2000)]
+
+
+#: what the coordinator answers an operator's swap request or query
+SwapAnswer = SwapRecord | SwapPending | SwapQueued | SwapRefused
+_SWAP_ANSWER: TypeAdapter[SwapAnswer] = TypeAdapter(SwapAnswer)
+
+
+def decode_swap_answer(data: bytes) -> SwapAnswer:
+    """The coordinator's answer to a swap request or query; WireError names what is wrong."""
+    if len(data) > 8 * MAX_SWAP_BYTES:
+        raise WireError(f"a swap answer of {len(data):,} bytes (at most {8 * MAX_SWAP_BYTES})")
+    try:
+        return _SWAP_ANSWER.validate_python(json.loads(data))
+    except RecursionError:
+        raise WireError("swap answer: not JSON: nested too deep") from None
+    except ValidationError as exc:
+        raise _why(exc, "swap answer") from None
+    except ValueError as exc:
+        raise WireError(f"swap answer: not JSON: {str(exc)[:80]}") from None
+
+
+def encode_swap_answer(answer: SwapAnswer) -> str:
+    return json.dumps(answer.model_dump(by_alias=True))
+
+
 # -- hub -> host daemon: agent processes ------------------------------------------------------------
 RunId = Annotated[str, Field(pattern=r"^[A-Za-z0-9]{1,64}$")]
 HostAgentId = Annotated[int, Field(ge=0, lt=10**6)]
@@ -236,9 +320,30 @@ class HostAnswer(_Message):
     error: str | None = None
 
 
+class HostInfo(_Message):
+    """What a host daemon says of itself (``swarmbed hosts``, deployment.json, a soak's process
+    list): its name, cores, free memory, process id, the router its agents connect to, and the
+    agents it runs per run."""
+
+    name: HostName
+    cores: int | None = Field(ge=1)
+    mem_free_mb: int = Field(ge=0)
+    pid: int = Field(ge=1)
+    endpoint: Annotated[str, Field(max_length=300)]
+    agents: Annotated[dict[RunId, Annotated[list[HostAgentId], Field(max_length=1000)]], Field(max_length=1000)]
+
+
+#: the most bytes of a host daemon's request or answer read (a few hundred in practice)
+MAX_HOST_MESSAGE_BYTES = 1 << 20
+
+
 def _decode_json(model: type[_M], data: bytes | None, what: str) -> _M:
+    if data is not None and len(data) > MAX_HOST_MESSAGE_BYTES:
+        raise WireError(f"{what}: {len(data):,} bytes, more than {MAX_HOST_MESSAGE_BYTES:,}")
     try:
         value = json.loads(data) if data is not None else None
+    except RecursionError:
+        raise WireError(f"{what}: not JSON: nested too deep") from None
     except ValueError as exc:
         raise WireError(f"{what}: not JSON: {exc}") from None
     try:
@@ -257,6 +362,10 @@ def decode_stop(data: bytes | None) -> StopAgents:
 
 def decode_host_answer(data: bytes | None) -> HostAnswer:
     return _decode_json(HostAnswer, data, "host answer")
+
+
+def decode_host_info(data: bytes | None) -> HostInfo:
+    return _decode_json(HostInfo, data, "host information")
 
 
 def encode_json(message: BaseModel) -> str:

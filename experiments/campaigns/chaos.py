@@ -272,8 +272,7 @@ class Chaos:
         live = self.run.coordinator.live()
         candidates = []
         for host, info in sorted(self.run.hosts.items()):
-            pid = (info or {}).get("pid")
-            ns = netns.namespace_of(pid) if isinstance(pid, int) else None
+            ns = netns.namespace_of(info.pid) if info is not None else None
             if ns is not None and host not in self._cut and (due.event.hosts is None or host in due.event.hosts):
                 candidates.append((host, ns))
         if not candidates:
@@ -321,8 +320,8 @@ class Chaos:
         live = self.run.coordinator.live()
         if live.tick <= record["end_tick"] + 1 or any(a in live.down for a in record["agents"]):
             return None
-        restarts = [r for r in live.restarts[record["restarts_before"] :] if r["agent"] in record["agents"]]
-        ok = sorted({r["agent"] for r in restarts if r["outcome"] == "ok"})
+        restarts = [r for r in live.restarts[record["restarts_before"] :] if r.agent in record["agents"]]
+        ok = sorted({r.agent for r in restarts if r.outcome == "ok"})
         lost = sorted(a for a in record["agents"] if live.lost.get(a, -1) >= record["tick"])
         went = f"ticks {record['tick']}-{record['end_tick']} during the cut"
         if not ok and not lost:
@@ -373,11 +372,11 @@ class Chaos:
         if record["kind"] == "kill":
             agent = record["agent"]
             for r in live.restarts:
-                if r["agent"] == agent and r["lost_at_tick"] >= record["tick"] and r["outcome"] != "retrying":
-                    if r["outcome"] != "ok":
-                        return f"restart failed: {r['reason']}"
-                    source = f"checkpoint of tick {r['checkpoint_tick']}" if r["checkpoint_tick"] != "" else "fresh"
-                    return f"restarted before tick {r['tick']} ({source}, {r['wait_ms']:.0f} ms)"
+                if r.agent == agent and r.lost_at_tick >= record["tick"] and r.outcome != "retrying":
+                    if r.outcome != "ok":
+                        return f"restart failed: {r.reason}"
+                    source = f"checkpoint of tick {r.checkpoint_tick}" if r.checkpoint_tick != "" else "fresh"
+                    return f"restarted before tick {r.tick} ({source}, {r.wait_ms:.0f} ms)"
             if agent in live.lost:
                 return f"lost at tick {live.lost[agent]} (on_agent_loss: {coord.exp.run.agent_loss})"
             return None

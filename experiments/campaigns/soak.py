@@ -148,7 +148,7 @@ class Monitor:
             if proc.poll() is None:
                 pids[name] = proc.pid
         for host, info in self.run.hosts.items():
-            pids.update(_host_processes(host, (info or {}).get("pid")))
+            pids.update(_host_processes(host, info.pid if info is not None else None))
         return pids
 
     def _sample(self) -> None:

@@ -8,14 +8,24 @@ in :mod:`swarmbed.wire.reports`.
 
 from __future__ import annotations
 
-import json
+import logging
 import time
 
 import zenoh
 
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import HOSTS, HostKeys, host_name_of
-from swarmbed.wire.reports import HostAnswer, StartAgents, StopAgents, decode_host_answer, encode_json
+from swarmbed.wire.reports import (
+    HostAnswer,
+    HostInfo,
+    StartAgents,
+    StopAgents,
+    decode_host_answer,
+    decode_host_info,
+    encode_json,
+)
+
+log = logging.getLogger("swarmbed.hosts")
 
 
 class HostError(RuntimeError):
@@ -58,15 +68,18 @@ def visible_hosts(session: zenoh.Session, timeout: float = 2.0) -> list[str]:
     return sorted(names)
 
 
-def host_info(session: zenoh.Session, name: str, timeout: float = 5.0) -> dict | None:
+def host_info(session: zenoh.Session, name: str, timeout: float = 5.0) -> HostInfo | None:
     """What host ``name`` says of itself (cores, free memory, its agents), for people and the
-    deployment file; None if it does not answer or answers other than a JSON object."""
+    deployment file; None if it does not answer, or answers other than a host's information (the
+    reason logged)."""
     data = _ask(session, HostKeys(name).info, None, timeout)
-    try:
-        answer = json.loads(data) if data is not None else None
-    except ValueError:
+    if data is None:
         return None
-    return answer if isinstance(answer, dict) else None
+    try:
+        return decode_host_info(data)
+    except WireError as exc:
+        log.warning("host %s: %s", name, exc)
+        return None
 
 
 def wait_for_hosts(

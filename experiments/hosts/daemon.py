@@ -19,7 +19,6 @@ The launcher's and the operators' side of the conversation is :mod:`.client`.
 from __future__ import annotations
 
 import ipaddress
-import json
 import logging
 import os
 import shutil
@@ -42,7 +41,7 @@ from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import HOSTS, HostKeys, Keys
 from swarmbed.wire.membership import is_alive
 from swarmbed.wire.process import process_name, tune_malloc
-from swarmbed.wire.reports import HostAnswer, StartAgents, StopAgents, decode_start, decode_stop, encode_json
+from swarmbed.wire.reports import HostAnswer, HostInfo, StartAgents, StopAgents, decode_start, decode_stop, encode_json
 from swarmbed.wire.session import free_loopback_endpoint, undeclare_all, zenoh_config
 
 log = logging.getLogger("swarmbed.host")
@@ -66,20 +65,20 @@ class Host:
         self.lock = threading.Lock()
         self._entities: list[Any] = []
 
-    def info(self) -> dict[str, Any]:
+    def info(self) -> HostInfo:
         with self.lock:
             agents = {
                 run: sorted(_agent_of(n) for n, p in ch.procs.items() if p.poll() is None)
                 for run, ch in self.runs.items()
             }
-        return {
-            "name": self.name,
-            "cores": os.cpu_count(),
-            "mem_free_mb": psutil.virtual_memory().available // 2**20,
-            "pid": os.getpid(),
-            "endpoint": self.endpoint,
-            "agents": {r: a for r, a in agents.items() if a},
-        }
+        return HostInfo(
+            name=self.name,
+            cores=os.cpu_count(),
+            mem_free_mb=psutil.virtual_memory().available // 2**20,
+            pid=os.getpid(),
+            endpoint=self.endpoint,
+            agents={r: a for r, a in agents.items() if a},
+        )
 
     def start_agents(self, request: StartAgents) -> HostAnswer:
         run_id, ids, incarnation = request.run_id, request.agents, request.incarnation
@@ -153,7 +152,7 @@ class Host:
     def declare(self) -> None:
         s, k = self.session, self.keys
         self._entities += [
-            s.declare_queryable(k.info, self._serve(k.info, lambda _data: json.dumps(self.info()))),
+            s.declare_queryable(k.info, self._serve(k.info, lambda _data: encode_json(self.info()))),
             s.declare_queryable(
                 k.start, self._serve(k.start, lambda data: encode_json(self.start_agents(decode_start(data))))
             ),

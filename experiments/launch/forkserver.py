@@ -7,22 +7,32 @@ no session, and forks one child per agent on request: the child starts with ever
 and shares the imported pages with its siblings until it writes to them.
 
 The server is single-threaded (so that forking it is safe): it reads spawn requests from stdin
-(one JSON line each: name, argv, log file) and writes one JSON line per event to stdout:
-``{"spawned": name, "pid": pid}`` or ``{"failed": name, "error": ...}``, and
-``{"exited": pid, "code": rc}`` (negative: killed by that signal, as subprocess reports it) when
-it reaps a child. Its children die with it (PR_SET_PDEATHSIG), and it dies with the launcher.
+and writes one event per line to stdout (the messages of :mod:`.forkmessages`): ``ready`` once,
+``spawned`` (name, pid) or ``failed`` (name, error) per request, and ``exited`` (pid, code;
+negative: killed by that signal, as subprocess reports it) when it reaps a child. Its children
+die with it (PR_SET_PDEATHSIG), and it dies with the launcher.
 """
 
 from __future__ import annotations
 
 import gc
-import json
 import os
 import select
 import signal
 import sys
 
 import setproctitle
+
+from swarmbed.experiments.launch.forkmessages import (
+    Event,
+    Exited,
+    Failed,
+    ForkProtocolError,
+    Ready,
+    Spawned,
+    decode_request,
+    encode,
+)
 
 # agents do no linear algebra: one BLAS thread, and no thread pool alive when the server forks
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -84,8 +94,8 @@ def _child(argv: list[str], log_path: str) -> None:
             os._exit(code if isinstance(code, int) else 1)
 
 
-def _say(event: dict) -> None:
-    sys.stdout.write(json.dumps(event) + "\n")
+def _say(event: Event) -> None:
+    sys.stdout.buffer.write(encode(event))
     sys.stdout.flush()
 
 
@@ -99,7 +109,7 @@ def _reap(children: set[int]) -> None:
             return
         children.discard(pid)
         code = -os.WTERMSIG(status) if os.WIFSIGNALED(status) else os.WEXITSTATUS(status)
-        _say({"exited": pid, "code": code})
+        _say(Exited(pid, code))
 
 
 def serve() -> int:
@@ -116,7 +126,7 @@ def serve() -> int:
     gc.collect()
     gc.freeze()
     children: set[int] = set()
-    _say({"ready": os.getpid()})
+    _say(Ready(os.getpid()))
     stdin = sys.stdin.buffer
     pending = b""
     while True:
@@ -130,16 +140,20 @@ def serve() -> int:
         pending += chunk
         while b"\n" in pending:
             line, pending = pending.split(b"\n", 1)
-            request = json.loads(line)
+            try:
+                request = decode_request(line)
+            except ForkProtocolError as exc:
+                _say(Failed("?", str(exc)))
+                continue
             try:
                 pid = os.fork()
             except OSError as exc:
-                _say({"failed": request["name"], "error": str(exc)})
+                _say(Failed(request.name, str(exc)))
                 continue
             if pid == 0:
-                _child(request["argv"], request["log"])
+                _child(request.argv, request.log)
             children.add(pid)
-            _say({"spawned": request["name"], "pid": pid})
+            _say(Spawned(request.name, pid))
 
 
 def _stop(children: set[int]) -> None:

@@ -8,7 +8,7 @@ server (:mod:`.forkserver`) where one is running: a process that imported everyt
 
 from __future__ import annotations
 
-import json
+import logging
 import os
 import queue
 import resource
@@ -24,7 +24,19 @@ from pathlib import Path
 import psutil
 
 import swarmbed
+from swarmbed.experiments.launch.forkmessages import (
+    Exited,
+    Failed,
+    ForkProtocolError,
+    Ready,
+    Spawned,
+    SpawnRequest,
+    decode_event,
+    encode,
+)
 from swarmbed.wire.session import SINGLE_WORKER
+
+log = logging.getLogger("swarmbed.launcher")
 
 AGENT_MODULE = "swarmbed.agent_runtime"
 
@@ -166,17 +178,21 @@ class ForkServer:
             ready = self.replies.get(timeout=timeout)
         except queue.Empty:
             ready = None
-        if not ready or "ready" not in ready:
+        if not isinstance(ready, Ready):
             self.close()
             raise ForkServerError(f"the agents' fork server did not start; see {log_path}")
 
     def _read(self) -> None:
         assert self.proc.stdout is not None
         for line in self.proc.stdout:
-            event = json.loads(line)
-            if "exited" in event:
+            try:
+                event = decode_event(line)
+            except ForkProtocolError as exc:
+                log.error("launcher: %s", exc)
+                continue
+            if isinstance(event, Exited):
                 with self.lock:
-                    self.exits[event["exited"]] = event["code"]
+                    self.exits[event.pid] = event.code
             else:
                 self.replies.put(event)
         self.replies.put(None)  # the server is gone
@@ -184,15 +200,15 @@ class ForkServer:
     def spawn(self, name: str, argv: list[str], log: Path, timeout: float = 30.0) -> ForkedProcess:
         assert self.proc.stdin is not None
         try:
-            self.proc.stdin.write((json.dumps({"name": name, "argv": argv, "log": str(log)}) + "\n").encode())
+            self.proc.stdin.write(encode(SpawnRequest(name, argv, str(log))))
             self.proc.stdin.flush()
             reply = self.replies.get(timeout=timeout)
         except (OSError, queue.Empty):
             reply = None
-        if not reply or "pid" not in reply:
-            why = reply.get("error") if reply else "it is gone or did not answer"
+        if not isinstance(reply, Spawned):
+            why = reply.error if isinstance(reply, Failed) else "it is gone or did not answer"
             raise ForkServerError(f"the fork server could not start {name}: {why}")
-        return ForkedProcess(self, reply["pid"])
+        return ForkedProcess(self, reply.pid)
 
     def exit_code(self, pid: int) -> int | None:
         with self.lock:

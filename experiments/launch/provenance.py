@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import swarmbed
+from swarmbed.extension.allocator import Allocator
 from swarmbed.wire.rundir import PROVENANCE
 
 FILE = PROVENANCE
@@ -59,10 +60,10 @@ def _versions(git: dict[str, Any] | None) -> dict[str, Any]:
     return {"swarmbed": swarmbed.__version__, "git": git, "python": platform.python_version(), "libraries": libraries}
 
 
-def provenance(scenario_cls: type, scenario_target: str, allocator_cls: type, allocator_target: str) -> dict:
+def provenance(scenario_cls: type, scenario_target: str, allocator_cls: type[Allocator], allocator_target: str) -> dict:
     """What ``provenance.json`` holds for a run of this scenario and allocator."""
     return {
         **code_state(),
         "scenario": {"target": scenario_target, "version": str(getattr(scenario_cls, "version", "1"))},
-        "allocator": {"target": allocator_target, "version": str(getattr(allocator_cls, "version", "1"))},
+        "allocator": {"target": allocator_target, "version": allocator_cls.version},
     }

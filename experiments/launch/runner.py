@@ -40,6 +40,7 @@ from swarmbed.experiments.launch.placement import AgentPlacement
 from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
 from swarmbed.experiments.launch.provenance import provenance
 from swarmbed.wire.keys import Keys
+from swarmbed.wire.reports import HostInfo
 from swarmbed.wire.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
 from swarmbed.wire.rundir import BT, DEPLOYMENT, RESULT_FILES
 from swarmbed.wire.schema import LOCAL, carriers, hosts_of
@@ -56,7 +57,7 @@ class LiveRun:
     children: Children
     session: zenoh.Session
     keys: Keys
-    hosts: dict[str, dict | None]  # host name -> what its daemon said of itself (cores, memory, pid)
+    hosts: dict[str, HostInfo | None]  # host name -> what its daemon said of itself (cores, memory, pid)
 
 
 class RunObserver(Protocol):
@@ -245,7 +246,7 @@ def _start_processes(plan: RunPlan, setup: _Setup) -> dict[str, Any]:
                 placement.first(i)
     except ForkServerError as exc:
         raise RunError(str(exc)) from None
-    hosts: dict[str, Any] = {}
+    hosts: dict[str, HostInfo | None] = {}
     if plan.remote_hosts:
         try:
             wait_for_hosts(
@@ -279,7 +280,12 @@ def _progress_bar(exp: Experiment, progress: bool) -> tuple[Any, Callable[[int, 
     return bar, on_tick
 
 
-def _record_swaps(plan: RunPlan, setup: _Setup, deployment: dict[str, Any], hosts: dict[str, Any]) -> None:
+def _host_documents(hosts: dict[str, HostInfo | None]) -> dict[str, dict[str, Any] | None]:
+    """deployment.json's ``hosts``: what each host said of itself, as it said it."""
+    return {h: info.model_dump() if info is not None else None for h, info in hosts.items()}
+
+
+def _record_swaps(plan: RunPlan, setup: _Setup, deployment: dict[str, Any], hosts: dict[str, HostInfo | None]) -> None:
     """After a run whose agents moved: where each ran at the end, and what each host ran then."""
     agents = setup.coord.agents
     for host in sorted({h for h in agents.hosts.values() if h != LOCAL}):
@@ -288,7 +294,7 @@ def _record_swaps(plan: RunPlan, setup: _Setup, deployment: dict[str, Any], host
         plan.out_dir / DEPLOYMENT,
         {
             **deployment,
-            "hosts": hosts,
+            "hosts": _host_documents(hosts),
             "placement_at_end": {str(i): agents.hosts.get(i, LOCAL) for i in range(plan.exp.agents.count)},
         },
     )
@@ -322,7 +328,7 @@ def _execute(
             "run_id": keys.run_id,
             "hub": [endpoint, *plan.hub.listen],
             "placement": {str(i): h for i, h in plan.where.items()},
-            "hosts": hosts,
+            "hosts": _host_documents(hosts),
             **({"ros2": exp.ros2.model_dump(mode="json")} if exp.ros2 else {}),
         }
         results.write_json(out_dir / DEPLOYMENT, deployment)

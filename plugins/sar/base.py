@@ -29,9 +29,6 @@ class StrategyParams(BaseModel):
 class SARStrategy(Allocator):
     Params = StrategyParams
     params: StrategyParams
-    #: whether the SAR scenario shows victims' colours to this strategy when it bids (its
-    #: ``colors_for_bidding: auto`` reads this trait from the allocator class)
-    bids_with_colors: bool = False
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)

@@ -62,7 +62,7 @@ class SARConsensus(SARStrategy):
     params: ConsensusParams
     message_kinds: ClassVar[tuple[str, ...]] = (BIDS,)
     event_names: ClassVar[tuple[str, ...]] = ("negotiations",)
-    bids_with_colors = True
+    bids_with_colors: ClassVar[bool] = True
     bt_nodes = SAR_NODES + (ExplorationNode,)
 
     def __init__(self, agent_id, params, rng, run_seed=0):
