@@ -23,6 +23,12 @@ left the bundle as it was; on the other ticks the agent has no task and its tree
 (``execute: settled``, the default). ``execute: first`` heads for the first task of the path on
 every tick, as swarmbed's published section 7 did.
 
+Information timestamps: simulated seconds, new every tick. SPACE's code stamps with
+``int(time.time())``, whole wall-clock seconds, which at the hundreds of simulated seconds it runs
+per wall second stay equal for hundreds of ticks, so Table 1's rules that need newer information
+seldom fire; ``stamp_every: S`` stamps with whole multiples of S simulated seconds instead (a
+simulated clock keeps lock-step runs reproducible, which a wall clock would not).
+
 Which tasks a consensus round touches: Table 1 is applied to every task a neighbour's message
 names (``consensus_scope: all``, the CBBA paper). SPACE's code applies it only to the tasks the agent
 senses, and of those only to the ones both it and the neighbour hold a bid for (``if y_k.get(j) is
@@ -63,6 +69,13 @@ class CBBAParams(BaseModel):
         description="all: Table 1 on every task a neighbour names (the CBBA paper); local_bids: only on tasks in "
         "view that this agent bid on and the neighbour names (SPACE's code)",
     )
+    stamp_every: float | None = Field(
+        None,
+        gt=0,
+        description="None: information timestamps in simulated seconds, new every tick (the CBBA paper); a "
+        "number: stamps of that many simulated seconds each, as SPACE's code's whole wall-clock seconds "
+        "last a few hundred simulated seconds (docs/reproduction.md section 7)",
+    )
     full_every: int = Field(
         10,
         ge=1,
@@ -90,7 +103,8 @@ class CBBA(Allocator):
 
     def decide(self, view: LocalView) -> int | None:
         st = self.state
-        st.now = view.time
+        every = self.params.stamp_every
+        st.now = view.time if every is None else math.floor(view.time / every) * every
         for task in self.book.update(view):
             st.forget(task)
         before = list(st.bundle)

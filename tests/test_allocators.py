@@ -358,3 +358,23 @@ def test_cbba_consensus_scope_of_spaces_code_touches_only_sensed_tasks_both_side
         winners[scope] = dict(cbba.z)
     assert winners["all"][1] == 1  # learnt who wins task 1, which it never bid on
     assert 1 not in winners["local_bids"] and winners["local_bids"][0] == 0  # 0 kept: its bid is higher
+
+
+def test_cbba_coarse_stamps_of_spaces_wall_clock_keep_the_newer_information_rules_from_firing():
+    """SPACE's code stamps information with whole wall-clock seconds, which last hundreds of
+    simulated seconds; ``stamp_every`` stamps with whole multiples of it in simulated time. Within
+    one stamp Table 1's rules that need newer information (here: both think agent 2 wins, with
+    other bids) leave the receiver's view as it is; with the paper's stamps they update it."""
+    tasks = {0: TaskInfo(0, 10.0, 0.0, 30.0)}
+    coarse = make("cbba", {"stamp_every": 300.0}, 0, np.random.default_rng(0), 0)
+    fine = make("cbba", {}, 0, np.random.default_rng(0), 0)
+    for k, t in enumerate((0.0, 150.0, 299.9, 300.0, 612.5)):
+        for cbba, stamp in ((coarse, 300.0 * math.floor(t / 300.0)), (fine, t)):
+            view = LocalView(0, 2, k, t, 0.0, 0.0, 0.0, 0.0, 1.0, tasks, [], 1.0, 300.0)
+            cbba.decide(view)
+            assert view.outbox[-1].data["t"] == stamp
+    for their_stamp_of_2, updated in ((0.0, False), (7.5, True)):
+        st = ConsensusState(0)
+        st.z[5], st.y[5], st.s[2] = 2, 3.0, 0.0
+        st.receive(1, {"t": 0.0, "w": [[5, 2, 4.0]], "s": [[2, their_stamp_of_2]]})
+        assert st.y[5] == (4.0 if updated else 3.0)
