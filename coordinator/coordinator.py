@@ -26,7 +26,7 @@ from pydantic import ValidationError
 from swarmbed.coordinator.errors import RunError
 from swarmbed.coordinator.events import CONSUMED, EventQueue
 from swarmbed.coordinator.lifecycle import AgentLifecycle
-from swarmbed.coordinator.live import Interval, LiveStatus
+from swarmbed.coordinator.live import Interval, LiveStatus, progress_sample
 from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.recorder import Recorder
 from swarmbed.coordinator.trees import TreeRecorder
@@ -62,7 +62,7 @@ from swarmbed.wire.seeds import WORLD, component_rng
 from swarmbed.wire.session import undeclare_all
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
-from swarmbed.wire.status import NetworkCounters, RunStatus, encode_status
+from swarmbed.wire.status import encode_status
 from swarmbed.wire.summary import RunSummary
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -380,35 +380,13 @@ class Coordinator:
     def _publish_status(self, wall_s: float) -> None:
         """Where the run is, for ``swarmbed watch`` (wall-clock paced: never part of the results)."""
         try:
-            status = self._status(wall_s)
+            status = progress_sample(self.exp, self.world, self.recorder, self.last_tick, self.late_ticks, wall_s)
         except ValidationError as exc:  # a scenario's row of another shape: the run goes on, unwatched
             if not self.status_refused:
                 log.warning("coordinator: progress sample not published (%s)", str(exc).splitlines()[0])
             self.status_refused = True
             return
         self.status_pub.put(encode_status(status))
-
-    def _status(self, wall_s: float) -> RunStatus:
-        w, net = self.world, self.recorder.net_cum
-        return RunStatus(
-            name=self.exp.name,
-            scenario=self.exp.scenario.kind,
-            allocator=self.exp.allocator.name,
-            tick=self.last_tick,
-            time=w.time,
-            ticks=self.exp.ticks,
-            wall_s=wall_s,
-            row=w.row(),
-            network=NetworkCounters(
-                messages_sent=net[0], bytes_sent=net[1], copies=net[2], delivered=net[3], dropped=net[4]
-            ),
-            drops=self.recorder.drops_cum,
-            alive=[int(a) for a in np.flatnonzero(w.alive)],
-            late_ticks=sum(self.late_ticks.values()),
-            positions=list(zip(*w.positions())),
-            labels=dict(w.agent_labels()),
-            markers=list(w.markers().values()),
-        )
 
     def _stuck(self) -> str:
         """Who held the tick up, as the proxy sees it: the agents that did not answer, or the proxy."""

@@ -1,4 +1,6 @@
-"""What a monitor in the launcher's process (a soak's sampler, chaos) sees of a running run.
+"""What a monitor sees of a running run: in the launcher's process (a soak's sampler, chaos), a
+:class:`LiveStatus`; anywhere on the run's network (``swarmbed watch``), the progress sample
+:func:`progress_sample` builds.
 
 Monitors run in their own threads beside the tick loop. They do not read the coordinator's
 attributes (which the loop changes mid-tick); the coordinator publishes a :class:`LiveStatus`, an
@@ -18,7 +20,12 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+import numpy as np
+
+from swarmbed.extension.scenario import World
 from swarmbed.wire.reports import RestartRecord
+from swarmbed.wire.schema import Experiment
+from swarmbed.wire.status import NetworkCounters, RunStatus
 
 
 def _frozen(mapping: Mapping) -> Mapping:
@@ -81,3 +88,29 @@ class Interval:
 
     slowest_tick_s: float
     latest_start_s: float | None
+
+
+def progress_sample(
+    exp: Experiment, w: World, recorder: Any, tick: int, late_ticks: Mapping[int, int], wall_s: float
+) -> RunStatus:
+    """Where the run is after ``tick``, for ``swarmbed watch`` (``recorder``: the run's Recorder)."""
+    net = recorder.net_cum
+    return RunStatus(
+        name=exp.name,
+        scenario=exp.scenario.kind,
+        allocator=exp.allocator.name,
+        tick=tick,
+        time=w.time,
+        ticks=exp.ticks,
+        wall_s=wall_s,
+        row=w.row(),
+        network=NetworkCounters(
+            messages_sent=net[0], bytes_sent=net[1], copies=net[2], delivered=net[3], dropped=net[4]
+        ),
+        drops=recorder.drops_cum,
+        alive=[int(a) for a in np.flatnonzero(w.alive)],
+        late_ticks=sum(late_ticks.values()),
+        positions=list(zip(*w.positions())),
+        labels=dict(w.agent_labels()),
+        markers=list(w.markers().values()),
+    )
