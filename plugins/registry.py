@@ -160,7 +160,7 @@ def registered_scenario(kind: object, trusted: bool = False) -> type[Scenario]:
         return Scenario
 
 
-def _validate(model: type[BaseModel], params: Mapping[str, Any], section: str) -> BaseModel:
+def check_params(model: type[BaseModel], params: Mapping[str, Any], section: str) -> BaseModel:
     try:
         return model.model_validate(dict(params))
     except ValidationError as exc:
@@ -174,11 +174,11 @@ def _validate(model: type[BaseModel], params: Mapping[str, Any], section: str) -
 
 
 def validate_params(name: str, params: Mapping[str, Any], scenario: str | None = None) -> BaseModel:
-    return _validate(resolve(name, scenario).Params, params, "allocator")
+    return check_params(resolve(name, scenario).Params, params, "allocator")
 
 
 def validate_scenario_params(kind: str, params: Mapping[str, Any]) -> BaseModel:
-    return _validate(resolve_scenario(kind).Params, params, "scenario")
+    return check_params(resolve_scenario(kind).Params, params, "scenario")
 
 
 def make(

@@ -27,11 +27,10 @@ from swarmbed.extension.scenario import Scenario
 from swarmbed.plugins.registry import (
     PluginError,
     allocator_target,
+    check_params,
     resolve,
     resolve_scenario,
     scenario_target,
-    validate_params,
-    validate_scenario_params,
 )
 from swarmbed.wire.schema import (
     AgentsSection,
@@ -183,9 +182,11 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
     except ValidationError as exc:
         raise fail([f"{'.'.join(str(p) for p in e['loc'])}: {_message(e)}" for e in exc.errors()]) from None
     try:
-        kind = exp.scenario.kind
-        scenario_params = validate_scenario_params(kind, exp.scenario.params())
-        allocator_params = validate_params(exp.allocator.name, exp.allocator.params(), kind)
+        kind = exp.scenario.kind  # each name resolved once here, its class used for every check below
+        scenario_cls = resolve_scenario(kind)
+        scenario_params = check_params(scenario_cls.Params, exp.scenario.params(), "scenario")
+        allocator_cls = resolve(exp.allocator.name, kind)
+        allocator_params = check_params(allocator_cls.Params, exp.allocator.params(), "allocator")
     except PluginError as exc:
         lines = str(exc).splitlines()
         # a name that does not resolve (a line naming its key already is the parameters' own error)
@@ -202,7 +203,7 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
             "allocator": AllocatorSection(name=exp.allocator.name, **allocator_params.model_dump(mode="json")),
         }
     )
-    problems = resolve_scenario(kind).check(exp, scenario_params)
+    problems = scenario_cls.check(exp, scenario_params)
     for check in (lambda: hosts_of(exp.placement, exp.agents.count), lambda: carriers(exp)):
         try:
             check()
@@ -213,25 +214,22 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
         for k, s in enumerate(exp.swaps)
         if s.agent >= exp.agents.count
     ]
-    allocator = resolve(exp.allocator.name, kind)
-    if exp.swaps and not allocator.snapshottable:
+    if exp.swaps and not allocator_cls.snapshottable:
         problems.append(
             f"swaps: allocator {exp.allocator.name} cannot move between processes "
-            f"({allocator.__name__}.snapshottable is False)"
+            f"({allocator_cls.__name__}.snapshottable is False)"
         )
     if problems:
         raise fail(problems)
-    tree_problem = _check_tree(exp)
+    tree_problem = _check_tree(exp, scenario_cls, allocator_cls)
     if tree_problem:
         raise fail([f"agents.behavior_tree: {tree_problem}"])
     return exp
 
 
-def _check_tree(exp: Experiment) -> str | None:
+def _check_tree(exp: Experiment, scenario_cls: type[Scenario], allocator_cls: type[Allocator]) -> str | None:
     """Load the agents' behavior tree with the node set they will have, so that a bad tree stops
     the run here, before any process starts. The problem, or None."""
-    scenario_cls = resolve_scenario(exp.scenario.kind)
-    allocator_cls = resolve(exp.allocator.name, exp.scenario.kind)
     path = tree_path(exp.agents.behavior_tree, scenario_cls, allocator_cls)
     if not path.is_file():
         return f"file {path} does not exist"
