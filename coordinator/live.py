@@ -18,10 +18,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any
 
 import numpy as np
 
+from swarmbed.coordinator.lifecycle import AgentLifecycle
+from swarmbed.coordinator.recorder import Recorder
 from swarmbed.extension.scenario import World
 from swarmbed.wire.reports import RestartRecord
 from swarmbed.wire.schema import Experiment
@@ -45,7 +46,7 @@ class LiveStatus:
     lost: Mapping[int, int]  # agent -> tick it was lost
     incarnation: Mapping[int, int]  # agent -> its current process, where not the first (0)
     hosts: Mapping[int, str]  # agent -> the host it runs on, where not this machine
-    restarts: tuple[RestartRecord, ...]  # the restart log so far (restarts.csv's rows), copies
+    restarts: tuple[RestartRecord, ...]  # the restart log so far (restarts.csv's rows)
     late_ticks: Mapping[int, int] = field(default_factory=dict)  # agent -> ticks it missed (real-time)
     slowest_tick: tuple[float, int] = (0.0, -1)  # (wall seconds, tick): the longest a tick took, start to start
 
@@ -60,11 +61,12 @@ class LiveStatus:
         network: list[int],
         drops: Mapping[str, int],
         alive: frozenset[int],
-        agents: Any,
+        agents: AgentLifecycle,
         late_ticks: Mapping[int, int],
         slowest_tick: tuple[float, int],
     ) -> LiveStatus:
-        """A status from the run's parts (``agents``: its AgentLifecycle), each copied."""
+        """A status from the run's parts, each copied (a restart record is complete once the tick
+        that made it is over, and never changed after: the records themselves are shared)."""
         return LiveStatus(
             tick,
             time,
@@ -75,7 +77,7 @@ class LiveStatus:
             _frozen(agents.lost),
             _frozen(agents.incarnation),
             _frozen(agents.hosts),
-            tuple(r.model_copy() for r in agents.restart_log),
+            tuple(agents.restart_log),
             _frozen(late_ticks),
             slowest_tick,
         )
@@ -91,9 +93,9 @@ class Interval:
 
 
 def progress_sample(
-    exp: Experiment, w: World, recorder: Any, tick: int, late_ticks: Mapping[int, int], wall_s: float
+    exp: Experiment, w: World, recorder: Recorder, tick: int, late_ticks: Mapping[int, int], wall_s: float
 ) -> RunStatus:
-    """Where the run is after ``tick``, for ``swarmbed watch`` (``recorder``: the run's Recorder)."""
+    """Where the run is after ``tick``, for ``swarmbed watch``."""
     net = recorder.net_cum
     return RunStatus(
         name=exp.name,
