@@ -53,9 +53,6 @@ class RunDir:
     def __repr__(self) -> str:
         return f"RunDir({str(self.path)!r})"
 
-    def __truediv__(self, name: str) -> Path:
-        return self.path / name
-
     @property
     def complete(self) -> bool:
         """Whether the run completed: its summary, written last, is there."""
