@@ -1011,6 +1011,7 @@ def cmd_swap(args: argparse.Namespace) -> int:
             why = answer.error if isinstance(answer, SwapRefused) else "no coordinator answered"
             print(f"error: run {args.run}: {why}", file=sys.stderr)
             return 2
+        print(f"swap {answer.queued} of agent {args.agent} to {args.to} queued; waiting for its outcome", flush=True)
         deadline = time.monotonic() + args.wait
         while time.monotonic() < deadline:
             record = ask({"swap": answer.queued})

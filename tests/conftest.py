@@ -130,6 +130,34 @@ def operator(tmp_path) -> Operator:
     return Operator(tmp_path)
 
 
+class SwapAsked:
+    """``swarmbed swap`` run from another terminal once a run's members joined: ``on_ready`` starts
+    it and holds the run until the coordinator queued the swap (or refused it), so a loaded machine
+    cannot finish the run before the request arrives; ``wait()`` gives (returncode, stdout, stderr)."""
+
+    def __init__(self, operator: Operator, agent: int, to: str) -> None:
+        self.argv = ["--agent", str(agent), "--to", to, *operator.args]
+        self.proc: subprocess.Popen | None = None
+        self.first_line = ""
+
+    def on_ready(self, keys, endpoint: str) -> None:
+        import sys
+
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id, *self.argv],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        assert self.proc.stdout is not None
+        self.first_line = self.proc.stdout.readline()  # "... queued; ...", or "" once it exits refused
+
+    def wait(self, timeout: float = 120) -> tuple[int, str, str]:
+        assert self.proc is not None, "the run never called on_ready"
+        out, err = self.proc.communicate(timeout=timeout)
+        return self.proc.returncode, self.first_line + out, err
+
+
 def whole_rows(path: Path) -> int:
     """The data rows of CSV file ``path``, asserting that none is torn: the file ends at a line end
     and every row has as many fields as the header (pandas would read a torn last row silently)."""

@@ -26,7 +26,7 @@ from swarmbed.wire.credentials import CredentialsError, Identity, check_admitted
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
 from swarmbed.wire.session import zenoh_config
-from tests.conftest import experiment, same_results
+from tests.conftest import SwapAsked, experiment, same_results
 
 BLOCK = zenoh.CongestionControl.BLOCK
 
@@ -476,47 +476,18 @@ def test_a_swap_to_a_host_that_may_not_carry_the_agent_is_refused_before_anythin
     """An operator asks to move agent 1 to h9, an admitted host that may carry only agent 4: the
     coordinator refuses it (the hub would refuse that host agent 1's keys) and nothing moves."""
     host = Identity.new("host-h9", "host", host="h9")
-    asked = {}
-
-    def ask(keys: Keys, endpoint: str) -> None:
-        proc = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "swarmbed",
-                "swap",
-                "--connect",
-                endpoint,
-                "--run",
-                keys.run_id,
-                "--agent",
-                "1",
-                "--to",
-                "h9",
-                *operator.args,
-            ],
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-        asked["rc"], asked["out"], asked["err"] = proc.returncode, proc.stdout, proc.stderr
-
-    threads: list[threading.Thread] = []
-
-    def from_another_terminal(keys: Keys, endpoint: str) -> None:
-        threads.append(threading.Thread(target=ask, args=(keys, endpoint)))
-        threads[-1].start()
+    swap = SwapAsked(operator, 1, "h9")
 
     sets = ["allocator.name=cbba", "run.duration=1000", "run.stop_when_done=false", "may_carry={h9: 4}"]
     run_experiment(
         experiment(*sets),
         tmp_path / "run",
         progress=False,
-        on_ready=from_another_terminal,
+        on_ready=swap.on_ready,
         hub=HubOptions(admit=[host, operator.identity]),
     )
-    threads[0].join(timeout=60)
-    assert "host h9 may not carry agent 1" in asked["out"] + asked["err"], asked
+    rc, out, err = swap.wait()
+    assert "host h9 may not carry agent 1" in out + err, (rc, out, err)
 
 
 def test_state_nobody_asked_for_is_refused_even_from_the_agent_itself(tmp_path):

@@ -3,10 +3,7 @@ request, and the run's files stay byte-identical to a run where nothing moved; f
 old process running."""
 
 import csv
-import subprocess
-import sys
 import textwrap
-import threading
 
 import numpy as np
 import pytest
@@ -16,7 +13,7 @@ from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.plugins.checks.allocator import ConformanceError, check_snapshot
 from swarmbed.plugins.registry import register
-from tests.conftest import QUICKSTART, experiment, same_results
+from tests.conftest import QUICKSTART, SwapAsked, experiment, same_results
 
 SAR = QUICKSTART.parent / "sar" / "_base.yaml"
 
@@ -54,57 +51,11 @@ def test_swapped_agents_give_the_files_of_a_run_where_nothing_moved(tmp_path, ba
 
 def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path, operator):
     sets = ["allocator.name=cbba", "run.duration=1000", "run.stop_when_done=false"]
-    asked = {}
-    threads = []
-
-    def ask(keys, endpoint):
-        # The refused request goes first: the run may end soon after the good swap is done.
-        bad = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "swarmbed",
-                "swap",
-                "--connect",
-                endpoint,
-                "--run",
-                keys.run_id,
-                "--agent",
-                "99",
-                "--to",
-                "local",
-                *operator.args,
-            ],
-            capture_output=True,
-            text=True,
-            timeout=60,
-        )
-        asked["bad"] = (bad.returncode, bad.stderr)
-        proc = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "swarmbed",
-                "swap",
-                "--connect",
-                endpoint,
-                "--run",
-                keys.run_id,
-                "--agent",
-                "2",
-                "--to",
-                "local",
-                *operator.args,
-            ],
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-        asked["rc"], asked["out"], asked["err"] = proc.returncode, proc.stdout, proc.stderr
+    bad, good = SwapAsked(operator, 99, "local"), SwapAsked(operator, 2, "local")
 
     def from_another_terminal(keys, endpoint):
-        threads.append(threading.Thread(target=ask, args=(keys, endpoint)))
-        threads[-1].start()
+        bad.on_ready(keys, endpoint)
+        good.on_ready(keys, endpoint)
 
     run_experiment(
         experiment(*sets),
@@ -113,10 +64,12 @@ def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path, operator):
         on_ready=from_another_terminal,
         hub=HubOptions(admit=[operator.identity]),
     )
-    threads[0].join(timeout=60)
-    assert asked["rc"] == 0, asked["err"]
-    assert "swap of agent 2 from local to local before tick" in asked["out"] and ": ok," in asked["out"]
-    assert asked["bad"][0] == 2 and "a swap request is" in asked["bad"][1]
+    rc, out, err = good.wait()
+    assert rc == 0, err
+    assert "swap 0 of agent 2 to local queued" in out
+    assert "swap of agent 2 from local to local before tick" in out and ": ok," in out
+    rc, _, err = bad.wait()
+    assert rc == 2 and "a swap request is" in err
     assert [r["agent"] for r in _swaps(tmp_path / "moved")] == ["2"]
     run_experiment(experiment(*sets), tmp_path / "still", progress=False)
     same_results(tmp_path / "still", tmp_path / "moved")
