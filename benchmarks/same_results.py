@@ -9,13 +9,15 @@ Each interpreter runs each shipped experiment file (``experiments/**/*.yaml`` th
 sweep nor a chaos plan) through ``swarmbed run``, its horizon cut to ``--duration`` simulated seconds
 (0: the file's own), in lock-step; then the reproducible result files are compared byte for byte
 (``config.yaml`` and ``provenance.json`` too, unless the versions' configurations are meant to
-differ: ``--skip-config``). Prints one line per experiment and exits 1 if any differs. Part of every
-commit that touches the tick path (issue 43).
+differ: ``--skip-config``; ``--new-summary-key K`` compares ``summary.json`` without the key K the new
+install adds, a figure reported beside the results, not a result that changed). Prints one line per
+experiment and exits 1 if any differs. Part of every commit that touches the tick path (issue 43).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import subprocess
 import sys
 import tempfile
@@ -57,13 +59,19 @@ def run(python: str, path: Path, out: Path, duration: float, extra: list[str]) -
     return None if done.returncode == 0 else (done.stderr.strip().splitlines() or ["failed"])[-1]
 
 
-def compare(a: Path, b: Path, config: bool) -> list[str]:
+def compare(a: Path, b: Path, config: bool, new_keys: tuple[str, ...] = ()) -> list[str]:
+    """The compared files that differ between run folders ``a`` (old) and ``b`` (new)."""
     names = [*COMPARED, *(("config.yaml",) if config else ())]
-    return [
-        n
-        for n in names
-        if (a / n).exists() != (b / n).exists() or ((a / n).exists() and (a / n).read_bytes() != (b / n).read_bytes())
-    ]
+    return [n for n in names if _read(a / n, ()) != _read(b / n, new_keys if n == "summary.json" else ())]
+
+
+def _read(path: Path, without: tuple[str, ...]) -> bytes | None:
+    if not path.exists():
+        return None
+    if not without:
+        return path.read_bytes()
+    document = json.loads(path.read_bytes())
+    return json.dumps({k: v for k, v in document.items() if k not in without}, sort_keys=True).encode()
 
 
 def main() -> int:
@@ -74,6 +82,9 @@ def main() -> int:
     ap.add_argument("--only", help="only files whose path contains this")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="for every run of both")
     ap.add_argument("--skip-config", action="store_true", help="do not compare config.yaml (new keys were added)")
+    ap.add_argument(
+        "--new-summary-key", action="append", default=[], metavar="KEY", help="a summary key only the new install has"
+    )
     args = ap.parse_args()
     differs = 0
     with tempfile.TemporaryDirectory() as tmp:
@@ -87,7 +98,7 @@ def main() -> int:
                 print(f"FAILED    {name}: {errors}")
                 differs += 1
                 continue
-            bad = compare(old, new, not args.skip_config)
+            bad = compare(old, new, not args.skip_config, tuple(args.new_summary_key))
             differs += bool(bad)
             print(f"{'DIFFERS' if bad else 'identical'} {name}{': ' + ', '.join(bad) if bad else ''}", flush=True)
     return 1 if differs else 0

@@ -41,6 +41,7 @@ from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World
+from swarmbed.scenarios.budget import ACTIVITIES, IDLE, INSPECTING, MOVING, PENALTY, RESCUING, TimeBudget
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
@@ -165,6 +166,7 @@ class SAR(Scenario):
         "rescues_per_agent",
         "invalid_actions",
         "stale_actions",
+        "time_budget",
     )
     params: SARParams
 
@@ -198,7 +200,15 @@ class SAR(Scenario):
             ("victims spawned / still alive", f"{summary['spawned']} / {summary['victims_alive']}"),
             ("negotiations", summary.get("negotiations", "-")),
             ("agents lost", len(summary["agents_lost"])),
+            ("robot time", _budget_text(summary["time_budget"])) if "time_budget" in summary else ("robot time", "-"),
         ]
+
+
+def _budget_text(budget: dict) -> str:
+    """``moving 1 %, inspecting 98 % (25 % lost), ...``: the time budget as the run's printout shows it."""
+    parts = [f"{name} {100 * budget[name]:.0f} %" for name in ACTIVITIES]
+    parts[INSPECTING] += f" ({100 * budget['inspecting_lost']:.0f} % lost)"
+    return ", ".join(parts)
 
 
 class SARWorld(World):
@@ -220,6 +230,7 @@ class SARWorld(World):
         self.rescues = np.zeros(self.n, dtype=np.int64)
         self.invalid_actions = np.zeros(self.n, dtype=np.int64)
         self.stale_actions = np.zeros(self.n, dtype=np.int64)  # aimed at a victim already gone
+        self.budget = TimeBudget(self.n)
         self.counts = {
             "rescued": 0,
             "expired": 0,
@@ -240,7 +251,8 @@ class SARWorld(World):
         self.inspected: dict[int, set[int]] = {}  # victim -> robots that inspected it
         self.results: dict[int, list[list[int]]] = {}  # robot -> inspection results for its next observation
         self.rescued_by: dict[int, list[int]] = {}  # robot -> victims it rescued, for its next observation
-        self.pending: dict[int, tuple[str, int, int]] = {}  # robot -> (inspect|rescue, victim, tick it ends in)
+        # robot -> (inspect|rescue, victim, tick it ends in, tick it began in)
+        self.pending: dict[int, tuple[str, int, int, int]] = {}
         self.goal: dict[int, tuple] = {}  # robot -> the goal of the move it is making (move_failure: per_move)
         self.tick = 0
         self._spawn(sc.victims)
@@ -392,6 +404,7 @@ class SARWorld(World):
         """Start a timed action; it ends (and takes effect) in the last tick it occupies. With
         ``failure_known: start`` a failed one ends here, costing this tick only; with
         ``rescue_saves: start`` a rescue saves its victim here and the robot stays busy."""
+        self.budget.doing(i, INSPECTING if name == "inspect" else RESCUING)  # a failed try too: its tick
         if self.sc.failure_known == "start" and self._failed(name):
             self._busy(i, 0.0)
             return
@@ -399,7 +412,7 @@ class SARWorld(World):
         if name == "rescue" and self.sc.rescue_saves == "start":
             self._rescue(i, v)
             return
-        self.pending[i] = (name, v, int(self.busy_until[i]) - 1)
+        self.pending[i] = (name, v, int(self.busy_until[i]) - 1, self.tick)
         if self.busy_until[i] - 1 == self.tick:
             self._finish(i)
 
@@ -417,10 +430,12 @@ class SARWorld(World):
 
     def _finish(self, i: int) -> None:
         """The end of robot i's inspection or rescue: the outcome, if the victim is still there."""
-        name, v, _ = self.pending.pop(i)
+        name, v, end, began = self.pending.pop(i)
         at_end = self.sc.failure_known == "end"
         if not self._in_reach(i, v):
             self.stale_actions[i] += 1  # it expired, or another robot rescued it, meanwhile
+            if name == "inspect":
+                self.budget.inspection_lost(i, end - began + 1)
         elif name == "inspect":
             if at_end and self._failed(name):
                 return
@@ -437,6 +452,7 @@ class SARWorld(World):
         new_move = self.sc.move_failure == "per_tick" or self.goal.get(i) != goal
         if new_move and self.fail_rng.random() < self.sc.move_fail:
             self.counts["move_failures"] += 1
+            self.budget.doing(i, PENALTY)
             self._busy(i, self.sc.move_penalty)
             self.goal.pop(i, None)  # it tries this move again once the penalty is over
             return
@@ -445,6 +461,7 @@ class SARWorld(World):
         dist = math.hypot(dx, dy)
         if dist < 1e-12:
             return
+        self.budget.doing(i, MOVING)
         step = min(self.speed * self.dt, dist)
         self.heading[i] = math.atan2(dy, dx)
         self.ax[i] += dx / dist * step
@@ -472,44 +489,48 @@ class SARWorld(World):
         """Advance one tick; robots act in id order on the state of this tick."""
         for i in map(int, np.flatnonzero(self.alive)):
             if self.busy_until[i] > self.tick:
+                self.budget.book(i)
                 if i in self.pending and self.pending[i][2] == self.tick:
                     self._finish(i)
                 continue
-            action = actions.get(i, ["stop"])
-            name = action[0] if action else None
-            v = self._victim(action)
-            r = None if v is None else self._at(v)
-            if name in ("inspect", "rescue") and v is not None:
-                self._face(i, v)  # it looks where the victim is (or was)
-            if name not in ("goto", "goto_task"):
-                self.goal.pop(i, None)  # the move it was making, if any, is over
-            if name == "goto" and len(action) == 3 and all(isinstance(c, (int, float)) for c in action[1:]):
-                self._move(i, float(action[1]), float(action[2]), ("point", action[1], action[2]))
-            elif name == "goto_task" and r is not None:
-                self._move(i, float(self.vx[r]), float(self.vy[r]), ("victim", v))
-            elif name == "inspect" and v is not None and self._in_reach(i, v):
-                self._begin(i, "inspect", v, self.sc.inspect_time)
-            elif (
-                name == "rescue"
-                and v is not None
-                and r is not None
-                and self._in_reach(i, v)
-                and i in self.inspected.get(v, ())
-                and self.vcolor[r] == self.color[i]
-            ):
-                self._begin(i, "rescue", v, self.sc.rescue_time)
-            elif name == "abandon" and v is not None:
-                self.counts["abandons"] += 1
-            elif (
-                name in ("inspect", "rescue", "goto_task") and v is not None and (r is None or self.vstatus[r] != ALIVE)
-            ):
-                self.stale_actions[i] += 1  # someone was faster, or it expired: not the robot's fault
-            elif name not in ("stop", "halt"):  # robots here move at a set speed: halting is stopping
-                self.invalid_actions[i] += 1
+            self.budget.doing(i, IDLE)  # unless what it does now says otherwise
+            self._act(i, actions.get(i, ["stop"]))
+            self.budget.book(i)
         self.tick += 1
         expired = (self.vstatus == ALIVE) & (self.vspawn + self.sc.lifetime <= self.time + 1e-9)
         for v in [int(r) + self.base for r in np.flatnonzero(expired)]:  # ids: _end may move the rows
             self._end(v, EXPIRED)
+
+    def _act(self, i: int, action: list) -> None:
+        """Robot i, free this tick, does ``action`` (an admitted one: its shape is not trusted)."""
+        name = action[0] if action else None
+        v = self._victim(action)
+        r = None if v is None else self._at(v)
+        if name in ("inspect", "rescue") and v is not None:
+            self._face(i, v)  # it looks where the victim is (or was)
+        if name not in ("goto", "goto_task"):
+            self.goal.pop(i, None)  # the move it was making, if any, is over
+        if name == "goto" and len(action) == 3 and all(isinstance(c, (int, float)) for c in action[1:]):
+            self._move(i, float(action[1]), float(action[2]), ("point", action[1], action[2]))
+        elif name == "goto_task" and r is not None:
+            self._move(i, float(self.vx[r]), float(self.vy[r]), ("victim", v))
+        elif name == "inspect" and v is not None and self._in_reach(i, v):
+            self._begin(i, "inspect", v, self.sc.inspect_time)
+        elif (
+            name == "rescue"
+            and v is not None
+            and r is not None
+            and self._in_reach(i, v)
+            and i in self.inspected.get(v, ())
+            and self.vcolor[r] == self.color[i]
+        ):
+            self._begin(i, "rescue", v, self.sc.rescue_time)
+        elif name == "abandon" and v is not None:
+            self.counts["abandons"] += 1
+        elif name in ("inspect", "rescue", "goto_task") and v is not None and (r is None or self.vstatus[r] != ALIVE):
+            self.stale_actions[i] += 1  # someone was faster, or it expired: not the robot's fault
+        elif name not in ("stop", "halt"):  # robots here move at a set speed: halting is stopping
+            self.invalid_actions[i] += 1
 
     # -- metrics -----------------------------------------------------------------------------------
     def row(self) -> dict:
@@ -549,6 +570,7 @@ class SARWorld(World):
             "rescues_per_agent": [int(r) for r in self.rescues],
             "invalid_actions": int(self.invalid_actions.sum()),
             "stale_actions": int(self.stale_actions.sum()),
+            "time_budget": self.budget.summary(self.dt),
         }
 
     def per_agent(self) -> dict[str, list]:

@@ -184,7 +184,10 @@ def _greedy_rescues(dt, seed, seconds=600.0, *overrides):
 def _greedy_world(dt, seed, seconds=600.0, *overrides):
     """A tree-like policy with full knowledge of positions, straight on the world: nearest victim
     not known to mismatch, go, inspect, rescue if the colours match."""
-    w = _sar_world(dt, seed, "agents.count=6", "scenario.victims=20", *overrides)
+    return _greedy_on(_sar_world(dt, seed, "agents.count=6", "scenario.victims=20", *overrides), seconds)
+
+
+def _greedy_on(w, seconds, after_tick=None):
     target: dict[int, int] = {}
     mismatched: set[tuple[int, int]] = set()
     while w.time < seconds - 1e-9:
@@ -208,7 +211,10 @@ def _greedy_world(dt, seed, seconds=600.0, *overrides):
                 mismatched.add((i, t))
             else:
                 actions[i] = ["rescue", t]
+        before = (w.ax.copy(), w.ay.copy())
         w.apply(actions)
+        if after_tick:
+            after_tick(before)
     return w
 
 
@@ -234,6 +240,36 @@ def test_sar_results_converge_as_the_tick_shrinks():
     assert abs(means[-1] - means[-2]) <= 0.05 * means[-1], means
     assert abs(means[-1] - means[-2]) < abs(means[0] - means[1]), means
     assert max(max(r) for r in runs.values()) <= 6 * 600 / sar.INSPECT_TIME, runs
+
+
+def test_the_time_budget_books_every_robot_tick_once_and_agrees_with_the_counts():
+    """Six greedy robots for 600 s, half their moves failing: each live tick is booked to one
+    activity (shares sum to one over 6 x 600 robot-seconds); the moving ticks are the ticks in
+    which a robot's position changed, seen from outside; inspecting is inspect_time per completed
+    inspection plus the lost ones (whole inspections too) plus what is under way at the end; the
+    penalty is move_penalty per failed move, but for one cut by the end."""
+    w = _sar_world(0.25, 4, "agents.count=6", "scenario.victims=20", "scenario.move_fail=0.5")
+    moved = np.zeros(w.n)
+
+    def count_moves(before):
+        moved[:] += (w.ax != before[0]) | (w.ay != before[1])
+
+    budget = _greedy_on(w, 600.0, count_moves).summary()["time_budget"]
+    shares = ("moving", "inspecting", "rescuing", "penalty", "idle")
+    assert sum(budget[k] for k in shares) == pytest.approx(1.0, abs=1e-5)
+    total = budget["robot_seconds"]
+    assert total == 6 * 600.0
+    assert budget["moving"] * total == pytest.approx(moved.sum() * 0.25, abs=1e-2)
+    inspect_time = w.sc.inspect_time
+    under_way = sum((w.tick - p[3]) * 0.25 for p in w.pending.values() if p[0] == "inspect")
+    lost = budget["inspecting_lost"] * total
+    assert lost / inspect_time == pytest.approx(round(lost / inspect_time), abs=1e-3) and lost > 0
+    assert (budget["inspecting"] - budget["inspecting_lost"]) * total - under_way == pytest.approx(
+        inspect_time * w.counts["inspections"], abs=1e-2
+    )
+    failed_moves = w.counts["move_failures"]
+    assert failed_moves > 10 and budget["idle"] > 0 and budget["rescuing"] > 0
+    assert 0 <= failed_moves * w.sc.move_penalty - budget["penalty"] * total <= w.sc.move_penalty + 1e-6
 
 
 FAILURES = ("scenario.move_fail=0.5", "scenario.inspect_fail=0.5", "scenario.rescue_fail=0.5")

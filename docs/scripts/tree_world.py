@@ -6,7 +6,8 @@ runs (`swarmbed sweep experiments/sar/calibration_tree.yaml`).
 
     python docs/scripts/tree_world.py --trials 3 --duration 1000 --set scenario.inspect_time=25
 
-prints the mean rescued, failed rescues, their ratio and expired per trial, as JSON.
+prints the mean rescued, failed rescues, their ratio and expired per trial, and the robots' time
+budget (the share of robot time moving, inspecting, rescuing, in move penalties and idle), as JSON.
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ def main() -> None:
     keys = ("rescued", "failed_rescues", "expired", "stale_actions", "inspections")
     out = {k: mean(r[k] for r in runs) for k in keys}
     out["failed_per_rescue"] = out["failed_rescues"] / max(out["rescued"], 1e-9)
+    out["time_budget"] = {k: round(mean(r["time_budget"][k] for r in runs), 4) for k in runs[0]["time_budget"]}
     out["rescued_each"] = [r["rescued"] for r in runs]
     out["set"] = args.set
     print(json.dumps(out))
