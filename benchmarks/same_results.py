@@ -10,7 +10,8 @@ sweep nor a chaos plan) through ``swarmbed run``, its horizon cut to ``--duratio
 (0: the file's own), in lock-step; then the reproducible result files are compared byte for byte
 (``config.yaml`` and ``provenance.json`` too, unless the versions' configurations are meant to
 differ: ``--skip-config``; ``--new-summary-key K`` compares ``summary.json`` without the key K the new
-install adds, a figure reported beside the results, not a result that changed). Prints one line per
+install adds, a figure reported beside the results, not a result that changed; ``--new-set`` sets the
+keys that give back the old behaviour in the new install's runs only). Prints one line per
 experiment and exits 1 if any differs. Part of every commit that touches the tick path (issue 43).
 """
 
@@ -62,16 +63,17 @@ def run(python: str, path: Path, out: Path, duration: float, extra: list[str]) -
 def compare(a: Path, b: Path, config: bool, new_keys: tuple[str, ...] = ()) -> list[str]:
     """The compared files that differ between run folders ``a`` (old) and ``b`` (new)."""
     names = [*COMPARED, *(("config.yaml",) if config else ())]
-    return [n for n in names if _read(a / n, ()) != _read(b / n, new_keys if n == "summary.json" else ())]
+    return [n for n in names if _read(a / n, new_keys, n) != _read(b / n, new_keys, n)]
 
 
-def _read(path: Path, without: tuple[str, ...]) -> bytes | None:
+def _read(path: Path, new_keys: tuple[str, ...], name: str) -> bytes | None:
+    """The file's bytes; for a summary the new install adds keys to, its document without them."""
     if not path.exists():
         return None
-    if not without:
+    if not new_keys or name != "summary.json":
         return path.read_bytes()
     document = json.loads(path.read_bytes())
-    return json.dumps({k: v for k, v in document.items() if k not in without}, sort_keys=True).encode()
+    return json.dumps({k: v for k, v in document.items() if k not in new_keys}, sort_keys=True).encode()
 
 
 def main() -> int:
@@ -81,6 +83,13 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=300.0, help="simulated seconds per run (0: the file's)")
     ap.add_argument("--only", help="only files whose path contains this")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="for every run of both")
+    ap.add_argument(
+        "--new-set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="for the new install's runs only: the keys that give back the old behaviour",
+    )
     ap.add_argument("--skip-config", action="store_true", help="do not compare config.yaml (new keys were added)")
     ap.add_argument(
         "--new-summary-key", action="append", default=[], metavar="KEY", help="a summary key only the new install has"
@@ -92,7 +101,8 @@ def main() -> int:
             name = str(path.relative_to(ROOT))
             old, new = Path(tmp) / name / "old", Path(tmp) / name / "new"
             errors = [
-                run(python, path, out, args.duration, args.set) for python, out in ((args.old, old), (args.new, new))
+                run(args.old, path, old, args.duration, args.set),
+                run(args.new, path, new, args.duration, [*args.set, *args.new_set]),
             ]
             if any(errors):
                 print(f"FAILED    {name}: {errors}")

@@ -7,7 +7,8 @@ heading, the direction it last moved in), not their colours. Within ``inspect_ra
 inspect a victim (learns the colour: a mismatch counts as a failed rescue), then rescue it if the
 colours match (a robot turns to the victim it inspects or rescues, and learns the outcome of its
 own actions). Inspecting takes ``inspect_time`` seconds and rescuing ``rescue_time`` seconds: the
-robot is busy meanwhile (its tree keeps ticking; the world ignores its actions), and the outcome
+robot is busy meanwhile (its tree keeps ticking; an action other than going on with it stops it,
+``interrupt: on_change``, or is ignored, ``never``), and the outcome
 (the colour learnt, the victim rescued) happens when the action ends, if the victim is still there
 (``rescue_saves: start`` saves it when the rescue starts instead); an action that ends within the
 tick it began in takes effect in that tick. Durations are rounded up to whole ticks, so results
@@ -54,7 +55,7 @@ COLOR_NAMES = ("red", "green", "blue")
 # section 2), and then frozen for every strategy and scenario. The rescue is done in the tick it is
 # started in (0 s): a matched victim must practically never expire between its inspection and its
 # rescue (tree's failed rescues are twice its rescues); the inspection's length sets the pace.
-INSPECT_TIME = 30.0
+INSPECT_TIME = 33.0
 RESCUE_TIME = 0.0
 
 
@@ -66,6 +67,12 @@ class SARParams(BaseModel):
     victims: int = Field(100, ge=0, description="victims at any time (steady state) or in all (finite)")
     lifetime: float = Field(100.0, gt=0, description="seconds a victim lives before it expires")
     replace: bool = Field(True, description="steady state: a rescued or expired victim is replaced")
+    first_ages: Literal["new", "spread"] = Field(
+        "spread",
+        description="the first victims' ages: spread, uniform over a lifetime (a steady state from the start: "
+        "expiries come one by one, not all at once every lifetime), or new, all born at time 0, as before "
+        "2026-11-28 (their replacements then expire in waves a lifetime apart for the whole run)",
+    )
     colors: int = Field(3, ge=1, le=3, description="RED, GREEN, BLUE")
     vision_range: float = Field(12.0, gt=0, description="conical vision: range (m)")
     vision_angle: float = Field(math.pi / 2, gt=0, le=2 * math.pi, description="conical vision: full angle (rad)")
@@ -100,6 +107,13 @@ class SARParams(BaseModel):
         "end",
         description="when a rescue saves its victim: when it ends, if the victim is still there, or when it starts "
         "(the robot then stays busy for rescue_time)",
+    )
+    interrupt: Literal["never", "on_change"] = Field(
+        "on_change",
+        description="a robot busy inspecting or rescuing whose action this tick is not to go on with it: on_change "
+        "stops the action and does the new one this tick (the paper's behavior trees 'can interrupt the current "
+        "action sequence' when the target's status changes; allocator.monitor says who watches), never lets the "
+        "action run its whole length, as before 2026-11-28",
     )
     agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
     agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
@@ -158,6 +172,7 @@ class SAR(Scenario):
         "rescue_failures",
         "move_failures",
         "abandons",
+        "interrupted",
         "spawned",
         "victims_alive",
         "victims_accounted",
@@ -240,6 +255,7 @@ class SARWorld(World):
             "rescue_failures": 0,
             "move_failures": 0,
             "abandons": 0,
+            "interrupted": 0,
         }
         # victims base .. nv-1, in arrays that double when full. A steady-state run spawns tens of
         # thousands; those gone for longer than FORGET_AFTER lifetimes leave the arrays (see _at)
@@ -255,7 +271,7 @@ class SARWorld(World):
         self.pending: dict[int, tuple[str, int, int, int]] = {}
         self.goal: dict[int, tuple] = {}  # robot -> the goal of the move it is making (move_failure: per_move)
         self.tick = 0
-        self._spawn(sc.victims)
+        self._spawn(sc.victims, first=True)
 
     # -- victims ---------------------------------------------------------------------------------
     @property
@@ -287,7 +303,9 @@ class SARWorld(World):
         self.vcolor = np.concatenate([self.vcolor, np.zeros(grow, dtype=np.int64)])
         self.vstatus = np.concatenate([self.vstatus, np.full(grow, UNUSED, dtype=np.int64)])
 
-    def _spawn(self, count: int) -> None:
+    def _spawn(self, count: int, first: bool = False) -> None:
+        """``count`` new victims; the first ones, with ``first_ages: spread``, of ages drawn uniform
+        over a lifetime after every place and colour, oldest first so that ids stay in birth order."""
         for _ in range(count):
             if self.nv - self.base == len(self.vstatus):
                 self._forget_old()
@@ -299,6 +317,9 @@ class SARWorld(World):
             self.vspawn[v] = self.time
             self.vstatus[v] = ALIVE
             self.nv += 1
+        if first and self.sc.first_ages == "spread" and count:
+            ages = np.sort(self.spawn_rng.uniform(0.0, self.sc.lifetime, count))[::-1]
+            self.vspawn[self.nv - self.base - count : self.nv - self.base] = self.time - ages
 
     def _end(self, victim: int, status: int) -> None:
         self.vstatus[victim - self.base] = status
@@ -488,18 +509,35 @@ class SARWorld(World):
     def apply(self, actions: dict[int, list]) -> None:
         """Advance one tick; robots act in id order on the state of this tick."""
         for i in map(int, np.flatnonzero(self.alive)):
+            action = actions.get(i, ["stop"])
+            if self.busy_until[i] > self.tick and self._interrupted(i, action):
+                self.busy_until[i] = self.tick
             if self.busy_until[i] > self.tick:
                 self.budget.book(i)
                 if i in self.pending and self.pending[i][2] == self.tick:
                     self._finish(i)
                 continue
             self.budget.doing(i, IDLE)  # unless what it does now says otherwise
-            self._act(i, actions.get(i, ["stop"]))
+            self._act(i, action)
             self.budget.book(i)
         self.tick += 1
         expired = (self.vstatus == ALIVE) & (self.vspawn + self.sc.lifetime <= self.time + 1e-9)
         for v in [int(r) + self.base for r in np.flatnonzero(expired)]:  # ids: _end may move the rows
             self._end(v, EXPIRED)
+
+    def _interrupted(self, i: int, action: list) -> bool:
+        """With ``interrupt: on_change``, whether busy robot i's action stops its inspection or
+        rescue (anything but going on with it); what it spent on it is booked lost if an inspection."""
+        if self.sc.interrupt == "never" or i not in self.pending:
+            return False
+        name, v, _, began = self.pending[i]
+        if len(action) == 2 and action[0] == name and action[1] == v:
+            return False
+        del self.pending[i]
+        self.counts["interrupted"] += 1
+        if name == "inspect":
+            self.budget.inspection_lost(i, self.tick - began)
+        return True
 
     def _act(self, i: int, action: list) -> None:
         """Robot i, free this tick, does ``action`` (an admitted one: its shape is not trusted)."""

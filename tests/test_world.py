@@ -243,12 +243,14 @@ def test_sar_results_converge_as_the_tick_shrinks():
 
 
 def test_the_time_budget_books_every_robot_tick_once_and_agrees_with_the_counts():
-    """Six greedy robots for 600 s, half their moves failing: each live tick is booked to one
+    """Six greedy robots for 600 s, half their moves failing, no action interrupted: each live tick is booked to one
     activity (shares sum to one over 6 x 600 robot-seconds); the moving ticks are the ticks in
     which a robot's position changed, seen from outside; inspecting is inspect_time per completed
     inspection plus the lost ones (whole inspections too) plus what is under way at the end; the
     penalty is move_penalty per failed move, but for one cut by the end."""
-    w = _sar_world(0.25, 4, "agents.count=6", "scenario.victims=20", "scenario.move_fail=0.5")
+    w = _sar_world(
+        0.25, 4, "agents.count=6", "scenario.victims=20", "scenario.move_fail=0.5", "scenario.interrupt=never"
+    )
     moved = np.zeros(w.n)
 
     def count_moves(before):
@@ -270,6 +272,101 @@ def test_the_time_budget_books_every_robot_tick_once_and_agrees_with_the_counts(
     failed_moves = w.counts["move_failures"]
     assert failed_moves > 10 and budget["idle"] > 0 and budget["rescuing"] > 0
     assert 0 <= failed_moves * w.sc.move_penalty - budget["penalty"] * total <= w.sc.move_penalty + 1e-6
+
+
+@pytest.mark.parametrize("interrupt", ["never", "on_change"])
+def test_a_busy_robot_that_turns_to_something_else_stops_its_inspection_only_if_interrupts_are_on(interrupt):
+    """A robot inspects a victim for 10 s (40 ticks) and after 5 ticks asks to go elsewhere: with
+    interrupt on_change it goes in that very tick, no colour ever comes, the interruption is counted
+    and its 5 ticks are booked lost; with never it stays until the inspection's end and learns the
+    colour, as before the key existed."""
+    w = _sar_world(
+        0.25,
+        0,
+        "agents.count=1",
+        "scenario.victims=1",
+        "scenario.replace=false",
+        "scenario.inspect_time=10",
+        "scenario.lifetime=1000",
+        f"scenario.interrupt={interrupt}",
+    )
+    w.vx[0], w.vy[0] = w.ax[0], w.ay[0]
+    start = float(w.ax[0])
+    w.apply({0: ["inspect", 0]})
+    for _ in range(4):
+        w.apply({0: ["inspect", 0]})  # going on with it
+    moved_at = None
+    while w.tick < 60:
+        w.apply({0: ["goto", start + 100.0, float(w.ay[0])]})
+        if moved_at is None and w.ax[0] != start:
+            moved_at = w.tick - 1
+    budget = w.summary()["time_budget"]
+    if interrupt == "on_change":
+        assert moved_at == 5 and w.counts["interrupted"] == 1 and w.counts["inspections"] == 0
+        assert budget["inspecting"] * budget["robot_seconds"] == pytest.approx(5 * 0.25, abs=1e-3)
+        assert budget["inspecting_lost"] == budget["inspecting"]
+    else:
+        assert moved_at == 40 and w.counts["interrupted"] == 0 and w.counts["inspections"] == 1
+        assert budget["inspecting"] * budget["robot_seconds"] == pytest.approx(10.0, abs=1e-3)
+        assert budget["inspecting_lost"] == 0
+
+
+def _strategy_world(seconds, *overrides):
+    """The SAR world and every robot's runtime stepped in one process, messages not delivered (as
+    docs/scripts/tree_world.py does): enough to watch what a strategy does with its own actions."""
+    from swarmbed.agent_runtime.runtime import AgentRuntime
+    from swarmbed.extension.actions import admit
+    from swarmbed.wire.codec import EMPTY_INBOX
+    from swarmbed.wire.schema import agent_spec
+    from swarmbed.wire.seeds import WORLD, component_rng
+
+    exp = experiment(f"run.duration={seconds}", *overrides, base=SAR_BASE)
+    resolved = resolve_experiment(exp)
+    scenario = resolved.scenario()
+    world = scenario.make_world(component_rng(exp.run.seed, WORLD), resolved.allocator_cls)
+    robots = {i: AgentRuntime(agent_spec(exp, resolved.targets), i) for i in range(exp.agents.count)}
+    for k in range(round(seconds / exp.run.dt)):
+        actions = {}
+        for i, obs in world.observations().items():
+            action, _, _ = robots[i].step(k, robots[i].decode_observation(obs.to_wire()), EMPTY_INBOX)
+            actions[i] = admit(action, scenario.actions)
+        world.apply(actions)
+    return world
+
+
+@pytest.mark.parametrize(
+    "allocator, monitor, interrupts",
+    [("tree", None, True), ("cbba", None, False), ("cbba", True, True), ("tree", False, False)],
+)
+def test_only_a_strategy_that_watches_its_target_stops_an_inspection_of_a_victim_gone_meanwhile(
+    allocator, monitor, interrupts
+):
+    """With interrupt on_change, tree (a behavior tree: its condition nodes watch the target) stops
+    inspections whose victim another robot rescued or that expired; cbba (a state machine) holds to
+    them, and its inspections end on a victim that is gone; allocator.monitor turns either way."""
+    sets = [f"allocator.name={allocator}", "scenario.interrupt=on_change"]
+    if monitor is not None:
+        sets.append(f"allocator.monitor={str(monitor).lower()}")
+    w = _strategy_world(140.0, "agents.count=10", *sets)  # the first victims all expire at 100 s
+    lost = w.summary()["time_budget"]["inspecting_lost"]
+    assert (w.counts["interrupted"] > 0) == interrupts, w.counts
+    assert lost > 0 and w.counts["inspections"] > 0
+
+
+@pytest.mark.parametrize("first_ages", ["spread", "new"])
+def test_the_first_victims_expire_one_by_one_unless_all_are_born_at_time_0(first_ages):
+    """A steady state from the start: the first victims' remaining lifetimes are uniform over a
+    lifetime (Kolmogorov-Smirnov against the uniform law), their ids in birth order (what lets the
+    world drop old rows); with first_ages new they all have the whole lifetime left."""
+    from scipy.stats import kstest
+
+    w = _sar_world(0.25, 5, "scenario.victims=2000", f"scenario.first_ages={first_ages}")
+    left = w.vspawn[: w.nv] + w.sc.lifetime - w.time
+    if first_ages == "new":
+        assert np.all(left == w.sc.lifetime)
+        return
+    assert np.all(np.diff(w.vspawn[: w.nv]) >= 0) and left.min() > 0 and left.max() <= w.sc.lifetime
+    assert kstest(left / w.sc.lifetime, "uniform").pvalue > 0.01
 
 
 FAILURES = ("scenario.move_fail=0.5", "scenario.inspect_fail=0.5", "scenario.rescue_fail=0.5")
@@ -311,7 +408,7 @@ def test_a_failed_inspection_costs_the_tick_it_was_tried_in_unless_failures_are_
         w.apply({0: ["inspect", 0]})
         assert w.busy_until[0] - w.tick == busy_ticks - 1, known
         for _ in range(busy_ticks):
-            w.apply({0: ["stop"]})
+            w.apply({0: ["inspect", 0] if w.busy_until[0] > w.tick else ["stop"]})  # going on with it, if busy
         assert w.counts["inspect_failures"] == 1 and not w.results, known
 
 

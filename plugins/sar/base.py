@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -24,11 +25,21 @@ TREES = Path(__file__).resolve().parent / "trees"
 class StrategyParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
     incompatible_for: float = Field(60.0, ge=0, description="seconds a mismatched victim is not retried")
+    monitor: bool | None = Field(
+        None,
+        description="whether the robot watches its target while it inspects or rescues it, and turns to something "
+        "else once the target is gone or no longer its own (with scenario.interrupt: on_change that stops the "
+        "action); None: as the text has it, the behavior-tree strategies do (their condition nodes watch the "
+        "target), cbba and c-cbba, state machines, do not; true reproduces runs of before 2026-11-28",
+    )
 
 
 class SARStrategy(Allocator):
     Params = StrategyParams
     params: StrategyParams
+    #: what ``monitor: None`` means for this strategy (CBBA-ETC paper, Section 4: the tree's condition
+    #: nodes "continuously monitor the status of the assigned target" and may interrupt the action)
+    MONITORS: ClassVar[bool] = True
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)
@@ -39,6 +50,7 @@ class SARStrategy(Allocator):
         self.incompatible: dict[int, float] = {}  # victim -> until when it is not retried
         self.gone: set[int] = set()  # victims known to be rescued or expired (their ids are never reused)
         self.target: int | None = None
+        self.holding = False  # busy with its target and not watching it (monitor off)
         self.my_color = -1
         self.reach = 5.0  # the scenario's inspection distance, as observed
         self.now = 0.0
@@ -48,6 +60,7 @@ class SARStrategy(Allocator):
         obs = view.obs
         self.now, self.my_color = view.time, obs.color
         self.reach = obs.reach
+        self.holding = not self.monitoring and obs.busy > 0 and self.target is not None
         for v, info in view.tasks.items():
             self.victims[v] = info
             self.expires[v] = view.time + info.remaining
@@ -60,7 +73,8 @@ class SARStrategy(Allocator):
         gone = [
             v
             for v, info in self.victims.items()
-            if v in rescued or (v not in view.tasks and (view.sees(info.x, info.y) or self.expires[v] <= view.time))
+            if (v in rescued or (v not in view.tasks and (view.sees(info.x, info.y) or self.expires[v] <= view.time)))
+            and not (self.holding and v == self.target)  # learnt once the action it holds to ends
         ]
         for v in gone:  # what was known of it goes too: a gone victim is never a candidate again
             del self.victims[v]
@@ -96,7 +110,13 @@ class SARStrategy(Allocator):
         """Whether this robot is still entitled to its target (consensus strategies: it wins it)."""
         return True
 
+    @property
+    def monitoring(self) -> bool:
+        return self.MONITORS if self.params.monitor is None else self.params.monitor
+
     def target_valid(self, view: LocalView) -> bool:
+        if self.holding:
+            return True  # it does not look while it holds to its action
         t = self.target
         return t is not None and t in self.victims and self.compatible(t) and self.holds(t)
 

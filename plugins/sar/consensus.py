@@ -171,6 +171,9 @@ class ReactiveCBBA(SARConsensus):
     bundle changed since its last one (or ``period`` seconds passed), and works its first victim."""
 
     default_tree = str(TREES / "cbba_fsm.xml")
+    #: "structured as a state machine within the robot's main action cycle rather than a Behavior
+    #: Tree" (Section 5.2): no condition node watches its target while it acts
+    MONITORS = False
 
     def should_trigger(self, view: LocalView) -> bool:
         return self.state.bundle != self.bundle_at_round or self.now - self.last_round >= self.params.period
