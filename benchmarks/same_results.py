@@ -56,6 +56,7 @@ def run(python: str, path: Path, out: Path, duration: float, extra: list[str]) -
         [python, "-m", "swarmbed", "run", str(path), "--out", str(out), "--no-progress", *sets],
         capture_output=True,
         text=True,
+        cwd=tempfile.gettempdir(),  # not the checkout: its swarmbed/ folder would shadow the install
     )
     return None if done.returncode == 0 else (done.stderr.strip().splitlines() or ["failed"])[-1]
 
