@@ -12,7 +12,8 @@ from swarmbed.plugins.sar.ccbba import CLUSTER_STREAM, kmeans_pp
 from tests.conftest import experiment, ledger_outcomes, read_ledger
 
 SAR = Path(__file__).resolve().parent.parent / "experiments" / "sar" / "_base.yaml"
-SMALL = ["agents.count=6", "scenario.victims=30", "run.duration=60", "run.record_every=4"]
+# 10-s inspections: in 60 s a robot makes several, whatever its strategy (33 s, the default, allows one)
+SMALL = ["agents.count=6", "scenario.victims=30", "run.duration=60", "run.record_every=4", "scenario.inspect_time=10"]
 STRATEGIES = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
 
 

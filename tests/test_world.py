@@ -146,6 +146,21 @@ def _sar_world(dt, seed=0, *overrides):
     return resolve_experiment(exp).scenario().make_world(np.random.default_rng(seed))
 
 
+def _one_robot_at_one_victim(*overrides):
+    """One robot standing on one victim that is never replaced, inspections of 10 s, dt 0.25."""
+    w = _sar_world(
+        0.25,
+        0,
+        "agents.count=1",
+        "scenario.victims=1",
+        "scenario.replace=false",
+        "scenario.inspect_time=10",
+        *overrides,
+    )
+    w.vx[0], w.vy[0] = w.ax[0], w.ay[0]
+    return w
+
+
 def test_sar_actions_take_their_duration_in_seconds_whatever_the_tick():
     """One robot on a victim of its colour: the inspection's result comes inspect_time after it
     began, the robot rescues at once, and the victim is saved rescue_time later; the same instant
@@ -285,17 +300,7 @@ def test_a_busy_robot_that_turns_to_something_else_stops_its_inspection_only_if_
     interrupt on_change it goes in that very tick, no colour ever comes, the interruption is counted
     and its 5 ticks are booked lost; with never it stays until the inspection's end and learns the
     colour, as before the key existed."""
-    w = _sar_world(
-        0.25,
-        0,
-        "agents.count=1",
-        "scenario.victims=1",
-        "scenario.replace=false",
-        "scenario.inspect_time=10",
-        "scenario.lifetime=1000",
-        f"scenario.interrupt={interrupt}",
-    )
-    w.vx[0], w.vy[0] = w.ax[0], w.ay[0]
+    w = _one_robot_at_one_victim("scenario.lifetime=1000", f"scenario.interrupt={interrupt}")
     start = float(w.ax[0])
     w.apply({0: ["inspect", 0]})
     for _ in range(4):
@@ -399,17 +404,7 @@ def test_with_failures_results_converge_as_the_tick_shrinks_when_a_move_fails_as
 
 def test_a_failed_inspection_costs_the_tick_it_was_tried_in_unless_failures_are_known_at_the_end():
     for known, busy_ticks in (("start", 1), ("end", 40)):
-        w = _sar_world(
-            0.25,
-            0,
-            "agents.count=1",
-            "scenario.victims=1",
-            "scenario.replace=false",
-            "scenario.inspect_time=10",
-            "scenario.inspect_fail=1",
-            f"scenario.failure_known={known}",
-        )
-        w.vx[0], w.vy[0] = w.ax[0], w.ay[0]
+        w = _one_robot_at_one_victim("scenario.inspect_fail=1", f"scenario.failure_known={known}")
         w.apply({0: ["inspect", 0]})
         assert w.busy_until[0] - w.tick == busy_ticks - 1, known
         for _ in range(busy_ticks):
