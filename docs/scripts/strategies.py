@@ -6,10 +6,10 @@
 
 One sweep: for each strategy, trials, victims rescued (mean and 95 % t-interval), expired, failed
 rescues and their ratio to rescues, negotiations (rounds initiated), messages (broadcasts), copies
-delivered (per receiver) and payload. Several sweeps ``--against`` a reference sweep of the same
-horizon: rescued in the reference and in each sweep, with the change from the reference over the
-seeds both ran (sweeps of the same file give run i the same seed) and its paired t-test, then the
-messages each sweep sent.
+delivered (per receiver) and payload; then the robots' time budget, where the runs carry it.
+Several sweeps ``--against`` a reference sweep of the same horizon: rescued in the reference and
+in each sweep, with the change from the reference over the seeds both ran (sweeps of the same file
+give run i the same seed) and its paired t-test, then the messages each sweep sent.
 """
 
 from __future__ import annotations
@@ -61,6 +61,21 @@ def one(df: pd.DataFrame) -> None:
         )
 
 
+BUDGET = ("moving", "inspecting", "inspecting_lost", "rescuing", "penalty", "idle")
+
+
+def budget(df: pd.DataFrame) -> None:
+    """Where the robots' time went, per strategy (runs of 2026-11-28 on carry ``time_budget``)."""
+    columns = [f"time_budget.{k}" for k in BUDGET]
+    if not set(columns) <= set(df):
+        return
+    print("\n| strategy | moving % | inspecting % | of it lost % | rescuing % | move penalty % | idle % |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for s in [s for s in ORDER if s in set(df["strategy"])]:
+        d = df[df["strategy"] == s]
+        print(f"| {s} | " + " | ".join(f"{100 * d[c].mean():.1f}" for c in columns) + " |")
+
+
 def against(reference: pd.DataFrame, sweeps: list[tuple[str, pd.DataFrame]]) -> None:
     names = [name for name, _ in sweeps]
     print("| strategy | reference | " + " | ".join(names) + " | messages, " + " / ".join(names) + " |")
@@ -94,7 +109,9 @@ def main() -> None:
     if args.against is None:
         for sweep in args.sweeps:
             print(f"\n{sweep}:\n")
-            one(runs(sweep))
+            table = runs(sweep)
+            one(table)
+            budget(table)
     else:
         against(runs(args.against), [(sweep.name, runs(sweep)) for sweep in args.sweeps])
 
