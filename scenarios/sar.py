@@ -43,11 +43,11 @@ from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World
 from swarmbed.scenarios.budget import ACTIVITIES, IDLE, INSPECTING, MOVING, PENALTY, RESCUING, TimeBudget
+from swarmbed.scenarios.victims import ALIVE, EXPIRED, RESCUED, VictimRows
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
 
-ALIVE, RESCUED, EXPIRED, UNUSED = 0, 1, 2, 3
 FORGET_AFTER = 2.0  # lifetimes after its spawn a victim's row may leave the world's arrays
 COLOR_NAMES = ("red", "green", "blue")
 # The paper gives no durations for inspecting and rescuing; they are calibrated on the
@@ -226,7 +226,7 @@ def _budget_text(budget: dict) -> str:
     return ", ".join(parts)
 
 
-class SARWorld(World):
+class SARWorld(VictimRows, World):
     def __init__(self, scenario: SAR, rng: np.random.Generator, bids_with_colors: bool) -> None:
         sc = scenario.params
         self.scenario, self.sc, self.dt = scenario, sc, scenario.dt
@@ -257,13 +257,7 @@ class SARWorld(World):
             "abandons": 0,
             "interrupted": 0,
         }
-        # victims base .. nv-1, in arrays that double when full. A steady-state run spawns tens of
-        # thousands; those gone for longer than FORGET_AFTER lifetimes leave the arrays (see _at)
-        self.nv = 0
-        self.base = 0
-        self.vx, self.vy, self.vspawn = np.zeros(0), np.zeros(0), np.zeros(0)
-        self.vcolor = np.zeros(0, dtype=np.int64)
-        self.vstatus = np.zeros(0, dtype=np.int64)
+        self._init_victims()  # rows of victims born more than FORGET_AFTER lifetimes ago leave
         self.inspected: dict[int, set[int]] = {}  # victim -> robots that inspected it
         self.results: dict[int, list[list[int]]] = {}  # robot -> inspection results for its next observation
         self.rescued_by: dict[int, list[int]] = {}  # robot -> victims it rescued, for its next observation
@@ -278,40 +272,11 @@ class SARWorld(World):
     def time(self) -> float:
         return self.tick * self.dt
 
-    def _at(self, victim: int) -> int | None:
-        """Where ``victim``'s row is in the arrays; None for one that left them.
-
-        A victim leaves once its lifetime ended more than a lifetime ago: every robot forgot it by
-        then (a robot drops a victim at the end of the lifetime it saw), so only a plugin that
-        names it from memory that old can ask for it, and such an action is stale. Until then it
-        stays, with its place and colour, for the robots that still go where it was."""
-        return victim - self.base if victim >= self.base else None
-
-    def _forget_old(self) -> None:
-        """Drop the rows of the victims that may leave (a prefix: ids are spawned in time order)."""
-        keep_after = self.time - FORGET_AFTER * self.sc.lifetime
-        first = int(np.searchsorted(self.vspawn[: self.nv - self.base], keep_after, side="left"))
-        if first:
-            for name in ("vx", "vy", "vspawn", "vcolor", "vstatus"):
-                arr = getattr(self, name)
-                arr[: len(arr) - first] = arr[first:]
-                arr[len(arr) - first :] = UNUSED if name == "vstatus" else 0
-            self.base += first
-
-    def _grow(self, grow: int) -> None:
-        self.vx, self.vy, self.vspawn = (np.concatenate([a, np.zeros(grow)]) for a in (self.vx, self.vy, self.vspawn))
-        self.vcolor = np.concatenate([self.vcolor, np.zeros(grow, dtype=np.int64)])
-        self.vstatus = np.concatenate([self.vstatus, np.full(grow, UNUSED, dtype=np.int64)])
-
     def _spawn(self, count: int, first: bool = False) -> None:
         """``count`` new victims; the first ones, with ``first_ages: spread``, of ages drawn uniform
         over a lifetime after every place and colour, oldest first so that ids stay in birth order."""
         for _ in range(count):
-            if self.nv - self.base == len(self.vstatus):
-                self._forget_old()
-                if self.nv - self.base >= 0.75 * len(self.vstatus):  # grow unless a quarter came free
-                    self._grow(max(64, len(self.vstatus)))
-            v = self.nv - self.base
+            v = self._next_row(keep_after=self.time - FORGET_AFTER * self.sc.lifetime)
             self.vx[v], self.vy[v] = self.scenario.random_point(self.spawn_rng)
             self.vcolor[v] = int(self.spawn_rng.integers(self.sc.colors))
             self.vspawn[v] = self.time
@@ -327,10 +292,6 @@ class SARWorld(World):
         self.counts["rescued" if status == RESCUED else "expired"] += 1
         if self.sc.replace:
             self._spawn(1)
-
-    @property
-    def victims_alive(self) -> int:
-        return int(np.count_nonzero(self.vstatus == ALIVE))
 
     @property
     def finished(self) -> bool:
