@@ -344,6 +344,7 @@ def _strategy_world(seconds, *overrides):
     return world
 
 
+@pytest.mark.slow  # no process, but 10 robots' runtimes for 560 ticks: 8-14 s each
 @pytest.mark.parametrize(
     "allocator, monitor, interrupts",
     [("tree", None, True), ("cbba", None, False), ("cbba", True, True), ("tree", False, False)],
