@@ -852,7 +852,7 @@ def _client_session(args: argparse.Namespace, connect_timeout_s: float | None = 
                 args.zenoh_config,
                 args.credentials,
                 tls_from_args(args),
-                connect_timeout_s=connect_timeout_s,
+                connect_timeout_s=connect_timeout_s if args.connect_timeout is None else args.connect_timeout,
             )
         )
     except CredentialsError as exc:

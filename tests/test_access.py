@@ -155,18 +155,23 @@ def test_only_processes_with_the_runs_credentials_join(tmp_path):
         wrong = write_credentials(tmp_path / "wrong.json", Identity("agent-1", "not-the-password", "agent"))
         with pytest.raises(zenoh.ZError):
             zenoh.open(zenoh_config("client", [endpoint], credentials=str(wrong)))
-        for name, extra in (("none", ()), ("wrong", ("--credentials", str(wrong)))):
-            proc = subprocess.run(agent_cmd(keys, endpoint, 1, *extra), capture_output=True, text=True, timeout=60)
-            tried[name] = (proc.returncode, proc.stderr)
-        # one of the run's own identities, used by a second process: our code refuses it
-        for name, agent in (("twin", 1), ("other", 2), ("outside", 99)):
-            proc = subprocess.run(
-                agent_cmd(keys, endpoint, agent, "--credentials", str(stolen(keys, "agent-1"))),
-                capture_output=True,
-                text=True,
-                timeout=60,
-            )
-            tried[name] = (proc.returncode, proc.stderr)
+        # no credentials, wrong ones, and one of the run's own identities used by a second process
+        # (our code refuses it): five intruders at once, each judged on its own
+        own = ("--credentials", str(stolen(keys, "agent-1")))
+        commands = {  # refused by the hub: a short --connect-timeout, not the 20 s a run's agent waits
+            "none": agent_cmd(keys, endpoint, 1, "--connect-timeout", "2"),
+            "wrong": agent_cmd(keys, endpoint, 1, "--credentials", str(wrong), "--connect-timeout", "2"),
+            "twin": agent_cmd(keys, endpoint, 1, *own),
+            "other": agent_cmd(keys, endpoint, 2, *own),
+            "outside": agent_cmd(keys, endpoint, 99, *own),
+        }
+        procs = {
+            name: subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            for name, cmd in commands.items()
+        }
+        for name, proc in procs.items():
+            _, err = proc.communicate(timeout=60)
+            tried[name] = (proc.returncode, err)
 
     result = run_experiment(
         experiment("run.duration=300", "run.stop_when_done=false"), tmp_path / "run", progress=False, on_ready=intruders

@@ -103,6 +103,9 @@ def tls_settings(folder: str | Path, name: str) -> dict[str, object]:
     }
 
 
+CHILD_CONNECT_TIMEOUT_S = 20.0  # a child process keeps trying to reach the hub this long, unless told
+
+
 def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client") -> None:
     """The flags every swarmbed process accepts, as zenoh-python's examples share them."""
     g = parser.add_argument_group("zenoh")
@@ -131,14 +134,19 @@ def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client"
     )
     g.add_argument("--tls", metavar="DIR", help="certificates made by swarmbed certs, for tls/HOST:PORT endpoints")
     g.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help=f"how long to keep trying to reach --connect before giving up (default: {CHILD_CONNECT_TIMEOUT_S:.0f} "
+        "for a run's processes, --wait where a command has it, else one try)",
+    )
+    g.add_argument(
         "--tls-name",
         metavar="NAME",
         help="whose certificate in --tls DIR this process presents (default: the host's --name, else "
         "this machine's host name)",
     )
-
-
-CHILD_CONNECT_TIMEOUT_S = 20.0
 
 
 def open_from_args(args: argparse.Namespace) -> zenoh.Session:
@@ -155,7 +163,7 @@ def open_from_args(args: argparse.Namespace) -> zenoh.Session:
                 args.zenoh_config,
                 args.credentials,
                 tls_from_args(args),
-                connect_timeout_s=CHILD_CONNECT_TIMEOUT_S,
+                connect_timeout_s=CHILD_CONNECT_TIMEOUT_S if args.connect_timeout is None else args.connect_timeout,
             )
         )
     except CredentialsError as exc:
