@@ -51,7 +51,7 @@ def one(df: pd.DataFrame) -> None:
     print("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for s in [s for s in ORDER if s in set(df["strategy"])]:
         d = df[df["strategy"] == s]
-        nego = d["negotiations"].mean()
+        nego = d["negotiations"].mean() if "negotiations" in d else np.nan  # none before a consensus strategy ran
         print(
             f"| {s} | {len(d)} | {_ci(d['rescued'])} | {d['expired'].mean():,.0f} | {d['failed_rescues'].mean():,.0f} "
             f"| {d['failed_rescues'].sum() / max(1, d['rescued'].sum()):.2f} "
