@@ -830,7 +830,7 @@ def register_host(sub: Subparsers) -> None:
         help="run without --credentials: no authentication, anyone who reaches the router may start "
         "agents (their code included); allowed with loopback endpoints only",
     )
-    add_zenoh_args(host, default_mode="router")
+    add_zenoh_args(host, default_mode="router", retries=False)
     host.set_defaults(func=cmd_host)
 
 
@@ -841,7 +841,7 @@ def _client_session(args: argparse.Namespace, connect_timeout_s: float | None = 
     import zenoh
 
     from swarmbed.wire.credentials import CredentialsError
-    from swarmbed.wire.session import tls_from_args, zenoh_config
+    from swarmbed.wire.session import connect_timeout, tls_from_args, zenoh_config
 
     try:
         return zenoh.open(
@@ -852,7 +852,7 @@ def _client_session(args: argparse.Namespace, connect_timeout_s: float | None = 
                 args.zenoh_config,
                 args.credentials,
                 tls_from_args(args),
-                connect_timeout_s=connect_timeout_s if args.connect_timeout is None else args.connect_timeout,
+                connect_timeout_s=connect_timeout(args, connect_timeout_s),
             )
         )
     except CredentialsError as exc:

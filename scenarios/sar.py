@@ -215,7 +215,7 @@ class SAR(Scenario):
             ("victims spawned / still alive", f"{summary['spawned']} / {summary['victims_alive']}"),
             ("negotiations", summary.get("negotiations", "-")),
             ("agents lost", len(summary["agents_lost"])),
-            ("robot time", _budget_text(summary["time_budget"])) if "time_budget" in summary else ("robot time", "-"),
+            ("robot time", _budget_text(summary["time_budget"])),
         ]
 
 

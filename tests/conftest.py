@@ -4,6 +4,7 @@ import multiprocessing.process
 import os
 import signal
 import subprocess
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -141,8 +142,6 @@ class SwapAsked:
         self.first_line = ""
 
     def on_ready(self, keys, endpoint: str) -> None:
-        import sys
-
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "swarmbed", "swap", "--connect", endpoint, "--run", keys.run_id, *self.argv],
             stdout=subprocess.PIPE,

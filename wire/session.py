@@ -106,8 +106,22 @@ def tls_settings(folder: str | Path, name: str) -> dict[str, object]:
 CHILD_CONNECT_TIMEOUT_S = 20.0  # a child process keeps trying to reach the hub this long, unless told
 
 
-def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client") -> None:
-    """The flags every swarmbed process accepts, as zenoh-python's examples share them."""
+def _seconds(text: str) -> float:
+    value = float(text)
+    if not value >= 0:  # also NaN
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds >= 0")
+    return value
+
+
+def connect_timeout(args: argparse.Namespace, default: float | None) -> float | None:
+    """How long to keep trying to connect: ``--connect-timeout`` if given, else ``default``."""
+    given = getattr(args, "connect_timeout", None)
+    return default if given is None else given
+
+
+def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client", retries: bool = True) -> None:
+    """The flags every swarmbed process accepts, as zenoh-python's examples share them
+    (``--connect-timeout`` unless ``retries`` is False: a router keeps trying on its own)."""
     g = parser.add_argument_group("zenoh")
     g.add_argument(
         "--mode",
@@ -133,14 +147,15 @@ def add_zenoh_args(parser: argparse.ArgumentParser, default_mode: str = "client"
         help="a credentials file (user and password, mode 600) for a hub that requires them",
     )
     g.add_argument("--tls", metavar="DIR", help="certificates made by swarmbed certs, for tls/HOST:PORT endpoints")
-    g.add_argument(
-        "--connect-timeout",
-        type=float,
-        default=None,
-        metavar="SECONDS",
-        help=f"how long to keep trying to reach --connect before giving up (default: {CHILD_CONNECT_TIMEOUT_S:.0f} "
-        "for a run's processes, --wait where a command has it, else one try)",
-    )
+    if retries:
+        g.add_argument(
+            "--connect-timeout",
+            type=_seconds,
+            default=None,
+            metavar="SECONDS",
+            help=f"how long to keep trying to reach --connect before giving up (default: "
+            f"{CHILD_CONNECT_TIMEOUT_S:.0f} for a run's processes, --wait where a command has it, else one try)",
+        )
     g.add_argument(
         "--tls-name",
         metavar="NAME",
@@ -163,7 +178,7 @@ def open_from_args(args: argparse.Namespace) -> zenoh.Session:
                 args.zenoh_config,
                 args.credentials,
                 tls_from_args(args),
-                connect_timeout_s=CHILD_CONNECT_TIMEOUT_S if args.connect_timeout is None else args.connect_timeout,
+                connect_timeout_s=connect_timeout(args, CHILD_CONNECT_TIMEOUT_S),
             )
         )
     except CredentialsError as exc:
