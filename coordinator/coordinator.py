@@ -10,12 +10,13 @@ client.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import queue
 import threading
 import time
 from array import array
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,6 @@ from swarmbed.coordinator.live import Interval, LiveStatus, progress_sample
 from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.recorder import Recorder
 from swarmbed.coordinator.trees import TreeRecorder
-from swarmbed.extension.actions import admit
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.codec import (
@@ -47,6 +47,7 @@ from swarmbed.wire.codec import (
 )
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of
 from swarmbed.wire.membership import accept_handovers, serve_text
+from swarmbed.wire.observation import Observation
 from swarmbed.wire.reports import (
     AgentReport,
     Checkpoint,
@@ -132,6 +133,9 @@ class Coordinator:
         self.decision_source = allocator.decision_source
         self.commands: Any = decider if self.decision_source == "env" else None
         self.pursuing: dict[int, list] = {}  # the actions the world was last given (for ROS 2's task markers)
+        self.stages = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
+        self._t0 = self._status_at = 0.0  # perf_counter when the ticks began, and at the last status
+        self._late_now = 0  # agents late at the tick in hand (real-time clock)
 
     # -- setup -----------------------------------------------------------------------------------
     def declare(self) -> None:
@@ -256,95 +260,100 @@ class Coordinator:
             self.trees.abandon()
         return self.recorder.abandon()
 
-    def run(self, on_tick: Callable[[int, float], None] | None = None) -> None:
-        w, r, rec = self.world, self.exp.run, self.recorder
-        rec.open()
-        inboxes: dict[int, bytes] = {}
-        st = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
-        t0 = status_at = time.perf_counter()
-        period = r.dt / r.speed  # wall seconds per tick on the real-time clock
-        for k in range(self.exp.ticks):
-            if (w.finished and self.exp.run.stop_when_done) or self.stop_requested.is_set():
-                break
-            now = time.perf_counter()
-            if k:
-                took = now - self.tick_started
-                with self._interval_lock:
-                    self.slowest_in_interval = max(self.slowest_in_interval, took)
-                if took > self.slowest_tick[0]:
-                    self.slowest_tick = (took, k - 1)
-            self.tick_started = now
-            if self.realtime:
-                lag = time.perf_counter() - (t0 + k * period)
-                if lag < 0:
-                    time.sleep(-lag)
-                    lag = time.perf_counter() - (t0 + k * period)
-                self.start_lags.append(max(lag, 0.0))
-            if st is not None:
-                st.start()
-            ids, xs, ys = w.positions()
-            rec.positions(k, ids, xs, ys)
-            if k > 0:
-                self.agents.due(k)
-            doomed = w.draw_losses()  # lost at tick k+1: the proxy must not deliver to them then
-            incarnations = {a: i for a, i in self.agents.incarnation.items() if i}
-            alive_next = [i for i in ids if i not in doomed]
-            self.world_pub.put(encode_world(WorldSample(k, ids, xs, ys, alive_next, incarnations)))
-            if st is not None:
-                st.mark("world")
-            observed = w.observations()
-            if st is not None:
-                st.mark("observations")
-            decisions = self.commands.decide(k, w, observed, inboxes) if self.commands is not None else {}
-            for i, obs in observed.items():
-                self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX), decisions.get(i)))
-            if st is not None:
-                st.mark("encode and put")
-            if self.ros2 is not None:  # while the agents think
-                pursuing = {a: self.pursuing[a] for a in ids if a in self.pursuing}
-                self.ros2.publish(k, w.time, (ids, xs, ys), w.markers(), pursuing, inboxes, self._task_size)
-            step = self._await_step(k)
-            if st is not None:
-                st.mark("await step")
-            for j in step.lost:
-                self.agents.lose(j, k, self._how_it_ended(j))
-            actions = step.actions
-            if step.late:
-                for a in step.late:
-                    self.late_ticks[a] = self.late_ticks.get(a, 0) + 1
-                if r.on_late == "hold":  # the robot keeps its last command; "stop": the world's default
-                    actions = {**{a: self.last_action[a] for a in step.late if a in self.last_action}, **actions}
-            if self.realtime:
-                self.last_action.update(actions)
-            declared = self.scenario.actions  # a world sees only actions of the shapes its scenario declares
-            admitted = {a: admit(act, declared) for a, act in actions.items() if w.alive[a]}
-            w.apply(admitted)
-            if self.ros2 is not None:
-                self.pursuing.update(admitted)
-            rec.step(step)
-            for j in doomed:
-                self.agents.retire(j, k + 1)
-            inboxes = step.inboxes
-            self.last_tick = k
-            if w.tick % self.exp.run.record_every == 0 or w.finished:
-                rec.row([len(step.late), round(1000 * self.start_lags[-1], 3)] if self.realtime else ())
-            if st is not None:
-                st.mark("apply and record")
-                st.ticks += len(ids)  # per agent-tick, as the other processes count
-            if self._live is not None:
-                self._publish_live()
-            if on_tick:
-                on_tick(w.tick, w.time)
-            if time.perf_counter() - status_at >= STATUS_EVERY:
-                status_at = time.perf_counter()
-                self._publish_status(status_at - t0)
-                rec.flush()
-        self._publish_status(time.perf_counter() - t0)
+    # -- the tick transport (swarmbed.engine.TickLoop drives it) ------------------------------------
+    def run_starts(self) -> None:
+        self._t0 = self._status_at = time.perf_counter()
+
+    def tick_starts(self, k: int) -> None:
+        now = time.perf_counter()
+        if k:
+            took = now - self.tick_started
+            with self._interval_lock:
+                self.slowest_in_interval = max(self.slowest_in_interval, took)
+            if took > self.slowest_tick[0]:
+                self.slowest_tick = (took, k - 1)
+        self.tick_started = now
+        if self.realtime:
+            r = self.exp.run
+            due = self._t0 + k * r.dt / r.speed  # the wall time of tick k
+            lag = time.perf_counter() - due
+            if lag < 0:
+                time.sleep(-lag)
+                lag = time.perf_counter() - due
+            self.start_lags.append(max(lag, 0.0))
+        if self.stages is not None:
+            self.stages.start()
+
+    def before_world(self, k: int) -> None:
+        self.agents.due(k)
+
+    def incarnations(self) -> dict[int, int]:
+        return {a: i for a, i in self.agents.incarnation.items() if i}
+
+    def world_ready(self, sample: WorldSample) -> None:
+        self.world_pub.put(encode_world(sample))
+        if self.stages is not None:
+            self.stages.mark("world")
+
+    def exchange(
+        self, k: int, sample: WorldSample, observed: Mapping[int, Observation], inboxes: Mapping[int, bytes]
+    ) -> NetemStep:
+        """Put every live agent's input of tick ``k`` and wait for the proxy's step; on the real-time
+        clock an agent that missed the deadline keeps its last command where ``run.on_late`` says."""
+        st, w = self.stages, self.world
+        decisions = self.commands.decide(k, w, observed, inboxes) if self.commands is not None else {}
+        for i, obs in observed.items():
+            self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX), decisions.get(i)))
+        if st is not None:
+            st.mark("encode and put")
+        if self.ros2 is not None:  # while the agents think
+            ids, xs, ys = sample.ids, sample.xs, sample.ys
+            pursuing = {a: self.pursuing[a] for a in ids if a in self.pursuing}
+            self.ros2.publish(k, w.time, (ids, xs, ys), w.markers(), pursuing, inboxes, self._task_size)
+        step = self._await_step(k)
+        if st is not None:
+            st.mark("await step")
+        self._late_now = len(step.late)
+        if step.late:
+            for a in step.late:
+                self.late_ticks[a] = self.late_ticks.get(a, 0) + 1
+            if self.exp.run.on_late == "hold":  # the robot keeps its last command; "stop": the world's default
+                held = {a: self.last_action[a] for a in step.late if a in self.last_action}
+                step = dataclasses.replace(step, actions={**held, **step.actions})
+        if self.realtime:
+            self.last_action.update(step.actions)
+        return step
+
+    def lose(self, agent: int, k: int) -> None:
+        self.agents.lose(agent, k, self._how_it_ended(agent))
+
+    def retire(self, agent: int, tick: int) -> None:
+        self.agents.retire(agent, tick)
+
+    def clock_columns(self) -> Sequence[float]:
+        return [self._late_now, round(1000 * self.start_lags[-1], 3)] if self.realtime else ()
+
+    def tick_done(self, k: int, admitted: Mapping[int, list]) -> None:
+        self.last_tick = k
+        if self.ros2 is not None:
+            self.pursuing.update(admitted)
         if self._live is not None:
             self._publish_live()
-        self.wall["run_s"] = time.perf_counter() - t0
-        if st is not None:
-            log.info("coordinator: %s", st.line())
+        if time.perf_counter() - self._status_at >= STATUS_EVERY:
+            self._status_at = time.perf_counter()
+            self._publish_status(self._status_at - self._t0)
+            self.recorder.flush()
+
+    def should_stop(self) -> bool:
+        return self.stop_requested.is_set()
+
+    def run_ends(self) -> None:
+        self._publish_status(time.perf_counter() - self._t0)
+        if self._live is not None:
+            self._publish_live()
+        self.wall["run_s"] = time.perf_counter() - self._t0
+        if self.stages is not None:
+            log.info("coordinator: %s", self.stages.line())
 
     # -- for monitors in this process (soak, chaos): see coordinator/live.py --------------------------
     def live(self) -> LiveStatus:

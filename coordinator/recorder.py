@@ -11,10 +11,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from swarmbed.coordinator import results
-from swarmbed.coordinator.lifecycle import AgentLifecycle
 from swarmbed.extension.scenario import World
 from swarmbed.wire.codec import NetemStep
 from swarmbed.wire.reports import Final, NetemFinal, RestartRecord, SwapRecord, Transport
@@ -24,6 +23,15 @@ from swarmbed.wire.schema import Experiment
 from swarmbed.wire.summary import RunSummary
 
 NETWORK_COLUMNS = ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
+
+
+class Membership(Protocol):
+    """What the results say of the run's agents: the coordinator's
+    :class:`~swarmbed.coordinator.lifecycle.AgentLifecycle`, or the in-process engine's."""
+
+    lost: dict[int, int]  # agent -> tick it was lost
+    swap_log: list[SwapRecord]
+    restart_log: list[RestartRecord]
 
 
 class Recorder:
@@ -97,7 +105,7 @@ class Recorder:
     def summary(
         self,
         ticks: int,
-        agents: AgentLifecycle,
+        agents: Membership,
         reports: dict[int, Final],
         netem_report: NetemFinal,
         malformed: int,
@@ -179,7 +187,7 @@ class Recorder:
         self,
         summary: RunSummary,
         timings: dict,
-        agents: AgentLifecycle,
+        agents: Membership,
         reports: dict[int, Final],
         netem_report: NetemFinal,
     ) -> None:

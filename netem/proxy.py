@@ -10,7 +10,6 @@ and this tick's counters. The ledger streams to ``network_ledger.csv`` in the ru
 from __future__ import annotations
 
 import logging
-import os
 import queue
 import threading
 import time
@@ -19,20 +18,17 @@ from typing import Any
 
 import zenoh
 
-from swarmbed.netem.ledger import Ledger, ReceiverLog
-from swarmbed.netem.radio import Radio, drop_reasons, measured
+from swarmbed.netem.exchange import Exchange
 from swarmbed.netem.ros2 import Ros2Outboxes
 from swarmbed.wire.codec import (
     AgentOut,
     NetemControl,
-    NetemStep,
     WireError,
     WorldSample,
     decode_agent_out,
     decode_netem_control,
     decode_netem_stop,
     decode_world,
-    encode_inbox,
     encode_netem_step,
     encode_traffic,
     pack,
@@ -40,11 +36,9 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
 from swarmbed.wire.membership import fetch_spec, hand_over
 from swarmbed.wire.process import child_args, pin_thread_state
-from swarmbed.wire.reports import NetemFatal, NetemFinal, Transport, encode_report
-from swarmbed.wire.rowfile import RowFile, TableWriteError
-from swarmbed.wire.rundir import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER
+from swarmbed.wire.reports import NetemFatal, Transport, encode_report
+from swarmbed.wire.rowfile import TableWriteError
 from swarmbed.wire.schema import NetemSpec
-from swarmbed.wire.seeds import NETEM, component_rng
 from swarmbed.wire.session import open_from_args
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
@@ -52,7 +46,6 @@ from swarmbed.wire.transport import tcp_counters
 
 log = logging.getLogger("swarmbed.netem")
 
-LEDGER_FILE, RECEIVER_LEDGER_FILE = LEDGER, RECEIVER_LEDGER
 TRAFFIC_EVERY = 0.25  # wall seconds between traffic samples for watchers
 
 
@@ -69,12 +62,8 @@ class Proxy:
         self.keys = keys
         self.session = session
         self.out_dir = out_dir
-        self.sink = RowFile(out_dir / LEDGER_FILE, LEDGER_COLUMNS)
-        self.receivers: ReceiverLog | None = None
-        if spec.network.ledger == "per_receiver":
-            self.receivers = ReceiverLog(out_dir / (RECEIVER_LEDGER_FILE + ".part"), measured=measured(spec.network))
-        self.ledger = Ledger(self.sink, self.receivers, drop_reasons(spec.network))
-        self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger)
+        self.exchange = Exchange(spec, out_dir)
+        self.sink, self.ledger, self.radio = self.exchange.sink, self.exchange.ledger, self.exchange.radio
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         # agents' outputs gather here, taken in Zenoh's own thread (no Python thread hop per
         # sample); the main thread is woken once for all that gathered while it was busy
@@ -87,8 +76,6 @@ class Proxy:
         self.world: WorldSample | None = None
         self.awaited: set[int] = set()  # agents of the tick in hand not yet answered nor lost
         self.malformed = 0
-        self._last = [0, 0, 0, 0, 0]
-        self._last_drops: dict[str, int] = dict(self.ledger.dropped)
         # the real-time clock: a tick is routed when every agent answered or `answer_within` wall
         # seconds after its world sample arrived, whichever comes first; later answers are late
         self.answer_by: float | None = None
@@ -329,40 +316,11 @@ class Proxy:
         if w.tick == 0:
             log.info("netem: tick 0 routed; the run is under way")
         outs = self.outs.pop(w.tick, {})
-        late = [a for a in w.ids if a not in outs and a not in self.lost]  # only ever on the real-time clock
-        members = set(w.ids)
         self._apply_controls(w.tick)
-        self.radio.route(w.tick, w.ids, w.xs, w.ys, {a: o.messages for a, o in outs.items() if a in members})
-        if st is not None:
-            st.mark("route")
-        alive_next = [a for a in w.alive_next if a not in self.lost]
-        inboxes = self.radio.deliver(w.tick + 1, alive_next)
-        if st is not None:
-            st.mark("deliver")
-        self.ledger.close_tick(w.tick)
-        self.sink.tick()
-        if st is not None:
-            st.mark("ledger")
-        led = self.ledger
-        now = [led.messages_sent, led.bytes_sent, led.copies, led.delivered, led.dropped_total]
-        counters = [a - b for a, b in zip(now, self._last)]
-        self._last = now
         events, self.late_events = self.late_events, {}
-        for a in sorted(outs):
-            for name, n in outs[a].events.items():
-                events[name] = events.get(name, 0) + n
-        drops = {r: n - self._last_drops[r] for r, n in led.dropped.items() if n != self._last_drops[r]}
-        self._last_drops = dict(led.dropped)
-        step = NetemStep(
-            w.tick,
-            {a: o.action for a, o in outs.items() if a in members},
-            {a: encode_inbox(v) for a, v in inboxes.items()},
-            counters,
-            self.lost_unreported,
-            events,
-            drops,
-            late,
-        )
+        step = self.exchange.route(w, outs, self.lost, self.lost_unreported, events)
+        if st is not None:
+            st.mark("route and deliver")
         self.lost_unreported = []
         self.step_pub.put(encode_netem_step(step))
         self._publish_traffic(outs)
@@ -397,24 +355,7 @@ class Proxy:
             log.info("netem: %s", self.stages.line())
         if self.watched:  # the totals as the run ends
             self.traffic_pub.put(encode_traffic(self.traffic))
-        self.radio.finish(last_tick)
-        self.ledger.close_tick(1 << 62)
-        self.ledger.check()
-        self.sink.finish()
-        files = [LEDGER_FILE]
-        if self.receivers is not None:
-            self.receivers.close()
-            os.replace(self.out_dir / (RECEIVER_LEDGER_FILE + ".part"), self.out_dir / RECEIVER_LEDGER_FILE)
-            files.append(RECEIVER_LEDGER_FILE)
-        report = NetemFinal(
-            kind="netem",
-            totals=self.ledger.totals(),
-            per_sender={str(k): v for k, v in self.ledger.per_sender().items()},
-            per_kind=self.ledger.per_kind(),
-            malformed=self.malformed,
-            ledger=files,
-            transport=Transport.model_validate({"tcp": tcp_counters()}),
-        )
+        report = self.exchange.finish(last_tick, self.malformed, Transport.model_validate({"tcp": tcp_counters()}))
         if not hand_over(self.session, self.keys.netem_report, encode_report(report)):
             log.error("netem: the coordinator did not take the final report")
 

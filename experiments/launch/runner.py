@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from swarmbed.coordinator import results
 from swarmbed.coordinator.coordinator import Coordinator, RunError
+from swarmbed.engine import TickLoop
 from swarmbed.experiments.hosts.client import HostError, host_info, wait_for_hosts
 from swarmbed.experiments.launch.access import RunAccess
 from swarmbed.experiments.launch.config import Experiment, Resolved, resolve_experiment, to_yaml
@@ -107,7 +108,7 @@ def plan_run(exp: Experiment, out_dir: Path, hub: HubOptions = LOOPBACK_ONLY) ->
     return plan
 
 
-def _start_result_dir(plan: RunPlan) -> None:
+def start_result_dir(plan: RunPlan) -> None:
     """The run's folder with its configuration and provenance, and no result of an earlier run in it:
     a stale summary must never vouch for a new, unfinished run."""
     out_dir, resolved = plan.out_dir, plan.resolved
@@ -145,7 +146,7 @@ def run_experiment(
     for an allocator that takes its decisions from the launching process (``external``), what makes
     them each tick (:mod:`swarmbed.envs`)."""
     plan = plan_run(exp, out_dir, hub)
-    _start_result_dir(plan)
+    start_result_dir(plan)
     return _execute(plan, progress, on_ready, fork_agents, observers, decider)
 
 
@@ -348,7 +349,7 @@ def _execute(
                 observer.start(live)
                 running.append(observer)
             loop_start = _tick_costs(children)
-            coord.run(on_tick)
+            TickLoop(exp, coord.scenario, coord.world, coord.recorder, coord, coord.stages).run(on_tick)
             loop_end = _tick_costs(children)
             if coord.agents.swap_log:
                 _record_swaps(plan, setup, deployment, hosts)

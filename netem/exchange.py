@@ -1,0 +1,97 @@
+"""One tick's exchange through the radio, with no network: the agents' outputs of tick k routed,
+the inboxes of tick k+1 delivered, the ledger closed for the tick, and the step the coordinator
+applies. The netem proxy runs it on what arrived over Zenoh; the in-process engine
+(:mod:`swarmbed.engine`) on what it stepped itself, so both book every copy the same way.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+from swarmbed.netem.ledger import Ledger, ReceiverLog
+from swarmbed.netem.radio import Radio, drop_reasons, measured
+from swarmbed.wire.codec import AgentOut, NetemStep, WorldSample, encode_inbox
+from swarmbed.wire.reports import NetemFinal, Transport
+from swarmbed.wire.rowfile import RowFile
+from swarmbed.wire.rundir import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER
+from swarmbed.wire.schema import NetemSpec
+from swarmbed.wire.seeds import NETEM, component_rng
+
+
+class Exchange:
+    """The radio, its ledger (streamed to ``network_ledger.csv`` in ``out_dir``) and the running
+    counters a step reports as differences."""
+
+    def __init__(self, spec: NetemSpec, out_dir: Path) -> None:
+        self.out_dir = out_dir
+        self.sink = RowFile(out_dir / LEDGER, LEDGER_COLUMNS)
+        self.receivers: ReceiverLog | None = None
+        if spec.network.ledger == "per_receiver":
+            self.receivers = ReceiverLog(out_dir / (RECEIVER_LEDGER + ".part"), measured=measured(spec.network))
+        self.ledger = Ledger(self.sink, self.receivers, drop_reasons(spec.network))
+        self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger)
+        self._last = [0, 0, 0, 0, 0]
+        self._last_drops: dict[str, int] = dict(self.ledger.dropped)
+
+    def route(
+        self,
+        w: WorldSample,
+        outs: Mapping[int, AgentOut],
+        lost: Iterable[int] = (),
+        newly_lost: list[int] | None = None,
+        events: dict[str, int] | None = None,
+    ) -> NetemStep:
+        """Route tick ``w.tick``: the messages of ``outs`` from agents the world names, the inboxes
+        of tick k+1 for those alive then and not ``lost``. ``newly_lost``: agents whose process left
+        since the last step (reported once); ``events``: counts carried in (late answers)."""
+        gone = set(lost)
+        late = [a for a in w.ids if a not in outs and a not in gone]  # only ever on the real-time clock
+        members = set(w.ids)
+        self.radio.route(w.tick, w.ids, w.xs, w.ys, {a: o.messages for a, o in outs.items() if a in members})
+        inboxes = self.radio.deliver(w.tick + 1, [a for a in w.alive_next if a not in gone])
+        led = self.ledger
+        led.close_tick(w.tick)
+        self.sink.tick()
+        now = [led.messages_sent, led.bytes_sent, led.copies, led.delivered, led.dropped_total]
+        counters = [a - b for a, b in zip(now, self._last)]
+        self._last = now
+        events = dict(events or {})
+        for a in sorted(outs):
+            for name, n in outs[a].events.items():
+                events[name] = events.get(name, 0) + n
+        drops = {r: n - self._last_drops[r] for r, n in led.dropped.items() if n != self._last_drops[r]}
+        self._last_drops = dict(led.dropped)
+        return NetemStep(
+            w.tick,
+            {a: o.action for a, o in outs.items() if a in members},
+            {a: encode_inbox(v) for a, v in inboxes.items()},
+            counters,
+            list(newly_lost or ()),
+            events,
+            drops,
+            late,
+        )
+
+    def finish(self, last_tick: int, malformed: int, transport: Transport | None = None) -> NetemFinal:
+        """Close the ledger after ``last_tick`` (every copy still in flight ends dropped with its
+        reason), check that it balances, put its files in place and make the final report."""
+        self.radio.finish(last_tick)
+        self.ledger.close_tick(1 << 62)
+        self.ledger.check()
+        self.sink.finish()
+        files = [LEDGER]
+        if self.receivers is not None:
+            self.receivers.close()
+            os.replace(self.out_dir / (RECEIVER_LEDGER + ".part"), self.out_dir / RECEIVER_LEDGER)
+            files.append(RECEIVER_LEDGER)
+        return NetemFinal(
+            kind="netem",
+            totals=self.ledger.totals(),
+            per_sender={str(k): v for k, v in self.ledger.per_sender().items()},
+            per_kind=self.ledger.per_kind(),
+            malformed=malformed,
+            ledger=files,
+            transport=transport,
+        )

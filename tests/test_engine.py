@@ -1,0 +1,68 @@
+"""The lock-step engine: the in-process transport writes the result files a real run writes.
+
+Each case runs one shipped experiment (shortened) twice: once as a run of real processes over
+Zenoh through the netem proxy, once on the in-process engine. The files that repeat byte for byte
+between runs must be the same bytes: the same world, the same agents' decisions, the same radio
+draws, the same ledger.
+"""
+
+import pytest
+
+from swarmbed.experiments.launch.inprocess import run_in_process
+from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.wire.rundir import RECEIVER_LEDGER
+from tests.conftest import ROOT, experiment, same_results
+
+SAR = ROOT / "experiments" / "sar" / "_base.yaml"
+CASES = {
+    "quickstart": (ROOT / "experiments" / "quickstart.yaml", []),
+    # robots lost mid-run (the scenario retires them), failed actions, loss and a rate cap
+    "sar c-cbba, losses and failures": (
+        SAR,
+        [
+            "allocator.name=c-cbba",
+            "run.duration=120",
+            "scenario.agent_loss=0.01",
+            "scenario.agent_loss_grace=20",
+            "scenario.move_fail=0.25",
+            "network.loss=0.1",
+            "network.rate=2000",
+            "network.limit=10",
+        ],
+    ),
+    "sar cbba-etc, bursty loss": (
+        SAR,
+        ["allocator.name=cbba-etc", "run.duration=60", "network.burst={mean_loss: 0.3, mean_burst: 5.0}"],
+    ),
+    "mtsr grape, log-distance radio, per-receiver ledger": (
+        ROOT / "experiments" / "space_mtsr.yaml",
+        [
+            "allocator.name=grape",
+            "agents.count=12",
+            "run.duration=300",
+            "network.range=null",
+            "network.propagation={shadowing_db: 6.0, tx_power_dbm: 19.6}",
+            "network.ledger=per_receiver",
+        ],
+    ),
+}
+
+
+@pytest.mark.slow  # starts a real run per case
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_in_process_engine_writes_a_real_runs_result_files_byte_for_byte(case, tmp_path):
+    base, overrides = CASES[case]
+    exp = experiment(*overrides, base=base)
+    real = run_experiment(exp, tmp_path / "real", progress=False)
+    alone = run_in_process(exp, tmp_path / "in_process")
+    assert real.summary["ticks"] > 10 and real.summary["network"]["delivered"] > 0
+    if exp.scenario.kind == "sar" and exp.scenario.params()["agent_loss"]:
+        assert real.summary["agents_lost"], "no robot was lost: the case does not exercise retiring"
+    same_results(real.out_dir, alone.out_dir)
+    if exp.network.ledger == "per_receiver":
+        assert (real.out_dir / RECEIVER_LEDGER).read_bytes() == (alone.out_dir / RECEIVER_LEDGER).read_bytes()
+
+
+def test_the_in_process_engine_refuses_the_real_time_clock(tmp_path):
+    with pytest.raises(ValueError, match="lock-step runs only"):
+        run_in_process(experiment("run.clock=realtime"), tmp_path)
