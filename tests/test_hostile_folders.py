@@ -41,7 +41,13 @@ def recorded(tmp_path_factory) -> Path:
 def swept(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("swept")
     (folder / "s.yaml").write_text(f"name: s\nbase: {QUICKSTART}\nruns: 3\n")
-    run_sweep(load_sweep(folder / "s.yaml", extra=["run.duration=60"]), folder / "out", jobs=2, progress=False)
+    run_sweep(
+        load_sweep(folder / "s.yaml", extra=["run.duration=60"]),
+        folder / "out",
+        jobs=2,
+        progress=False,
+        in_process=True,
+    )
     return folder
 
 

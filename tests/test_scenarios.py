@@ -140,7 +140,7 @@ def test_a_third_scenario_runs_end_to_end_with_no_change_to_swarmbed(tmp_path):
     assert again.summary["delivered"] == s["delivered"]
 
 
-@pytest.mark.slow  # starts processes
+@pytest.mark.slow  # a sweep's pool workers (its runs on the in-process engine)
 def test_analyze_draws_the_figures_a_third_scenario_names(tmp_path):
     """``Scenario.figures`` and ``metric_labels``: the analysis tabulates and draws a scenario it
     has never heard of, with no edit of its own."""
@@ -149,7 +149,13 @@ def test_analyze_draws_the_figures_a_third_scenario_names(tmp_path):
 
     _pickup_experiment(tmp_path)
     (tmp_path / "sweep.yaml").write_text("name: pickups\nbase: pickup.yaml\nruns: 2\n")
-    run_sweep(load_sweep(tmp_path / "sweep.yaml", extra=["run.duration=40"]), tmp_path / "out", jobs=2, progress=False)
+    run_sweep(
+        load_sweep(tmp_path / "sweep.yaml", extra=["run.duration=40"]),
+        tmp_path / "out",
+        jobs=2,
+        progress=False,
+        in_process=True,
+    )
     # a results folder is data: the class it names is imported only where the user vouches for it
     assert {p.name for p in analyze(tmp_path / "out")} == {"scenario_summary.csv", "scenario_summary.md"}
     names = {p.name for p in analyze(tmp_path / "out", trusted=True)}

@@ -40,7 +40,7 @@ def test_cohens_d_uses_the_pooled_standard_deviation():
     assert cohens_d(a, b) == pytest.approx(0.5)  # means differ by 1, pooled sd is 2
 
 
-@pytest.mark.slow  # starts processes
+@pytest.mark.slow  # a sweep's pool workers (its runs on the in-process engine) and the figures
 def test_sar_analysis_of_two_sweeps(tmp_path):
     base = ROOT / "experiments" / "sar" / "_base.yaml"
     dirs = []
@@ -52,7 +52,7 @@ def test_sar_analysis_of_two_sweeps(tmp_path):
         )
         extra = ["agents.count=4", "run.duration=15"] + ([] if victims == 10 else [f"scenario.victims={victims}"])
         sweep = load_sweep(spec, extra=extra)
-        run_sweep(sweep, tmp_path / f"out{victims}", jobs=2, progress=False)
+        run_sweep(sweep, tmp_path / f"out{victims}", jobs=2, progress=False, in_process=True)
         dirs.append(tmp_path / f"out{victims}")
     names = {p.name for p in analyze(dirs, control="cbba-etc")}
     # one rescued/expired figure per sweep: trials of different sweeps are not pooled in one bar
@@ -77,7 +77,7 @@ def test_sar_analysis_of_two_sweeps(tmp_path):
     assert row["mean"] == 0 and row["control_mean"] > 0 and row["cohens_d"] < 0
 
 
-@pytest.mark.slow  # starts processes
+@pytest.mark.slow  # a sweep's pool workers (its runs on the in-process engine) and the figures
 def test_strategies_are_compared_within_each_setting_of_a_sweeps_other_factors(tmp_path):
     """A sweep over strategies and a loss level: the statistics and the per-strategy bars are made
     per loss level, never over both pooled."""
@@ -85,7 +85,13 @@ def test_strategies_are_compared_within_each_setting_of_a_sweeps_other_factors(t
     spec = tmp_path / "levels.yaml"
     grid = "{allocator.name: [tree, cbba-etc], network.loss: [0.0, 0.5]}"
     spec.write_text(f"name: levels\nbase: {base}\nruns: 2\ngrid: {grid}\n")
-    run_sweep(load_sweep(spec, extra=["agents.count=4", "run.duration=15"]), tmp_path / "out", jobs=2, progress=False)
+    run_sweep(
+        load_sweep(spec, extra=["agents.count=4", "run.duration=15"]),
+        tmp_path / "out",
+        jobs=2,
+        progress=False,
+        in_process=True,
+    )
     names = {p.name for p in analyze(tmp_path / "out", control="cbba-etc")}
     assert {"fig_rescued_expired_levels_loss-0.png", "fig_rescued_expired_levels_loss-0.5.png"} <= names, names
     table = pd.read_csv(tmp_path / "out" / "statistics.csv")

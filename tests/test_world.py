@@ -321,27 +321,12 @@ def test_a_busy_robot_that_turns_to_something_else_stops_its_inspection_only_if_
         assert budget["inspecting_lost"] == 0
 
 
-def _strategy_world(seconds, *overrides):
-    """The SAR world and every robot's runtime stepped in one process, messages not delivered (as
-    docs/scripts/tree_world.py does): enough to watch what a strategy does with its own actions."""
-    from swarmbed.agent_runtime.runtime import AgentRuntime
-    from swarmbed.extension.actions import admit
-    from swarmbed.wire.codec import EMPTY_INBOX
-    from swarmbed.wire.schema import agent_spec
-    from swarmbed.wire.seeds import WORLD, component_rng
+def _strategy_run(out_dir, seconds, *overrides):
+    """The SAR world and every robot's runtime and the radio stepped in one process (the
+    in-process engine): the summary of the run."""
+    from swarmbed.experiments.launch.inprocess import run_in_process
 
-    exp = experiment(f"run.duration={seconds}", *overrides, base=SAR_BASE)
-    resolved = resolve_experiment(exp)
-    scenario = resolved.scenario()
-    world = scenario.make_world(component_rng(exp.run.seed, WORLD), resolved.allocator_cls)
-    robots = {i: AgentRuntime(agent_spec(exp, resolved.targets), i) for i in range(exp.agents.count)}
-    for k in range(round(seconds / exp.run.dt)):
-        actions = {}
-        for i, obs in world.observations().items():
-            action, _, _ = robots[i].step(k, robots[i].decode_observation(obs.to_wire()), EMPTY_INBOX)
-            actions[i] = admit(action, scenario.actions)
-        world.apply(actions)
-    return world
+    return run_in_process(experiment(f"run.duration={seconds}", *overrides, base=SAR_BASE), out_dir).summary
 
 
 @pytest.mark.slow  # no process, but 10 robots' runtimes for 560 ticks: 8-14 s each
@@ -350,7 +335,7 @@ def _strategy_world(seconds, *overrides):
     [("tree", None, True), ("cbba", None, False), ("cbba", True, True), ("tree", False, False)],
 )
 def test_only_a_strategy_that_watches_its_target_stops_an_inspection_of_a_victim_gone_meanwhile(
-    allocator, monitor, interrupts
+    allocator, monitor, interrupts, tmp_path
 ):
     """With interrupt on_change, tree (a behavior tree: its condition nodes watch the target) stops
     inspections whose victim another robot rescued or that expired; cbba (a state machine) holds to
@@ -358,10 +343,9 @@ def test_only_a_strategy_that_watches_its_target_stops_an_inspection_of_a_victim
     sets = [f"allocator.name={allocator}", "scenario.interrupt=on_change"]
     if monitor is not None:
         sets.append(f"allocator.monitor={str(monitor).lower()}")
-    w = _strategy_world(140.0, "agents.count=10", *sets)  # the first victims all expire at 100 s
-    lost = w.summary()["time_budget"]["inspecting_lost"]
-    assert (w.counts["interrupted"] > 0) == interrupts, w.counts
-    assert lost > 0 and w.counts["inspections"] > 0
+    s = _strategy_run(tmp_path, 140.0, "agents.count=10", *sets)  # the first victims all expire at 100 s
+    assert (s["interrupted"] > 0) == interrupts, s
+    assert s["time_budget"]["inspecting_lost"] > 0 and s["inspections"] > 0
 
 
 @pytest.mark.parametrize("first_ages", ["spread", "new"])

@@ -1,8 +1,8 @@
-"""The non-communicating `tree` strategy in the search-and-rescue world, in one process: the world
-and every robot's runtime stepped in lock-step as a run steps them, without Zenoh (`tree` sends no
-messages, so no radio is needed). For the world's calibration (docs/reproduction.md, section 2):
-a search over the action model is hundreds of trials; the chosen model is then checked with real
-runs (`swarmbed sweep experiments/sar/calibration_tree.yaml`).
+"""The non-communicating `tree` strategy in the search-and-rescue world, in one process: the world,
+every robot's runtime and the radio stepped by the in-process engine (swarmbed.engine): a real
+run's results for the same configuration and seed, without Zenoh. For the world's calibration
+(docs/reproduction.md, section 2): a search over the action model is hundreds of trials; the
+chosen model is then checked with real runs (`swarmbed sweep experiments/sar/calibration_tree.yaml`).
 
     python docs/scripts/tree_world.py --trials 3 --duration 1000 --set scenario.inspect_time=25
 
@@ -14,37 +14,21 @@ from __future__ import annotations
 
 import argparse
 import json
+import tempfile
 from pathlib import Path
 from statistics import mean
 
-from swarmbed.agent_runtime.runtime import AgentRuntime
 from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.config import resolve_experiment
-from swarmbed.extension.actions import admit
-from swarmbed.wire.codec import EMPTY_INBOX
-from swarmbed.wire.schema import agent_spec
-from swarmbed.wire.seeds import WORLD, component_rng
+from swarmbed.experiments.launch.inprocess import run_in_process
 
 BASE = Path(__file__).resolve().parents[2] / "experiments" / "sar" / "_base.yaml"
 
 
 def trial(overrides: list[str], seed: int) -> dict:
+    """One trial's summary, from the in-process engine (the result files go to a temporary folder)."""
     exp = cfg.load(BASE, ["allocator.name=tree", f"run.seed={seed}", *overrides])
-    resolved = resolve_experiment(exp)
-    scenario = resolved.scenario()
-    world = scenario.make_world(component_rng(seed, WORLD), resolved.allocator_cls)
-    spec = agent_spec(exp, resolved.targets)
-    robots = {i: AgentRuntime(spec, i) for i in range(exp.agents.count)}
-    declared = scenario.actions
-    ticks = round(exp.run.duration / exp.run.dt)
-    for k in range(ticks):
-        actions = {}
-        for i, obs in world.observations().items():
-            decoded = robots[i].decode_observation(obs.to_wire())
-            action, _messages, _events = robots[i].step(k, decoded, EMPTY_INBOX)
-            actions[i] = admit(action, declared)
-        world.apply(actions)
-    return world.summary()
+    with tempfile.TemporaryDirectory() as out:
+        return run_in_process(exp, Path(out)).summary
 
 
 def main() -> None:

@@ -225,9 +225,12 @@ def _record_attempt(run_dir: Path, **fields: Any) -> None:
         f.write(line + "\n")
 
 
-def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S) -> Outcome:
+def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S, in_process: bool = False) -> Outcome:
     """One run, wherever an executor placed it: claim its directory, run it, release the claim.
-    Returns (status, detail); a run another process holds is left to it ("claimed")."""
+    Returns (status, detail); a run another process holds is left to it ("claimed"). With
+    ``in_process`` the run is stepped by the in-process engine in the executor's worker (the same
+    result files; for tests and calibration)."""
+    from swarmbed.experiments.launch.inprocess import run_in_process
     from swarmbed.experiments.launch.runner import run_experiment
 
     out = Path(spec.out_dir)
@@ -241,7 +244,11 @@ def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S) -> Outcome
         started = time.time()
         _record_attempt(out, event="start", time=started)
         try:
-            run_experiment(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra), out, progress=False)
+            exp = experiment_for(spec.base, spec.scenario, spec.seed, spec.extra)
+            if in_process:
+                run_in_process(exp, out)
+            else:
+                run_experiment(exp, out, progress=False)
             outcome: Outcome = ("ok", "")
         except Exception as exc:  # a failed run is recorded, the sweep goes on (an interrupt is not a failure)
             detail = f"{type(exc).__name__}: {exc}\n\n{traceback.format_exc()}"
@@ -495,12 +502,14 @@ def run_sweep(
     executor: Executor | None = None,
     stale_after: float = claims.STALE_AFTER_S,
     redo_mismatched: bool = False,
+    in_process: bool = False,
 ) -> pd.DataFrame:
     """Run every incomplete run of ``sweep`` into ``out`` through ``executor`` (default: the local
     process pool with ``jobs`` workers), then write the tables (on Ctrl-C too, of what completed).
     Runs another command holds are left to it; runs that never started because a worker died are
     started again once. A completed run made under another configuration than planned is refused
-    (or, with ``redo_mismatched``, run again)."""
+    (or, with ``redo_mismatched``, run again). ``in_process``: each run on the in-process engine
+    (lock-step only; the same result files as processes, for tests and calibration sweeps)."""
     from swarmbed.experiments.campaigns import executors
 
     if jobs is not None and jobs < 1:
@@ -527,7 +536,7 @@ def run_sweep(
     todo = [s for s in specs if run_status(Path(s.out_dir), stale_after) != "ok"]
     done_before = len(specs) - len(todo)
     bar = tqdm(total=len(specs), initial=done_before, unit="run", desc=sweep.name, disable=not progress)
-    fn = partial(execute, stale_after=stale_after)
+    fn = partial(execute, stale_after=stale_after, in_process=in_process)
     retried: set[str] = set()
     try:
         while todo:
