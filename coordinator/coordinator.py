@@ -1,36 +1,35 @@
-"""The coordinator: owns simulated time and the world, drives the clock (lock-step or real-time).
+"""The coordinator: owns the world and is the Zenoh transport of the lock-step engine's tick loop.
 
-Tick k: publish the world (positions, membership) to the proxy and one input sample to every live
-agent (its observation and its inbox of tick k); wait for the proxy's step (every live agent's
-action and message of tick k taken, or on the real-time clock those that came before the
-deadline); apply the actions; record. On the real-time clock tick k starts at its wall time.
-The coordinator's session is the run's Zenoh hub: it listens, everyone else connects to it as a
-client.
+:class:`swarmbed.engine.TickLoop` steps the world; per tick k the coordinator publishes the world
+(positions, membership) to the proxy and one input sample to every live agent (its observation and
+its inbox of tick k), and waits for the proxy's step (every live agent's action and message of
+tick k taken, or on the real-time clock those that came before the deadline). Around the ticks it
+paces the real-time clock (:mod:`~swarmbed.coordinator.clock`), starts, swaps and restarts agents
+(:mod:`~swarmbed.coordinator.lifecycle`) and publishes the run's progress
+(:mod:`~swarmbed.coordinator.live`). The coordinator's session is the run's Zenoh hub: it
+listens, everyone else connects to it as a client.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import queue
 import threading
 import time
-from array import array
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import zenoh
-from pydantic import ValidationError
 
+from swarmbed.coordinator.clock import WallClock
 from swarmbed.coordinator.errors import RunError
 from swarmbed.coordinator.events import CONSUMED, EventQueue
 from swarmbed.coordinator.lifecycle import AgentLifecycle
-from swarmbed.coordinator.live import Interval, LiveStatus, progress_sample
+from swarmbed.coordinator.live import Interval, LiveStatus, Watched
 from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.recorder import Recorder
-from swarmbed.coordinator.trees import TreeRecorder
+from swarmbed.coordinator.trees import TreeRecorder, TreeRelay
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.codec import (
@@ -63,13 +62,26 @@ from swarmbed.wire.seeds import WORLD, component_rng
 from swarmbed.wire.session import undeclare_all
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
-from swarmbed.wire.status import encode_status
 from swarmbed.wire.summary import RunSummary
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
-STATUS_EVERY = 0.25  # wall seconds between progress samples for watchers
 __all__ = ["Coordinator", "RunError"]
+
+
+def _check_decision_source(exp: Experiment, source: str | None, commands: Any) -> None:
+    """An allocator that takes its decisions from outside has where they come from, or the run
+    stops before any process starts."""
+    if source == "env" and commands is None:
+        raise RunError(
+            f"allocator {exp.allocator.name!r} takes its decisions from a driver in the launching "
+            "process (swarmbed.envs): swarmbed run cannot drive it"
+        )
+    if source == "ros2" and exp.ros2 is None:
+        raise RunError(
+            f"allocator {exp.allocator.name!r} takes its decisions from ROS 2 topics: the experiment "
+            "needs a ros2: section (docs/ros2.md)"
+        )
 
 
 class Coordinator:
@@ -111,21 +123,10 @@ class Coordinator:
         self.netem_report: NetemFinal | None = None
         self.malformed = 0
         self.realtime = exp.run.clock == "realtime"
-        # the real-time clock's own accounting (wall-clock facts: never part of a lock-step run's files)
-        self.late_ticks: dict[int, int] = {}  # agent -> ticks it missed
-        self.start_lags = array("d")  # wall seconds each tick started after its time
-        self.last_action: dict[int, list] = {}
+        self.clock = WallClock(exp.run)  # pacing and wall-clock facts (never in a lock-step run's files)
         self.last_tick = -1
         self.wall: dict[str, float] = {}
-        # for soak monitors (wall-clock facts, never in a run's result files)
         self.stop_requested = threading.Event()  # end the run after the tick under way (soak's duration)
-        self.tick_started = 0.0  # perf_counter at the start of the tick under way
-        self.slowest_tick = (0.0, -1)  # (wall seconds, tick): the longest a tick took from start to start
-        self.slowest_in_interval = 0.0  # the same since a monitor last took it (take_interval)
-        self._lags_taken = 0  # start lags a monitor has taken (take_interval)
-        self._interval_lock = threading.Lock()
-        self._live: LiveStatus | None = None  # published after every tick once a monitor asked (live)
-        self.status_refused = False  # a progress sample failed its model (logged once)
         self._entities: list = []
         self.ros2: Any = None  # a Ros2Out while the run publishes ROS 2 topics
         # where the decisions of an allocator that takes them from outside come from: ROS 2 topics
@@ -134,8 +135,7 @@ class Coordinator:
         self.commands: Any = decider if self.decision_source == "env" else None
         self.pursuing: dict[int, list] = {}  # the actions the world was last given (for ROS 2's task markers)
         self.stages = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
-        self._t0 = self._status_at = 0.0  # perf_counter when the ticks began, and at the last status
-        self._late_now = 0  # agents late at the tick in hand (real-time clock)
+        self.watched = Watched(exp, self.world, self.recorder, self.agents, self.clock, self._put_status)
 
     # -- setup -----------------------------------------------------------------------------------
     def declare(self) -> None:
@@ -150,12 +150,7 @@ class Coordinator:
             s.declare_queryable(k.agent_snapshot_all, self.agents.on_snapshot_query),
             s.declare_queryable(k.swap, self.agents.on_swap_query),
         ]
-        # agents hand their trees' changes over while recording or while a monitor watches; monitors
-        # read them under view/ from here, with DROP, so a monitor that stops reading holds nothing up;
-        # only the changes of an agent someone monitors are republished (none while only recording)
-        self.monitored: set[str] = set()  # monitor token keys alive now
-        self._entities.append(s.liveliness().declare_subscriber(k.monitor_all, self._on_monitor, history=True))
-        self._entities.append(s.declare_subscriber(k.agent_bt_all, self._on_bt))
+        self._entities += TreeRelay(s, k, self.trees).declare()
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
         self.agents.agent_pubs = self.agent_pubs
         self.world_pub = s.declare_publisher(k.world, congestion_control=BLOCK)
@@ -165,44 +160,16 @@ class Coordinator:
         self._entities += self.agent_pubs + [self.world_pub, self.stop_pub, self.status_pub]
         self._entities.append(s.liveliness().declare_token(k.alive_coordinator))
         if self.exp.ros2 is not None:  # the run as ROS 2 topics (docs/ros2.md): the hub is also a ROS 2 node
-            from swarmbed.coordinator.ros2 import Ros2Out
+            from swarmbed.coordinator.ros2 import Ros2Commands, Ros2Out
 
             try:
                 self.ros2 = Ros2Out(s, self.exp.ros2, self.n, self.scenario.actions)
             except ImportError as exc:  # the ros2 extra is not installed: say so before any process starts
                 raise RunError(str(exc)) from None
             if self.decision_source == "ros2":
-                from swarmbed.coordinator.ros2 import Ros2Commands
-
-                self.commands = Ros2Commands(
-                    self.ros2, self.n, self.exp.ros2.command_timeout, self.realtime, self._malformed
-                )
-        if self.decision_source == "env" and self.commands is None:
-            raise RunError(
-                f"allocator {self.exp.allocator.name!r} takes its decisions from a driver in the launching "
-                "process (swarmbed.envs): swarmbed run cannot drive it"
-            )
-        if self.decision_source == "ros2" and self.exp.ros2 is None:
-            raise RunError(
-                f"allocator {self.exp.allocator.name!r} takes its decisions from ROS 2 topics: the experiment "
-                "needs a ros2: section (docs/ros2.md)"
-            )
-
-    def _on_monitor(self, sample: zenoh.Sample) -> None:
-        key = str(sample.key_expr)
-        (self.monitored.add if sample.kind == zenoh.SampleKind.PUT else self.monitored.discard)(key)
-
-    def _on_bt(self, sample: zenoh.Sample) -> None:
-        if self.trees is not None:
-            self.trees.on_sample(sample)
-        if not self.monitored:
-            return
-        try:
-            agent = agent_id_of(str(sample.key_expr))  # only agent i may publish on agent/<i>/bt
-        except WireError:
-            return
-        if self.keys.monitor(agent) in self.monitored:
-            self.session.put(self.keys.view_bt(agent), sample.payload, congestion_control=zenoh.CongestionControl.DROP)
+                timeout = self.exp.ros2.command_timeout
+                self.commands = Ros2Commands(self.ros2, self.n, timeout, self.realtime, self._malformed)
+        _check_decision_source(self.exp, self.decision_source, self.commands)
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -262,25 +229,10 @@ class Coordinator:
 
     # -- the tick transport (swarmbed.engine.TickLoop drives it) ------------------------------------
     def run_starts(self) -> None:
-        self._t0 = self._status_at = time.perf_counter()
+        self.clock.start()
 
     def tick_starts(self, k: int) -> None:
-        now = time.perf_counter()
-        if k:
-            took = now - self.tick_started
-            with self._interval_lock:
-                self.slowest_in_interval = max(self.slowest_in_interval, took)
-            if took > self.slowest_tick[0]:
-                self.slowest_tick = (took, k - 1)
-        self.tick_started = now
-        if self.realtime:
-            r = self.exp.run
-            due = self._t0 + k * r.dt / r.speed  # the wall time of tick k
-            lag = time.perf_counter() - due
-            if lag < 0:
-                time.sleep(-lag)
-                lag = time.perf_counter() - due
-            self.start_lags.append(max(lag, 0.0))
+        self.clock.tick_starts(k)
         if self.stages is not None:
             self.stages.start()
 
@@ -313,16 +265,7 @@ class Coordinator:
         step = self._await_step(k)
         if st is not None:
             st.mark("await step")
-        self._late_now = len(step.late)
-        if step.late:
-            for a in step.late:
-                self.late_ticks[a] = self.late_ticks.get(a, 0) + 1
-            if self.exp.run.on_late == "hold":  # the robot keeps its last command; "stop": the world's default
-                held = {a: self.last_action[a] for a in step.late if a in self.last_action}
-                step = dataclasses.replace(step, actions={**held, **step.actions})
-        if self.realtime:
-            self.last_action.update(step.actions)
-        return step
+        return self.clock.answers(step)
 
     def lose(self, agent: int, k: int) -> None:
         self.agents.lose(agent, k, self._how_it_ended(agent))
@@ -331,27 +274,21 @@ class Coordinator:
         self.agents.retire(agent, tick)
 
     def clock_columns(self) -> Sequence[float]:
-        return [self._late_now, round(1000 * self.start_lags[-1], 3)] if self.realtime else ()
+        return self.clock.columns()
 
     def tick_done(self, k: int, admitted: Mapping[int, list]) -> None:
         self.last_tick = k
         if self.ros2 is not None:
             self.pursuing.update(admitted)
-        if self._live is not None:
-            self._publish_live()
-        if time.perf_counter() - self._status_at >= STATUS_EVERY:
-            self._status_at = time.perf_counter()
-            self._publish_status(self._status_at - self._t0)
+        if self.watched.after_tick(k):
             self.recorder.flush()
 
     def should_stop(self) -> bool:
         return self.stop_requested.is_set()
 
     def run_ends(self) -> None:
-        self._publish_status(time.perf_counter() - self._t0)
-        if self._live is not None:
-            self._publish_live()
-        self.wall["run_s"] = time.perf_counter() - self._t0
+        self.watched.final(self.last_tick)
+        self.wall["run_s"] = self.clock.elapsed()
         if self.stages is not None:
             log.info("coordinator: %s", self.stages.line())
 
@@ -359,43 +296,14 @@ class Coordinator:
     def live(self) -> LiveStatus:
         """The run as of its last tick. The first call makes the coordinator publish a status after
         every tick from then on (a run nobody monitors builds none)."""
-        if self._live is None:
-            self._publish_live()
-        assert self._live is not None
-        return self._live
+        return self.watched.live(self.last_tick)
 
-    def _publish_live(self) -> None:
-        alive = frozenset(int(a) for a in np.flatnonzero(self.world.alive))
-        r = self.recorder
-        self._live = LiveStatus.of(
-            self.last_tick,
-            self.world.time,
-            r.net_cum,
-            r.drops_cum,
-            alive,
-            self.agents,
-            self.late_ticks,
-            self.slowest_tick,
-        )
+    def _put_status(self, data: bytes) -> None:
+        self.status_pub.put(data)
 
     def take_interval(self) -> Interval:
         """The slowest tick and the latest start since the last call (a soak's sample interval)."""
-        with self._interval_lock:
-            slowest, self.slowest_in_interval = self.slowest_in_interval, 0.0
-        lags = self.start_lags[self._lags_taken :]
-        self._lags_taken += len(lags)
-        return Interval(slowest, max(lags) if len(lags) else None)
-
-    def _publish_status(self, wall_s: float) -> None:
-        """Where the run is, for ``swarmbed watch`` (wall-clock paced: never part of the results)."""
-        try:
-            status = progress_sample(self.exp, self.world, self.recorder, self.last_tick, self.late_ticks, wall_s)
-        except ValidationError as exc:  # a scenario's row of another shape: the run goes on, unwatched
-            if not self.status_refused:
-                log.warning("coordinator: progress sample not published (%s)", str(exc).splitlines()[0])
-            self.status_refused = True
-            return
-        self.status_pub.put(encode_status(status))
+        return self.clock.take_interval()
 
     def _stuck(self) -> str:
         """Who held the tick up, as the proxy sees it: the agents that did not answer, or the proxy."""
@@ -559,27 +467,10 @@ class Coordinator:
 
     def summary(self) -> RunSummary:
         assert self.netem_report is not None, "summary() before the proxy's final report"
-        clock = self.clock_summary() if self.realtime else None
+        clock = self.clock.summary() if self.realtime else None
         return self.recorder.summary(
             self.last_tick + 1, self.agents, self.reports, self.netem_report, self.malformed, clock
         )
-
-    def clock_summary(self) -> dict:
-        """How well the real-time clock was kept: ticks agents missed, and ticks that started late
-        (more than a tenth of a tick's wall period after their time) with the start lag's spread."""
-        r = self.exp.run
-        lags = np.asarray(self.start_lags) * 1000
-        tolerance_ms = 100 * r.dt / r.speed
-        spread = [float(v) for v in np.percentile(lags, [50, 99, 100])] if len(lags) else [None] * 3
-        return {
-            "speed": r.speed,
-            "deadline": r.deadline,
-            "on_late": r.on_late,
-            "late_ticks_total": sum(self.late_ticks.values()),
-            "late_ticks": {str(a): n for a, n in sorted(self.late_ticks.items())},
-            "ticks_started_late": int((lags > tolerance_ms).sum()),
-            "start_lag_ms": dict(zip(("p50", "p99", "max"), spread)),
-        }
 
     def write_results(self, timings: dict) -> RunSummary:
         summary = self.summary()

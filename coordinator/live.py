@@ -15,18 +15,28 @@ Everything here is a wall-clock fact of one run on one machine: never part of a 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import logging
+import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
+from pydantic import ValidationError
 
 from swarmbed.coordinator.lifecycle import AgentLifecycle
 from swarmbed.coordinator.recorder import Recorder
 from swarmbed.extension.scenario import World
 from swarmbed.wire.reports import RestartRecord
 from swarmbed.wire.schema import Experiment
-from swarmbed.wire.status import NetworkCounters, RunStatus
+from swarmbed.wire.status import NetworkCounters, RunStatus, encode_status
+
+if TYPE_CHECKING:
+    from swarmbed.coordinator.clock import WallClock
+
+log = logging.getLogger("swarmbed.coordinator")
+STATUS_EVERY = 0.25  # wall seconds between progress samples for watchers
 
 
 def _frozen(mapping: Mapping) -> Mapping:
@@ -116,3 +126,69 @@ def progress_sample(
         labels=dict(w.agent_labels()),
         markers=list(w.markers().values()),
     )
+
+
+class Watched:
+    """What the coordinator shows of the run as it goes: a progress sample for ``swarmbed watch``
+    every ``STATUS_EVERY`` wall seconds (handed to ``put_status``), and, once a monitor in this
+    process asked for one (:meth:`live`), a :class:`LiveStatus` after every tick."""
+
+    def __init__(
+        self,
+        exp: Experiment,
+        world: World,
+        recorder: Recorder,
+        agents: AgentLifecycle,
+        clock: WallClock,
+        put_status: Callable[[bytes], None],
+    ) -> None:
+        self.exp, self.world, self.recorder, self.agents, self.clock = exp, world, recorder, agents, clock
+        self.put_status = put_status
+        self.refused = False  # a progress sample failed its model (logged once)
+        self._live: LiveStatus | None = None
+        self._status_at = 0.0  # perf_counter at the last progress sample
+
+    def live(self, tick: int) -> LiveStatus:
+        """The run as of ``tick``, the last one stepped; from the first call on, one is made after
+        every tick (a run nobody monitors builds none)."""
+        if self._live is None:
+            self._make_live(tick)
+        assert self._live is not None
+        return self._live
+
+    def after_tick(self, tick: int) -> bool:
+        """Tick ``tick`` is over: the live status if asked for, a progress sample if one is due.
+        Returns whether a sample went out (the recorder flushes with it)."""
+        if self._live is not None:
+            self._make_live(tick)
+        if time.perf_counter() - self._status_at < STATUS_EVERY:
+            return False
+        self.status(tick)
+        return True
+
+    def final(self, tick: int) -> None:
+        """The ticks are over: the last progress sample and live status."""
+        self.status(tick)
+        if self._live is not None:
+            self._make_live(tick)
+
+    def status(self, tick: int) -> None:
+        """Where the run is, for ``swarmbed watch`` (wall-clock paced: never part of the results)."""
+        self._status_at = time.perf_counter()
+        try:
+            sample = progress_sample(
+                self.exp, self.world, self.recorder, tick, self.clock.late_ticks, self.clock.elapsed()
+            )
+        except ValidationError as exc:  # a scenario's row of another shape: the run goes on, unwatched
+            if not self.refused:
+                log.warning("coordinator: progress sample not published (%s)", str(exc).splitlines()[0])
+            self.refused = True
+            return
+        self.put_status(encode_status(sample))
+
+    def _make_live(self, tick: int) -> None:
+        alive = frozenset(int(a) for a in np.flatnonzero(self.world.alive))
+        r, c = self.recorder, self.clock
+        self._live = LiveStatus.of(
+            tick, self.world.time, r.net_cum, r.drops_cum, alive, self.agents, c.late_ticks, c.slowest_tick
+        )

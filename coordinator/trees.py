@@ -21,7 +21,7 @@ import zenoh
 
 from swarmbed.wire.btlog import decode_tree_changes, file_head, records, tree_size
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.keys import agent_id_of
+from swarmbed.wire.keys import Keys, agent_id_of
 from swarmbed.wire.rundir import BT, PART_SUFFIX, PARTIAL_PREFIX, btlog_name
 
 log = logging.getLogger("swarmbed.coordinator")
@@ -89,3 +89,37 @@ class TreeRecorder:
                 entry.file.close()
                 os.replace(entry.path, self.folder / (PARTIAL_PREFIX + btlog_name(agent)))
             self.logs.clear()
+
+
+class TreeRelay:
+    """Agents hand their trees' changes over while the run records them or a monitor watches;
+    monitors (``swarmbed groot``) read them under ``view/`` from here, with DROP, so a monitor that
+    stops reading holds nothing up. Only the changes of an agent someone monitors are republished
+    (none while only recording)."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, trees: TreeRecorder | None) -> None:
+        self.session, self.keys, self.trees = session, keys, trees
+        self.monitored: set[str] = set()  # monitor token keys alive now
+
+    def declare(self) -> list:
+        s, k = self.session, self.keys
+        return [
+            s.liveliness().declare_subscriber(k.monitor_all, self._on_monitor, history=True),
+            s.declare_subscriber(k.agent_bt_all, self._on_bt),
+        ]
+
+    def _on_monitor(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        (self.monitored.add if sample.kind == zenoh.SampleKind.PUT else self.monitored.discard)(key)
+
+    def _on_bt(self, sample: zenoh.Sample) -> None:
+        if self.trees is not None:
+            self.trees.on_sample(sample)
+        if not self.monitored:
+            return
+        try:
+            agent = agent_id_of(str(sample.key_expr))  # only agent i may publish on agent/<i>/bt
+        except WireError:
+            return
+        if self.keys.monitor(agent) in self.monitored:
+            self.session.put(self.keys.view_bt(agent), sample.payload, congestion_control=zenoh.CongestionControl.DROP)
