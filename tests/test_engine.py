@@ -65,4 +65,11 @@ def test_the_in_process_engine_writes_a_real_runs_result_files_byte_for_byte(cas
 
 def test_the_in_process_engine_refuses_the_real_time_clock(tmp_path):
     with pytest.raises(ValueError, match="lock-step runs only"):
-        run_in_process(experiment("run.clock=realtime"), tmp_path)
+        run_in_process(experiment("run.clock=realtime"), tmp_path / "run")
+    assert not (tmp_path / "run").exists()
+
+
+def test_the_in_process_engine_refuses_an_allocator_that_takes_decisions_from_outside(tmp_path):
+    with pytest.raises(ValueError, match="no one to ask"):
+        run_in_process(experiment("allocator={name: external}"), tmp_path / "run")
+    assert not (tmp_path / "run").exists()  # refused before the folder was made

@@ -22,8 +22,15 @@ def run_in_process(exp: Experiment, out_dir: Path) -> RunResult:
     """Run ``exp`` (lock-step) in this process and write its result files to ``out_dir``."""
     t0 = time.perf_counter()
     plan = plan_run(exp, out_dir)
-    start_result_dir(plan)
     resolved = plan.resolved
+    if exp.run.clock != "lockstep":
+        raise ValueError("the in-process engine steps lock-step runs only (run.clock: lockstep)")
+    if resolved.allocator_cls.decision_source is not None:
+        raise ValueError(
+            f"allocator {exp.allocator.name!r} takes its decisions from outside "
+            f"({resolved.allocator_cls.decision_source}): the in-process engine has no one to ask"
+        )
+    start_result_dir(plan)
     scenario = resolved.scenario()
     world = scenario.make_world(component_rng(exp.run.seed, WORLD), resolved.allocator_cls)
     recorder = Recorder(exp, world, out_dir, list(resolved.allocator_cls.event_names))
