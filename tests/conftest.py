@@ -34,6 +34,15 @@ def experiment(*overrides: str, base: Path = QUICKSTART) -> cfg.Experiment:
 RESULTS = ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv", "config.yaml")
 
 
+def reference_run(exp: cfg.Experiment, out_dir: Path):
+    """The run a test holds a real one against ("watching, swapping, attacking, spreading over hosts
+    changes no result"), stepped by the in-process engine: byte for byte the files of a real run of
+    the same configuration (tests/test_engine.py), in a fraction of its time."""
+    from swarmbed.experiments.launch.inprocess import run_in_process
+
+    return run_in_process(exp, out_dir)
+
+
 def same_results(a: Path, b: Path, config: bool = True) -> None:
     """The result files of two runs are byte-identical (``config``: config.yaml too; not where the
     two runs were configured apart in a way that must not change a result, e.g. Zenoh's threads)."""

@@ -26,7 +26,7 @@ from swarmbed.wire.credentials import CredentialsError, Identity, check_admitted
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
 from swarmbed.wire.session import zenoh_config
-from tests.conftest import SwapAsked, experiment, same_results
+from tests.conftest import SwapAsked, experiment, reference_run, same_results
 
 BLOCK = zenoh.CongestionControl.BLOCK
 
@@ -220,7 +220,7 @@ def test_an_agent_may_publish_only_on_its_own_keys(tmp_path):
         "run.duration=400",
     ]
     attacked = run_experiment(experiment(*sets), tmp_path / "attacked", progress=False, on_ready=impostor)
-    run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
+    reference_run(experiment(*sets), tmp_path / "clean")
     assert seen == {"report taken": False, "stop taken": False, "heard": 0}
     assert attacked.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}
     same_results(tmp_path / "clean", tmp_path / "attacked")
@@ -305,7 +305,7 @@ def test_an_operator_that_stops_reading_holds_nothing_up(tmp_path, operator):
             client.kill()
             client.wait(timeout=10)
     assert clients
-    run_experiment(experiment(*sets), tmp_path / "alone", progress=False)
+    reference_run(experiment(*sets), tmp_path / "alone")
     same_results(tmp_path / "held", tmp_path / "alone")
 
 
@@ -376,7 +376,7 @@ def test_junk_at_every_key_is_refused_or_counted_and_changes_nothing(tmp_path, o
         hub=HubOptions(admit=[operator.identity]),
     )
     assert done.is_set(), "the run ended before all junk was sent"
-    run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
+    reference_run(experiment(*sets), tmp_path / "clean")
     assert sent == {"out": 531, "report": 3}  # of 16,972 junk samples in all
     assert attacked.summary["network"]["malformed"] == {"coordinator": 3, "netem": 531, "agents": 0}
     summaries = [json.loads((tmp_path / run / "summary.json").read_text()) for run in ("clean", "attacked")]
@@ -465,7 +465,7 @@ def test_a_host_identity_may_carry_only_its_own_agents_and_act_only_as_its_own_h
         hub=HubOptions(admit=[host, operator.identity]),
     )
     threads[0].join(timeout=30)
-    run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
+    reference_run(experiment(*sets), tmp_path / "clean")
     assert seen == {
         "report of agent 0 taken": False,
         "heard": {0: False, 2: True},
@@ -581,7 +581,7 @@ def test_on_an_open_hub_malformed_keys_and_control_samples_are_counted_not_fatal
         experiment(*sets), tmp_path / "attacked", progress=False, on_ready=in_the_background, hub=HubOptions(auth=False)
     )
     assert done.is_set(), "the run ended before all junk was sent"
-    run_experiment(experiment(*sets), tmp_path / "clean", progress=False)
+    reference_run(experiment(*sets), tmp_path / "clean")
     malformed = attacked.summary["network"]["malformed"]
     assert malformed["netem"] >= 7 + 8 and malformed["coordinator"] >= 5, malformed
     for name in ("timeseries.csv", "agents.csv", "network_ledger.csv"):

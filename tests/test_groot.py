@@ -207,7 +207,7 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
     from swarmbed.experiments.launch.hub import HubOptions
     from swarmbed.experiments.launch.runner import run_experiment
     from swarmbed.wire.session import free_loopback_endpoint
-    from tests.conftest import experiment, same_results
+    from tests.conftest import experiment, reference_run, same_results
 
     sets = ["agents.count=6", "allocator.name=cbba", "run.stop_when_done=false", "run.duration=6000", "run.seed=5"]
     endpoint, port = free_loopback_endpoint(), free_port()
@@ -260,5 +260,5 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
         assert len(buffers) == 2 and shape(xml)[0][0] == "BehaviorTree"  # its tree, ticking
         uids = [u for u, *_ in (struct.unpack_from("<HB", b, 0) for b in buffers)]
         assert uids and all(u == 1 for u in uids)
-    run_experiment(experiment(*sets), tmp_path / "alone", progress=False)
+    reference_run(experiment(*sets), tmp_path / "alone")
     same_results(tmp_path / "watched", tmp_path / "alone")

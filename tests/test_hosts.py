@@ -16,7 +16,7 @@ import pytest
 from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity
-from tests.conftest import QUICKSTART, experiment, same_results
+from tests.conftest import QUICKSTART, experiment, reference_run, same_results
 
 SAR = QUICKSTART.parent / "sar" / "_base.yaml"
 
@@ -25,7 +25,7 @@ def test_agents_split_over_three_hosts_give_the_all_local_results(lab, tmp_path,
     for name in ("h1", "h2", "h3"):
         lab.add_host(name)
     sets = ["agents.count=20", "allocator={name: cbba}", "run.duration=150", "run.stop_when_done=false"]
-    local = run_experiment(experiment(*sets), tmp_path / "local", progress=False)
+    local = reference_run(experiment(*sets), tmp_path / "local")
     placed = experiment(*sets, "placement={h1: '0-5', h2: '6-12,19', h3: [13, 14, 15, 16, 17, 18]}")
     seen = {}
 
@@ -53,7 +53,7 @@ def test_search_and_rescue_over_two_hosts_gives_the_all_local_results(lab, tmp_p
     lab.add_host("a")
     lab.add_host("b")
     sets = ["allocator.name=cbba-etc", "run.duration=40"]
-    run_experiment(experiment(*sets, base=SAR), tmp_path / "local", progress=False)
+    reference_run(experiment(*sets, base=SAR), tmp_path / "local")
     run_experiment(
         experiment(*sets, "placement={a: '0-9', b: '10-19'}", base=SAR),
         tmp_path / "spread",
@@ -123,7 +123,7 @@ def test_ten_swaps_between_hosts_give_the_all_local_results(lab, tmp_path):
     lab.add_host("h1")
     lab.add_host("h2")
     sets = ["agents.count=8", "allocator={name: cbba}", "run.duration=120", "run.stop_when_done=false"]
-    run_experiment(experiment(*sets), tmp_path / "local", progress=False)
+    reference_run(experiment(*sets), tmp_path / "local")
     rng = np.random.default_rng(3)
     ticks = sorted(int(t) for t in rng.choice(np.arange(1, 110), 10, replace=False))
     swaps = ", ".join(
@@ -158,7 +158,7 @@ def test_a_swap_to_a_dead_host_fails_and_the_agent_goes_on_where_it_was(lab, tmp
     lab.add_host("dead")
     lab.kill_host("dead")
     sets = ["allocator={name: cbba}", "run.duration=60", "run.stop_when_done=false"]
-    run_experiment(experiment(*sets), tmp_path / "local", progress=False)
+    reference_run(experiment(*sets), tmp_path / "local")
     run_experiment(
         experiment(*sets, "placement={alive: '0-1'}", "swaps=[{agent: 1, tick: 10, to: dead}]"),
         tmp_path / "tried",

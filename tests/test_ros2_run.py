@@ -19,7 +19,7 @@ from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity, write_credentials
 from swarmbed.wire.ros2 import Ros2Types, decode_attachment, gid
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
-from tests.conftest import experiment, read_ledger, same_results
+from tests.conftest import experiment, read_ledger, reference_run, same_results
 
 DOMAIN = 7
 SETTINGS = ("agents.count=4", "run.duration=80", "run.stop_when_done=false", "run.record_trajectories=true")
@@ -80,7 +80,7 @@ def seen(tmp_path_factory):
     time.sleep(0.5)
     reader = readers[0]
     reader.session.close()
-    off = run_experiment(experiment(*SETTINGS), base / "off", progress=False)
+    off = reference_run(experiment(*SETTINGS), base / "off")
     return on, off, reader
 
 

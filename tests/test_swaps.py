@@ -13,7 +13,7 @@ from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.plugins.checks.allocator import ConformanceError, check_snapshot
 from swarmbed.plugins.registry import register
-from tests.conftest import QUICKSTART, SwapAsked, experiment, same_results
+from tests.conftest import QUICKSTART, SwapAsked, experiment, reference_run, same_results
 
 SAR = QUICKSTART.parent / "sar" / "_base.yaml"
 
@@ -38,7 +38,7 @@ def _swaps(run_dir):
 )
 def test_swapped_agents_give_the_files_of_a_run_where_nothing_moved(tmp_path, base, sets):
     still = [x for x in sets if not x.startswith("run.zenoh_threads")]
-    run_experiment(experiment(*still, base=base), tmp_path / "still", progress=False)
+    reference_run(experiment(*still, base=base), tmp_path / "still")
     rng = np.random.default_rng(7)
     n = cfg.load(base).agents.count
     ticks = sorted(int(t) for t in rng.choice(np.arange(1, 100), 6, replace=False))
@@ -71,7 +71,7 @@ def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path, operator):
     rc, _, err = bad.wait()
     assert rc == 2 and "a swap request is" in err
     assert [r["agent"] for r in _swaps(tmp_path / "moved")] == ["2"]
-    run_experiment(experiment(*sets), tmp_path / "still", progress=False)
+    reference_run(experiment(*sets), tmp_path / "still")
     same_results(tmp_path / "still", tmp_path / "moved")
 
 
@@ -110,7 +110,7 @@ def test_state_that_cannot_move_is_refused_and_the_old_process_goes_on(tmp_path)
     (record,) = _swaps(tmp_path / "tried")
     assert record["outcome"] == "failed" and "snapshot_failed" in record["reason"]
     assert "state.allocator.lock: cannot snapshot a _thread.lock" in record["reason"]  # names what and where
-    run_experiment(experiment(*sets), tmp_path / "still", progress=False)
+    reference_run(experiment(*sets), tmp_path / "still")
     same_results(tmp_path / "still", tmp_path / "tried")
 
 
@@ -119,7 +119,7 @@ def test_a_swap_to_a_host_that_is_not_there_fails_and_the_old_process_goes_on(tm
     run_experiment(experiment(*sets, "swaps=[{agent: 1, tick: 5, to: nowhere}]"), tmp_path / "tried", progress=False)
     (record,) = _swaps(tmp_path / "tried")
     assert record["outcome"] == "failed" and "cannot start it on nowhere" in record["reason"]
-    run_experiment(experiment(*sets), tmp_path / "still", progress=False)
+    reference_run(experiment(*sets), tmp_path / "still")
     same_results(tmp_path / "still", tmp_path / "tried")
 
 

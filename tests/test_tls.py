@@ -13,7 +13,7 @@ from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import CredentialsError, Identity, write_credentials
 from swarmbed.wire.session import free_loopback_endpoint, tls_settings, zenoh_config
-from tests.conftest import experiment, same_results
+from tests.conftest import experiment, reference_run, same_results
 
 x509 = pytest.importorskip("cryptography.x509", reason="swarmbed certs needs the tls extra (cryptography)")
 
@@ -113,7 +113,7 @@ def test_a_host_over_tls_gives_the_all_local_results_and_strangers_are_refused(t
     finally:
         daemon.send_signal(signal.SIGTERM)
         daemon.wait(timeout=20)
-    run_experiment(experiment(*sets), tmp_path / "local", progress=False)
+    reference_run(experiment(*sets), tmp_path / "local")
     same_results(tmp_path / "local", tmp_path / "tls")
     assert refused == {"foreign CA": True, "plain": True, "credentials, no certificate": True}
     assert '"1": "h1"' in (tmp_path / "tls" / "deployment.json").read_text()
