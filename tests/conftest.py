@@ -43,6 +43,14 @@ def reference_run(exp: cfg.Experiment, out_dir: Path):
     return run_in_process(exp, out_dir)
 
 
+def sweep_in_process(spec: Path, out: Path, *extra: str):
+    """A sweep file's runs on the in-process engine, two at once, and its table: for tests whose
+    point is what is made of a sweep's results (tables, statistics, figures, hostile folders)."""
+    from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
+
+    return run_sweep(load_sweep(spec, extra=list(extra)), out, jobs=2, progress=False, in_process=True)
+
+
 def same_results(a: Path, b: Path, config: bool = True) -> None:
     """The result files of two runs are byte-identical (``config``: config.yaml too; not where the
     two runs were configured apart in a way that must not change a result, e.g. Zenoh's threads)."""

@@ -11,12 +11,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.experiments.views.analyze import AnalyzeError, analyze
 from swarmbed.experiments.views.replay import ReplayError, replay
 from swarmbed.experiments.views.report import ReportError, report
-from tests.conftest import QUICKSTART, experiment
+from tests.conftest import QUICKSTART, experiment, sweep_in_process
 
 RECORDED = [
     "run.duration=30",
@@ -41,13 +40,7 @@ def recorded(tmp_path_factory) -> Path:
 def swept(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("swept")
     (folder / "s.yaml").write_text(f"name: s\nbase: {QUICKSTART}\nruns: 3\n")
-    run_sweep(
-        load_sweep(folder / "s.yaml", extra=["run.duration=60"]),
-        folder / "out",
-        jobs=2,
-        progress=False,
-        in_process=True,
-    )
+    sweep_in_process(folder / "s.yaml", folder / "out", "run.duration=60")
     return folder
 
 

@@ -17,7 +17,7 @@ from swarmbed.plugins.checks.scenario import ScenarioCheckError, check_scenario
 from swarmbed.plugins.registry import resolve_scenario, scenario_names
 from swarmbed.wire.codec import WireError
 from swarmbed.wire.targets import load_target
-from tests.conftest import ledger_outcomes, read_ledger
+from tests.conftest import ledger_outcomes, read_ledger, sweep_in_process
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = Path(__file__).resolve().parent / "example_scenario.py"
@@ -144,18 +144,11 @@ def test_a_third_scenario_runs_end_to_end_with_no_change_to_swarmbed(tmp_path):
 def test_analyze_draws_the_figures_a_third_scenario_names(tmp_path):
     """``Scenario.figures`` and ``metric_labels``: the analysis tabulates and draws a scenario it
     has never heard of, with no edit of its own."""
-    from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
     from swarmbed.experiments.views.analyze import analyze
 
     _pickup_experiment(tmp_path)
     (tmp_path / "sweep.yaml").write_text("name: pickups\nbase: pickup.yaml\nruns: 2\n")
-    run_sweep(
-        load_sweep(tmp_path / "sweep.yaml", extra=["run.duration=40"]),
-        tmp_path / "out",
-        jobs=2,
-        progress=False,
-        in_process=True,
-    )
+    sweep_in_process(tmp_path / "sweep.yaml", tmp_path / "out", "run.duration=40")
     # a results folder is data: the class it names is imported only where the user vouches for it
     assert {p.name for p in analyze(tmp_path / "out")} == {"scenario_summary.csv", "scenario_summary.md"}
     names = {p.name for p in analyze(tmp_path / "out", trusted=True)}

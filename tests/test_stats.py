@@ -4,10 +4,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
 from swarmbed.experiments.views.analyze import analyze, load
 from swarmbed.experiments.views.stats import cohens_d, compare
-from tests.conftest import ROOT
+from tests.conftest import ROOT, sweep_in_process
 
 
 def test_anova_dunnett_and_cohens_d_find_the_shifted_group():
@@ -51,8 +50,7 @@ def test_sar_analysis_of_two_sweeps(tmp_path):
             f"name: v{victims}\nbase: {base}\nruns: 2\n{setting}grid: {{allocator.name: [tree, cbba-etc]}}\n"
         )
         extra = ["agents.count=4", "run.duration=15"] + ([] if victims == 10 else [f"scenario.victims={victims}"])
-        sweep = load_sweep(spec, extra=extra)
-        run_sweep(sweep, tmp_path / f"out{victims}", jobs=2, progress=False, in_process=True)
+        sweep_in_process(spec, tmp_path / f"out{victims}", *extra)
         dirs.append(tmp_path / f"out{victims}")
     names = {p.name for p in analyze(dirs, control="cbba-etc")}
     # one rescued/expired figure per sweep: trials of different sweeps are not pooled in one bar
@@ -85,13 +83,7 @@ def test_strategies_are_compared_within_each_setting_of_a_sweeps_other_factors(t
     spec = tmp_path / "levels.yaml"
     grid = "{allocator.name: [tree, cbba-etc], network.loss: [0.0, 0.5]}"
     spec.write_text(f"name: levels\nbase: {base}\nruns: 2\ngrid: {grid}\n")
-    run_sweep(
-        load_sweep(spec, extra=["agents.count=4", "run.duration=15"]),
-        tmp_path / "out",
-        jobs=2,
-        progress=False,
-        in_process=True,
-    )
+    sweep_in_process(spec, tmp_path / "out", "agents.count=4", "run.duration=15")
     names = {p.name for p in analyze(tmp_path / "out", control="cbba-etc")}
     assert {"fig_rescued_expired_levels_loss-0.png", "fig_rescued_expired_levels_loss-0.5.png"} <= names, names
     table = pd.read_csv(tmp_path / "out" / "statistics.csv")
