@@ -52,7 +52,7 @@ def test_interval_is_clipped_to_both_bounds():
 # -- event triggers ------------------------------------------------------------------------------
 
 
-def view(t, x, y, victims, inbox=(), agent=0, color=0):
+def view(t, x, y, victims, inbox=(), agent=0, color=0, busy=0):
     tasks = {v: TaskInfo(v, vx, vy, 100.0, c) for v, (vx, vy, c) in victims.items()}
     obs = SARObservation(
         float(t),
@@ -66,7 +66,7 @@ def view(t, x, y, victims, inbox=(), agent=0, color=0):
         robots=[],
         inspected=[],
         rescued=[],
-        busy=0,
+        busy=busy,
     )
     return LocalView(
         agent, 4, int(t), float(t), x, y, 0.0, 0.0, 1.0, tasks, list(inbox), 11.1, math.inf, 2 * math.pi, obs
@@ -237,3 +237,28 @@ def test_available_known_never_bids_on_a_victim_another_robot_is_known_to_win():
         s.observe(v)
         s.build_bundle(v)
         assert s.state.bundle == expected, available
+
+
+# -- a state machine busy with its action (issue 44 item 4) -----------------------------------------
+
+
+@pytest.mark.parametrize("while_busy", ["hold", "negotiate"])
+def test_a_cbba_robot_holding_an_inspection_builds_and_negotiates_only_if_asked(while_busy):
+    """cbba's action cycle is build, consensus, execute in turn: while an inspection runs (the robot
+    holds to it: monitor off) a new victim nearer than its bundle's changes nothing with ``hold``;
+    with ``negotiate`` its bundle changes and it starts a round at once. Once the action ends it
+    builds and negotiates either way."""
+    s = make("cbba", {"max_tasks": 2, "while_busy": while_busy}, 0, np.random.default_rng(0), 0, "sar")
+    first = {1: (3, 0, 0), 2: (40, 0, 0)}
+    s.observe(view(0, 0, 0, first))
+    assert s.fsm_step(view(0, 0, 0, first)) == ["inspect", 1] and s.events == {"negotiations": 1}
+    s.events = {}
+    more = {**first, 3: (4, 0, 0)}  # a nearer second victim comes into view while robot 0 inspects 1
+    s.observe(view(1, 0, 0, more, busy=5))
+    assert s.fsm_step(view(1, 0, 0, more, busy=5)) == ["inspect", 1]  # it holds to its inspection either way
+    assert s.events == ({} if while_busy == "hold" else {"negotiations": 1}), s.events
+    assert s.state.bundle == ([1, 2] if while_busy == "hold" else [1, 3])
+    s.events = {}
+    s.observe(view(2, 0, 0, more))  # the inspection is over
+    s.fsm_step(view(2, 0, 0, more))
+    assert s.state.bundle == [1, 3] and s.events == ({"negotiations": 1} if while_busy == "hold" else {})

@@ -15,7 +15,7 @@ import numpy as np
 from pydantic import Field
 
 from swarmbed.extension import LocalView
-from swarmbed.plugins.sar.consensus import ConsensusParams, ReactiveCBBA
+from swarmbed.plugins.sar.consensus import ReactiveCBBA, ReactiveParams
 
 BIDS, LEADERS, RESULT = "bids", "leaders", "result"
 CLUSTER_STREAM = 0xCCBBA  # a fixed entropy word: every robot draws the same clustering stream
@@ -42,7 +42,7 @@ def kmeans_pp(points: np.ndarray, k: int, rng: np.random.Generator, iterations: 
     return labels
 
 
-class CCBBAParams(ConsensusParams):
+class CCBBAParams(ReactiveParams):
     clusters: int = Field(2, ge=1, description="k of k-means++")
 
 

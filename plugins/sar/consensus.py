@@ -57,6 +57,16 @@ class ConsensusParams(StrategyParams):
     )
 
 
+class ReactiveParams(ConsensusParams):
+    while_busy: Literal["hold", "negotiate"] = Field(
+        "hold",
+        description="cbba and c-cbba, state machines whose action cycle is build, consensus, execute in "
+        "turn: hold (an inspection or rescue under way is the cycle's execute step; the robot builds and "
+        "starts a round again once it ends) or negotiate (it keeps building and starting rounds while it "
+        "holds to the action, as runs before 2026-11-28 did). Only while it holds (allocator.monitor off)",
+    )
+
+
 class SARConsensus(SARStrategy):
     Params = ConsensusParams
     params: ConsensusParams
@@ -170,6 +180,8 @@ class ReactiveCBBA(SARConsensus):
     """``cbba``: a state machine. Each tick it keeps its bundle full, starts a round whenever the
     bundle changed since its last one (or ``period`` seconds passed), and works its first victim."""
 
+    Params = ReactiveParams
+    params: ReactiveParams
     default_tree = str(TREES / "cbba_fsm.xml")
     #: "structured as a state machine within the robot's main action cycle rather than a Behavior
     #: Tree" (Section 5.2): no condition node watches its target while it acts
@@ -179,6 +191,11 @@ class ReactiveCBBA(SARConsensus):
         return self.state.bundle != self.bundle_at_round or self.now - self.last_round >= self.params.period
 
     def fsm_step(self, view: LocalView) -> list | None:
+        if self.holding and self.params.while_busy == "hold":
+            # "a continuous loop of building a bundle, achieving consensus, and executing the
+            # highest-priority task remaining" (Section 5.2): while the action runs, the loop is in
+            # its execute step
+            return self.execute(view)
         self.build_bundle(view)
         if not self.target_valid(view):
             self.select_new_target(view)
