@@ -222,14 +222,6 @@ SLOW_MODULES = frozenset(
 FILE_DURATIONS = Path(__file__).with_name("file_durations.json")
 
 
-def pytest_xdist_auto_num_workers(config):
-    """``-n auto``: three workers for the whole suite on 2 cores, two for the fast lane. Many slow
-    tests wait on the wall clock (soaks, Zenoh leases, host daemons), so a third worker overlaps
-    them (568 s against 644 s with two, 2026-11-28); the fast lane is CPU-bound and a third worker
-    only adds switching (62 s against 47 s)."""
-    return 2 if "not slow" in (config.getoption("markexpr") or "") else 3
-
-
 def pytest_addoption(parser):
     parser.addoption(
         "--record-durations", action="store_true", help=f"write each test file's seconds to {FILE_DURATIONS.name}"

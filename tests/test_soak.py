@@ -393,7 +393,9 @@ def test_on_the_real_time_clock_a_stopped_agent_misses_ticks_and_the_soak_says_h
     late = int(v["faults"][0]["outcome"].split(", ")[1].split()[0])
     assert 10 <= late <= 20, v["faults"][0]["outcome"]
     summary = json.loads((tmp_path / "soak" / "summary.json").read_text())
-    assert summary["realtime"]["late_ticks"] == {"1": late}
+    missed = summary["realtime"]["late_ticks"]
+    assert missed["1"] == late  # on a loaded machine another agent may miss a deadline once or twice
+    assert all(n <= 2 for agent, n in missed.items() if agent != "1"), missed
     assert summary["network"]["dropped"]["late"] > 0 and v["conserved"]
     run = pd.read_csv(tmp_path / "soak" / RUN)
     assert run["start_lag_ms"].notna().any()
