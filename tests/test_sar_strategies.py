@@ -248,7 +248,8 @@ def test_a_cbba_robot_holding_an_inspection_builds_and_negotiates_only_if_asked(
     holds to it: monitor off) a new victim nearer than its bundle's changes nothing with ``hold``;
     with ``negotiate`` its bundle changes and it starts a round at once. Once the action ends it
     builds and negotiates either way."""
-    s = make("cbba", {"max_tasks": 2, "while_busy": while_busy}, 0, np.random.default_rng(0), 0, "sar")
+    params = {"max_tasks": 2, "while_busy": while_busy, "consensus_wait": "free"}
+    s = make("cbba", params, 0, np.random.default_rng(0), 0, "sar")
     first = {1: (3, 0, 0), 2: (40, 0, 0)}
     s.observe(view(0, 0, 0, first))
     assert s.fsm_step(view(0, 0, 0, first)) == ["inspect", 1] and s.events == {"negotiations": 1}
@@ -262,3 +263,129 @@ def test_a_cbba_robot_holding_an_inspection_builds_and_negotiates_only_if_asked(
     s.observe(view(2, 0, 0, more))  # the inspection is over
     s.fsm_step(view(2, 0, 0, more))
     assert s.state.bundle == [1, 3] and s.events == ({"negotiations": 1} if while_busy == "hold" else {})
+
+
+# -- a consensus that takes simulated time (issue 44 item 2) ----------------------------------------
+
+
+def run_fsm(s, steps):
+    """Tick a state-machine strategy through ``steps`` (inbox per tick); its actions."""
+    victims = {1: (3, 0, 0), 2: (40, 0, 0)}
+    actions = []
+    for tick, inbox in enumerate(steps):
+        v = view(tick, 0, 0, victims, inbox, agent=s.agent_id)
+        s.observe(v)
+        actions.append(s.fsm_step(v))
+        s.outbox = list(v.outbox)
+    return actions
+
+
+#: robot 1 wins victim 1 (3 m from robot 0) with a bid robot 0 cannot beat, heard at tick 2
+OUTBID = [(), (), [Message(1, "bids", {"t": 1.0, "w": [[1, 1, 50.0]], "s": []})], (), (), ()]
+
+
+@pytest.mark.parametrize(
+    "wait, expected, rounds",
+    [
+        # free: it acts in the tick it announces; the reply turns it to victim 2 at once
+        ("free", [["inspect", 1], ["inspect", 1], ["goto_task", 2], ["goto_task", 2]], 2),
+        # one round: it listens two ticks (out and back), then acts on what came: victim 1 is lost
+        # and its bundle empty, so it wanders (None) until the next build
+        ("round", [["stop"], ["stop"], None], 1),
+        # rounds until one brings nothing new: the reply starts a second round on victim 2
+        ("agree", [["stop"], ["stop"], ["stop"], ["stop"], ["goto_task", 2]], 2),
+    ],
+)
+def test_cbba_stands_still_while_its_consensus_takes_rounds(wait, expected, rounds):
+    s = make("cbba", {"max_tasks": 1, "consensus_wait": wait}, 0, np.random.default_rng(0), 0, "sar")
+    actions = run_fsm(s, OUTBID[: len(expected)])
+    assert actions == expected
+    assert s.events["negotiations"] == rounds
+
+
+def test_cbba_waits_by_default_and_agreement_is_capped_at_max_rounds():
+    s = make("cbba", {"max_tasks": 1}, 0, np.random.default_rng(0), 0, "sar")
+    assert s.wait == "agree" and run_fsm(s, OUTBID[:1]) == [["stop"]]
+    capped = make("cbba", {"max_tasks": 1, "max_rounds": 1}, 0, np.random.default_rng(0), 0, "sar")
+    assert run_fsm(capped, OUTBID[:3]) == [["stop"], ["stop"], None]  # no second round: it acts
+
+
+def test_a_busy_robot_does_not_break_off_its_inspection_to_wait():
+    """monitor on: the robot builds and negotiates while it inspects, but the round costs it nothing."""
+    s = make("cbba", {"max_tasks": 1, "monitor": True}, 0, np.random.default_rng(0), 0, "sar")
+    victims = {1: (3, 0, 0)}
+    v = view(0, 0, 0, victims, busy=5)
+    s.observe(v)
+    assert s.fsm_step(v) == ["inspect", 1] and s.events == {"negotiations": 1}
+    assert s.round_began is None
+
+
+def test_cbba_etc_books_the_losses_of_its_round_when_the_round_ends():
+    """Lc, the tasks lost in the last round, feeds the adaptive interval: with a round that takes
+    time the reply that outbids the robot is in it; with a free round it lands in the next."""
+    for wait, lost in (("round", 1), ("free", 0)):
+        s = etc(consensus_wait=wait)
+        victims = {1: (3, 0, 0)}
+        v0 = view(0, 0, 0, victims)
+        s.observe(v0)
+        s.build_bundle(v0)
+        waiting = s.start_consensus(v0)
+        assert waiting == (wait == "round")
+        for tick in (1, 2):
+            inbox = OUTBID[tick]
+            v = view(tick, 0, 0, victims, inbox)
+            s.observe(v)
+            if waiting:
+                assert s.consensus_step(v) == (tick < 2)
+        assert s.lost_last == lost, wait
+
+
+def ccbba_robot(agent, wait, **params):
+    team = [(0, 0.0, 0.0), (1, 1.0, 0.0), (2, 60.0, 60.0)]  # clusters {0, 1} led by 0, {2}
+    r = make("c-cbba", {"max_tasks": 1, "consensus_wait": wait, **params}, agent, np.random.default_rng(0), 0, "sar")
+    r.setup(team)
+    assert r.leaders == [0, 2] and r.leader == 0
+    return r
+
+
+def sent(r):
+    return [(out.dest, out.kind) for out in r.outbox]
+
+
+def test_a_ccbba_member_stands_still_until_its_leaders_result_arrives():
+    result = [Message(0, "result", {"t": 2.0, "w": [[1, 1, 1 / 3]], "s": []})]
+    member = ccbba_robot(1, "leaders")
+    actions = run_fsm(member, [(), (), (), result, ()])
+    assert actions[:3] == [["stop"]] * 3 and actions[3] == ["inspect", 1]
+    free = ccbba_robot(1, "free")
+    assert run_fsm(free, [()])[0] == ["inspect", 1]  # it acts as it sends
+    deaf = ccbba_robot(1, "leaders", leader_wait=4)  # the result never comes: it gives up waiting
+    assert run_fsm(deaf, [()] * 5) == [["stop"]] * 4 + [["inspect", 1]]
+
+
+def test_a_ccbba_leader_answers_its_cluster_only_once_the_leaders_settle():
+    leader = ccbba_robot(0, "leaders")
+    steps = []
+    for tick in range(6):
+        v = view(tick, 0, 0, {1: (3, 0, 0)}, agent=0)
+        leader.observe(v)
+        steps.append((leader.fsm_step(v), sorted((out.dest, out.kind) for out in v.outbox)))
+    assert steps == [
+        (["stop"], [((2,), "leaders")]),  # its first relay (period); then its bundle changes: its own round
+        (["stop"], []),  # listening to the other leader
+        (["stop"], [((2,), "leaders")]),  # what changed meanwhile: a second leaders' round
+        (["stop"], []),
+        (["inspect", 1], [((1,), "result")]),  # nothing new from the other leader: the result goes out
+        (["inspect", 1], []),
+    ]
+    free = ccbba_robot(0, "free")
+    v0, v1 = view(0, 0, 0, {1: (3, 0, 0)}), view(1, 0, 0, {1: (3, 0, 0)})
+    free.observe(v0)
+    assert free.fsm_step(v0) == ["inspect", 1]
+    free.observe(v1)
+    assert sorted((out.dest, out.kind) for out in v0.outbox + v1.outbox) == [
+        ((1,), "result"),
+        ((1,), "result"),
+        ((2,), "leaders"),
+        ((2,), "leaders"),
+    ]  # leaders and cluster told together, in the tick it relays

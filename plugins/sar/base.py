@@ -50,6 +50,7 @@ class SARStrategy(Allocator):
         self.incompatible: dict[int, float] = {}  # victim -> until when it is not retried
         self.gone: set[int] = set()  # victims known to be rescued or expired (their ids are never reused)
         self.target: int | None = None
+        self.busy = False  # inspecting or rescuing
         self.holding = False  # busy with its target and not watching it (monitor off)
         self.my_color = -1
         self.reach = 5.0  # the scenario's inspection distance, as observed
@@ -60,7 +61,8 @@ class SARStrategy(Allocator):
         obs = view.obs
         self.now, self.my_color = view.time, obs.color
         self.reach = obs.reach
-        self.holding = not self.monitoring and obs.busy > 0 and self.target is not None
+        self.busy = obs.busy > 0
+        self.holding = not self.monitoring and self.busy and self.target is not None
         for v, info in view.tasks.items():
             self.victims[v] = info
             self.expires[v] = view.time + info.remaining

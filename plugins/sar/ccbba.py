@@ -11,6 +11,8 @@ members (multicast) whenever its winners or bids changed (what it heard, or its 
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 from pydantic import Field
 
@@ -44,6 +46,17 @@ def kmeans_pp(points: np.ndarray, k: int, rng: np.random.Generator, iterations: 
 
 class CCBBAParams(ReactiveParams):
     clusters: int = Field(2, ge=1, description="k of k-means++")
+    consensus_wait: Literal["free", "leaders"] | None = Field(  # type: ignore[assignment]
+        None,
+        description="what a consensus costs the robot in simulated time: leaders (the text: a member that "
+        "sent its bids stands still until its leader's result arrives, at most leader_wait ticks; a leader "
+        "exchanges with the other leaders in rounds of round_ticks until one brings nothing new, then sends "
+        "the result) or free (a member acts at once, a leader relays to both at once, as runs before "
+        "2026-11-28 did); None: leaders",
+    )
+    leader_wait: int = Field(
+        20, ge=1, description="consensus_wait leaders: ticks a robot waits at most for its cluster's result"
+    )
 
 
 class ClusteringCBBA(ReactiveCBBA):
@@ -55,6 +68,9 @@ class ClusteringCBBA(ReactiveCBBA):
     Params = CCBBAParams
     params: CCBBAParams
     message_kinds = (BIDS, LEADERS, RESULT)
+    #: "Once a global consensus is reached, the leaders disseminate the final, conflict-free task
+    #: assignments back to the robots in their clusters" (Section 5.2)
+    WAIT = "leaders"
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)
@@ -63,6 +79,9 @@ class ClusteringCBBA(ReactiveCBBA):
         self.leaders: list[int] = []
         self.dirty = False
         self.last_relay = -1e18
+        self.exchange_began: int | None = None  # a leader: tick of the leaders' round under way
+        self.exchange_rounds = 0
+        self.result_heard = False  # a member: its leader's result came while it waited
 
     @property
     def is_leader(self) -> bool:
@@ -98,6 +117,8 @@ class ClusteringCBBA(ReactiveCBBA):
         """A leader relays what it heard only when it learned something: a winner or a bid it did
         not hold. Relaying on every incoming message made the two leaders echo the same state to
         each other every tick (about 96 % of c-cbba's messages, none of them news)."""
+        if self.round_began is not None and any(m.kind == RESULT and m.sender == self.leader for m in view.inbox):
+            self.result_heard = True
         if not (self.is_leader and any(m.kind in (BIDS, LEADERS) for m in view.inbox)):
             super().receive(view)
             return
@@ -107,16 +128,42 @@ class ClusteringCBBA(ReactiveCBBA):
             self.dirty = True
 
     def relay(self, view: LocalView) -> None:
-        """Leader: pass the merged view to the other leaders and back to the cluster."""
+        """Leader: pass the merged view to the other leaders and back to the cluster (with
+        ``consensus_wait: leaders`` back to the cluster only once the leaders' rounds settle)."""
+        others = [a for a in self.leaders if a != self.agent_id]
+        if self.exchange_began is not None:
+            if view.tick - self.exchange_began < self.params.round_ticks:
+                return
+            if self.dirty and self.exchange_rounds < self.params.max_rounds:
+                self.exchange(view, others)
+                return
+            self.exchange_began = None  # a global consensus, as far as this leader hears
+            self.disseminate(view)
+            return
         if not (self.dirty or self.now - self.last_relay >= self.params.period):
             return
-        message = self.state.message()
-        others = [a for a in self.leaders if a != self.agent_id]
-        if others:
-            view.send(others, LEADERS, message)
-        if self.members:
-            view.send(self.members, RESULT, message)
+        if self.wait == "free" or not others:
+            message = self.state.message()
+            if others:
+                view.send(others, LEADERS, message)
+            self.count("negotiations")
+            self.disseminate(view, message)
+            return
+        self.exchange_rounds = 0
+        self.exchange(view, others)
+
+    def exchange(self, view: LocalView, others: list[int]) -> None:
+        """A round among the leaders."""
+        view.send(others, LEADERS, self.state.message())
         self.count("negotiations")
+        self.dirty = False
+        self.exchange_began = view.tick
+        self.exchange_rounds += 1
+
+    def disseminate(self, view: LocalView, message: dict | None = None) -> None:
+        """Send the merged view back to the cluster."""
+        if self.members:
+            view.send(self.members, RESULT, message if message is not None else self.state.message())
         self.dirty = False
         self.last_relay = self.now
 
@@ -129,6 +176,17 @@ class ClusteringCBBA(ReactiveCBBA):
     def run_consensus(self, view: LocalView) -> None:
         if self.is_leader:  # a leader's rounds are its relays (counted there)
             self.broadcast_round(view)
-            self.close_round()
+            self.close_round(losses=self.wait == "free")
             return
+        self.result_heard = False
         super().run_consensus(view)
+
+    def consensus_step(self, view: LocalView) -> bool:
+        """A member waits for its leader's result, a leader for its exchange to settle (at most
+        ``leader_wait`` ticks either way: a lost message or a leader out of range must not stall it)."""
+        assert self.round_began is not None, "consensus_step() outside a consensus"
+        waiting = (self.dirty or self.exchange_began is not None) if self.is_leader else not self.result_heard
+        if waiting and view.tick - self.round_began < self.params.leader_wait:
+            return True
+        self.end_consensus()
+        return False

@@ -55,6 +55,18 @@ class ConsensusParams(StrategyParams):
         description="Algorithm 3's T_available = T minus the tasks already in a bundle: own (this robot's) or "
         "known (any bundle it knows of, which forbids outbidding a known winner)",
     )
+    consensus_wait: Literal["free", "round", "agree"] | None = Field(
+        None,
+        description="what a consensus costs the robot in simulated time (docs/reproduction.md section 6): "
+        "free (nothing: it acts in the tick it announced, as runs before 2026-11-28 did), round (one "
+        "communication round: it stands still round_ticks ticks listening, then acts on what came back), "
+        "agree (rounds until one brings nothing new, a local agreement, at most max_rounds); "
+        "None: as the text has it, agree for cbba and cbba-tree, round for cbba-etc",
+    )
+    round_ticks: int = Field(
+        2, ge=1, description="ticks a round listens for replies (2: a neighbour's answer, out and back)"
+    )
+    max_rounds: int = Field(10, ge=1, description="consensus_wait agree: rounds at most before acting")
 
 
 class ReactiveParams(ConsensusParams):
@@ -83,6 +95,9 @@ class SARConsensus(SARStrategy):
         self.lost = 0  # bundle victims lost to others' bids since the last round
         self.lost_last = 0  # Lc: lost in the last round
         self.lost_before = 0  # Lc of the round before
+        self.round_began: int | None = None  # tick of the round under way, while the robot waits on it
+        self.rounds_in = 0  # rounds of the consensus under way
+        self.news = False  # the round under way taught the robot a winner or a bid
 
     # -- knowledge -------------------------------------------------------------------------------
     def observe(self, view: LocalView) -> None:
@@ -94,9 +109,14 @@ class SARConsensus(SARStrategy):
         self.state.forget(victim)
 
     def receive(self, view: LocalView) -> None:
+        listening = self.round_began is not None and bool(view.inbox)
+        if listening:
+            winners, bids = dict(self.state.z), dict(self.state.y)
         for msg in view.inbox:
             if msg.kind in self.consensus_kinds(msg.sender):
                 self.state.receive(msg.sender, msg.data, ignore=self.gone)
+        if listening and (self.state.z != winners or self.state.y != bids):
+            self.news = True
         self.state.drop_stale_winners(self.now - self.params.winner_timeout)
         self.release_outbid()
 
@@ -147,16 +167,64 @@ class SARConsensus(SARStrategy):
         return self.target is not None
 
     # -- consensus -----------------------------------------------------------------------------------
+    #: what ``consensus_wait: None`` means for this strategy
+    WAIT: ClassVar[str] = "agree"
+
+    @property
+    def wait(self) -> str:
+        return self.WAIT if self.params.consensus_wait is None else self.params.consensus_wait
+
     def run_consensus(self, view: LocalView) -> None:
+        """Announce one round; with ``consensus_wait: free`` it is over at once."""
         self.broadcast_round(view)
         self.count("negotiations")
-        self.close_round()
+        self.close_round(losses=self.wait == "free")
 
-    def close_round(self) -> None:
-        """Book a round: when, the bundle it announced, and the tasks lost since the last one (Lc)."""
+    def close_round(self, losses: bool = True) -> None:
+        """Book a round: when, the bundle it announced, and (``losses``) the tasks lost since the
+        last one (Lc); a consensus that takes time books Lc when it ends, with its replies in."""
         self.last_round = self.now
         self.bundle_at_round = list(self.state.bundle)
+        if losses:
+            self.book_losses()
+
+    def book_losses(self) -> None:
         self.lost_before, self.lost_last, self.lost = self.lost_last, self.lost, 0
+
+    def start_consensus(self, view: LocalView) -> bool:
+        """Run a consensus; True while the robot waits on it (its action held: it stands still).
+        A robot busy inspecting or rescuing (monitor on, or while_busy negotiate) does not break
+        off to wait: for it a round is free."""
+        if self.wait == "free" or self.busy:
+            self.run_consensus(view)
+            if self.wait != "free":
+                self.book_losses()
+            return False
+        self.round_began, self.rounds_in, self.news = view.tick, 1, False
+        self.run_consensus(view)
+        return True
+
+    def consensus_step(self, view: LocalView) -> bool:
+        """A tick of the consensus under way (its replies already received); True while it goes on."""
+        assert self.round_began is not None, "consensus_step() outside a consensus"
+        if view.tick - self.round_began < self.params.round_ticks:
+            return True
+        if self.wait == "agree" and self.rounds_in < self.params.max_rounds:
+            announced = self.bundle_at_round
+            self.build_bundle(view)
+            if self.news or self.state.bundle != announced:
+                self.round_began, self.news = view.tick, False
+                self.rounds_in += 1
+                self.run_consensus(view)
+                return True
+        self.end_consensus()
+        return False
+
+    def end_consensus(self) -> None:
+        """The consensus is over (agreed, its rounds spent, or its node halted)."""
+        if self.round_began is not None:
+            self.round_began = None
+            self.book_losses()
 
     def broadcast_round(self, view: LocalView) -> None:
         view.broadcast(BIDS, self.state.message())
@@ -168,7 +236,8 @@ class SARConsensus(SARStrategy):
         """Only cbba-etc adapts its interval."""
 
     def acquire(self, view: LocalView) -> bool:
-        """The acquisition branch in one call: build, consensus if triggered, select."""
+        """The acquisition branch in one call (a consensus that takes time needs the tree's
+        RunConsensus node): build, consensus if triggered, select."""
         self.build_bundle(view)
         if self.should_trigger(view):
             self.run_consensus(view)
@@ -191,6 +260,12 @@ class ReactiveCBBA(SARConsensus):
         return self.state.bundle != self.bundle_at_round or self.now - self.last_round >= self.params.period
 
     def fsm_step(self, view: LocalView) -> list | None:
+        if self.round_began is not None:  # negotiating: "achieving consensus" before executing
+            if self.consensus_step(view):
+                return ["stop"]
+            if not self.target_valid(view):
+                self.select_new_target(view)
+            return self.execute(view)
         if self.holding and self.params.while_busy == "hold":
             # "a continuous loop of building a bundle, achieving consensus, and executing the
             # highest-priority task remaining" (Section 5.2): while the action runs, the loop is in
@@ -199,8 +274,8 @@ class ReactiveCBBA(SARConsensus):
         self.build_bundle(view)
         if not self.target_valid(view):
             self.select_new_target(view)
-        if self.should_trigger(view):
-            self.run_consensus(view)
+        if self.should_trigger(view) and self.start_consensus(view):
+            return ["stop"]
         return self.execute(view)
 
 
@@ -231,6 +306,9 @@ class CBBAETC(SARConsensus):
 
     Params = ETCParams
     params: ETCParams
+    #: "configured to be completed in a single communication round to facilitate rapid
+    #: decision-making" (Section 4)
+    WAIT = "round"
     event_names = ("negotiations", "tr_init", "tr_delta_bid", "tr_conflict", "tr_fallback")
     default_tree = str(TREES / "cbba_etc.xml")
 

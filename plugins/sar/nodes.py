@@ -127,12 +127,19 @@ class ShouldTrigger(_SARNode, Condition):
         return _ok(self.strategy.should_trigger(self.view))
 
 
-class RunConsensus(_SARNode, SyncAction):
+class RunConsensus(_SARNode, StatefulAction):
+    """RUNNING while the consensus takes its rounds (``consensus_wait``), the robot standing still."""
+
     ID = "RunConsensus"
 
-    def tick(self):
-        self.strategy.run_consensus(self.view)
-        return SUCCESS
+    def on_start(self):
+        return RUNNING if self.strategy.start_consensus(self.view) else SUCCESS
+
+    def on_running(self):
+        return RUNNING if self.strategy.consensus_step(self.view) else SUCCESS
+
+    def on_halted(self):
+        self.strategy.end_consensus()
 
 
 class AdaptInterval(_SARNode, SyncAction):
