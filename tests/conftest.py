@@ -18,6 +18,7 @@ pytest_plugins = ("tests.netns",)  # the `lab` fixture: stand-in hosts in networ
 
 ROOT = Path(__file__).resolve().parent.parent
 QUICKSTART = ROOT / "experiments" / "quickstart.yaml"
+SAR_BASE = ROOT / "experiments" / "sar" / "_base.yaml"  # the search-and-rescue baseline
 
 
 # A shell starts a background job with SIGINT ignored, and an ignored signal stays ignored across

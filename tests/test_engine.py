@@ -11,9 +11,9 @@ import pytest
 from swarmbed.experiments.launch.inprocess import run_in_process
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.rundir import RECEIVER_LEDGER
-from tests.conftest import ROOT, experiment, same_results
+from tests.conftest import ROOT, SAR_BASE, experiment, same_results
 
-SAR = ROOT / "experiments" / "sar" / "_base.yaml"
+SAR = SAR_BASE
 CASES = {
     "quickstart": (ROOT / "experiments" / "quickstart.yaml", []),
     # robots lost mid-run (the scenario retires them), failed actions, loss and a rate cap

@@ -16,9 +16,9 @@ import pytest
 from swarmbed.coordinator.coordinator import RunError
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity
-from tests.conftest import QUICKSTART, experiment, reference_run, same_results
+from tests.conftest import SAR_BASE, experiment, reference_run, same_results
 
-SAR = QUICKSTART.parent / "sar" / "_base.yaml"
+SAR = SAR_BASE
 
 
 def test_agents_split_over_three_hosts_give_the_all_local_results(lab, tmp_path, operator):

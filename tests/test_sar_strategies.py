@@ -12,7 +12,7 @@ from swarmbed.plugins.registry import make
 from swarmbed.plugins.sar.ccbba import ClusteringCBBA, kmeans_pp
 from swarmbed.plugins.sar.interval import IntervalParams, next_interval, omega, sigmoid
 from swarmbed.scenarios.sar import SARObservation
-from swarmbed.wire.codec import TASK_DTYPE
+from swarmbed.wire.codec import EMPTY_INBOX, TASK_DTYPE
 
 P = IntervalParams()  # the paper's values: rho 1, theta 3/1, mu 10, kappa 0.1, lambda 6, gamma 0.001, phi 3..8
 
@@ -389,3 +389,33 @@ def test_a_ccbba_leader_answers_its_cluster_only_once_the_leaders_settle():
         ((2,), "leaders"),
         ((2,), "leaders"),
     ]  # leaders and cluster told together, in the tick it relays
+
+
+@pytest.mark.parametrize("strategy", ["cbba-tree", "cbba-etc"])
+def test_the_trees_runconsensus_node_keeps_the_robot_still_while_its_round_runs(strategy):
+    """The shipped behavior tree, in the agent runtime: a robot with no target sees a victim 20 m
+    away, builds, starts a round and selects. With a round that takes time (the default) it
+    stands (``stop``) for the round's two ticks before it moves; with ``free`` it moves a tick
+    after it announced."""
+    from swarmbed.agent_runtime.runtime import AgentRuntime
+    from swarmbed.experiments.launch.config import resolve_experiment
+    from swarmbed.wire.schema import agent_spec
+    from tests.conftest import SAR_BASE, experiment
+
+    def first_actions(wait: str) -> list:
+        exp = experiment(f"allocator={{name: {strategy}, consensus_wait: {wait}}}", "agents.count=2", base=SAR_BASE)
+        runtime = AgentRuntime(agent_spec(exp, resolve_experiment(exp).targets), 0)
+        table = np.zeros(1, dtype=TASK_DTYPE)
+        table["id"], table["x"], table["remaining"], table["color"] = 7, 20.0, 90.0, -1
+        actions = []
+        for tick in range(5):
+            obs = SARObservation(
+                tick * 0.25, 0.0, 0.0, 0.0, 0.0, table, color=0, reach=5.0, robots=[], inspected=[], rescued=[], busy=0
+            )
+            action, _, _ = runtime.step(tick, obs, EMPTY_INBOX)
+            actions.append(action[0])
+        return actions
+
+    default = "agree" if strategy == "cbba-tree" else "round"
+    assert first_actions(default) == ["stop", "stop", "stop", "goto_task", "goto_task"]
+    assert first_actions("free") == ["stop", "goto_task", "goto_task", "goto_task", "goto_task"]
