@@ -122,7 +122,6 @@ class Coordinator:
         self.reports: dict[int, Final] = {}
         self.netem_report: NetemFinal | None = None
         self.malformed = 0
-        self.realtime = exp.run.clock == "realtime"
         self.clock = WallClock(exp.run)  # pacing and wall-clock facts (never in a lock-step run's files)
         self.last_tick = -1
         self.wall: dict[str, float] = {}
@@ -168,7 +167,7 @@ class Coordinator:
                 raise RunError(str(exc)) from None
             if self.decision_source == "ros2":
                 timeout = self.exp.ros2.command_timeout
-                self.commands = Ros2Commands(self.ros2, self.n, timeout, self.realtime, self._malformed)
+                self.commands = Ros2Commands(self.ros2, self.n, timeout, self.clock.realtime, self._malformed)
         _check_decision_source(self.exp, self.decision_source, self.commands)
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
@@ -467,7 +466,7 @@ class Coordinator:
 
     def summary(self) -> RunSummary:
         assert self.netem_report is not None, "summary() before the proxy's final report"
-        clock = self.clock.summary() if self.realtime else None
+        clock = self.clock.summary() if self.clock.realtime else None
         return self.recorder.summary(
             self.last_tick + 1, self.agents, self.reports, self.netem_report, self.malformed, clock
         )

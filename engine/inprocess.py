@@ -32,7 +32,7 @@ class InProcess:
         spec = agent_spec(exp, targets)
         self.world = world
         self.runtimes = {i: AgentRuntime(spec, i) for i in range(exp.agents.count)}
-        self.exchange_ = Exchange(netem_spec(exp), out_dir)
+        self.radio_exchange = Exchange(netem_spec(exp), out_dir)
         # what the recorder reads of a run's membership: no process is ever lost, swapped or restarted
         self.lost: dict[int, int] = {}  # agent -> tick its robot was lost (the scenario's losses)
         self.swap_log: list[SwapRecord] = []
@@ -52,7 +52,7 @@ class InProcess:
         return {}
 
     def world_ready(self, sample: WorldSample) -> None:
-        self.exchange_.radio.confirm()  # the inboxes made for this tick arrived
+        self.radio_exchange.radio.confirm()  # the inboxes made for this tick arrived
 
     def exchange(
         self, k: int, sample: WorldSample, observed: Mapping[int, Observation], inboxes: Mapping[int, bytes]
@@ -64,7 +64,7 @@ class InProcess:
                 k, runtime.decode_observation(obs.to_wire()), inboxes.get(i, EMPTY_INBOX)
             )
             outs[i] = decode_agent_out(encode_agent_out(k, i, action, messages, events))
-        return self.exchange_.route(sample, outs)
+        return self.radio_exchange.route(sample, outs)
 
     def lose(self, agent: int, k: int) -> None:  # no process to lose
         raise AssertionError(f"agent {agent} lost at tick {k} in a run of one process")
@@ -92,4 +92,4 @@ class InProcess:
 
     def finish(self, last_tick: int) -> NetemFinal:
         """Close the radio's ledger and make the proxy's final report."""
-        return self.exchange_.finish(last_tick, malformed=0)
+        return self.radio_exchange.finish(last_tick, malformed=0)

@@ -389,7 +389,7 @@ class Chaos:
             if live.tick <= record["resumed_tick"] + 1:
                 return None  # resumed: wait until it answered a tick again
             late = live.late_ticks.get(agent, 0) - record["late_before"]
-            waited = f", {late} late ticks" if coord.realtime else ""
+            waited = f", {late} late ticks" if coord.exp.run.clock == "realtime" else ""
             return f"resumed at tick {record['resumed_tick']}{waited}"
         if record["kind"] == "cut":
             return self._cut_outcome(record)
