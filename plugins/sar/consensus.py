@@ -66,7 +66,9 @@ class ConsensusParams(StrategyParams):
     round_ticks: int = Field(
         2, ge=1, description="ticks a round listens for replies (2: a neighbour's answer, out and back)"
     )
-    max_rounds: int = Field(10, ge=1, description="consensus_wait agree: rounds at most before acting")
+    max_rounds: int = Field(
+        10, ge=1, description="consensus_wait agree (and a c-cbba leader's exchange): rounds at most before acting"
+    )
 
 
 class ReactiveParams(ConsensusParams):
