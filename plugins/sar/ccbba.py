@@ -130,18 +130,18 @@ class ClusteringCBBA(ReactiveCBBA):
     def relay(self, view: LocalView) -> None:
         """Leader: pass the merged view to the other leaders and back to the cluster (with
         ``consensus_wait: leaders`` back to the cluster only once the leaders' rounds settle)."""
-        others = [a for a in self.leaders if a != self.agent_id]
         if self.exchange_began is not None:
             if view.tick - self.exchange_began < self.params.round_ticks:
                 return
             if self.dirty and self.exchange_rounds < self.params.max_rounds:
-                self.exchange(view, others)
+                self.exchange(view)
                 return
             self.exchange_began = None  # a global consensus, as far as this leader hears
             self.disseminate(view)
             return
         if not (self.dirty or self.now - self.last_relay >= self.params.period):
             return
+        others = self.other_leaders
         if self.wait == "free" or not others:
             message = self.state.message()
             if others:
@@ -150,11 +150,15 @@ class ClusteringCBBA(ReactiveCBBA):
             self.disseminate(view, message)
             return
         self.exchange_rounds = 0
-        self.exchange(view, others)
+        self.exchange(view)
 
-    def exchange(self, view: LocalView, others: list[int]) -> None:
+    @property
+    def other_leaders(self) -> list[int]:
+        return [a for a in self.leaders if a != self.agent_id]
+
+    def exchange(self, view: LocalView) -> None:
         """A round among the leaders."""
-        view.send(others, LEADERS, self.state.message())
+        view.send(self.other_leaders, LEADERS, self.state.message())
         self.count("negotiations")
         self.dirty = False
         self.exchange_began = view.tick
@@ -176,7 +180,7 @@ class ClusteringCBBA(ReactiveCBBA):
     def run_consensus(self, view: LocalView) -> None:
         if self.is_leader:  # a leader's rounds are its relays (counted there)
             self.broadcast_round(view)
-            self.close_round(losses=self.wait == "free")
+            self.close_round()
             return
         self.result_heard = False
         super().run_consensus(view)

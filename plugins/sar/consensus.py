@@ -57,7 +57,7 @@ class ConsensusParams(StrategyParams):
     )
     consensus_wait: Literal["free", "round", "agree"] | None = Field(
         None,
-        description="what a consensus costs the robot in simulated time (docs/reproduction.md section 6): "
+        description="what a consensus costs the robot in simulated time (docs/reproduction.md sections 1 and 5): "
         "free (nothing: it acts in the tick it announced, as runs before 2026-11-28 did), round (one "
         "communication round: it stands still round_ticks ticks listening, then acts on what came back), "
         "agree (rounds until one brings nothing new, a local agreement, at most max_rounds); "
@@ -177,20 +177,19 @@ class SARConsensus(SARStrategy):
         return self.WAIT if self.params.consensus_wait is None else self.params.consensus_wait
 
     def run_consensus(self, view: LocalView) -> None:
-        """Announce one round; with ``consensus_wait: free`` it is over at once."""
+        """Announce one round."""
         self.broadcast_round(view)
         self.count("negotiations")
-        self.close_round(losses=self.wait == "free")
+        self.close_round()
 
-    def close_round(self, losses: bool = True) -> None:
-        """Book a round: when, the bundle it announced, and (``losses``) the tasks lost since the
-        last one (Lc); a consensus that takes time books Lc when it ends, with its replies in."""
+    def close_round(self) -> None:
+        """Book a round's start: when, and the bundle it announced."""
         self.last_round = self.now
         self.bundle_at_round = list(self.state.bundle)
-        if losses:
-            self.book_losses()
 
     def book_losses(self) -> None:
+        """A consensus ended: the tasks lost since the last one ended are its Lc (with a consensus
+        that takes time, its replies are in)."""
         self.lost_before, self.lost_last, self.lost = self.lost_last, self.lost, 0
 
     def start_consensus(self, view: LocalView) -> bool:
@@ -199,8 +198,7 @@ class SARConsensus(SARStrategy):
         off to wait: for it a round is free."""
         if self.wait == "free" or self.busy:
             self.run_consensus(view)
-            if self.wait != "free":
-                self.book_losses()
+            self.book_losses()
             return False
         self.round_began, self.rounds_in, self.news = view.tick, 1, False
         self.run_consensus(view)
@@ -243,6 +241,7 @@ class SARConsensus(SARStrategy):
         self.build_bundle(view)
         if self.should_trigger(view):
             self.run_consensus(view)
+            self.book_losses()
             self.adapt_interval()
         return self.select_new_target(view)
 
