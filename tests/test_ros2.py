@@ -89,6 +89,18 @@ def test_payloads_are_cdr_with_the_encapsulation_header(types):
         types.deserialize(data[:5], "geometry_msgs/msg/PoseStamped")
 
 
+def test_stamps_carry_a_rounded_up_fraction_into_the_seconds(types):
+    # tick 90 at dt 0.7 is 62.99999999999999 s in floating point: stamped 63 s, never 62 s
+    t = 90 * 0.7
+    assert (stamp(types, t).sec, stamp(types, t).nanosec) == (63, 0)
+    previous = (-1, 0)
+    for tick in range(2000):  # simulated time never runs backwards in the stamps
+        s = stamp(types, tick * 0.7)
+        assert 0 <= s.nanosec < 1_000_000_000 and (s.sec, s.nanosec) > previous, tick
+        assert abs(s.sec + s.nanosec * 1e-9 - tick * 0.7) < 1e-6
+        previous = (s.sec, s.nanosec)
+
+
 def test_the_shipped_ros2_package_defines_the_types_the_run_uses(types):
     from pathlib import Path
 

@@ -251,11 +251,10 @@ class Ros2Types:
 
 
 def stamp(types: Ros2Types, seconds: float) -> Any:
-    """A ``builtin_interfaces/Time`` of simulated seconds."""
-    whole = int(seconds // 1)
-    return types.cls("builtin_interfaces/msg/Time")(
-        sec=whole, nanosec=int(round((seconds - whole) * 1e9)) % 1_000_000_000
-    )
+    """A ``builtin_interfaces/Time`` of simulated seconds, rounded to the nearest nanosecond (a
+    fraction that rounds up to a whole second carries into ``sec``: 62.99999999999999 is 63 s)."""
+    sec, nanosec = divmod(round(seconds * 1e9), 1_000_000_000)
+    return types.cls("builtin_interfaces/msg/Time")(sec=int(sec), nanosec=int(nanosec))
 
 
 def wall_ns() -> int:
