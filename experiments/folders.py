@@ -14,7 +14,8 @@ from typing import Any
 
 import pandas as pd
 
-from swarmbed.wire.rundir import RunFileError, member
+from swarmbed.experiments.rundir import read_table_member
+from swarmbed.wire.rundir import RunFileError
 
 # a sweep folder
 SPEC = "sweep.json"  # the sweep as planned: name, base, seed, runs, scenarios and their overrides
@@ -51,13 +52,9 @@ def read_table(sweep_dir: Path) -> pd.DataFrame:
         if not (sweep_dir / name).exists():
             continue
         try:
-            path = member(sweep_dir, name)
-            table = pd.read_parquet(path) if name == PARQUET else pd.read_csv(path)
+            table = read_table_member(sweep_dir, name)
         except RunFileError as exc:
             problems.append(str(exc))
-            continue
-        except Exception as exc:  # pyarrow and pandas raise many kinds for a torn or foreign file
-            problems.append(f"{sweep_dir / name}: cannot be read as a table ({type(exc).__name__})")
             continue
         missing = [c for c in TABLE_COLUMNS if c not in table.columns]
         if missing:

@@ -11,19 +11,21 @@ names are :mod:`swarmbed.wire.rundir`'s, shared with the processes that write th
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
-import yaml
 
+from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml
 from swarmbed.wire import rundir as names
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.rundir import (
     CONFIG,
     LEDGER_COLUMNS,
     MARKER_COLUMNS,
+    MAX_CONFIG_BYTES,
     SUMMARY,
     RunFileError,
     check_finite,
@@ -31,14 +33,58 @@ from swarmbed.wire.rundir import (
     read_json_member,
     read_member,
 )
+from swarmbed.wire.schema import MAX_AGENT_COUNT
 from swarmbed.wire.summary import RunSummary, read_summary
 
 #: the most ticks a view believes a run has: far beyond any run's (a day at 1 ms)
 MAX_TICKS = 10**9
 
 
-#: the most agents a view believes a run has (it draws matrices of agents by agents)
-MAX_AGENTS = 100_000
+#: the most agents a view believes a run has (it draws matrices of agents by agents): the most a
+#: run can have (``agents.count``)
+MAX_AGENTS = MAX_AGENT_COUNT
+
+#: the most bytes on disk and rows a reader takes from one table of a run or sweep folder. A
+#: Parquet file compresses equal rows to nothing (40 M rows in under 1 MB), so its rows are counted
+#: from its footer before anything is read. ``SWARMBED_MAX_TABLE_ROWS`` raises the row bound for a
+#: run known to be larger (10 M rows is a 500-agent trajectory of 20,000 ticks).
+MAX_TABLE_BYTES = 2 << 30
+MAX_TABLE_ROWS = 10_000_000
+
+
+def max_table_rows() -> int:
+    """:data:`MAX_TABLE_ROWS`, or ``SWARMBED_MAX_TABLE_ROWS`` where it is set to a whole number."""
+    given = os.environ.get("SWARMBED_MAX_TABLE_ROWS", "")
+    return int(given) if given.isdigit() else MAX_TABLE_ROWS
+
+
+def read_table_member(folder: Path, name: str, **read: Any) -> pd.DataFrame:
+    """The CSV or Parquet table ``folder/name`` (a regular file inside ``folder``, see
+    :func:`~swarmbed.wire.rundir.member`), read as what its name says and nothing else: no
+    decompression a name inside it or the target of a link would pick, at most
+    :data:`MAX_TABLE_BYTES` on disk and :func:`max_table_rows` rows, counted before the rows are
+    allocated. A RunFileError names the file for anything else."""
+    path, shown = member(folder, name), Path(folder) / name
+    size, rows = path.stat().st_size, max_table_rows()
+    if size > MAX_TABLE_BYTES:
+        raise RunFileError(f"{shown}: {size:,} bytes, more than a table read here ({MAX_TABLE_BYTES:,})")
+    too_many = f"{shown}: more than {rows:,} rows, more than a table read here (SWARMBED_MAX_TABLE_ROWS raises it)"
+    try:
+        if name.endswith(".parquet"):
+            import pyarrow.parquet as pq
+
+            if pq.ParquetFile(path).metadata.num_rows > rows:
+                raise RunFileError(too_many)
+            frame = pd.read_parquet(path)
+        else:
+            frame = pd.read_csv(path, compression=None, nrows=rows + 1, **read)
+            if len(frame) > rows:
+                raise RunFileError(too_many)
+    except RunFileError:
+        raise
+    except Exception as exc:  # pandas and pyarrow raise many kinds for a torn or foreign file
+        raise RunFileError(f"{shown}: cannot be read as a table ({type(exc).__name__})") from None
+    return frame
 
 
 class RunDir:
@@ -79,11 +125,11 @@ class RunDir:
     def config(self) -> dict[str, Any]:
         """The run's resolved experiment, ``config.yaml``, as a mapping with a ``run`` section."""
         if self._config is None:
-            text = read_member(self.path, CONFIG).decode(errors="replace")
+            text = read_member(self.path, CONFIG, MAX_CONFIG_BYTES).decode(errors="replace")
             try:
-                config = yaml.safe_load(text)
-            except (yaml.YAMLError, RecursionError) as exc:
-                raise RunFileError(f"{self.path / CONFIG}: not YAML ({str(exc).splitlines()[0][:80]})") from None
+                config = parse_yaml(text, str(self.path / CONFIG))
+            except YamlFileError as exc:
+                raise RunFileError(str(exc).splitlines()[0][:200]) from None
             if not isinstance(config, dict) or not isinstance(config.get("run"), dict):
                 raise RunFileError(f"{self.path / CONFIG}: no run section")
             self._config = config
@@ -118,11 +164,7 @@ class RunDir:
         """A CSV or Parquet table of the run, with at least ``columns``. With ``ticks``: its ``tick``
         column must hold whole numbers from 0 to ``ticks``; the columns ``finite`` must hold finite
         numbers."""
-        path = member(self.path, name)
-        try:
-            frame = pd.read_parquet(path) if name.endswith(".parquet") else pd.read_csv(path, **read)
-        except Exception as exc:  # pandas and pyarrow raise many kinds for a torn or foreign file
-            raise RunFileError(f"{self.path / name}: cannot be read as a table ({type(exc).__name__})") from None
+        frame = read_table_member(self.path, name, **read)
         for column in columns:
             if column not in frame:
                 raise RunFileError(f"{self.path / name}: no column {column!r}")

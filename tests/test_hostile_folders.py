@@ -178,3 +178,72 @@ def test_torn_tables_and_a_foreign_plan_are_one_line(swept, tmp_path):
     (fresh / "sweep.json").write_text("[]")
     _one_line_naming(_swarmbed("analyze", fresh), "sweep.json")
     _one_line_naming(_swarmbed("sweep", "--status", fresh), "sweep.json")
+
+
+def _bounded(*args, env: dict | None = None) -> subprocess.CompletedProcess:
+    """``swarmbed ARGS`` in at most 3 GB of address space and 120 s: a reader that allocates by what
+    a folder claims dies here instead of taking the machine."""
+    import os
+    import resource
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
+
+    return subprocess.run(
+        [sys.executable, "-m", "swarmbed", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=limit,
+        env={**os.environ, **(env or {})},
+    )
+
+
+def test_a_link_to_a_compressed_table_is_not_inflated(recorded, tmp_path):
+    import gzip
+
+    run = _copy(recorded, tmp_path / "run")
+    ledger = pd.read_csv(run / "network_ledger.csv")
+    rows = "".join(f"{i % 30},0,fcg,delivered,1,10\n" for i in range(2_000_000))
+    (run / "big.csv.gz").write_bytes(gzip.compress(("tick,sender,kind,outcome,messages,bytes\n" + rows).encode()))
+    (run / "network_ledger.csv").unlink()
+    (run / "network_ledger.csv").symlink_to("big.csv.gz")  # inside the folder: a name pandas would inflate
+    _one_line_naming(_bounded("report", run, "-o", tmp_path / "r.html"), "network_ledger.csv")
+    (run / "network_ledger.csv").unlink()
+    shutil.copy(run / "big.csv.gz", run / "network_ledger.csv")  # compressed bytes under a CSV name
+    done = _bounded("report", run, "-o", tmp_path / "r.html")
+    _one_line_naming(done, "network_ledger.csv")
+    assert len(ledger) < 1000 and not (tmp_path / "r.html").exists()
+
+
+def test_a_table_of_more_rows_than_a_reader_takes_is_refused_before_it_is_read(recorded, tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    run = _copy(recorded, tmp_path / "run")
+    receivers = pq.read_table(run / "network_ledger_receivers.parquet")
+    many = pa.concat_tables([receivers] * (5000 // receivers.num_rows + 2))
+    pq.write_table(many, run / "network_ledger_receivers.parquet")
+    bound = {"SWARMBED_MAX_TABLE_ROWS": "5000"}  # the same check as 10 M, on a table a test can write
+    _one_line_naming(_bounded("report", run, "-o", tmp_path / "r.html", env=bound), "network_ledger_receivers")
+    _one_line_naming(_bounded("replay", run, "--mcap", tmp_path / "r.mcap", env=bound), "network_ledger_receivers")
+    assert _bounded("report", run, "-o", tmp_path / "r.html").returncode == 0  # within the default bound
+
+
+def test_counts_a_folder_claims_are_bounded_before_anything_is_allocated(recorded, swept, tmp_path):
+    import json
+
+    run = _copy(recorded, tmp_path / "run")
+    summary = json.loads((run / "summary.json").read_text())
+    summary["agents"] = 12000
+    (run / "summary.json").write_text(json.dumps(summary))
+    _one_line_naming(_bounded("report", run, "-o", tmp_path / "r.html"), "summary.json")
+    run = _copy(recorded, tmp_path / "config")
+    text = (run / "config.yaml").read_text()
+    (run / "config.yaml").write_text(text + "padding:\n" + "".join(f"  k{i}: {i}\n" for i in range(200_000)))
+    _one_line_naming(_bounded("report", run, "-o", tmp_path / "r.html"), "config.yaml")
+    sweep = _copy(swept / "out", tmp_path / "sweep")
+    plan = json.loads((sweep / "sweep.json").read_text())
+    plan["runs"] = 100_000_000
+    (sweep / "sweep.json").write_text(json.dumps(plan))
+    _one_line_naming(_bounded("sweep", "--status", sweep), "sweep.json")

@@ -80,6 +80,8 @@ REPRODUCIBLE = (
 # -- reading a folder someone else may have made ---------------------------------------------------
 #: the most a reader takes from one JSON or YAML file of a run (a summary is a few kB)
 MAX_DOCUMENT_BYTES = 16 << 20
+#: the most a reader takes of ``config.yaml`` (a resolved experiment is a few kB; parsing YAML is slow)
+MAX_CONFIG_BYTES = 1 << 20
 
 
 class RunFileError(ValueError):
@@ -91,6 +93,8 @@ def member(folder: Path, name: str) -> Path:
     folder is data anyone may have crafted, and a link in it must not make a reader open
     ``/etc/shadow``, a FIFO that never ends, or ``/dev/zero``."""
     path = Path(folder) / name
+    if path.is_symlink():  # a link inside the folder may name a .gz that a reader would inflate
+        raise RunFileError(f"{path}: a symbolic link, not a regular file: not read")
     try:
         real, inside = path.resolve(strict=True), Path(folder).resolve(strict=True)
         st = real.stat()

@@ -25,6 +25,8 @@ SAFE_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.+=-]{0,99}$"
 
 #: the most ticks one run may have (duration / dt): checked before anything is built
 MAX_TICKS = 100_000_000
+#: the most agents a run has (each is an OS process); views bound what they draw by it
+MAX_AGENT_COUNT = 1000
 
 
 class Strict(BaseModel):
@@ -91,7 +93,7 @@ class RunSection(Strict):
 
 
 class AgentsSection(Strict):
-    count: int = Field(10, ge=1, le=1000, description="number of agents, one OS process each")
+    count: int = Field(10, ge=1, le=MAX_AGENT_COUNT, description="number of agents, one OS process each")
     max_speed: float = Field(0.25, gt=0, description="v_max, units per second")
     max_accel: float = Field(0.01, gt=0, description="a_max, units per second^2 (MT-SR kinematics)")
     max_turn_rate: float = Field(0.25, gt=0, description="omega_max, radians per second (MT-SR kinematics)")

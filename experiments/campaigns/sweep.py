@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 import re
 import socket
@@ -58,7 +59,7 @@ from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml, read_yaml
 from swarmbed.experiments.rundir import RunDir
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.rundir import PROVENANCE, RunFileError, read_json_member, read_member
+from swarmbed.wire.rundir import MAX_CONFIG_BYTES, PROVENANCE, RunFileError, read_json_member, read_member
 from swarmbed.wire.schema import SAFE_NAME
 
 
@@ -163,6 +164,8 @@ def load_sweep(
     grid_spec.update(_parse_grid(g) for g in grid)
     entries = [SweepScenario(e.name, tuple(e.set.items())) for e in spec.scenarios] or [SweepScenario("", ())]
     keys = list(grid_spec)
+    runs_each = spec.runs if runs is None else runs
+    _check_size(len(entries) * math.prod(len(v) for v in grid_spec.values()), runs_each, str(path))
     scenarios = []
     for entry in entries:
         for combo in itertools.product(*(grid_spec[k] for k in keys)):
@@ -195,6 +198,19 @@ def load_sweep(
         factors,
         list(extra),
     )
+
+
+#: the most runs a sweep plans (scenarios x runs): every planned run is an object and a folder
+MAX_PLANNED_RUNS = 1_000_000
+
+
+def _check_size(scenarios: int, runs: int, where: str) -> None:
+    """A ConfigError naming ``where`` for a sweep of more than :data:`MAX_PLANNED_RUNS` runs, before
+    any of them is planned."""
+    if scenarios * max(runs, 1) > MAX_PLANNED_RUNS:
+        raise cfg.ConfigError(
+            f"{where}: {scenarios:,} scenarios x {runs:,} runs is more than the {MAX_PLANNED_RUNS:,} runs a sweep plans"
+        )
 
 
 def run_seeds(sweep_seed: int, runs: int) -> list[int]:
@@ -423,6 +439,7 @@ def read_spec(out: Path) -> Sweep:
     try:
         data = read_json_member(out, SPEC)
         order = data.get("order") or list(data["scenarios"])
+        _check_size(len(order), int(data["runs"]), str(out / SPEC))
         return Sweep(
             data["name"],
             Path(data["base"]),
@@ -432,6 +449,8 @@ def read_spec(out: Path) -> Sweep:
             list(data["factors"]),
             list(data["extra"]),
         )
+    except cfg.ConfigError:
+        raise
     except (OSError, ValueError, KeyError, TypeError, AttributeError, RunFileError) as exc:
         raise cfg.ConfigError(f"{out}: not a sweep directory (no readable {SPEC}: {exc})") from None
 
@@ -475,8 +494,8 @@ def _check_completed(specs: list[RunSpec], out: Path, redo: bool) -> None:
             continue
         planned = cfg.to_yaml(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra))
         try:
-            made = (run_dir / results.CONFIG).read_text()
-        except OSError:
+            made = read_member(run_dir, results.CONFIG, MAX_CONFIG_BYTES).decode(errors="replace")
+        except RunFileError:
             made = ""
         if made != planned:
             mismatched.append((spec, made, planned))

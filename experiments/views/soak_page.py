@@ -16,9 +16,10 @@ from swarmbed.experiments.folders import CHAOS as CHAOS_FILE
 from swarmbed.experiments.folders import SOAK_PROCESSES as PROCESSES
 from swarmbed.experiments.folders import SOAK_RUN as RUN
 from swarmbed.experiments.folders import SOAK_VERDICT as VERDICT
+from swarmbed.experiments.rundir import read_table_member
 from swarmbed.experiments.views.colours import DROP_COLORS
 from swarmbed.experiments.views.page import Page
-from swarmbed.wire.rundir import RunFileError, member, read_json_member
+from swarmbed.wire.rundir import read_json_member
 
 CHAOS_COLORS = {"kill_agent": "#D55E00", "stop_agent": "#E69F00", "loss_burst": "#0072B2", "rate_cap": "#009E73"}
 
@@ -27,12 +28,7 @@ def _read(folder: Path, name: str) -> tuple[pd.DataFrame | None, str]:
     """A soak table and the file it came from (the ``.part`` of a soak that did not finish)."""
     for candidate in (name, name + ".part"):
         if (folder / candidate).exists():
-            try:
-                return pd.read_csv(member(folder, candidate)), candidate
-            except RunFileError:
-                raise
-            except Exception as exc:  # pandas raises many kinds for a torn or foreign file
-                raise RunFileError(f"{folder / candidate}: cannot be read as a table ({type(exc).__name__})") from None
+            return read_table_member(folder, candidate), candidate
     return None, name
 
 
