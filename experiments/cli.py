@@ -251,8 +251,10 @@ def cmd_credentials(args: argparse.Namespace) -> int:
     try:
         if args.host and args.role != "host":
             raise CredentialsError("--host names the host of a host identity: give --role host too")
-        path = write_credentials(Path(args.file), Identity.new(args.user, args.role, args.host or ""))
-    except (CredentialsError, OSError) as exc:
+        path = write_credentials(
+            Path(args.file), Identity.new(args.user, args.role, args.host or ""), replace=args.force
+        )
+    except CredentialsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"{path}: {args.role} {args.user!r}; admit it with swarmbed run --admit {path}")
@@ -264,7 +266,8 @@ def register_credentials(sub: Subparsers) -> None:
     from swarmbed.wire.credentials import ROLES
 
     cr = sub.add_parser("credentials", help="make a credentials file for a host daemon or an operator (watch, swap)")
-    cr.add_argument("file", help="the file to write (created with mode 600)")
+    cr.add_argument("file", help="the file to write (created with mode 600; an existing file only with --force)")
+    cr.add_argument("--force", action="store_true", help="replace FILE if it exists")
     cr.add_argument("--user", required=True, help="the user name (letters, digits, no ':' or spaces)")
     cr.add_argument(
         "--role",

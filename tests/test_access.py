@@ -586,3 +586,65 @@ def test_on_an_open_hub_malformed_keys_and_control_samples_are_counted_not_fatal
     assert malformed["netem"] >= 7 + 8 and malformed["coordinator"] >= 5, malformed
     for name in ("timeseries.csv", "agents.csv", "network_ledger.csv"):
         assert (tmp_path / "clean" / name).read_bytes() == (tmp_path / "attacked" / name).read_bytes(), name
+
+
+def _cli(*args, cwd: Path | None = None, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "swarmbed", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=cwd or Path(__file__).resolve().parent.parent,
+    )
+
+
+def _one_line(done: subprocess.CompletedProcess, *words: str) -> None:
+    err = done.stderr.strip()
+    assert done.returncode == 2 and len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert all(word in err for word in words), err
+
+
+def test_credentials_never_replace_a_file_without_force_and_name_what_is_wrong(tmp_path):
+    experiment = tmp_path / "exp.yaml"
+    experiment.write_text("name: mine\n")
+    experiment.chmod(0o644)
+    _one_line(_cli("credentials", experiment, "--user", "op"), "exists", "--force")
+    assert experiment.read_text() == "name: mine\n" and (experiment.stat().st_mode & 0o777) == 0o644
+    host = tmp_path / "host.json"
+    assert _cli("credentials", host, "--user", "lab1", "--role", "host").returncode == 0
+    before = host.read_text()
+    _one_line(_cli("credentials", host, "--user", "op"), "exists")
+    assert host.read_text() == before
+    assert _cli("credentials", host, "--user", "op", "--force").returncode == 0
+    assert read_credentials(host).role == "operator"
+    _one_line(_cli("credentials", tmp_path / "missing" / "c.json", "--user", "op"), "missing", "No such file")
+    # a run's own process names and names that are no names are refused, at once and in a file
+    for user in ("agent-0", "netem", "lab1-agents", "..", ".", "-rf"):
+        _one_line(_cli("credentials", tmp_path / f"u{len(user)}{user.strip('.-')}.json", f"--user={user}"), "user name")
+    crafted = _crafted(tmp_path, "agent0", user="agent-0", password="p" * 24, role="operator")
+    _one_line(_cli("run", "experiments/quickstart.yaml", "--admit", crafted, "--check"), "agent0.json", "agent-<i>")
+
+
+def test_a_credentials_file_of_nested_brackets_is_one_line(tmp_path):
+    nested = tmp_path / "nested.json"
+    nested.write_text("[" * 4000)
+    nested.chmod(0o600)
+    with pytest.raises(CredentialsError, match="not JSON"):
+        read_credentials(nested)
+    _one_line(_cli("run", "experiments/quickstart.yaml", "--admit", nested, "--check"), "nested.json")
+    _one_line(_cli("host", "--name", "h", "--connect", "tcp/127.0.0.1:9", "--credentials", nested), "nested.json")
+
+
+def test_a_host_daemon_refuses_a_long_name_and_a_busy_port_in_one_line(tmp_path):
+    import socket
+
+    _one_line(_cli("host", "--name", "h" * 58, "--connect", "tcp/127.0.0.1:9", "--insecure"), "host name", "57")
+    _one_line(_cli("host", "--name=-rf", "--connect", "tcp/127.0.0.1:9", "--insecure"), "host name")
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        done = _cli(
+            "host", "--name", "h1", "--insecure", "--connect", "tcp/127.0.0.1:9", "--listen", f"tcp/127.0.0.1:{port}"
+        )
+    _one_line(done, f"127.0.0.1:{port}", "--listen")

@@ -25,7 +25,14 @@ ROLES = ("operator", "host", "commander")  # commander: an operator that may pub
 ALL_ROLES = (*ROLES, "netem", "agent")
 #: user and host names: one line of the hub's ``user:password`` dictionary and one key chunk of
 #: ``swarmbed/hosts/<name>`` each, so no ``:``, no line break, no wildcard, bounded
-NAME = re.compile(r"[A-Za-z0-9_.@-]{1,64}")
+#: and no leading ``.`` or ``-`` (``..`` and ``-rf`` are not names: one would be a folder's parent,
+#: the other an option on any command line it lands on)
+NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.@-]{0,63}")
+#: the user names a run or a host daemon gives its own processes (``netem``, ``agent-<i>``,
+#: ``<host>-agents``): never an admitted identity's
+RESERVED = re.compile(r"netem|agent-[0-9]+|.*-agents")
+#: the longest host name: ``<host>-agents``, its agents' identity, must itself be a user name
+MAX_HOST_NAME = 64 - len("-agents")
 #: passwords: what ``secrets.token_urlsafe`` writes, or any printable ASCII without spaces or ``:``
 PASSWORD = re.compile(r"[!-9;-~]{8,256}")
 #: a credentials file is a few hundred bytes; anything far larger is not one (and is not read)
@@ -51,17 +58,21 @@ class Identity:
             if not isinstance(getattr(self, field), str):
                 raise CredentialsError(f"{field}: must be a string, not {type(getattr(self, field)).__name__}")
         if not NAME.fullmatch(self.user):
-            raise CredentialsError(f"user name {self.user[:80]!r}: 1 to 64 letters, digits, _ . @ - only")
+            raise CredentialsError(
+                f"user name {self.user[:80]!r}: 1 to 64 letters, digits, _ . @ -, starting with a letter, digit or _"
+            )
+        if self.role in ROLES and RESERVED.fullmatch(self.user):
+            raise CredentialsError(
+                f"user name {self.user!r}: a name a run gives its own processes (netem, agent-<i>, <host>-agents)"
+            )
         if not PASSWORD.fullmatch(self.password):
             raise CredentialsError("password: 8 to 256 printable characters, without spaces, ':' or line breaks")
         if self.role not in ALL_ROLES:
             raise CredentialsError(f"role {self.role[:80]!r}: one of {', '.join(ROLES)}")
-        if self.host and (self.role != "host" or not NAME.fullmatch(self.host) or "@" in self.host):
-            raise CredentialsError(
-                f"host name {self.host[:80]!r}: only a host identity has one, 1 to 64 letters, digits, _ . - only"
-            )
-        if self.role == "host" and "@" in self.host_name:
-            raise CredentialsError(f"host name {self.host_name[:80]!r}: letters, digits, _ . - only")
+        if self.host and self.role != "host":
+            raise CredentialsError(f"host name {self.host[:80]!r}: only a host identity has one")
+        if self.role == "host":
+            check_host_name(self.host_name)
 
     @classmethod
     def new(cls, user: str, role: str, host: str = "") -> Identity:
@@ -73,19 +84,37 @@ class Identity:
         return self.host or self.user
 
 
-def open_private(path: str | Path, mode: str = "w") -> IO:
+def check_host_name(name: str) -> str:
+    """``name`` if it can name a host (placements, ``swarmbed host --name``), else a CredentialsError."""
+    if not (isinstance(name, str) and NAME.fullmatch(name) and "@" not in name and len(name) <= MAX_HOST_NAME):
+        raise CredentialsError(
+            f"host name {str(name)[:80]!r}: 1 to {MAX_HOST_NAME} letters, digits, _ . -, starting with a letter, "
+            "digit or _"
+        )
+    return name
+
+
+def open_private(path: str | Path, mode: str = "w", replace: bool = True) -> IO:
     """``path`` opened for writing (``"w"`` or ``"wb"``), emptied and readable by its owner only
-    (mode 600, also when it existed before)."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    (mode 600, also when it existed before). ``replace=False``: a FileExistsError if ``path`` exists
+    (checked and created in one step)."""
+    flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if replace else os.O_EXCL)
+    fd = os.open(path, flags, 0o600)
     f = os.fdopen(fd, mode)
     os.fchmod(fd, 0o600)  # an existing file keeps its mode through O_CREAT
     return f
 
 
-def write_credentials(path: Path, identity: Identity) -> Path:
-    """Write ``identity`` to ``path``, created readable and writable by its owner only."""
-    with open_private(path) as f:
-        json.dump(asdict(identity), f)
+def write_credentials(path: Path, identity: Identity, replace: bool = True) -> Path:
+    """Write ``identity`` to ``path``, created readable and writable by its owner only. ``replace=False``:
+    a CredentialsError if ``path`` exists (a user's file is never replaced without asking)."""
+    try:
+        with open_private(path, replace=replace) as f:
+            json.dump(asdict(identity), f)
+    except FileExistsError:
+        raise CredentialsError(f"{path}: exists; give --force to replace it with new credentials") from None
+    except OSError as exc:
+        raise CredentialsError(f"{path}: {exc.strerror or exc}") from None
     return Path(path)
 
 
@@ -112,7 +141,7 @@ def read_credentials(path: str | Path) -> Identity:
         raise CredentialsError(f"credentials file {path}: {exc.strerror}") from None
     try:
         data = json.loads(raw)
-    except ValueError:
+    except (ValueError, RecursionError):  # nested brackets overflow json's recursion
         raise CredentialsError(f"credentials file {path}: not JSON") from None
     if not isinstance(data, dict) or not {"user", "password"} <= data.keys():
         raise CredentialsError(f"credentials file {path}: not a JSON object with user and password")

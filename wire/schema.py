@@ -125,7 +125,7 @@ class AllocatorSection(BaseModel):
         return dict(self.model_extra or {})
 
 
-HOST_NAME = r"^[A-Za-z0-9_.-]+$"
+HOST_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,56}$"  # credentials.check_host_name's: <host>-agents is a user name
 LOCAL = "local"  # the launching machine's name in a placement
 
 

@@ -36,7 +36,13 @@ import zenoh
 from swarmbed.experiments.hosts.client import HostError
 from swarmbed.experiments.launch.access import EVERY_MESSAGE
 from swarmbed.experiments.launch.launcher import AGENT_MODULE, Children, ForkServerError
-from swarmbed.wire.credentials import Identity, read_credentials, write_credentials, write_dictionary
+from swarmbed.wire.credentials import (
+    Identity,
+    check_host_name,
+    read_credentials,
+    write_credentials,
+    write_dictionary,
+)
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import HOSTS, HostKeys, Keys
 from swarmbed.wire.membership import is_alive
@@ -260,6 +266,7 @@ def serve(
     for ``tls/`` endpoints. Without credentials it refuses to start unless ``insecure`` and every
     endpoint it listens on or connects to is on loopback: an unauthenticated host daemon runs
     whatever anyone who reaches it names."""
+    check_host_name(name)
     if not credentials and not insecure:
         raise HostError(
             f"host {name}: no --credentials: a host daemon without them lets anyone who reaches it start "
@@ -299,6 +306,13 @@ def serve(
     tune_malloc()  # a daemon meant to stay up for days
     try:
         session = zenoh.open(zenoh_config(mode, connect, listen, zenoh_config_file, settings=settings))
+    except zenoh.ZError as exc:  # a --listen port another process holds, an endpoint that cannot be
+        if private:
+            shutil.rmtree(private, ignore_errors=True)
+        raise HostError(
+            f"host {name}: cannot open its router on {', '.join(listen)} ({str(exc).splitlines()[0][:160]}); "
+            "is the port in use? give another --listen"
+        ) from None
     except BaseException:
         if private:
             shutil.rmtree(private, ignore_errors=True)
