@@ -28,9 +28,11 @@ from __future__ import annotations
 import json
 import math
 import queue
+import re
 import shutil
 import tempfile
 import threading
+import weakref
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -44,6 +46,7 @@ except ImportError as exc:  # an optional extra
     raise ImportError("swarmbed.envs needs the envs extra: pip install 'swarmbed[envs]'") from exc
 
 from swarmbed.experiments.launch import config as cfg
+from swarmbed.experiments.launch.access import claim_folder, remove_orphaned_folders
 from swarmbed.experiments.launch.runner import RunResult, run_experiment
 from swarmbed.plugins.external import DEFER
 from swarmbed.wire.codec import WireError, decode_inbox
@@ -62,6 +65,7 @@ class _Bridge:
 
     def __init__(self, max_tasks: int, n: int, reward_key: str) -> None:
         self.max_tasks, self.n, self.reward_key = max_tasks, n, reward_key
+        self.counters: list[str] = []  # the world's numeric counters, as of the first tick
         self.to_env: queue.Queue = queue.Queue()
         self.to_run: queue.Queue = queue.Queue()
         self.coordinator: Any = None
@@ -77,13 +81,15 @@ class _Bridge:
             self.to_env.put(("end", self._progress(world), bool(world.finished)))
 
     def _progress(self, world: Any) -> float:
-        return float(world.row().get(self.reward_key, 0))
+        return float(world.row().get(self.reward_key, 0.0))
 
     def decide(
         self, tick: int, world: Any, observed: Mapping[int, Any], inboxes: Mapping[int, bytes]
     ) -> dict[int, int]:
         if self.stopping:
             return {}
+        if not self.counters:
+            self.counters = sorted(k for k, v in world.row().items() if isinstance(v, (int, float)) and k != "tick")
         views = {i: self._view(obs, inboxes.get(i)) for i, obs in observed.items()}
         self.to_env.put(("tick", tick, views, self._progress(world)))
         decisions = self.to_run.get()
@@ -130,6 +136,7 @@ class SwarmbedParallelEnv(ParallelEnv):
     seeds (its parameters: the experiment's ``allocator:`` keys when it names the same allocator)."""
 
     metadata = {"name": "swarmbed_v0", "render_modes": [], "is_parallelizable": True}
+    render_mode = None  # nothing to render (SuperSuit's vector wrappers read it)
 
     def __init__(
         self,
@@ -140,6 +147,8 @@ class SwarmbedParallelEnv(ParallelEnv):
         out_dir: str | Path | None = None,
         fallback: str | None = None,
     ) -> None:
+        if isinstance(max_tasks, (bool, np.bool_)) or not isinstance(max_tasks, (int, np.integer)) or max_tasks < 1:
+            raise ValueError(f"max_tasks {max_tasks!r}: the rows of tasks an agent sees, a whole number of at least 1")
         self.config = Path(config)
         given = cfg.load(self.config, list(sets))
         external: dict[str, Any] = {"name": "external"}
@@ -168,8 +177,15 @@ class SwarmbedParallelEnv(ParallelEnv):
         self.defer: int | None = max_tasks + 1 if fallback is not None else None
         self._action_space = spaces.Discrete(max_tasks + (2 if fallback is not None else 1))
         self._own_dir = out_dir is None
-        self.out_dir = Path(out_dir) if out_dir is not None else Path(tempfile.mkdtemp(prefix="swarmbed-env-"))
-        self.runs = 0
+        if out_dir is None:  # removed by close(), at exit, or by the next swarmbed process if this one was killed
+            remove_orphaned_folders()
+            self.out_dir = Path(tempfile.mkdtemp(prefix="swarmbed-env-"))
+            claim_folder(self.out_dir)
+            self._cleanup = weakref.finalize(self, shutil.rmtree, self.out_dir, ignore_errors=True)
+        else:
+            self.out_dir = Path(out_dir)
+        self.runs = 0  # the runs this environment started
+        self._seeds: np.random.Generator | None = None  # draws the seed of a reset() given none
         self.agents: list[str] = []
         self.results: list[RunResult] = []  # every finished run of this environment, in order
         self._bridge: _Bridge | None = None
@@ -188,10 +204,17 @@ class SwarmbedParallelEnv(ParallelEnv):
     # -- the run under the environment -------------------------------------------------------------
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         self._end_run()
-        sets = [*self.sets, f"run.seed={seed}"] if seed is not None else self.sets
-        exp = cfg.load(self.config, sets)
+        if seed is None and self._seeds is not None:  # a new world each episode, drawn from the last seed
+            seed = int(self._seeds.integers(2**31))
+        elif seed is None:  # the first episode: the configuration's own seed
+            seed = self.exp.run.seed
+        else:
+            self._seeds = np.random.default_rng(seed)
+        if self._seeds is None:
+            self._seeds = np.random.default_rng(seed)
+        exp = cfg.load(self.config, [*self.sets, f"run.seed={seed}"])
         self._bridge = bridge = _Bridge(self.max_tasks, exp.agents.count, self.reward_key)
-        out = self.out_dir / f"run_{self.runs}"
+        out = self._next_run_dir()
         self.runs += 1
         self._failure = None
 
@@ -208,13 +231,26 @@ class SwarmbedParallelEnv(ParallelEnv):
         item = self._next()
         if item[0] != "tick":
             raise EnvError("the run ended before its first tick")
+        if self.reward_key not in bridge.counters:
+            self._end_run()
+            raise ValueError(
+                f"reward_key {self.reward_key!r}: not a counter of this world (one of {', '.join(bridge.counters)})"
+            )
         _, _tick, views, progress = item
         self._progress = progress
         self.agents = [self.possible_agents[i] for i in sorted(views)]
         obs = self._observe(views)
         return obs, {a: {"task_ids": self._choices[a]} for a in self.agents}
 
+    def _next_run_dir(self) -> Path:
+        """``out_dir/run_<k>``, k after every ``run_<j>`` the folder holds: a run never replaces the
+        results of an earlier one, this environment's or another's."""
+        taken = [int(m.group(1)) for p in self.out_dir.glob("run_*") if (m := re.fullmatch(r"run_(\d+)", p.name))]
+        return self.out_dir / f"run_{max(taken, default=-1) + 1}"
+
     def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        if not isinstance(actions, Mapping):
+            raise ValueError(f"actions: a mapping of agent name to action, not {type(actions).__name__}")
         if self._bridge is None or not self.agents:
             raise EnvError("step() before reset(), or after every agent is done")
         decisions = self._decisions(actions)
@@ -300,7 +336,7 @@ class SwarmbedParallelEnv(ParallelEnv):
         self._end_run()
         self.agents = []
         if self._own_dir:
-            shutil.rmtree(self.out_dir, ignore_errors=True)
+            self._cleanup()
 
 
 def parallel_env(**kwargs: Any) -> SwarmbedParallelEnv:

@@ -2,6 +2,7 @@
 with a run swarmbed itself drives, and bad actions refused while the run goes on."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -79,6 +80,8 @@ def test_bad_actions_are_refused_with_one_line_and_the_run_goes_on(tmp_path):
             ({**good, "agent_2": float("nan")}, ["agent_2", "nan"]),
             ({**good, "agent_7": 0}, ["agent_7"]),
             ({**good, "agent_0": -1}, ["agent_0", "-1"]),
+            ([0, 0, 0], ["mapping", "list"]),
+            (None, ["mapping", "NoneType"]),
         ):
             with pytest.raises(ValueError) as err:
                 env.step(bad)
@@ -131,3 +134,67 @@ def test_a_built_in_allocator_plays_as_a_policy_through_the_env(tmp_path):
     ours, theirs = (json.loads((r.out_dir / "summary.json").read_text()) for r in (driven, builtin))
     assert (ours.pop("allocator"), theirs.pop("allocator")) == ("external", "fcg")
     assert ours == theirs and ours["network"]["messages_sent"] > 0
+
+
+TINY = ("agents.count=2", "run.duration=4")
+
+
+def _to_the_end(env: SwarmbedParallelEnv) -> None:
+    while env.agents:
+        env.step(dict.fromkeys(env.agents, 0))
+
+
+def test_runs_are_numbered_after_what_the_folder_holds_and_unseeded_episodes_differ(tmp_path):
+    first = SwarmbedParallelEnv(sets=TINY, out_dir=tmp_path / "shared")
+    try:
+        first.reset(seed=1)
+        _to_the_end(first)
+        first.reset()  # no seed: drawn from the last one given, so another world
+        _to_the_end(first)
+    finally:
+        first.close()
+    kept = (tmp_path / "shared" / "run_0" / "summary.json").read_bytes()
+    second = SwarmbedParallelEnv(sets=TINY, out_dir=tmp_path / "shared")
+    try:
+        second.reset(seed=2)
+        _to_the_end(second)
+    finally:
+        second.close()
+    assert sorted(p.name for p in (tmp_path / "shared").iterdir()) == ["run_0", "run_1", "run_2"]
+    assert (tmp_path / "shared" / "run_0" / "summary.json").read_bytes() == kept
+    seeds = [json.loads((tmp_path / "shared" / f"run_{k}" / "summary.json").read_text())["seed"] for k in range(3)]
+    assert seeds[0] == 1 and seeds[2] == 2 and seeds[1] not in (1, 2), seeds
+
+
+def test_arguments_no_world_has_are_refused_in_one_line(tmp_path):
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(ValueError, match="max_tasks"):
+            SwarmbedParallelEnv(sets=TINY, max_tasks=bad, out_dir=tmp_path / "never")
+    env = SwarmbedParallelEnv(sets=TINY, reward_key="nope", out_dir=tmp_path / "nope")
+    assert env.render_mode is None  # SuperSuit's vector wrappers read it
+    try:
+        with pytest.raises(ValueError, match="reward_key 'nope'.*tasks_completed"):
+            env.reset(seed=1)
+    finally:
+        env.close()
+
+
+def test_an_environment_never_closed_leaves_no_temporary_folder(tmp_path):
+    import subprocess
+    import sys
+
+    make = "from swarmbed.envs import SwarmbedParallelEnv; env = SwarmbedParallelEnv(sets={sets!r}); print(env.out_dir)"
+    killed = subprocess.run(
+        [sys.executable, "-c", make.format(sets=TINY) + "; import os, signal; os.kill(os.getpid(), signal.SIGKILL)"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    left = Path(killed.stdout.strip())
+    assert killed.returncode == -9 and left.is_dir()
+    returned = subprocess.run(
+        [sys.executable, "-c", make.format(sets=TINY)], capture_output=True, text=True, timeout=120
+    )
+    assert returned.returncode == 0, returned.stderr
+    assert not Path(returned.stdout.strip()).exists()  # removed at exit
+    assert not left.exists()  # a killed process's folder: removed by the next environment

@@ -207,7 +207,7 @@ class RunAccess:
                 raise ValueError(f"admitted user {identity.user!r} clashes with a name the run gives its own processes")
         remove_orphaned_folders()
         self.folder = Path(tempfile.mkdtemp(prefix=f"swarmbed-{keys.run_id}-"))  # mode 700
-        (self.folder / OWNER).write_text(json.dumps({"pid": os.getpid(), "started": psutil.Process().create_time()}))
+        claim_folder(self.folder)
         own = [Identity.new("netem", "netem")] + [Identity.new(agent_user(i), "agent") for i in self.agent_ids]
         self.files = {
             identity.user: write_credentials(self.folder / f"{identity.user}.json", identity) for identity in own
@@ -235,6 +235,12 @@ class RunAccess:
 
     def close(self) -> None:
         shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def claim_folder(folder: Path) -> None:
+    """Record this process as the owner of the temporary ``folder`` (``swarmbed-<what>-...``), so that
+    :func:`remove_orphaned_folders` removes it once this process is gone, however it ended."""
+    (folder / OWNER).write_text(json.dumps({"pid": os.getpid(), "started": psutil.Process().create_time()}))
 
 
 def remove_orphaned_folders(tmp: Path | None = None) -> list[Path]:
