@@ -24,6 +24,7 @@ with publishing on or off (tests/test_ros2_run.py holds them byte-identical).
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -34,11 +35,14 @@ import zenoh
 
 from swarmbed.extension.actions import ActionSpec
 from swarmbed.wire.codec import EMPTY_INBOX, WireError, decode_inbox
-from swarmbed.wire.ros2 import RADIO_INBOX, SENSOR_QOS, TASK_COMMAND, TASK_OBSERVATION, stamp
+from swarmbed.wire.ros2 import NODE_PREFIX, RADIO_INBOX, SENSOR_QOS, TASK_COMMAND, TASK_OBSERVATION, stamp
 from swarmbed.wire.ros2_node import Ros2Node
 from swarmbed.wire.schema import Ros2Section
 
-NODE_NAME = "swarmbed"
+NODE_NAME = NODE_PREFIX
+log = logging.getLogger("swarmbed.coordinator")
+#: wall seconds between two reports of ticks that waited for commands that never came
+WAIT_REPORT_EVERY_S = 10.0
 CLOCK, POSE, MARKERS = "rosgraph_msgs/msg/Clock", "geometry_msgs/msg/PoseStamped", "visualization_msgs/msg/MarkerArray"
 TASK_HEIGHT = 2.0  # metres of a task's cylinder; its diameter is the arrival radius, at least 1
 FREE, HELD = (0.6, 0.6, 0.6, 0.8), (1.0, 0.55, 0.0, 0.9)  # RGBA of a task nobody / somebody pursues
@@ -229,6 +233,9 @@ class Ros2Commands:
         self.latest: dict[int, tuple[tuple[int, int], int]] = {}  # robot -> (stamp, decision)
         self.held: dict[int, int] = {}  # robot -> the decision it acts on
         self.timeouts = 0  # robot-ticks that kept their last decision because none came in time
+        self.asked: tuple[int, int] = (-1, -1)  # the stamp of the observations last published
+        self.commands = 0  # commands taken
+        self._reported_at = -float("inf")  # when a wait was last reported (monotonic)
 
     def _on_command(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -247,9 +254,17 @@ class Ros2Commands:
             self.malformed(key, exc if isinstance(exc, WireError) else WireError(str(exc)))
             return
         with self.cond:
-            if robot not in self.latest or stamp_key >= self.latest[robot][0]:
+            if stamp_key > self.asked:  # no observation of that time was published: never a decision
+                future = WireError(f"a command stamped {stamp_key[0]}.{stamp_key[1]:09d} s, after the tick asked")
+            elif robot not in self.latest or stamp_key >= self.latest[robot][0]:
+                future = None
                 self.latest[robot] = (stamp_key, int(msg.task))
+                self.commands += 1
                 self.cond.notify_all()
+            else:
+                future = None
+        if future is not None:
+            self.malformed(key, future)
 
     def decide(
         self, tick: int, world: Any, observed: Mapping[int, Any], inboxes: Mapping[int, bytes]
@@ -260,6 +275,9 @@ class Ros2Commands:
         now = stamp(t, sim_time)
         header = self.out.Header(stamp=now, frame_id=self.out.settings.frame_id)
         Msg = t.cls(TASK_OBSERVATION)
+        wanted = (int(now.sec), int(now.nanosec))
+        with self.cond:
+            self.asked = wanted
         for i, obs in observed.items():
             tasks = obs.tasks
             self.out.node.put(
@@ -277,7 +295,6 @@ class Ros2Commands:
                     task_remaining=np.ascontiguousarray(tasks["remaining"], dtype=np.float64),
                 ),
             )
-        wanted = (int(now.sec), int(now.nanosec))
         deadline = time.monotonic() + (0.0 if self.realtime else self.timeout)
         with self.cond:
             while not self.realtime and not all(self.latest.get(i, ((-1, -1), 0))[0] == wanted for i in observed):
@@ -285,13 +302,36 @@ class Ros2Commands:
                 if left <= 0:
                     break
                 self.cond.wait(left)
+            missing = []
             for i in observed:
                 got = self.latest.get(i)
                 if got is not None and (self.realtime or got[0] == wanted):
                     self.held[i] = got[1]
                 elif not self.realtime:
-                    self.timeouts += 1  # lock-step without its decision in time: the last one holds
+                    missing.append(i)  # lock-step without its decision in time: the last one holds
+        if missing:
+            self.timeouts += len(missing)
+            self._report_wait(tick, missing)
         return {i: self.held[i] for i in observed if i in self.held}
+
+    def _report_wait(self, tick: int, missing: list[int]) -> None:
+        """Say, at most every :data:`WAIT_REPORT_EVERY_S` wall seconds, that a tick waited the whole
+        ``command_timeout`` for robots whose command never came."""
+        now = time.monotonic()
+        if now - self._reported_at < WAIT_REPORT_EVERY_S:
+            return
+        self._reported_at = now
+        robots = ", ".join(map(str, missing[:10])) + (f" and {len(missing) - 10} more" if len(missing) > 10 else "")
+        hint = "" if self.commands else "; no command has come yet: is a ROS 2 node answering /robot_<i>/cmd?"
+        log.warning(
+            "ros2: tick %d waited %g s (ros2.command_timeout) for robot(s) %s, which keep their last decision "
+            "(%d robot-ticks so far)%s",
+            tick,
+            self.timeout,
+            robots,
+            self.timeouts,
+            hint,
+        )
 
 
 def _robot_of(key: str, n: int) -> int:

@@ -493,7 +493,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         left = sum(1 for spec in planned if not RunDir(spec.out_dir).complete)
         first = {spec.scenario.name: spec for spec in reversed(planned)}
         every = {name: experiment_for(spec.base, spec.scenario, spec.seed, spec.extra) for name, spec in first.items()}
-        print(describe_sweep(len(planned), left, every, args.jobs or 1))
+        print(describe_sweep(len(planned), left, every, args.jobs or os.cpu_count() or 1))  # the local pool's default
         return 0
     if len(planned) > CONFIRM_RUNS and not args.yes:
         print(

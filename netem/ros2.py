@@ -12,11 +12,11 @@ import numpy as np
 import zenoh
 
 from swarmbed.wire.codec import BROADCAST
-from swarmbed.wire.ros2 import RADIO_OUTBOX, stamp
+from swarmbed.wire.ros2 import NODE_PREFIX, RADIO_OUTBOX, stamp
 from swarmbed.wire.ros2_node import Ros2Node
 from swarmbed.wire.schema import NetemSpec
 
-NODE_NAME = "swarmbed_radio"
+NODE_NAME = NODE_PREFIX + "_radio"
 
 
 class Ros2Outboxes:

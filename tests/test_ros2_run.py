@@ -33,6 +33,7 @@ class RosReader:
         self.tokens: set[str] = set()
         self.lock = threading.Lock()
         self.session = zenoh.open(zenoh_config("client", [endpoint], credentials=credentials))
+        self.hub = str(next(iter(self.session.info.routers_zid())))
         self.sub = self.session.declare_subscriber(f"{DOMAIN}/**", self._on_sample)
         self.graph = self.session.liveliness().declare_subscriber(f"@ros2_lv/{DOMAIN}/**", self._on_token, history=True)
 
@@ -66,6 +67,9 @@ def seen(tmp_path_factory):
         forger = zenoh.open(zenoh_config("client", [endpoint], credentials=str(operator.path)))
         forger.put(f"{DOMAIN}/robot_0/pose/geometry_msgs::msg::dds_::PoseStamped_/forged", b"forged")
         forger.liveliness().declare_token(f"@ros2_lv/{DOMAIN}/forged/0/0/NN/%/%/impostor")
+        hub = str(next(iter(forger.info.routers_zid())))
+        for name in ("swarmbed", "swarmbed_radio"):  # the run's own nodes' tokens are the run's alone
+            forger.liveliness().declare_token(f"@ros2_lv/{DOMAIN}/{hub}/0/0/NN/%/%/{name}")
         time.sleep(0.2)
         forger.close()
 
@@ -126,6 +130,8 @@ def test_every_topic_is_on_rmw_zenohs_key_with_its_type_hash_and_attachment(seen
     # an operator's ROS 2 tools join the graph (their own node's token), but the pose it forged for
     # robot 0 never reached a reader: the hub refused the put
     assert any("/impostor" in t for t in reader.tokens)
+    assert not any(t.split("/")[2] != reader.hub and t.endswith("/swarmbed") for t in reader.tokens)
+    assert sum(t.endswith(("/NN/%/%/swarmbed", "/NN/%/%/swarmbed_radio")) for t in reader.tokens) == 2
     assert not any(p == b"forged" for samples in reader.samples.values() for _, p, _ in samples)
 
 
@@ -249,6 +255,9 @@ def driven(tmp_path_factory):
             forged = Command(header=Header(stamp=obs.header.stamp, frame_id="map"), robot=0, task=-3)
             meddler.put(halt_key, types.serialize(forged, "swarmbed_msgs/msg/TaskCommand"))
 
+        # an operator drops a token named as the hub's node: the node must not take it for the run's end
+        hub = str(next(iter(meddler.info.routers_zid())))
+        meddler.liveliness().declare_token(f"@ros2_lv/{DOMAIN}/{hub}/0/0/NN/%/%/swarmbed").undeclare()
         held["sub"] = meddler.declare_subscriber(
             f"{DOMAIN}/robot_0/observation/swarmbed_msgs::msg::dds_::TaskObservation_/**", halt_robot_0
         )
@@ -259,11 +268,17 @@ def driven(tmp_path_factory):
             robot=2,
             task=-3,
         )
+        future = Command(  # stamped at the end of time: every later command would look older
+            header=Header(stamp=types.cls("builtin_interfaces/msg/Time")(sec=2**31 - 1, nanosec=0), frame_id="map"),
+            robot=1,
+            task=-3,
+        )
         for key, payload in (
             (halt_key.replace("robot_0", "robot_1"), b"\x00\x01\x00\x00garbage"),  # not CDR of a TaskCommand
             (halt_key.replace("robot_0", "robot_1"), types.serialize(wrong_robot, "swarmbed_msgs/msg/TaskCommand")),
             (halt_key.replace("robot_0", "robot_1"), b"\x00" * 4096),  # oversized
             (halt_key.replace("robot_0", "robot_99"), types.serialize(wrong_robot, "swarmbed_msgs/msg/TaskCommand")),
+            (halt_key.replace("robot_0", "robot_1"), types.serialize(future, "swarmbed_msgs/msg/TaskCommand")),
         ):
             sloppy.put(key, payload)
         time.sleep(0.5)  # the node's and the meddler's subscriptions reach the hub before tick 0
@@ -298,8 +313,8 @@ def test_a_ros2_node_in_the_loop_gives_the_builtin_allocators_results(driven):
         assert (ros.out_dir / name).read_bytes() == (builtin.out_dir / name).read_bytes(), name
     ours, theirs = (json.loads((run.out_dir / "summary.json").read_text()) for run in (ros, builtin))
     assert (ours.pop("allocator"), theirs.pop("allocator")) == ("ros2", "nearest")
-    # the commander's four malformed commands, counted where the run counts what it dropped
-    assert (ours["network"]["malformed"]["coordinator"], theirs["network"]["malformed"]["coordinator"]) == (4, 0)
+    # the commander's five malformed commands (one from the future), counted where the run counts drops
+    assert (ours["network"]["malformed"]["coordinator"], theirs["network"]["malformed"]["coordinator"]) == (5, 0)
     ours["network"]["malformed"]["coordinator"] = 0
     assert ours == theirs
 
@@ -320,3 +335,40 @@ def test_on_the_real_time_clock_no_tick_waits_for_a_command(tmp_path):
     assert result.summary["ticks"] == 60
     assert result.timings["run_s"] < 15  # 60 ticks at 20x: 3 s; waiting would take 300 s
     assert result.timings["ros2_command_timeouts"] == 0  # nothing is waited for, so nothing times out
+
+
+def test_a_tick_that_waits_for_a_node_says_so_and_check_counts_the_wait(tmp_path):
+    """Nobody answers: each lock-step tick waits command_timeout, and the run says which robots it
+    waited for (once per 10 s, not per tick); --check puts the wait into its estimate."""
+    root = Path(__file__).resolve().parent.parent
+    sets = [
+        "--set",
+        "agents.count=2",
+        "--set",
+        "run.duration=12",
+        "--set",
+        "run.stop_when_done=false",
+        "--set",
+        "allocator.name=ros2",
+        "--set",
+        f"ros2={{domain: {DOMAIN + 2}, command_timeout: 0.5}}",
+    ]
+    swarmbed = [sys.executable, "-m", "swarmbed", "run", "experiments/quickstart.yaml", *sets]
+    check = subprocess.run([*swarmbed, "--check"], capture_output=True, text=True, cwd=root, timeout=120)
+    assert check.returncode == 0 and "ros2.command_timeout" in check.stdout and "never answers" in check.stdout
+    started = time.monotonic()
+    done = subprocess.run(
+        [*swarmbed, "--out", str(tmp_path / "run"), "--no-progress"], capture_output=True, text=True, cwd=root
+    )
+    assert done.returncode == 0, done.stderr
+    waits = [line for line in done.stderr.splitlines() if "ros2.command_timeout" in line]
+    assert len(waits) == 1 and "robot(s) 0, 1" in waits[0] and "no command has come yet" in waits[0], done.stderr
+    assert time.monotonic() - started >= 12 * 0.5
+    bad = subprocess.run(
+        [*swarmbed[:-2], "--set", f"ros2={{domain: {DOMAIN + 2}, command_timeout: 1e300}}", "--check"],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        timeout=120,
+    )
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "command_timeout" in bad.stderr

@@ -35,6 +35,9 @@ from typing import Any
 from swarmbed.wire.errors import WireError
 
 ADMIN_SPACE = "@ros2_lv"
+#: every ROS 2 node of a run is named with this prefix (/swarmbed, /swarmbed_radio): their graph
+#: tokens are the run's alone
+NODE_PREFIX = "swarmbed"
 NODE, PUBLISHER, SUBSCRIPTION = "NN", "MP", "MS"
 GID_BYTES = 16
 ATTACHMENT_BYTES = 8 + 8 + 1 + GID_BYTES  # two int64 and a length-prefixed 16-byte array

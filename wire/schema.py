@@ -204,7 +204,10 @@ class Ros2Section(Strict):
     frame_id: str = Field("map", pattern=r"^[A-Za-z_][A-Za-z0-9_/]{0,63}$", description="frame of poses and markers")
     every: int = Field(1, ge=1, description="ticks between poses, task markers and inboxes (/clock: every tick)")
     command_timeout: float = Field(
-        10.0, gt=0, description="allocator ros2, lock-step: wall seconds a tick waits for every robot's command"
+        10.0,
+        gt=0,
+        le=3600,
+        description="allocator ros2, lock-step: wall seconds a tick waits for every robot's command (at most 3600)",
     )
 
 

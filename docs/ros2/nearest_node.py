@@ -10,7 +10,10 @@ same result files as the same run with ``allocator: {name: nearest}`` (tests/tes
 
     python docs/ros2/nearest_node.py --connect tcp/127.0.0.1:7447 --credentials commander.json --domain 0
 
-It leaves when the run's ``/swarmbed`` node leaves the graph (or on Ctrl-C).
+It leaves when the run's hub is gone: its router (the endpoint it connected to) drops the
+connection, or the hub itself withdraws the ``/swarmbed`` node's token (a token under the router's own
+id; any other session's token of that name is ignored, and the run's access rules refuse one anyway).
+Ctrl-C leaves too.
 """
 
 from __future__ import annotations
@@ -88,8 +91,16 @@ def main() -> int:
             key = f"{d}/robot_{obs.robot}/cmd/{dds(COMMAND)}/{cmd_hash}"
             session.put(key, bytes(store.serialize_cdr(command, COMMAND)), attachment=attachment)
 
+        hub = {str(z) for z in session.info.routers_zid()}  # the run's hub: the router we reached
+
         def on_graph(sample: zenoh.Sample) -> None:
-            if sample.kind == zenoh.SampleKind.DELETE and str(sample.key_expr).endswith("/NN/%/%/swarmbed"):
+            chunks = str(sample.key_expr).split("/")
+            # the hub's own session withdrew its node: never someone else's token of that name
+            if (
+                sample.kind == zenoh.SampleKind.DELETE
+                and chunks[-4:] == ["NN", "%", "%", "swarmbed"]
+                and chunks[2] in hub
+            ):
                 gone.set()
 
         subscriber = session.declare_subscriber(
@@ -98,7 +109,9 @@ def main() -> int:
         graph = session.liveliness().declare_subscriber(f"@ros2_lv/{d}/**", on_graph)
         print("ready", flush=True)
         try:
-            gone.wait()
+            while not gone.wait(0.5):
+                if not hub & {str(z) for z in session.info.routers_zid()}:
+                    break  # the hub's router closed the connection: the run is over
         except KeyboardInterrupt:
             pass
         for entity in [subscriber, graph, *tokens]:

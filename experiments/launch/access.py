@@ -43,6 +43,7 @@ from swarmbed.wire.credentials import Identity, check_admitted, write_credential
 from swarmbed.wire.keys import HOSTS, PREFIX, Keys
 from swarmbed.wire.process import process_alive
 from swarmbed.wire.ros2 import ADMIN_SPACE as ROS2_ADMIN_SPACE
+from swarmbed.wire.ros2 import NODE_PREFIX as ROS2_NODE_PREFIX
 
 log = logging.getLogger("swarmbed.access")
 OWNER = "owner.json"  # in a run's private folder: the launcher that made it (pid, start time)
@@ -130,7 +131,11 @@ def access_rules(
             # `**` never matches an `@` chunk: the graph's tokens need their own way out
             _allow("ros2-deliver", EVERY_MESSAGE, [graph], flow="egress"),
         ]
-        operator_rules += ["ros2-read", "ros2-graph", "ros2-deliver"]
+        # ... but never a token of the run's own nodes (/swarmbed, /swarmbed_radio): a viewer declares
+        # its own node's; one that dropped the hub's would tell every ROS 2 node the run had ended
+        ours = f"{ROS2_ADMIN_SPACE}/{ros2_domain}/*/*/*/*/*/*/{ROS2_NODE_PREFIX}$*/**"
+        rules.append({**_allow("ros2-not-ours", ["liveliness_token"], [ours]), "permission": "deny"})
+        operator_rules += ["ros2-read", "ros2-graph", "ros2-deliver", "ros2-not-ours"]
         rules.append(_allow("ros2-command", ["put"], [f"{ros2_domain}/robot_$*/cmd/**"]))
         rules += [  # the proxy's own ROS 2 node publishes what each robot sent
             _allow("netem-ros2", ["put"], [f"{ros2_domain}/robot_$*/radio/sent/**"]),

@@ -80,6 +80,12 @@ def describe_plan(exp: Experiment, out: Path, admitted: Sequence[Identity] = ())
         else:
             lines.append(f"  host {host}: NOT admitted (give --admit with its credentials file)")
     lines.append(f"  estimated wall time: about {_duration(estimate_wall_s(exp))} on {os.cpu_count()} cores")
+    if exp.allocator.name == "ros2" and exp.run.clock == "lockstep" and exp.ros2 is not None:
+        timeout = exp.ros2.command_timeout
+        lines.append(
+            f"  plus the ROS 2 node's answers: each tick waits up to {timeout:g} s (ros2.command_timeout) for every "
+            f"robot's command; a node that never answers makes the run last about {_duration(exp.ticks * timeout)}"
+        )
     return "\n".join(lines)
 
 
