@@ -144,6 +144,10 @@ def test_check_validates_and_plans_without_starting_anything(tmp_path, capsys):
     assert rc == 2 and "1,200 runs" in err and "--yes" in err and not (tmp_path / "s").exists()
     rc, text, _ = _main(capsys, "sweep", sweep, "--grid", "allocator.name=fcg,cbba", "--check", "--out", tmp_path / "s")
     assert rc == 0 and "800 runs planned, 800 still to run" in text and not (tmp_path / "s").exists(), text
+    # without --jobs the local pool runs one a core, and the estimate says so
+    import os
+
+    assert f"with --jobs {os.cpu_count()}" in text, text
 
 
 def test_a_host_that_is_not_admitted_is_named_as_such():
