@@ -207,6 +207,7 @@ class AgentLifecycle:
                 record = self.requested_swaps.get(req.swap)
                 answer = record if record is not None else SwapPending(pending=True)
             elif req.agent < self.n:
+                self._check_carrier(req.agent, req.to)
                 if self.swap_requests.qsize() >= MAX_QUEUED_SWAPS:
                     raise WireError(f"{MAX_QUEUED_SWAPS} swaps are already waiting; ask again after they are done")
                 if len(self.requested_swaps) >= MAX_SWAPS_PER_RUN:
@@ -220,6 +221,20 @@ class AgentLifecycle:
         except WireError as exc:
             answer = SwapRefused(error=f'{exc} (a swap request is {{"agent": 0..{self.n - 1}, "to": HOST}})')
         query.reply(query.key_expr, encode_swap_answer(answer))
+
+    def _check_carrier(self, agent: int, to: str) -> None:
+        """A WireError, before a swap is queued, for a host that is not one of the run's or may not
+        carry ``agent`` (the hub would refuse it the agent's keys)."""
+        if to == LOCAL or self.carriers is None or agent in self.carriers.get(to, ()):
+            return
+        able = sorted(host for host, ids in self.carriers.items() if agent in ids)
+        known = (
+            f"host {to!r} may not carry agent {agent}" if to in self.carriers else f"{to!r} is not a host of this run"
+        )
+        raise WireError(
+            f"{known}; agent {agent} may move to {', '.join([LOCAL, *able])} (placement, swaps and may_carry "
+            "name the hosts and agents a run admits)"
+        )
 
     # -- checkpoints and restarts (run.on_agent_loss: restart) ---------------------------------------
     def _ask_checkpoints(self, k: int) -> None:

@@ -397,10 +397,28 @@ def _param_groups(name: str) -> list[tuple[str, list[tuple[str, str, str, str]]]
     return groups
 
 
+def _section_groups() -> list[tuple[str, list[tuple[str, str, str, str]]]]:
+    """Every key of an experiment outside a scenario's or an allocator's own: the sections, ROS 2,
+    and where agents run (placement, swaps, may_carry)."""
+    from swarmbed.wire.schema import Experiment, Ros2Section
+
+    groups = [(f"{name}:", cfg.describe(model, f"{name}.")) for name, model in cfg.SECTIONS.items()]
+    groups.append(("ros2 (off unless given):", cfg.describe(Ros2Section, "ros2.")))
+    hosts = [
+        row
+        for row in cfg.describe(Experiment)
+        if row[0].split(".")[0].removesuffix("[]") in ("placement", "swaps", "may_carry")
+    ]
+    groups.append(("hosts (placement, swaps, may_carry: docs in the README's Several machines):", hosts))
+    return groups
+
+
 def cmd_params(args: argparse.Namespace) -> int:
-    """Every key of the generic sections, or of a scenario or an allocator: type, default, meaning."""
+    """Every key of the generic sections, or of a scenario or an allocator, or one key: type,
+    default, meaning."""
+    sections = _section_groups()
     if args.name is None:
-        groups = [(f"{name}:", cfg.describe(model, f"{name}.")) for name, model in cfg.SECTIONS.items()]
+        groups = list(sections)
         groups.append(
             (
                 "scenarios (swarmbed params NAME):",
@@ -417,14 +435,25 @@ def cmd_params(args: argparse.Namespace) -> int:
             for n, k in registry.entries()
         ]
         groups.append(("allocators (swarmbed params NAME):", allocators))
-    elif args.name in cfg.SECTIONS:
-        groups = [(f"{args.name}:", cfg.describe(cfg.SECTIONS[args.name], f"{args.name}."))]
     else:
-        groups = _param_groups(args.name)
+        groups = [
+            (title, rows)
+            for title, rows in (
+                (title, [r for r in rows if r[0] == args.name or r[0].startswith((args.name + ".", args.name + "[]."))])
+                for title, rows in sections
+            )
+            if rows
+        ]
+        groups = groups or _param_groups(args.name)
         if not groups:
+            import difflib
+
+            keys = [r[0] for _, rows in sections for r in rows]
+            near = difflib.get_close_matches(args.name, keys + registry.scenario_names() + registry.names(), n=1)
             print(
-                f"error: {args.name!r} is neither a section ({', '.join(cfg.SECTIONS)}), a scenario "
-                f"({', '.join(registry.scenario_names())}) nor an allocator ({', '.join(registry.names())})",
+                f"error: {args.name!r} is neither a key or section (run, agents, network, ros2, placement, ...), "
+                f"a scenario ({', '.join(registry.scenario_names())}) nor an allocator ({', '.join(registry.names())})"
+                + (f"; did you mean {near[0]!r}?" if near else ""),
                 file=sys.stderr,
             )
             return 2
@@ -443,7 +472,10 @@ def register_params(sub: Subparsers) -> None:
         "params", help="every key of an experiment, a scenario or an allocator: type, default, meaning"
     )
     par.add_argument(
-        "name", nargs="?", help="a section (network, run, ...), a scenario or an allocator; none: every section"
+        "name",
+        nargs="?",
+        help="a section (network, run, ros2, ...) or one key (network.loss), a scenario or an allocator; "
+        "none: every section",
     )
     par.set_defaults(func=cmd_params)
 

@@ -28,6 +28,7 @@ from pydantic import BaseModel, ValidationError
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.targets import TargetError, is_target, load_target
+from swarmbed.wire.validation import validation_lines
 
 ANY = "*"
 ALLOCATOR_GROUP = "swarmbed.allocators"
@@ -164,13 +165,7 @@ def check_params(model: type[BaseModel], params: Mapping[str, Any], section: str
     try:
         return model.model_validate(dict(params))
     except ValidationError as exc:
-        raise PluginError(
-            "\n".join(
-                f"{'.'.join([section, *(str(p) for p in e['loc'])])}: "
-                f"{'unknown key' if e['type'] == 'extra_forbidden' else e['msg']}"
-                for e in exc.errors()
-            )
-        ) from None
+        raise PluginError("\n".join(validation_lines(exc, model, prefix=section))) from None
 
 
 def validate_params(name: str, params: Mapping[str, Any], scenario: str | None = None) -> BaseModel:

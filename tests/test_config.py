@@ -21,7 +21,7 @@ def load_text(tmp_path, text, *overrides):
         ("agents:\n  count: 0\n", "agents.count: Input should be greater than or equal to 1"),
         ("network:\n  loss: 1.5\n", "network.loss:"),
         ("run:\n  clock: warp\n", "run.clock:"),
-        ("scenario:\n  workload: [60, 6]\n", "scenario: Value error, workload"),
+        ("scenario:\n  workload: [60, 6]\n", "scenario: workload must be"),
         ("allocator:\n  name: fcg\n  mode: Fastest\n", "allocator.mode:"),
         ("allocator:\n  name: nosuch\n", "unknown allocator 'nosuch'"),
         ("agents:\n  behavior_tree: missing.xml\n", "agents.behavior_tree: file"),
@@ -43,7 +43,9 @@ def test_overrides_apply_to_any_dotted_key():
 
 
 def test_bad_overrides_are_refused():
-    with pytest.raises(cfg.ConfigError, match="^--set agents.speed=3: unknown key$"):
+    with pytest.raises(
+        cfg.ConfigError, match=r"^--set agents.speed=3: unknown key \(did you mean 'agents.max_speed'\?\)$"
+    ):
         cfg.load(QUICKSTART, ["agents.speed=3"])
     with pytest.raises(
         cfg.ConfigError,
@@ -128,6 +130,15 @@ def test_run_help_shows_no_python_internals(capsys):
     out = capsys.readouterr().out
     assert "allocator.theta_bid_change" in out and "float" in out
     assert main(["params", "nosuch"]) == 2
+    # one key, and the sections beside run, agents and network
+    assert main(["params", "network.loss"]) == 0
+    out = capsys.readouterr().out
+    assert "network.loss" in out and "network.range" not in out and "probability" in out
+    assert main(["params"]) == 0
+    out = capsys.readouterr().out
+    assert all(key in out for key in ("ros2.command_timeout", "placement", "swaps[].to", "may_carry")), out
+    assert main(["params", "network.los"]) == 2
+    assert "did you mean 'network.loss'?" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

@@ -122,6 +122,14 @@ def test_errors_blame_the_flag_that_gave_the_value(tmp_path, capsys):
     assert rc == 2 and err.startswith("error: --seed -1:"), err
     rc, _, err = _main(capsys, "run", QUICKSTART, "--set", "run=null", "--check")
     assert rc == 2 and err.startswith("error: --set run=null: must be a section"), err
+    # a check over several keys blames the flag that gave the first, in the validator's own words
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--set", "run.duration=0.5", "--check")
+    assert rc == 2 and err.startswith("error: --set run.duration=0.5: run.duration 0.5 s"), err
+    assert "Value error" not in err and ": :" not in err, err
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--set", "agents.cout=3", "--check")
+    assert rc == 2 and "unknown key (did you mean 'agents.count'?)" in err, err
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--set", "allocator.name=missing.py:X", "--check")
+    assert rc == 2 and "missing.py does not exist" in err and "targets.py" not in err, err
     rc, _, err = _main(capsys, "sweep", QUICKSTART, "--grid", "allocator.name=,,", "--check")
     assert rc == 2 and "none of them empty" in err and "share a name" not in err, err
     rc, _, err = _main(capsys, "sweep", QUICKSTART, "--grid", "allocator.name=fcg,fcg", "--check")

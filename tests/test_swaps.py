@@ -52,9 +52,11 @@ def test_swapped_agents_give_the_files_of_a_run_where_nothing_moved(tmp_path, ba
 def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path, operator):
     sets = ["allocator.name=cbba", "run.duration=1000", "run.stop_when_done=false"]
     bad, good = SwapAsked(operator, 99, "local"), SwapAsked(operator, 2, "local")
+    nowhere = SwapAsked(operator, 1, "nowhere")  # no host of this run: refused at once, never queued
 
     def from_another_terminal(keys, endpoint):
         bad.on_ready(keys, endpoint)
+        nowhere.on_ready(keys, endpoint)
         good.on_ready(keys, endpoint)
 
     run_experiment(
@@ -70,6 +72,8 @@ def test_a_swap_asked_for_during_a_run_moves_the_agent(tmp_path, operator):
     assert "swap of agent 2 from local to local before tick" in out and ": ok," in out
     rc, _, err = bad.wait()
     assert rc == 2 and "a swap request is" in err
+    rc, out, err = nowhere.wait()
+    assert rc == 2 and "'nowhere' is not a host of this run" in err and "queued" not in out, (out, err)
     assert [r["agent"] for r in _swaps(tmp_path / "moved")] == ["2"]
     reference_run(experiment(*sets), tmp_path / "still")
     same_results(tmp_path / "still", tmp_path / "moved")

@@ -67,6 +67,8 @@ def load_target(target: str, base: type[T]) -> type[T]:
     module_ref, _, cls_name = target.rpartition(":")
     try:
         module = _import_module(module_ref)
+    except TargetError as exc:  # ours: a file that is not there, not a module's own failure
+        raise TargetError(f"cannot import {module_ref!r}: {exc}") from None
     except ImportError as exc:
         raise TargetError(f"cannot import {module_ref!r}: {exc}") from exc
     except SyntaxError as exc:  # the user's file: one line naming where, not a traceback through ours

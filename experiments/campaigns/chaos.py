@@ -64,6 +64,7 @@ from swarmbed.experiments.launch.yamlfile import YamlFileError, read_yaml
 from swarmbed.wire.codec import NetemControl, encode_netem_control
 from swarmbed.wire.process import process_name
 from swarmbed.wire.rowfile import RowFile
+from swarmbed.wire.validation import validation_lines
 
 log = logging.getLogger("swarmbed.chaos")
 CHAOS_COLUMNS = ["wall_s", "tick", "action", "target", "detail", "outcome"]
@@ -113,7 +114,7 @@ def load_chaos(path: Path) -> ChaosPlan:
     try:
         return ChaosPlan.model_validate(data or {})
     except ValidationError as exc:
-        where = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        where = "; ".join(validation_lines(exc, ChaosPlan))
         raise ChaosError(f"{path}: {where}") from None
 
 

@@ -61,6 +61,7 @@ from swarmbed.experiments.rundir import RunDir
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.rundir import MAX_CONFIG_BYTES, PROVENANCE, RunFileError, read_json_member, read_member
 from swarmbed.wire.schema import SAFE_NAME
+from swarmbed.wire.validation import validation_lines
 
 
 class ScenarioEntry(BaseModel):
@@ -156,9 +157,7 @@ def load_sweep(
     try:
         spec = SweepFile.model_validate(data)
     except ValidationError as exc:
-        raise cfg.ConfigError(
-            "\n".join(f"{path}: {'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
-        ) from None
+        raise cfg.ConfigError("\n".join(f"{path}: {line}" for line in validation_lines(exc, SweepFile))) from None
     common = tuple(spec.set.items())
     grid_spec = dict(spec.grid)
     grid_spec.update(_parse_grid(g) for g in grid)

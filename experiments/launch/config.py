@@ -43,6 +43,7 @@ from swarmbed.wire.schema import (
     carriers,
     hosts_of,
 )
+from swarmbed.wire.validation import validation_lines
 
 __all__ = [
     "ConfigError",
@@ -132,15 +133,16 @@ def parse_override(text: str) -> tuple[str, Any]:
 
 
 def _origin(line: str, where: str, overridden: dict[str, Any], origin: str = "--set") -> str:
-    """``line`` (``dotted.key: message``) prefixed by where that key came from: the flag that gave it
-    (``--set key=value`` as the user wrote the value, ``--seed N``) or the file."""
+    """``line`` (``dotted.key: message``, or a message about several keys that starts with the one
+    it is about) prefixed by where that key came from: the flag that gave it (``--set key=value`` as
+    the user wrote the value, ``--seed N``) or the file."""
     key, _, message = line.partition(": ")
     for set_key, value in overridden.items():
         flag = f"--seed {value}" if set_key == SEED_FLAG else f"{origin} {set_key}={_as_written(value)}"
         set_key = "run.seed" if set_key == SEED_FLAG else set_key
         if key == set_key:
             return f"{flag}: {message}"
-        if key.startswith(set_key + ".") or set_key.startswith(key + "."):
+        if key.startswith(set_key + ".") or set_key.startswith(key + ".") or line.startswith(set_key + " "):
             return f"{flag}: {line}"
     return f"{where}: {line}"
 
@@ -152,15 +154,6 @@ SEED_FLAG = "<--seed>"
 def _as_written(value: Any) -> str:
     """A value as YAML writes it (``null``, ``true``, ``[1, 2]``), the way a user typed it after ``=``."""
     return value if isinstance(value, str) else json.dumps(value)
-
-
-def _message(error: Any) -> str:
-    """A validation error in words a user of the YAML reads: never an internal class name."""
-    if error["type"] == "extra_forbidden":
-        return "unknown key"
-    if error["type"] in ("model_type", "dict_type", "model_attributes_type"):
-        return f"must be a section (a mapping of keys), not {error['input']!r}"
-    return str(error["msg"])
 
 
 def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, origin: str = "--set") -> Experiment:
@@ -180,7 +173,7 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
         # parameters are checked by its Params model below, which may convert YAML lists to tuples)
         exp = Experiment.model_validate(data, strict=True)
     except ValidationError as exc:
-        raise fail([f"{'.'.join(str(p) for p in e['loc'])}: {_message(e)}" for e in exc.errors()]) from None
+        raise fail(validation_lines(exc, Experiment)) from None
     try:
         kind = exp.scenario.kind  # each name resolved once here, its class used for every check below
         scenario_cls = resolve_scenario(kind)
@@ -338,6 +331,10 @@ def describe(model: type[BaseModel], prefix: str = "") -> list[tuple[str, str, s
             rows += describe(ann, f"{prefix}{name}.")
             continue
         section = [a for a in get_args(ann) if isinstance(a, type) and issubclass(a, BaseModel)]
+        if section and get_origin(ann) is list:  # a list of entries (swaps): each entry's keys below
+            rows.append((f"{prefix}{name}", "list", "[]", field.description or ""))
+            rows += describe(section[0], f"{prefix}{name}[].")
+            continue
         if section:  # an optional section (network.propagation): off unless given, its keys below
             rows.append((f"{prefix}{name}", "section | null", "null", field.description or ""))
             rows += describe(section[0], f"{prefix}{name}.")
