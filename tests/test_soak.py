@@ -30,6 +30,7 @@ from swarmbed.experiments.campaigns.soak import (
     parse_duration,
     rss_growth,
     soak,
+    tick_rates,
 )
 from swarmbed.experiments.launch.access import OWNER, RunAccess, remove_orphaned_folders
 from swarmbed.experiments.launch.runner import run_experiment
@@ -76,6 +77,17 @@ def test_rss_growth_is_judged_only_where_it_is_there():
     assert judged["rss"] == "grows" and judged["rss_growth_mb"] > 25
     slow = rss_growth(hours, 72 + hours / 7200 * 20 + rng.uniform(-0.3, 0.3, len(hours)), limits)  # 12 %/h
     assert slow["rss"] == "grows" and slow["rss_slope_low_pct_h"] > 0
+
+
+def test_tick_rates_leave_out_the_window_cut_short_as_the_soak_stops():
+    """The issue's 60 s soak: every full 5 s window ran 295-403 ticks/s, the last sample came 0.4 s
+    after the one before with a handful of ticks, and the verdict said 132.1 at the end."""
+    wall = np.array([5.0 * k for k in range(1, 13)] + [60.4])
+    rates = np.array([385.2, 390, 403, 380, 360, 350, 340, 330, 320, 310, 300, 295, 132.1])
+    start, end = tick_rates(wall, rates)
+    assert start == pytest.approx(385.2) and end == pytest.approx(295.0)
+    assert tick_rates(np.array([]), np.array([])) == (0.0, 0.0)
+    assert tick_rates(np.array([5.0, 10.0]), np.array([100.0, 120.0])) == (100.0, 120.0)
 
 
 def test_durations_and_chaos_files_are_checked_with_clear_errors(tmp_path):

@@ -369,6 +369,21 @@ def _breaches(
     return breaches
 
 
+def tick_rates(wall_s: np.ndarray, ticks_per_s: np.ndarray) -> tuple[float, float]:
+    """Ticks per second over the first and the last tenth of the soak's full sampling windows. A
+    window cut short (the sample taken as the soak stops, a few tenths of a second after the one
+    before) is left out: its few ticks over a short span say nothing of the rate."""
+    spans = np.diff(wall_s, prepend=0.0)
+    keep = wall_s > 0
+    if keep.sum() > 2:
+        keep &= spans >= 0.9 * np.median(spans[keep])
+    rates = ticks_per_s[keep]
+    if not len(rates):
+        return 0.0, 0.0
+    tenth = max(1, len(rates) // 10)
+    return float(rates[:tenth].mean()), float(rates[-tenth:].mean())
+
+
 def verdict(
     out_dir: Path,
     limits: Thresholds,
@@ -385,10 +400,7 @@ def verdict(
     end = float(procs["wall_s"].max()) if len(procs) else 0.0
     per_process = _process_trends(procs, limits, end)
     by_kind = _worst_by_kind(per_process, procs)
-    tenth = max(1, len(counters) // 10)
-    steady = counters[counters["wall_s"] > 0]
-    rate_start = float(steady["ticks_per_s"].head(tenth).mean()) if len(steady) else 0.0
-    rate_end = float(steady["ticks_per_s"].tail(tenth).mean()) if len(steady) else 0.0
+    rate_start, rate_end = tick_rates(counters["wall_s"].to_numpy(float), counters["ticks_per_s"].to_numpy(float))
     net = (summary or {}).get("network", {})
     conserved = bool(net) and net["copies"] == net["delivered"] + net["dropped_total"]
     faults = [dict(zip(["wall_s", "tick", "action", "target", "detail", "outcome"], row)) for row in chaos_rows]
