@@ -123,6 +123,32 @@ def test_groot2_hears_from_us_what_btcpps_publisher_answers(name):
         assert mine.socket.send(b"abc") is None and mine.socket.recv_multipart() == [b"error", b"wrong request header"]
 
 
+def test_a_recording_nobody_reads_keeps_what_btcpps_publisher_keeps():
+    """A client that starts a recording and never asks for it (``t``): the gateway keeps the newest
+    changes only, bounded as BehaviorTree.CPP's publisher bounds them, and answers the same."""
+    from swarmbed.experiments.views.groot2 import CHANGE_BYTES, MAX_RECORDED_CHANGES
+
+    xml, scripts = CASES[next(iter(CASES))]
+    their_tree = btcpp_tree(xml, scripts)
+    registry = NodeRegistry()
+    registry.register(Act)
+    registry.register(Cond)
+    our_tree = load_tree("<test>", registry, text=xml, context=Script(scripts))
+    recorder = ChangeRecorder(our_tree)
+    monitored = MonitoredTree()
+    monitored.reset(tree_xml(our_tree), tree_identity("test", "unread"), len(our_tree.nodes))
+    with both_publishers(their_tree, monitored) as (mine, theirs):
+        ask_both(mine, theirs, "r", b"start")
+        for tick in range(3000):
+            their_tree.tick_exactly_once()
+            our_tree.tick_once()
+            monitored.apply(tick * 250_000, recorder.take())
+        assert len(monitored.recorded) <= MAX_RECORDED_CHANGES * CHANGE_BYTES
+        ours_t, their_t = ask_both(mine, theirs, "t")
+        assert len(changes_of(ours_t[0])) == len(changes_of(their_t[0])) == MAX_RECORDED_CHANGES
+        assert changes_of(ours_t[0]) == changes_of(their_t[0])
+
+
 BLACKBOARDS = """<root BTCPP_format="4" main_tree_to_execute="Main">
   <BehaviorTree ID="Main"><Sequence>
     <SetBlackboard value="3" output_key="literal"/>

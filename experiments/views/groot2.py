@@ -82,6 +82,13 @@ def buffer_order(xml: str) -> list[int]:
     return [int(n.get("_uid", "0")) for tree in root.findall("BehaviorTree") for n in tree.iter() if n.get("_uid")]
 
 
+#: the status changes a recording keeps until Groot2 asks for them with ``t`` (the newest; older
+#: ones are dropped, as BehaviorTree.CPP's publisher bounds its transitions buffer): a client that
+#: started a recording and went away must not grow the gateway by 9 bytes a change for ever
+MAX_RECORDED_CHANGES = 1000
+CHANGE_BYTES = 9  # 6 bytes of microseconds, a uint16 uid, a status byte
+
+
 class MonitoredTree:
     """What Groot2 sees of one tree: its XML and identity, each node's status, and the status changes
     recorded while Groot2 asks for them. Fed by :meth:`reset` and :meth:`apply` (from any thread);
@@ -139,6 +146,8 @@ class MonitoredTree:
                 if self.recording_from is not None:
                     offset = max(0, time_us - self.recording_from)
                     self.recorded += offset.to_bytes(6, "little") + struct.pack("<HB", uid, code)
+            if len(self.recorded) > MAX_RECORDED_CHANGES * CHANGE_BYTES:  # nobody asked ("t") for a while
+                del self.recorded[: len(self.recorded) - MAX_RECORDED_CHANGES * CHANGE_BYTES]
 
     def answer(self, frames: list[bytes]) -> list[bytes]:
         if not frames or len(frames[0]) != REQUEST.size:
