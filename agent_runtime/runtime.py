@@ -38,7 +38,7 @@ SNAPSHOT_VERSION = 1
 
 
 def build_scenario(spec: AgentSpec) -> Scenario:
-    cls = load_target(spec.targets.scenario, Scenario)
+    cls = load_target(spec.targets.scenario, Scenario, spec.targets.digests)
     return cls(cls.Params.model_validate(spec.scenario.params()), spec.agents, spec.dt)
 
 
@@ -49,7 +49,7 @@ class AgentRuntime:
         self.n_agents = spec.agents.count
         runtime_seed, allocator_seed = agent_seeds(spec.seed, agent_id, self.n_agents, 2)
         self.scenario = build_scenario(spec)
-        allocator_cls = load_target(spec.targets.allocator, Allocator)
+        allocator_cls = load_target(spec.targets.allocator, Allocator, spec.targets.digests)
         self.allocator = allocator_cls(
             agent_id,
             allocator_cls.Params.model_validate(spec.allocator.params()),

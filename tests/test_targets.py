@@ -64,3 +64,25 @@ def test_a_copied_file_restores_a_snapshot_made_from_the_original(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "7"
     assert unpack_state(blob.read_bytes())["memory"] == memory
+
+
+def test_an_agent_refuses_a_plugin_file_that_differs_from_the_one_the_launcher_checked(tmp_path):
+    """A host daemon's agent resolves ``file.py:Class`` on its own machine: the spec carries the
+    file's digest as the launcher read it, and another file under that path is refused."""
+    from swarmbed.agent_runtime.runtime import AgentRuntime
+    from swarmbed.experiments.launch import config as cfg
+    from swarmbed.wire.schema import agent_spec
+    from swarmbed.wire.targets import TargetError
+    from tests.conftest import experiment
+
+    plugin = tmp_path / "mine.py"
+    plugin.write_text(
+        "from swarmbed.plugins.fcg import FirstClaimedGreedy\n\nclass Mine(FirstClaimedGreedy):\n    pass\n"
+    )
+    exp = experiment(f"allocator.name={plugin}:Mine", "agents.count=2")
+    spec = agent_spec(exp, cfg.resolve_experiment(exp).targets)
+    assert list(spec.targets.digests) == [str(plugin)]
+    AgentRuntime(spec, 0)  # the file the launcher checked
+    plugin.write_text(plugin.read_text() + "\nFLAVOUR = 'another'\n")  # the same path, other bytes
+    with pytest.raises(TargetError, match="not the file the launcher checked"):
+        AgentRuntime(spec, 1)

@@ -266,6 +266,9 @@ class Targets(Strict):
 
     scenario: str
     allocator: str
+    #: file -> sha256 of its bytes as the launcher checked it, for every ``path/file.py`` target: a
+    #: process elsewhere (a host daemon's agent) refuses a file of that path that differs
+    digests: dict[str, str] = Field(default_factory=dict)
 
 
 class AgentSpec(Strict):

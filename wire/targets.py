@@ -31,19 +31,41 @@ def is_target(text: str) -> bool:
     return ":" in text
 
 
-def user_module_name(path: Path) -> str:
+def file_digest(path: Path) -> str:
+    """The sha256 of a plugin file's bytes, in hex."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def user_module_name(path: Path, digest: str | None = None) -> str:
     """The module name a plugin file loads as: its stem and a digest of its bytes."""
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+    digest = (digest or file_digest(path))[:12]
     stem = "".join(c if c.isalnum() else "_" for c in path.stem)
     return f"swarmbed_user_plugin_{stem}_{digest}"
 
 
-def _import_module(ref: str) -> ModuleType:
+def file_digests(*targets: str) -> dict[str, str]:
+    """``{file: sha256}`` of the ``path/file.py`` modules among ``targets`` (what the launcher
+    checked, handed on with them); a file that is not there is left to :func:`load_target` to name."""
+    out = {}
+    for target in targets:
+        ref = target.rpartition(":")[0]
+        if ref.endswith(".py") and Path(ref).is_file():
+            out[ref] = file_digest(Path(ref))
+    return out
+
+
+def _import_module(ref: str, digest: str | None = None) -> ModuleType:
     if ref.endswith(".py"):
         path = Path(ref).resolve()
         if not path.is_file():
             raise TargetError(f"file {ref} does not exist")
-        mod_name = user_module_name(path)
+        found = file_digest(path)
+        if digest is not None and found != digest:
+            raise TargetError(
+                f"file {ref} here is not the file the launcher checked (sha256 {found[:12]}... here, "
+                f"{digest[:12]}... there): copy the same file to this machine"
+            )
+        mod_name = user_module_name(path, found)
         if mod_name in sys.modules:
             return sys.modules[mod_name]
         spec = importlib.util.spec_from_file_location(mod_name, path)
@@ -60,13 +82,14 @@ def _import_module(ref: str) -> ModuleType:
     return importlib.import_module(ref)
 
 
-def load_target(target: str, base: type[T]) -> type[T]:
-    """The class ``target`` names; it must be a subclass of ``base``."""
+def load_target(target: str, base: type[T], digests: dict[str, str] | None = None) -> type[T]:
+    """The class ``target`` names; it must be a subclass of ``base``. ``digests``: ``{file: sha256}``
+    (:func:`file_digests`); a file target whose bytes differ is refused."""
     if not is_target(target):
         raise TargetError(f"{target!r} is not a target: expected 'module:Class' or 'path/to/file.py:Class'")
     module_ref, _, cls_name = target.rpartition(":")
     try:
-        module = _import_module(module_ref)
+        module = _import_module(module_ref, (digests or {}).get(module_ref))
     except TargetError as exc:  # ours: a file that is not there, not a module's own failure
         raise TargetError(f"cannot import {module_ref!r}: {exc}") from None
     except ImportError as exc:

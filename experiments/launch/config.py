@@ -43,6 +43,7 @@ from swarmbed.wire.schema import (
     carriers,
     hosts_of,
 )
+from swarmbed.wire.targets import file_digests
 from swarmbed.wire.validation import validation_lines
 
 __all__ = [
@@ -236,7 +237,8 @@ def _check_tree(exp: Experiment, scenario_cls: type[Scenario], allocator_cls: ty
 def resolve_experiment(exp: Experiment) -> Resolved:
     """The classes and targets of a validated experiment (what the launcher hands its processes)."""
     kind, name = exp.scenario.kind, exp.allocator.name
-    targets = Targets(scenario=scenario_target(kind), allocator=allocator_target(name, kind))
+    scenario, allocator = scenario_target(kind), allocator_target(name, kind)
+    targets = Targets(scenario=scenario, allocator=allocator, digests=file_digests(scenario, allocator))
     return Resolved(exp, resolve_scenario(kind), resolve(name, kind), targets)
 
 
