@@ -17,9 +17,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarmbed.bt import BTError, load_tree, palette_xml
-from swarmbed.coordinator.coordinator import RunError
+from swarmbed.coordinator.errors import RunError
 from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.rundir import RunDir
 from swarmbed.extension.node_sets import node_registry
 from swarmbed.plugins import registry
 from swarmbed.wire.session import add_zenoh_args
@@ -97,6 +96,8 @@ def _taken(out: Path, force: bool) -> str | None:
     if not out.exists() or not any(out.iterdir()):
         return None
     if not force:
+        from swarmbed.experiments.rundir import RunDir
+
         what = "a finished run" if RunDir(out).complete else "files"
         return f"--out {out}: holds {what} already; give another --out, or --force to clear it first"
     shutil.rmtree(out)
@@ -521,6 +522,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     planned = plan(sweep, out)
     if args.check:
         from swarmbed.experiments.launch.check import describe_sweep
+        from swarmbed.experiments.rundir import RunDir
 
         left = sum(1 for spec in planned if not RunDir(spec.out_dir).complete)
         first = {spec.scenario.name: spec for spec in reversed(planned)}

@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
-from scipy import stats
 
 import swarmbed
 from swarmbed.experiments.folders import PARQUET, SOAK_PROCESSES, TABLE, read_table
@@ -354,6 +353,8 @@ def _count_axis(title: str, counts) -> dict:
 
 
 def _ci(values: pd.Series) -> float:
+    from scipy import stats  # 0.4 s to import: only a sweep's page needs it
+
     n = values.count()
     return float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
 
