@@ -21,3 +21,16 @@ def test_the_readme_states_what_the_quickstart_sends(tmp_path):
     assert stated["cbba10"]["payload"] == c["payload"], "README.md: run docs/scripts/readme_facts.py --write"
     for label in ("quickstart", "cbba10"):
         assert abs(stated[label]["tcp"] - measured[label]["tcp"]) <= 0.1 * measured[label]["tcp"], (label, measured)
+
+
+def test_the_readme_names_every_benchmark_in_both_its_lists():
+    """The Benchmarks section and the Layout table name every script in benchmarks/."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    readme = (root / "README.md").read_text()
+    section = readme.split("## Benchmarks", 1)[1].split("\n## ", 1)[0]
+    row = next(line for line in readme.splitlines() if line.startswith("| `benchmarks/` |"))
+    for script in sorted(p.name for p in (root / "benchmarks").glob("*.py") if p.name != "__init__.py"):
+        assert f"`{script}`" in section, f"{script} missing from the Benchmarks section"
+        assert f"`{script}`" in row, f"{script} missing from the Layout table"

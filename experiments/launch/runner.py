@@ -262,14 +262,17 @@ def _start_processes(plan: RunPlan, setup: _Setup) -> dict[str, Any]:
 
 
 def _progress_bar(exp: Experiment, progress: bool) -> tuple[Any, Callable[[int, float], None]]:
-    """A bar of simulated seconds and the tick callback that moves it (every 1/200 of the run)."""
+    """A bar of simulated seconds and the tick callback that moves it (every 1/200 of the run). With
+    ``run.stop_when_done`` the run may end before ``run.duration``: the bar says so, since it counts
+    to the duration (the quick start's world is done at 234 of 2000 s)."""
+    sooner = " (at most: ends when the world is done)" if exp.run.stop_when_done else ""
     bar = tqdm(
         total=exp.run.duration,
         unit="sim s",
         desc=exp.name,
         disable=not progress,
         leave=False,
-        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]",
+        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s" + sooner + " [{elapsed}<{remaining}]",
     )
     shown = [0.0]
 
