@@ -37,6 +37,9 @@ class InProcess:
         self.lost: dict[int, int] = {}  # agent -> tick its robot was lost (the scenario's losses)
         self.swap_log: list[SwapRecord] = []
         self.restart_log: list[RestartRecord] = []
+        #: the decisions for the tick in hand of an allocator that takes them from outside (``external``:
+        #: a learner that owns the loop sets them between TickLoop.begin and complete)
+        self.decisions: Mapping[int, int] = {}
 
     # -- the transport ----------------------------------------------------------------------------
     def run_starts(self) -> None:
@@ -61,7 +64,7 @@ class InProcess:
         for i, obs in observed.items():
             runtime = self.runtimes[i]
             action, messages, events = runtime.step(
-                k, runtime.decode_observation(obs.to_wire()), inboxes.get(i, EMPTY_INBOX)
+                k, runtime.decode_observation(obs.to_wire()), inboxes.get(i, EMPTY_INBOX), self.decisions.get(i)
             )
             outs[i] = decode_agent_out(encode_agent_out(k, i, action, messages, events))
         return self.radio_exchange.route(sample, outs)

@@ -8,7 +8,8 @@ k+1, the radio's counters); apply the actions the scenario declares; record.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Protocol
 
 from swarmbed.coordinator.recorder import Recorder
@@ -66,6 +67,17 @@ class TickTransport(Protocol):
         """The ticks are over (the last one, or the one before a stop)."""
 
 
+@dataclass(frozen=True)
+class TickInHand:
+    """A tick between :meth:`TickLoop.begin` and :meth:`TickLoop.complete`."""
+
+    k: int
+    sample: WorldSample
+    observed: Mapping[int, Observation]
+    doomed: Collection[int]  # robots the scenario loses at tick k+1
+    live: int  # agents alive at tick k
+
+
 class TickLoop:
     """The world, its recorder and a transport; :meth:`run` steps them to the end of the run."""
 
@@ -83,26 +95,41 @@ class TickLoop:
         self.stages = stages  # benchmarks/profile_tick.py
         self.last_tick = -1
 
+    def start(self) -> None:
+        """Open the result tables and tell the transport the first tick is about to start."""
+        self.recorder.open()
+        self.transport.run_starts()
+
+    def over(self, k: int) -> bool:
+        """Whether the run ends before tick ``k``: its duration, a finished world where the run says
+        to stop then, or a transport that asks to stop (a soak's duration)."""
+        w = self.world
+        return k >= self.exp.ticks or (w.finished and self.exp.run.stop_when_done) or self.transport.should_stop()
+
     def run(self, on_tick: Callable[[int, float], None] | None = None) -> int:
         """Step every tick of the run (or until the world is finished, where the run says to stop
         then); return the last tick stepped."""
-        w, rec, t = self.world, self.recorder, self.transport
-        stop_when_done = self.exp.run.stop_when_done
-        rec.open()
+        w, t = self.world, self.transport
+        self.start()
         inboxes: dict[int, bytes] = {}
-        t.run_starts()
-        for k in range(self.exp.ticks):
-            if (w.finished and stop_when_done) or t.should_stop():
-                break
+        k = 0
+        while not self.over(k):
             t.tick_starts(k)
             inboxes = self.tick(k, inboxes)
             if on_tick:
                 on_tick(w.tick, w.time)
+            k += 1
         t.run_ends()
         return self.last_tick
 
     def tick(self, k: int, inboxes: Mapping[int, bytes]) -> dict[int, bytes]:
         """Tick ``k`` with the inboxes delivered for it; return the inboxes of tick k+1."""
+        return self.complete(self.begin(k), inboxes)
+
+    def begin(self, k: int) -> TickInHand:
+        """The first half of tick ``k``: positions recorded, losses drawn, the world sample made and
+        every live agent's observation. Between :meth:`begin` and :meth:`complete` a caller that owns
+        the loop (a learner) reads the observations and sets its decisions."""
         w, rec, t, st = self.world, self.recorder, self.transport, self.stages
         ids, xs, ys = w.positions()
         rec.positions(k, ids, xs, ys)
@@ -115,20 +142,26 @@ class TickLoop:
         observed = w.observations()
         if st is not None:
             st.mark("observations")
-        step = t.exchange(k, sample, observed, inboxes)
+        return TickInHand(k, sample, observed, doomed, len(ids))
+
+    def complete(self, hand: TickInHand, inboxes: Mapping[int, bytes]) -> dict[int, bytes]:
+        """The second half of a tick: the transport carries it, the world applies the actions its
+        scenario declares, the recorder books it; return the inboxes of the next tick."""
+        w, rec, t, st, k = self.world, self.recorder, self.transport, self.stages, hand.k
+        step = t.exchange(k, hand.sample, hand.observed, inboxes)
         for j in step.lost:
             t.lose(j, k)
         declared = self.scenario.actions  # a world sees only actions of the shapes its scenario declares
         admitted = {a: admit(act, declared) for a, act in step.actions.items() if w.alive[a]}
         w.apply(admitted)
         rec.step(step)
-        for j in doomed:
+        for j in hand.doomed:
             t.retire(j, k + 1)
         self.last_tick = k
         if w.tick % self.exp.run.record_every == 0 or w.finished:
             rec.row(t.clock_columns())
         if st is not None:
             st.mark("apply and record")
-            st.ticks += len(ids)  # per agent-tick, as the other processes count
+            st.ticks += hand.live  # per agent-tick, as the other processes count
         t.tick_done(k, admitted)
         return step.inboxes

@@ -126,19 +126,54 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 2
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
+    if args.engine == "inprocess":
+        why = _inprocess_refusals(exp)
+        if args.listen or args.admit or args.tls:
+            why.append("--listen, --admit and --tls are for a hub others join: the in-process engine has none")
+        if why:
+            print(f"error: --engine inprocess: {why[0]}", file=sys.stderr)
+            return 2
     if args.check:
         from swarmbed.experiments.launch.check import describe_plan
 
-        print(describe_plan(exp, out, admitted))
+        print(describe_plan(exp, out, admitted, args.engine))
         return 0
     problem = _taken(out, args.force)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
+    if args.engine == "inprocess":
+        from swarmbed.experiments.launch.inprocess import InProcessRun
+        from swarmbed.experiments.launch.runner import progress_bar
+
+        bar, on_tick = progress_bar(exp, not args.no_progress)
+        with bar:
+            result = InProcessRun(exp, out).run(on_tick)
+        print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
+        return 0
     hub = HubOptions(listen=args.listen, auth=not args.no_auth, admit=admitted, tls=tls)
     result = run_experiment(exp, out, progress=not args.no_progress, hub=hub)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
+
+
+def _inprocess_refusals(exp) -> list[str]:
+    """Why ``exp`` cannot run on the in-process engine (none: it can)."""
+    from swarmbed.experiments.launch.inprocess import refusals
+
+    return refusals(exp, cfg.resolve_experiment(exp).allocator_cls.decision_source)
+
+
+def _add_engine(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--engine",
+        choices=["processes", "inprocess"],
+        default="processes",
+        help="processes (default): every agent its own OS process over Zenoh and the netem proxy; inprocess: "
+        "every agent and the radio stepped in this process, the same result files byte for byte, faster for "
+        "light allocators (lock-step, one machine, no ROS 2, no tree logs): develop and sweep in-process, "
+        "validate in processes",
+    )
 
 
 def register_run(sub: Subparsers) -> None:
@@ -158,6 +193,7 @@ def register_run(sub: Subparsers) -> None:
     )
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_engine(run)
     run.add_argument(
         "--listen",
         "-l",
@@ -520,14 +556,21 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     sweep = load_sweep(args.sweep, args.runs, args.grid, args.set, args.seed)
     out = Path(args.out) if args.out else Path("runs") / sweep.name
     planned = plan(sweep, out)
+    first = {spec.scenario.name: spec for spec in reversed(planned)}
+    every = {name: experiment_for(spec.base, spec.scenario, spec.seed, spec.extra) for name, spec in first.items()}
+    if args.engine == "inprocess":
+        for name, exp in every.items():
+            why = _inprocess_refusals(exp)
+            if why:
+                print(f"error: --engine inprocess: scenario {name}: {why[0]}", file=sys.stderr)
+                return 2
     if args.check:
         from swarmbed.experiments.launch.check import describe_sweep
         from swarmbed.experiments.rundir import RunDir
 
         left = sum(1 for spec in planned if not RunDir(spec.out_dir).complete)
-        first = {spec.scenario.name: spec for spec in reversed(planned)}
-        every = {name: experiment_for(spec.base, spec.scenario, spec.seed, spec.extra) for name, spec in first.items()}
-        print(describe_sweep(len(planned), left, every, args.jobs or os.cpu_count() or 1))  # the local pool's default
+        jobs = args.jobs or os.cpu_count() or 1  # the local pool's default
+        print(describe_sweep(len(planned), left, every, jobs, args.engine))
         return 0
     if len(planned) > CONFIRM_RUNS and not args.yes:
         print(
@@ -550,6 +593,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             executor=executor,
             stale_after=args.stale_after,
             redo_mismatched=args.redo_mismatched,
+            in_process=args.engine == "inprocess",
         )
     except ExecutorError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -575,6 +619,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if shown:
         print("means over each scenario's completed runs (swarmbed analyze for intervals and tests):")
         print(ok.groupby("scenario")[shown].mean(numeric_only=True).round(1).to_string())
+    if args.verify:
+        from swarmbed.experiments.campaigns.verify import verify_in_processes
+
+        if not verify_in_processes(planned, out, args.verify):
+            return 1
     return 0 if len(ok) == len(table) else 1
 
 
@@ -622,6 +671,14 @@ def register_sweep(sub: Subparsers) -> None:
         "this sweep plans (without it the sweep refuses to reuse or mix them)",
     )
     sw.add_argument("--runs", "-n", type=_positive, help="runs per scenario (overrides the file)")
+    _add_engine(sw)
+    sw.add_argument(
+        "--verify",
+        type=_positive,
+        metavar="K",
+        help="after the sweep, run K of its completed runs again in processes (the lowest seeds) and compare "
+        "every reproducible result file byte for byte; exit 1 naming any file that differs",
+    )
     sw.add_argument("--seed", type=int, help="sweep seed (overrides the file)")
     sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")
     sw.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every run")

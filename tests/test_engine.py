@@ -73,3 +73,62 @@ def test_the_in_process_engine_refuses_an_allocator_that_takes_decisions_from_ou
     with pytest.raises(ValueError, match="no one to ask"):
         run_in_process(experiment("allocator={name: external}"), tmp_path / "run")
     assert not (tmp_path / "run").exists()  # refused before the folder was made
+
+
+def _swarmbed(*args, cwd=ROOT):
+    import subprocess
+    import sys
+
+    return subprocess.run(
+        [sys.executable, "-m", "swarmbed", *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=300
+    )
+
+
+@pytest.mark.slow  # starts a real run
+def test_users_reach_the_in_process_engine_and_get_a_runs_files(tmp_path):
+    quick = ROOT / "experiments" / "quickstart.yaml"
+    done = _swarmbed("run", quick, "--engine", "inprocess", "--out", tmp_path / "ip", "--no-progress")
+    assert done.returncode == 0, done.stderr
+    assert _swarmbed("run", quick, "--out", tmp_path / "pr", "--no-progress").returncode == 0
+    same_results(tmp_path / "pr", tmp_path / "ip")
+    assert '"engine": "inprocess"' in (tmp_path / "ip" / "timings.json").read_text()
+    check = _swarmbed("run", quick, "--engine", "inprocess", "--check")
+    assert check.returncode == 0 and "engine: in-process" in check.stdout and "on one core" in check.stdout
+
+
+@pytest.mark.slow  # the command line in a subprocess
+def test_what_needs_processes_is_refused_in_one_line_before_anything_starts(tmp_path):
+    quick = ROOT / "experiments" / "quickstart.yaml"
+    for sets, words in (
+        (["--set", "run.clock=realtime"], "lock-step"),
+        (["--set", "placement={lab1: '0-1'}"], "other hosts"),
+        (["--set", "allocator.name=ros2", "--set", "ros2={domain: 3}"], "decisions from outside"),
+        (["--set", "ros2={domain: 3}"], "ROS 2 topics"),
+        (["--set", "run.record_bt=true"], "behavior-tree logs"),
+        (["--listen", "tcp/127.0.0.1:7447"], "--listen"),
+    ):
+        for check in ([], ["--check"]):
+            done = _swarmbed("run", quick, "--engine", "inprocess", "--out", tmp_path / "never", *sets, *check)
+            err = done.stderr.strip()
+            assert done.returncode == 2 and len(err.splitlines()) == 1 and words in err, (sets, err)
+            assert not (tmp_path / "never").exists()
+
+
+@pytest.mark.slow  # a sweep, then runs of processes
+def test_a_sweep_in_process_is_verified_against_processes_and_a_difference_is_named(tmp_path):
+    sweep = tmp_path / "s.yaml"
+    sweep.write_text(f"name: s\nbase: {ROOT / 'experiments' / 'quickstart.yaml'}\nruns: 2\n")
+    args = ("sweep", sweep, "--engine", "inprocess", "--out", tmp_path / "out", "--no-progress")
+    done = _swarmbed(*args, "--set", "run.duration=60", "--verify", "1")
+    assert done.returncode == 0, done.stderr
+    assert "1 runs again in processes; all the same" in done.stdout, done.stdout
+    ours = tmp_path / "out" / "base" / "run_000" / "timeseries.csv"
+    seeds = sorted(tmp_path.glob("out/base/run_*"))
+    assert len(seeds) == 2
+    # a file that the engine got wrong is named, and the command fails
+    for run in seeds:
+        series = run / "timeseries.csv"
+        series.write_text(series.read_text().replace("\n1,", "\n1,9", 1))
+    again = _swarmbed(*args, "--set", "run.duration=60", "--verify", "1")
+    assert again.returncode == 1 and "DIFFERS" in again.stdout and "timeseries.csv" in again.stdout, again.stdout
+    assert ours.exists()

@@ -261,7 +261,7 @@ def _start_processes(plan: RunPlan, setup: _Setup) -> dict[str, Any]:
     return hosts
 
 
-def _progress_bar(exp: Experiment, progress: bool) -> tuple[Any, Callable[[int, float], None]]:
+def progress_bar(exp: Experiment, progress: bool) -> tuple[Any, Callable[[int, float], None]]:
     """A bar of simulated seconds and the tick callback that moves it (every 1/200 of the run). With
     ``run.stop_when_done`` the run may end before ``run.duration``: the bar says so, since it counts
     to the duration (the quick start's world is done at 234 of 2000 s)."""
@@ -344,7 +344,7 @@ def _execute(
         if on_ready:
             on_ready(keys, endpoint)
 
-        bar, on_tick = _progress_bar(exp, progress)
+        bar, on_tick = progress_bar(exp, progress)
         live = LiveRun(exp, out_dir, coord, children, session, keys, hosts)
         running: list[RunObserver] = []
         try:
