@@ -1,11 +1,15 @@
-"""A PettingZoo ``ParallelEnv`` whose agents are swarmbed's agent processes, over the emulated radio.
+"""A PettingZoo ``ParallelEnv`` whose agents are swarmbed's agents, over the emulated radio.
 
-``reset(seed)`` starts a lock-step run of the experiment with the ``external`` allocator (its
-processes, the hub, the netem proxy, as ``swarmbed run`` does) in a thread of this process;
-``step(actions)`` hands every agent's decision for the tick in hand to the coordinator, which puts
-it in that agent's tick sample; the agent's allocator answers with it, its tree runs it, the world
-and the radio move on one tick, and the next tick's observations come back. So the bytes, the
-ledger and the result files are those of a normal run (``docs/learning.md``).
+``engine="processes"`` (default): ``reset(seed)`` starts a lock-step run of the experiment with the
+``external`` allocator (its processes, the hub, the netem proxy, as ``swarmbed run`` does) in a
+thread of this process; ``step(actions)`` hands every agent's decision for the tick in hand to the
+coordinator, which puts it in that agent's tick sample; the agent's allocator answers with it, its
+tree runs it, the world and the radio move on one tick, and the next tick's observations come back.
+``engine="inprocess"``: the learner owns the loop; every agent's runtime and the radio step in this
+process (:class:`~swarmbed.experiments.launch.inprocess.InProcessRun`), one tick a ``step``, with no
+thread and no queue. Either way the bytes, the ledger and the result files are those of a normal
+run, and the same seed and actions give the same observations and files on both engines
+(``docs/learning.md``).
 
 Spaces, per agent (``max_tasks`` = K, N agents):
 
@@ -47,9 +51,10 @@ except ImportError as exc:  # an optional extra
 
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.access import claim_folder, remove_orphaned_folders
+from swarmbed.experiments.launch.inprocess import ENGINES, InProcessRun
 from swarmbed.experiments.launch.runner import RunResult, run_experiment
 from swarmbed.plugins.external import DEFER
-from swarmbed.wire.codec import WireError, decode_inbox
+from swarmbed.wire.codec import EMPTY_INBOX, WireError, decode_inbox
 
 QUICKSTART = Path(__file__).resolve().parent.parent / "experiments" / "quickstart.yaml"
 STEP_TIMEOUT = 600.0  # wall seconds a step waits for the run's next tick before calling the run stuck
@@ -57,6 +62,40 @@ STEP_TIMEOUT = 600.0  # wall seconds a step waits for the run's next tick before
 
 class EnvError(RuntimeError):
     """The run under the environment failed (its processes, its configuration)."""
+
+
+def agent_view(obs: Any, inbox: bytes | None, max_tasks: int, n: int) -> tuple[dict[str, np.ndarray], list[int]]:
+    """One agent's observation (the spaces of the module docstring) and the task ids of its rows."""
+    tasks = obs.tasks
+    x, y = obs.x, obs.y
+    rows = np.zeros((max_tasks, 3), dtype=np.float32)
+    mask = np.zeros(max_tasks, dtype=np.int8)
+    chosen: list[int] = []
+    if len(tasks):
+        ids, txs, tys, left = tasks["id"].tolist(), tasks["x"].tolist(), tasks["y"].tolist(), tasks["remaining"]
+        # nearest first, ties to the lower id, with the distance the plugins use (math.hypot, which
+        # may differ from numpy's in the last bit): action 1 is then the nearest allocator's choice
+        order = sorted(range(len(ids)), key=lambda j: (math.hypot(txs[j] - x, tys[j] - y), ids[j]))[:max_tasks]
+        m = len(order)
+        rows[:m, 0] = tasks["x"][order] - x
+        rows[:m, 1] = tasks["y"][order] - y
+        rows[:m, 2] = left[order]
+        mask[:m] = 1
+        chosen = [ids[j] for j in order]
+    heard = np.zeros(n, dtype=np.int8)
+    if inbox and inbox != EMPTY_INBOX:
+        try:
+            senders = [copy.sender for copy in decode_inbox(inbox)]
+        except WireError:  # the proxy's own encoding: never expected; heard nothing
+            senders = []
+        heard[[i for i in senders if 0 <= i < n]] = 1
+    me = np.array((x, y, obs.heading, obs.speed), dtype=np.float32)
+    return {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}, chosen
+
+
+def _counters(world: Any) -> list[str]:
+    """The world's numeric counters (what a reward may be the increase of)."""
+    return sorted(k for k, v in world.row().items() if isinstance(v, (int, float)) and k != "tick")
 
 
 class _Bridge:
@@ -89,7 +128,7 @@ class _Bridge:
         if self.stopping:
             return {}
         if not self.counters:
-            self.counters = sorted(k for k, v in world.row().items() if isinstance(v, (int, float)) and k != "tick")
+            self.counters = _counters(world)
         views = {i: self._view(obs, inboxes.get(i)) for i, obs in observed.items()}
         self.to_env.put(("tick", tick, views, self._progress(world)))
         decisions = self.to_run.get()
@@ -100,28 +139,7 @@ class _Bridge:
         return decisions
 
     def _view(self, obs: Any, inbox: bytes | None) -> tuple[dict[str, np.ndarray], list[int]]:
-        tasks = obs.tasks
-        dx, dy = tasks["x"] - obs.x, tasks["y"] - obs.y
-        # nearest first, ties to the lower id, with the distance the plugins use (math.hypot, which
-        # may differ from numpy's in the last bit): action 1 is then the nearest allocator's choice
-        ids, ddx, ddy = tasks["id"].tolist(), dx.tolist(), dy.tolist()
-        order = sorted(range(len(ids)), key=lambda j: (math.hypot(ddx[j], ddy[j]), ids[j]))[: self.max_tasks]
-        rows = np.zeros((self.max_tasks, 3), dtype=np.float32)
-        rows[: len(order), 0], rows[: len(order), 1] = dx[order], dy[order]
-        rows[: len(order), 2] = tasks["remaining"][order]
-        mask = np.zeros(self.max_tasks, dtype=np.int8)
-        mask[: len(order)] = 1
-        heard = np.zeros(self.n, dtype=np.int8)
-        if inbox:
-            try:
-                for copy in decode_inbox(inbox):
-                    if 0 <= copy.sender < self.n:
-                        heard[copy.sender] = 1
-            except WireError:  # the proxy's own encoding: never expected; heard nothing
-                pass
-        me = np.array([obs.x, obs.y, obs.heading, obs.speed], dtype=np.float32)
-        view: dict[str, np.ndarray] = {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}
-        return view, [ids[j] for j in order]
+        return agent_view(obs, inbox, self.max_tasks, self.n)
 
 
 class SwarmbedParallelEnv(ParallelEnv):
@@ -146,7 +164,11 @@ class SwarmbedParallelEnv(ParallelEnv):
         reward_key: str | None = None,
         out_dir: str | Path | None = None,
         fallback: str | None = None,
+        engine: str = "processes",
     ) -> None:
+        if engine not in ENGINES:
+            raise ValueError(f"engine {engine!r}: one of {', '.join(ENGINES)}")
+        self.engine = engine
         if isinstance(max_tasks, (bool, np.bool_)) or not isinstance(max_tasks, (int, np.integer)) or max_tasks < 1:
             raise ValueError(f"max_tasks {max_tasks!r}: the rows of tasks an agent sees, a whole number of at least 1")
         self.config = Path(config)
@@ -189,6 +211,7 @@ class SwarmbedParallelEnv(ParallelEnv):
         self.agents: list[str] = []
         self.results: list[RunResult] = []  # every finished run of this environment, in order
         self._bridge: _Bridge | None = None
+        self._inprocess: InProcessRun | None = None  # engine="inprocess": the run this process steps
         self._thread: threading.Thread | None = None
         self._failure: BaseException | None = None
         self._choices: dict[str, list[int]] = {}
@@ -213,9 +236,13 @@ class SwarmbedParallelEnv(ParallelEnv):
         if self._seeds is None:
             self._seeds = np.random.default_rng(seed)
         exp = cfg.load(self.config, [*self.sets, f"run.seed={seed}"])
-        self._bridge = bridge = _Bridge(self.max_tasks, exp.agents.count, self.reward_key)
         out = self._next_run_dir()
         self.runs += 1
+        if self.engine == "inprocess":
+            self._inprocess = InProcessRun(exp, out, env=True)
+            counters = _counters(self._inprocess.world)
+            return self._first(self._inprocess_item(), counters)
+        self._bridge = bridge = _Bridge(self.max_tasks, exp.agents.count, self.reward_key)
         self._failure = None
 
         def run() -> None:
@@ -229,12 +256,16 @@ class SwarmbedParallelEnv(ParallelEnv):
         self._thread = threading.Thread(target=run, name=f"swarmbed-env-run-{self.runs}", daemon=True)
         self._thread.start()
         item = self._next()
+        return self._first(item, bridge.counters)
+
+    def _first(self, item: tuple, counters: list[str]) -> tuple[dict, dict]:
+        """reset()'s answer from the run's first tick."""
         if item[0] != "tick":
             raise EnvError("the run ended before its first tick")
-        if self.reward_key not in bridge.counters:
+        if self.reward_key not in counters:
             self._end_run()
             raise ValueError(
-                f"reward_key {self.reward_key!r}: not a counter of this world (one of {', '.join(bridge.counters)})"
+                f"reward_key {self.reward_key!r}: not a counter of this world (one of {', '.join(counters)})"
             )
         _, _tick, views, progress = item
         self._progress = progress
@@ -251,11 +282,16 @@ class SwarmbedParallelEnv(ParallelEnv):
     def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         if not isinstance(actions, Mapping):
             raise ValueError(f"actions: a mapping of agent name to action, not {type(actions).__name__}")
-        if self._bridge is None or not self.agents:
+        if (self._bridge is None and self._inprocess is None) or not self.agents:
             raise EnvError("step() before reset(), or after every agent is done")
         decisions = self._decisions(actions)
-        self._bridge.to_run.put(decisions)
-        item = self._next()
+        if self._inprocess is not None:
+            self._inprocess.advance(decisions)
+            item = self._inprocess_item()
+        else:
+            assert self._bridge is not None
+            self._bridge.to_run.put(decisions)
+            item = self._next()
         acting = list(self.agents)
         if item[0] == "tick":
             _, _tick, views, progress = item
@@ -312,6 +348,19 @@ class SwarmbedParallelEnv(ParallelEnv):
         self._last_obs.update(obs)
         return obs
 
+    def _inprocess_item(self) -> tuple:
+        """What the bridge would hand over, from the run this process steps: the tick in hand's
+        views and the progress so far, or the end of the run (its result files written)."""
+        run = self._inprocess
+        assert run is not None
+        progress = float(run.world.row().get(self.reward_key, 0.0))
+        if run.over:
+            self.results.append(run.finish())
+            return ("end", progress, bool(run.world.finished))
+        hand, n = run.observe(), self.exp.agents.count
+        views = {i: agent_view(obs, run.inboxes.get(i), self.max_tasks, n) for i, obs in hand.observed.items()}
+        return ("tick", hand.k, views, progress)
+
     def _next(self) -> tuple:
         assert self._bridge is not None
         try:
@@ -324,7 +373,11 @@ class SwarmbedParallelEnv(ParallelEnv):
         return item
 
     def _end_run(self) -> None:
-        """Stop the run under way, if any, and wait for its processes to leave."""
+        """Stop the run under way, if any, and wait for its processes to leave (in-process: write the
+        result files of the ticks stepped)."""
+        run, self._inprocess = self._inprocess, None
+        if run is not None and run.result is None:
+            self.results.append(run.finish())
         bridge, thread = self._bridge, self._thread
         if thread is not None and thread.is_alive() and bridge is not None:
             bridge.to_run.put(None)  # the coordinator may wait for decisions: let it stop

@@ -10,7 +10,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from swarmbed.envs import SwarmbedParallelEnv
 from swarmbed.experiments.launch.runner import run_experiment
-from tests.conftest import ROOT, experiment
+from tests.conftest import ROOT, experiment, same_results
 
 RADIO = ("network.loss=0.2", "network.burst={mean_loss: 0.2, mean_burst: 4}")
 SMALL = ("agents.count=3", "run.duration=40", *RADIO)
@@ -24,13 +24,14 @@ SMALL = ("agents.count=3", "run.duration=40", *RADIO)
     ],
     ids=["mtsr", "sar"],
 )
-def test_pettingzoos_api_and_seed_tests_pass_on_real_runs(config, sets):
-    env = SwarmbedParallelEnv(config, sets)
+@pytest.mark.parametrize("engine", ["processes", "inprocess"])
+def test_pettingzoos_api_and_seed_tests_pass_on_real_runs(config, sets, engine):
+    env = SwarmbedParallelEnv(config, sets, engine=engine)
     try:
         parallel_api_test(env, num_cycles=30)
     finally:
         env.close()
-    parallel_seed_test(lambda: SwarmbedParallelEnv(config, sets), num_cycles=30)
+    parallel_seed_test(lambda: SwarmbedParallelEnv(config, sets, engine=engine), num_cycles=30)
 
 
 def _drive(tmp_path, name, policy, seed=5, sets=SMALL):
@@ -198,3 +199,28 @@ def test_an_environment_never_closed_leaves_no_temporary_folder(tmp_path):
     assert returned.returncode == 0, returned.stderr
     assert not Path(returned.stdout.strip()).exists()  # removed at exit
     assert not left.exists()  # a killed process's folder: removed by the next environment
+
+
+@pytest.mark.parametrize(
+    "config", [ROOT / "experiments" / "quickstart.yaml", ROOT / "experiments" / "sar" / "_base.yaml"]
+)
+def test_both_engines_give_the_same_observations_and_result_files(tmp_path, config):
+    """The learner that owns the loop (in-process) and the one that steps a run of processes see the
+    same world tick by tick, and leave the same result files."""
+    seen = {}
+    for engine in ("processes", "inprocess"):
+        env = SwarmbedParallelEnv(config, SMALL, out_dir=tmp_path / engine, engine=engine)
+        rng = np.random.default_rng(3)
+        trace = []
+        try:
+            obs, _ = env.reset(seed=11)
+            while env.agents:
+                trace.append({a: {k: v.tolist() for k, v in o.items()} for a, o in sorted(obs.items())})
+                actions = {a: int(rng.integers(env.action_space(a).n)) for a in env.agents}
+                obs, rewards, term, trunc, _ = env.step(actions)
+                trace.append((sorted(rewards.items()), sorted(term.items()), sorted(trunc.items())))
+        finally:
+            env.close()
+        seen[engine] = trace
+    assert len(seen["processes"]) > 20 and seen["processes"] == seen["inprocess"]
+    same_results(tmp_path / "processes" / "run_0", tmp_path / "inprocess" / "run_0")
