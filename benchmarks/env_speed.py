@@ -31,7 +31,10 @@ def main() -> None:
     ap.add_argument("--ticks", type=int, default=300)
     ap.add_argument("--engine", nargs="+", default=["inprocess", "processes"], choices=["inprocess", "processes"])
     args = ap.parse_args()
-    print(f"{'engine':>10} {'N':>4} {'reset s':>8} {'env steps/s':>12} {'run ticks/s':>12} {'env / run':>9}")
+    print(
+        f"{'engine':>10} {'N':>4} {'reset s':>8} {'env steps/s':>12} {'run ticks/s':>12} {'env / run':>9} "
+        f"{'CPU us/step':>12}"
+    )
     for engine in args.engine:
         for n in args.n:
             measure(engine, n, args.ticks)
@@ -45,11 +48,12 @@ def measure(engine: str, n: int, ticks: int) -> None:
         t0 = time.perf_counter()
         obs, _ = env.reset(seed=1)
         reset_s = time.perf_counter() - t0
-        steps, t1 = 0, time.perf_counter()
+        steps, t1, c1 = 0, time.perf_counter(), time.process_time()
         while env.agents:
             obs, *_ = env.step({a: 1 if obs[a]["task_mask"][0] else 0 for a in env.agents})
             steps += 1
         env_rate = steps / (time.perf_counter() - t1)
+        cpu_us = 1e6 * (time.process_time() - c1) / steps  # this process's: all of it in-process
     finally:
         env.close()
     exp = cfg.load(ROOT / "experiments" / "quickstart.yaml", [*sets, "allocator.name=nearest", "run.seed=1"])
@@ -60,7 +64,8 @@ def measure(engine: str, n: int, ticks: int) -> None:
             result = run_experiment(exp, Path(out), progress=False)
     run_rate = result.summary["ticks"] / result.timings["run_s"]
     print(
-        f"{engine:>10} {n:>4} {reset_s:>8.2f} {env_rate:>12.1f} {run_rate:>12.1f} {env_rate / run_rate:>9.2f}",
+        f"{engine:>10} {n:>4} {reset_s:>8.2f} {env_rate:>12.1f} {run_rate:>12.1f} {env_rate / run_rate:>9.2f} "
+        f"{cpu_us:>12.0f}",
         flush=True,
     )
 
