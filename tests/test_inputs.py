@@ -128,6 +128,8 @@ def test_errors_blame_the_flag_that_gave_the_value(tmp_path, capsys):
     assert "Value error" not in err and ": :" not in err, err
     rc, _, err = _main(capsys, "run", QUICKSTART, "--set", "agents.cout=3", "--check")
     assert rc == 2 and "unknown key (did you mean 'agents.count'?)" in err, err
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--set", "allocator.name=ros2", "--check")
+    assert rc == 2 and "needs a ros2: section" in err, err
     rc, _, err = _main(capsys, "run", QUICKSTART, "--set", "allocator.name=missing.py:X", "--check")
     assert rc == 2 and "missing.py does not exist" in err and "targets.py" not in err, err
     rc, _, err = _main(capsys, "sweep", QUICKSTART, "--grid", "allocator.name=,,", "--check")

@@ -208,6 +208,11 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
         for k, s in enumerate(exp.swaps)
         if s.agent >= exp.agents.count
     ]
+    if allocator_cls.decision_source == "ros2" and exp.ros2 is None:
+        problems.append(
+            f"allocator.name: {exp.allocator.name!r} takes its decisions from ROS 2 topics: the experiment "
+            "needs a ros2: section (docs/ros2.md)"
+        )
     if exp.swaps and not allocator_cls.snapshottable:
         problems.append(
             f"swaps: allocator {exp.allocator.name} cannot move between processes "
