@@ -15,7 +15,8 @@ Spaces, per agent (``max_tasks`` = K, N agents):
 
 * observation, a ``Dict``: ``self`` (x, y, heading, speed), ``tasks`` (K rows of dx, dy and
   remaining work of the tasks in view, nearest first, ties to the lower id; zeros past the last),
-  ``task_mask`` (which rows hold a task), ``heard_from`` (the agents whose radio messages it
+  ``task_mask`` (which rows hold a task), ``action_mask`` (the actions that choose something),
+  ``heard_from`` (the agents whose radio messages it
   received this tick: range, loss, bursts and caps shape it);
 * action, ``Discrete(K + 1)``: 0 chooses no task (the agent's tree explores), j the j-th row of
   ``tasks``; a row the mask marks empty also chooses none. With a ``fallback`` allocator,
@@ -91,6 +92,16 @@ def agent_view(obs: Any, inbox: bytes | None, max_tasks: int, n: int) -> tuple[d
         heard[[i for i in senders if 0 <= i < n]] = 1
     me = np.array((x, y, obs.heading, obs.speed), dtype=np.float32)
     return {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}, chosen
+
+
+def with_action_mask(view: dict[str, np.ndarray], deferring: bool) -> dict[str, np.ndarray]:
+    """``view`` with ``action_mask``: the actions that choose something (0, no task, always; j where
+    row j holds a task; the fallback's action where there is one), as sb3-contrib's MaskablePPO and
+    TorchRL's PettingZoo wrapper read it."""
+    legal = np.ones(len(view["task_mask"]) + (2 if deferring else 1), dtype=np.int8)
+    legal[1 : 1 + len(view["task_mask"])] = view["task_mask"]
+    view["action_mask"] = legal
+    return view
 
 
 def _counters(world: Any) -> list[str]:
@@ -193,6 +204,7 @@ class SwarmbedParallelEnv(ParallelEnv):
                 "tasks": spaces.Box(-inf, inf, (max_tasks, 3), np.float32),
                 "task_mask": spaces.MultiBinary(max_tasks),
                 "heard_from": spaces.MultiBinary(n),
+                "action_mask": spaces.MultiBinary(max_tasks + (2 if fallback is not None else 1)),
             }
         )
         #: the action that lets the fallback allocator decide (only with ``fallback``)
@@ -344,7 +356,7 @@ class SwarmbedParallelEnv(ParallelEnv):
         obs = {}
         for i, (view, ids) in views.items():
             name = self.possible_agents[i]
-            obs[name], self._choices[name] = view, ids
+            obs[name], self._choices[name] = with_action_mask(view, self.defer is not None), ids
         self._last_obs.update(obs)
         return obs
 

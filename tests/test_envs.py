@@ -223,4 +223,7 @@ def test_both_engines_give_the_same_observations_and_result_files(tmp_path, conf
             env.close()
         seen[engine] = trace
     assert len(seen["processes"]) > 20 and seen["processes"] == seen["inprocess"]
+    for step in seen["inprocess"][::2]:  # every action the mask allows picks a row that holds a task
+        for view in step.values():
+            assert view["action_mask"] == [1, *view["task_mask"]]
     same_results(tmp_path / "processes" / "run_0", tmp_path / "inprocess" / "run_0")
