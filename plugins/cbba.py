@@ -88,6 +88,7 @@ class CBBA(Allocator):
     Params = CBBAParams
     params: CBBAParams
     message_kinds = (KIND,)
+    version = "2"  # 2: messages carry packed arrays (plugins/consensus.py); the same decisions
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)

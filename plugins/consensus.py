@@ -8,17 +8,136 @@ changed since the message before (``"d": 1``; a winner dropped travels as ``NONE
 names as many entries as the whole state (rounds far apart: everything changed), which then goes.
 A receiver applies Table 1 to the tasks a delta names and takes an agent a delta does not name as no news
 about it. A neighbour that missed a message, or came into range, is whole again at the next full
-one. The full messages are byte for byte those of ``full_every = 1``."""
+one. The full messages are byte for byte those of ``full_every = 1``.
+
+On the wire a message is ``{"t": stamp, WINNERS, STAMPS}`` (``"d": 1`` for a delta), its vectors
+packed arrays of declared little-endian dtypes, each under the key of the narrowest that holds it
+exactly (an empty one left out) (:data:`WINNER_KEYS`: task uint16 or uint32, winner int8 or int16, bid float64;
+:data:`STAMP_KEYS`: agent int8 or int16, stamp uint16 or int32 where every stamp is whole, else
+float64), as a robot would send them: a receiver reads them without a Python
+object per entry, and anything that is not such an array (a torn or crafted message) is read as
+naming nothing. :func:`consensus_message` and
+:func:`read_message` build and read one."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
+
+import numpy as np
 
 from swarmbed.wire.state import state_type
 
 NONE = -1
 _NEVER = -math.inf
+
+#: one winner entry of a message: the task, the agent believed to win it (NONE: a winner dropped,
+#: in a delta), its winning bid (float64 always: a bid is compared exactly)
+WINNER_DTYPE = np.dtype([("task", "<u4"), ("winner", "<i2"), ("bid", "<f8")])
+#: one information timestamp of a message: the agent, the simulated time of the latest news of it
+STAMP_DTYPE = np.dtype([("agent", "<i2"), ("stamp", "<f8")])
+#: each vector's keys and declared dtypes, narrowest first: a message carries a vector under the
+#: first key whose dtype holds every entry exactly (ids below 128 or 65,536, whole-second stamps), and
+#: leaves an empty one out; one-letter keys, as every byte of a message is counted
+WINNER_KEYS = (
+    ("w", np.dtype([("task", "<u2"), ("winner", "i1"), ("bid", "<f8")])),
+    ("v", np.dtype([("task", "<u2"), ("winner", "<i2"), ("bid", "<f8")])),
+    ("u", WINNER_DTYPE),
+)
+STAMP_KEYS = (
+    ("s", np.dtype([("agent", "i1"), ("stamp", "<u2")])),
+    ("r", np.dtype([("agent", "<i2"), ("stamp", "<u2")])),
+    ("q", np.dtype([("agent", "<i2"), ("stamp", "<i4")])),
+    ("p", STAMP_DTYPE),
+)
+
+
+def _narrowest(wide: np.ndarray, keys: tuple[tuple[str, np.dtype], ...]) -> tuple[str, np.ndarray]:
+    """The first of ``keys`` whose dtype holds every entry of ``wide`` exactly, and the entries in it
+    (ids: in range; stamps: whole numbers in range; a bid is always float64)."""
+    for key, dtype in keys[:-1]:
+        if all(_holds(wide[name], dtype[name]) for name in dtype.names or ()):
+            return key, wide.astype(dtype)
+    return keys[-1][0], wide
+
+
+def _holds(values: np.ndarray, dtype: np.dtype) -> bool:
+    if dtype.kind == "f" or dtype == values.dtype:
+        return True
+    info = np.iinfo(dtype)
+    if not (info.min <= values.min() and values.max() <= info.max):
+        return False
+    return values.dtype.kind != "f" or bool((values == np.floor(values)).all())
+
+
+def _narrowest_key(rows: Sequence[tuple], keys: tuple[tuple[str, np.dtype], ...]) -> str:
+    """:func:`_narrowest`'s key for a few rows, found without making arrays."""
+    columns = list(zip(*rows))
+    for key, dtype in keys[:-1]:
+        fits = True
+        for name, column in zip(dtype.names or (), columns):
+            field = dtype[name]
+            if field.kind == "f" or key == keys[-1][0]:
+                continue
+            info = np.iinfo(field)
+            if not (info.min <= min(column) and max(column) <= info.max and all(v == int(v) for v in column)):
+                fits = False
+                break
+        if fits:
+            return key
+    return keys[-1][0]
+
+
+#: below this many rows a message's dtype is chosen in Python (a few numpy calls cost more)
+FEW_ROWS = 32
+
+
+def _pack(out: dict[str, Any], rows: Sequence[tuple], keys: tuple[tuple[str, np.dtype], ...]) -> None:
+    """``rows`` into ``out`` under the first of ``keys`` whose dtype holds every row exactly."""
+    if not rows:
+        return  # an empty vector is left out
+    if len(rows) < FEW_ROWS:
+        key = _narrowest_key(rows, keys)
+        out[key] = np.array(rows, dtype=dict(keys)[key]).tobytes()
+    else:
+        key, packed = _narrowest(np.array(rows, dtype=keys[-1][1]), keys)
+        out[key] = packed.tobytes()
+
+
+def _read(data: dict, keys: tuple[tuple[str, np.dtype], ...]) -> np.ndarray:
+    """The packed array under the first of ``keys`` the message has, or none for anything that is
+    not one (a torn or crafted message)."""
+    for key, dtype in keys:
+        raw = data.get(key)
+        if raw is not None:
+            if not isinstance(raw, bytes) or len(raw) % dtype.itemsize:
+                break
+            return np.frombuffer(raw, dtype)
+    return np.empty(0, keys[-1][1])
+
+
+def consensus_message(
+    t: float, winners: Sequence[tuple] = (), stamps: Sequence[tuple] = (), delta: bool = False
+) -> dict:
+    """A message as it goes out: ``winners`` as (task, winner, bid), ``stamps`` as (agent, stamp)."""
+    out: dict[str, Any] = {"t": _compact(t)}
+    if delta:
+        out["d"] = 1
+    _pack(out, winners, WINNER_KEYS)
+    _pack(out, stamps, STAMP_KEYS)
+    return out
+
+
+def read_message(data: Any) -> tuple[float, list[tuple[int, int, float]], list[tuple[int, float]], bool]:
+    """(stamp, winners, stamps, is a delta) of a message, as Python values."""
+    w, s = _read(data, WINNER_KEYS), _read(data, STAMP_KEYS)
+    return (
+        data["t"],
+        list(zip(w["task"].tolist(), w["winner"].tolist(), w["bid"].tolist())),
+        list(zip(s["agent"].tolist(), s["stamp"].tolist())),
+        bool(data.get("d")),
+    )
 
 
 def _compact(t: float) -> float | int:
@@ -99,20 +218,18 @@ class ConsensusState:
         winners = {t: (self.z[t], self.y[t]) for t in self.z}
         delta = None
         if not due_whole:
-            changed = [[t, w, b] for t, (w, b) in sorted(winners.items()) if self.told.get(t) != (w, b)]
-            dropped = [[t, NONE, 0.0] for t in sorted(self.told.keys() - winners.keys())]
-            stamps = [[a, _compact(ts)] for a, ts in sorted(self.s.items()) if self.told_s.get(a) != ts]
+            told, told_s = self.told, self.told_s
+            changed = [(t, w, b) for t, (w, b) in winners.items() if told.get(t) != (w, b)]
+            dropped = [(t, NONE, 0.0) for t in told.keys() - winners.keys()]
+            stamps = [(a, ts) for a, ts in sorted(self.s.items()) if told_s.get(a) != ts]
             if len(changed) + len(dropped) + len(stamps) < len(winners) + len(self.s):  # else whole is smaller
-                delta = {"t": _compact(self.now), "d": 1, "w": sorted(changed + dropped), "s": stamps}
+                delta = consensus_message(self.now, sorted(changed + dropped), stamps, delta=True)
         self.told, self.told_s = winners, dict(self.s)
         return delta or self._whole()
 
     def _whole(self) -> dict:
-        return {
-            "t": _compact(self.now),
-            "w": [[t, self.z[t], self.y[t]] for t in sorted(self.z)],
-            "s": [[a, _compact(ts)] for a, ts in sorted(self.s.items())],
-        }
+        z, y = self.z, self.y
+        return consensus_message(self.now, [(t, z[t], y[t]) for t in sorted(z)], sorted(self.s.items()))
 
     def receive(self, sender: int, data: dict, ignore: Iterable[int] = (), within: set[int] | None = None) -> None:
         """Apply Table 1 to every task in a neighbour's message, then merge its timestamps.
@@ -121,20 +238,31 @@ class ConsensusState:
         the tasks in ``within`` that the message names, leaving alone those the sender holds no
         winner for."""
         i, k = self.agent_id, sender
+        if not isinstance(data, dict) or not isinstance(data.get("t"), (int, float)):
+            return  # not a message of ours: nothing in it
         delta = bool(data.get("d"))
-        entries = set(map(tuple, data["w"]))
-        if delta:  # only the tasks it names; a NONE entry is a winner the sender dropped
-            differing = {t for t, w, b in entries if (self.z.get(t, NONE), self.y.get(t, 0.0)) != (w, b)}
-        else:
-            mine = {(t, w, y_t) for (t, w), y_t in zip(self.z.items(), (self.y[t] for t in self.z))}
-            differing = {e[0] for e in entries ^ mine}  # identical entries leave every table case unchanged
-        theirs = {t: (w, b) for t, w, b in entries if t in differing}
+        w = _read(data, WINNER_KEYS)
+        names = w["task"].tolist()
+        if any(a >= b for a, b in zip(names, names[1:])):  # ours are sorted, each task once: keep the first
+            w = w[np.unique(w["task"], return_index=True)[1]]
+            names = w["task"].tolist()
+        wins, bids = w["winner"].tolist(), w["bid"].tolist()
+        z, y = self.z, self.y
+        # the tasks whose belief differs from ours (identical entries leave every table case unchanged):
+        # a delta names only the tasks it changes (NONE: a winner the sender dropped); a whole message
+        # also differs on every task we hold that it does not name
+        zget, yget = z.get, y.get
+        theirs = {t: (wk, bk) for t, wk, bk in zip(names, wins, bids) if zget(t, NONE) != wk or yget(t, 0.0) != bk}
+        differing = set(theirs)
+        if not delta:
+            named = set(names)
+            differing.update(t for t in z if t not in named)
         if within is not None:
             differing = {t for t in differing if t in within and t in theirs}
-        sk = dict(data["s"])
+        s = _read(data, STAMP_KEYS)
+        sk: dict[int, float] = dict(zip(s["agent"].tolist(), s["stamp"].tolist()))
         sk[k] = data["t"]
         skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
-        z, y = self.z, self.y
 
         def compare(m: int) -> int:
             mine = self.now if m == i else self.s.get(m, _NEVER)
@@ -156,10 +284,10 @@ class ConsensusState:
                     self.z[j], self.y[j] = zk, yk
             elif action == "reset":
                 self.reset(j)
-        stamps = self.s
-        for m, ts in sk.items():
-            if ts > stamps.get(m, _NEVER) and m != i:
-                stamps[m] = ts
+        known = self.s.get
+        newer = {m: ts for m, ts in sk.items() if ts > known(m, _NEVER)}
+        newer.pop(i, None)
+        self.s.update(newer)
 
     def reset(self, task: int) -> None:
         self.z.pop(task, None)

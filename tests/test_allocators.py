@@ -9,7 +9,7 @@ from swarmbed.extension import HALT, HOLD, LocalView, Message, TaskInfo
 from swarmbed.plugins.cbba import CBBA
 from swarmbed.plugins.checks.allocator import CLEAN_NETWORK as CLEAN
 from swarmbed.plugins.checks.allocator import random_instance, run_all, simulate
-from swarmbed.plugins.consensus import NONE, ConsensusState, table
+from swarmbed.plugins.consensus import NONE, ConsensusState, consensus_message, read_message, table
 from swarmbed.plugins.grape import VOID
 from swarmbed.plugins.registry import entries, make
 from swarmbed.wire.codec import pack, unpack
@@ -105,18 +105,19 @@ def test_cbba_messages_between_whole_ones_carry_what_changed_and_a_missed_one_is
     a.add(11, 4.0)
     a.s = {2: 1.0, 3: 1.0}
     whole = a.message()
-    assert "d" not in whole and len(whole["w"]) == 2 and len(whole["s"]) == 2
+    _t, winners, stamps, is_delta = read_message(whole)
+    assert not is_delta and len(winners) == 2 and len(stamps) == 2
     b.receive(0, whole)
     assert b.z == {10: 0, 11: 0}
     a.now, a.s[3] = 1.0, 2.0
     a.reset(10)
     a.add(12, 3.0)
     delta = a.message()
-    assert delta == {"t": 1, "d": 1, "w": [[10, NONE, 0.0], [12, 0, 3.0]], "s": [[3, 2]]}
+    assert read_message(delta) == (1, [(10, NONE, 0.0), (12, 0, 3.0)], [(3, 2.0)], True)
     a.now = 2.0
     a.add(13, 2.0)
     missed = a.message()  # lost on the way to b
-    assert missed["w"] == [[13, 0, 2.0]] and missed["s"] == []
+    assert read_message(missed)[1:3] == ([(13, 0, 2.0)], [])
     b.now = 2.0
     b.receive(0, delta)
     assert b.z == {11: 0, 12: 0} and b.s == {0: 1, 2: 1.0, 3: 2}
@@ -334,7 +335,7 @@ def test_cbba_consensus_scope_of_spaces_code_touches_only_sensed_tasks_both_side
     """SPACE's code skips a task in a consensus round unless it is in the agent's local tasks and
     both it and the neighbour hold a bid for it (``consensus_scope: local_bids``); the CBBA paper's
     round (``all``, the default) takes every task the neighbour names."""
-    theirs = {"t": 1, "w": [[10, 1, 9.0], [11, 1, 9.0], [12, 1, 9.0]], "s": []}
+    theirs = consensus_message(1, [(10, 1, 9.0), (11, 1, 9.0), (12, 1, 9.0)], [])
     paper, space = ConsensusState(0), ConsensusState(0)
     for st in (paper, space):
         st.add(10, 5.0)
@@ -346,7 +347,7 @@ def test_cbba_consensus_scope_of_spaces_code_touches_only_sensed_tasks_both_side
     assert space.z == {10: 1, 11: 0}  # 11: not sensed; 12: never bid on by agent 0
 
     tasks = {0: TaskInfo(0, 10.0, 0.0, 30.0), 1: TaskInfo(1, 200.0, 0.0, 30.0)}
-    heard = [Message(1, "cbba", {"t": 0, "w": [[0, 1, 0.5], [1, 1, 9.0]], "s": []})]
+    heard = [Message(1, "cbba", consensus_message(0, [(0, 1, 0.5), (1, 1, 9.0)], []))]
     winners = {}
     for scope in ("all", "local_bids"):
         cbba = make("cbba", {"consensus_scope": scope, "max_tasks": 1}, 0, np.random.default_rng(0), 0)
@@ -376,5 +377,35 @@ def test_cbba_coarse_stamps_of_spaces_wall_clock_keep_the_newer_information_rule
     for their_stamp_of_2, updated in ((0.0, False), (7.5, True)):
         st = ConsensusState(0)
         st.z[5], st.y[5], st.s[2] = 2, 3.0, 0.0
-        st.receive(1, {"t": 0.0, "w": [[5, 2, 4.0]], "s": [[2, their_stamp_of_2]]})
+        st.receive(1, consensus_message(0.0, [(5, 2, 4.0)], [(2, their_stamp_of_2)]))
         assert st.y[5] == (4.0 if updated else 3.0)
+
+
+def test_consensus_messages_are_packed_arrays_of_the_narrowest_declared_dtype_and_read_back_exactly():
+    small = consensus_message(3, [(1, 2, 0.1 + 0.2), (300, 7, 1e-300)], [(4, 5.0), (9, 12.0)])
+    assert set(small) == {"t", "w", "s"} and len(small["w"]) == 2 * 11 and len(small["s"]) == 2 * 3
+    assert read_message(small) == (3, [(1, 2, 0.1 + 0.2), (300, 7, 1e-300)], [(4, 5.0), (9, 12.0)], False)
+    wide = consensus_message(2.5, [(70_000, 300, 2.0), (70_001, NONE, 0.0)], [(200, 0.25), (3, 1e6)], delta=True)
+    assert set(wide) == {"t", "d", "u", "p"}  # task ids past 65,535, a stamp that is not whole
+    assert read_message(wide) == (2.5, [(70_000, 300, 2.0), (70_001, NONE, 0.0)], [(200, 0.25), (3, 1e6)], True)
+    assert set(consensus_message(0, [(1, 200, 1.0)], [(200, 70_000.0)])) == {"t", "v", "q"}
+    assert consensus_message(1) == {"t": 1}  # empty vectors are left out
+
+
+def test_a_crafted_consensus_message_names_nothing_and_changes_nothing():
+    st = ConsensusState(0)
+    st.add(4, 2.0)
+    before = (dict(st.z), dict(st.y), dict(st.s))
+    for crafted in (
+        {"t": 1, "w": b"\x01\x02\x03"},  # not a whole number of entries
+        {"t": 1, "w": [[4, 1, 9.0]], "s": "x"},  # not packed bytes
+        {"t": "soon", "w": consensus_message(1, [(4, 1, 9.0)])["w"]},  # a stamp that is not a number
+        [4, 1, 9.0],
+        None,
+    ):
+        st.receive(1, crafted)
+        assert (st.z, st.y) == before[:2], crafted
+    # a task named twice: the first entry counts (ours never repeat one)
+    twice = consensus_message(1, [(5, 1, 1.0), (5, 2, 9.0)])
+    st.receive(1, twice)
+    assert st.z[5] == 1 and st.y[5] == 1.0

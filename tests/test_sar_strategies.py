@@ -8,6 +8,7 @@ import pytest
 
 from swarmbed.extension import LocalView, Message, TaskInfo
 from swarmbed.plugins.checks.allocator import random_instance, simulate
+from swarmbed.plugins.consensus import consensus_message
 from swarmbed.plugins.registry import make
 from swarmbed.plugins.sar.ccbba import ClusteringCBBA, kmeans_pp
 from swarmbed.plugins.sar.interval import IntervalParams, next_interval, omega, sigmoid
@@ -112,14 +113,14 @@ def test_tr_conflict_fires_when_a_known_winner_can_be_outbid():
     victims = {1: (2, 0, 0), 2: (4, 0, 0)}  # victim 1 fills the one-task bundle; victim 2 is won by robot 3
     fire(s, view(0, 0, 0, victims))
     run_round(s, view(0, 0, 0, victims))
-    weak = Message(3, "bids", {"t": 0.5, "w": [[2, 3, 0.01]], "s": []})
+    weak = Message(3, "bids", consensus_message(0.5, [(2, 3, 0.01)], []))
     _, fired = fire(s, view(1, 0, 0, victims, [weak]))
     assert fired["tr_conflict"] and not fired["tr_init"] and not fired["tr_fallback"]
     mine = 1 / (4 + s.params.epsilon)  # this robot's utility for victim 2
-    within_margin = Message(3, "bids", {"t": 1.5, "w": [[2, 3, mine - 0.02]], "s": []})
+    within_margin = Message(3, "bids", consensus_message(1.5, [(2, 3, mine - 0.02)], []))
     _, fired = fire(s, view(2, 0, 0, victims, [within_margin]))
     assert not fired["tr_conflict"]  # it would win, but not by theta_outbid_margin
-    strong = Message(3, "bids", {"t": 2.5, "w": [[2, 3, 5.0]], "s": []})
+    strong = Message(3, "bids", consensus_message(2.5, [(2, 3, 5.0)], []))
     _, fired = fire(s, view(3, 0, 0, victims, [strong]))
     assert not fired["tr_conflict"]
 
@@ -199,7 +200,7 @@ def test_comm_claims_of_a_silent_robot_lapse():
 def test_cbba_wins_of_a_silent_robot_lapse():
     b = make("cbba-etc", {"winner_timeout": 100.0}, 1, np.random.default_rng(0), 0, "sar")
     victims = {7: (3, 0, -1)}
-    won = Message(0, "bids", {"t": 0.0, "w": [[7, 0, 50.0]], "s": []})
+    won = Message(0, "bids", consensus_message(0.0, [(7, 0, 50.0)], []))
     b.observe(view(0, 0, 0, victims, [won], agent=1))
     assert not b.build_bundle(view(0, 0, 0, victims, agent=1))  # outbid by robot 0's 50.0
     b.observe(view(101, 0, 0, victims, agent=1))
@@ -281,7 +282,7 @@ def run_fsm(s, steps):
 
 
 #: robot 1 wins victim 1 (3 m from robot 0) with a bid robot 0 cannot beat, heard at tick 2
-OUTBID = [(), (), [Message(1, "bids", {"t": 1.0, "w": [[1, 1, 50.0]], "s": []})], (), (), ()]
+OUTBID = [(), (), [Message(1, "bids", consensus_message(1.0, [(1, 1, 50.0)], []))], (), (), ()]
 
 
 @pytest.mark.parametrize(
@@ -353,7 +354,7 @@ def sent(r):
 
 
 def test_a_ccbba_member_stands_still_until_its_leaders_result_arrives():
-    result = [Message(0, "result", {"t": 2.0, "w": [[1, 1, 1 / 3]], "s": []})]
+    result = [Message(0, "result", consensus_message(2.0, [(1, 1, 1 / 3)], []))]
     member = ccbba_robot(1, "leaders")
     actions = run_fsm(member, [(), (), (), result, ()])
     assert actions[:3] == [["stop"]] * 3 and actions[3] == ["inspect", 1]

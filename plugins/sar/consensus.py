@@ -87,6 +87,7 @@ class SARConsensus(SARStrategy):
     message_kinds: ClassVar[tuple[str, ...]] = (BIDS,)
     event_names: ClassVar[tuple[str, ...]] = ("negotiations",)
     bids_with_colors: ClassVar[bool] = True
+    version = "2"  # 2: consensus messages carry packed arrays (plugins/consensus.py); the same decisions
     bt_nodes = SAR_NODES + (ExplorationNode,)
 
     def __init__(self, agent_id, params, rng, run_seed=0):
