@@ -1,0 +1,86 @@
+"""SPACE's own code against swarmbed, side by side, on the same cells, the same machine, the same hour.
+
+For each allocator (CBBA, GRAPE, FCG: SPACE's ``cbba``, ``grape``, ``greedy``) and radio range, one
+run of SPACE's code headless through ``../shared/tools/space-bench`` (its example config at that
+range, the agent count and horizon set), then the same cell in swarmbed on the in-process engine and
+in processes (``experiments/space_mtsr_code.yaml``), interleaved cell by cell, and the ratios:
+SPACE's wall seconds over ours (above 1: ours is faster).
+
+    SPACE_DIR=/tmp/space SPACE_PY=/tmp/spacevenv/bin/python python benchmarks/space_side_by_side.py
+    python benchmarks/space_side_by_side.py --alg cbba --range 300 --agents 50 --horizon 600
+
+Set up SPACE once with ``../shared/tools/space-bench/setup.sh`` (it prints the two variables). Run
+from a non-editable install on an otherwise idle machine; each figure is one run: repeat the command
+to see how much the machine's day moves them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+BENCH = ROOT.parent / "shared" / "tools" / "space-bench"
+OURS = {"cbba": "cbba", "grape": "grape", "greedy": "fcg"}
+
+
+def space_seconds(alg: str, agents: int, comm: int, seed: int, horizon: int, out: Path) -> float:
+    """Wall seconds of SPACE's run (its loop and set-up, as bench.json reports them)."""
+    env = {**os.environ, "SPACE_DIR": os.environ.get("SPACE_DIR", "/tmp/space")}
+    env.setdefault("SPACE_PY", "/tmp/spacevenv/bin/python")
+    args = [str(BENCH / "one.sh"), alg, str(agents), str(comm), str(seed), str(horizon), str(out)]
+    subprocess.run(args, env=env, check=True, capture_output=True, text=True)
+    return float(json.loads((out / "bench.json").read_text())["total_wall_s"])
+
+
+def our_seconds(alg: str, agents: int, comm: int, seed: int, horizon: int, engine: str, out: Path) -> float:
+    """Wall seconds of ``swarmbed run --engine ENGINE`` on the same cell, in a fresh interpreter."""
+    sets = [
+        f"allocator.name={OURS[alg]}",
+        f"agents.count={agents}",
+        f"network.range={comm}",
+        f"run.seed={seed}",
+        f"run.duration={horizon}",
+    ]
+    cmd = [sys.executable, "-m", "swarmbed", "run", str(ROOT / "experiments" / "space_mtsr_code.yaml")]
+    cmd += [a for s in sets for a in ("--set", s)] + ["--engine", engine, "--out", str(out), "--no-progress"]
+    started = time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    return time.perf_counter() - started
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--alg", nargs="+", default=["greedy", "grape", "cbba"], choices=list(OURS))
+    ap.add_argument("--range", nargs="+", type=int, default=[100, 300], dest="ranges")
+    ap.add_argument("--agents", type=int, default=50)
+    ap.add_argument("--horizon", type=int, default=600)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--engines", nargs="+", default=["inprocess", "processes"], choices=["inprocess", "processes"])
+    args = ap.parse_args()
+    if not (Path(os.environ.get("SPACE_DIR", "/tmp/space")) / "main.py").exists():
+        sys.exit("SPACE's code is not set up: run ../shared/tools/space-bench/setup.sh and export what it prints")
+    head = f"{'range':>5} {'allocator':>9} {'SPACE s':>8}" + "".join(
+        f" {e + ' s':>12} {'x SPACE':>8}" for e in args.engines
+    )
+    print(head)
+    with tempfile.TemporaryDirectory() as tmp:
+        for comm in args.ranges:
+            for alg in args.alg:
+                base = Path(tmp) / f"{alg}_{comm}"
+                space = space_seconds(alg, args.agents, comm, args.seed, args.horizon, base / "space")
+                line = f"{comm:>5} {OURS[alg]:>9} {space:>8.1f}"
+                for engine in args.engines:
+                    ours = our_seconds(alg, args.agents, comm, args.seed, args.horizon, engine, base / engine)
+                    line += f" {ours:>12.1f} {space / ours:>8.2f}"
+                print(line, flush=True)
+
+
+if __name__ == "__main__":
+    main()
