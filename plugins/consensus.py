@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from swarmbed.plugins.packed import pack_rows, read_tuples
 from swarmbed.wire.state import state_type
 
 NONE = -1
@@ -53,68 +54,13 @@ STAMP_KEYS = (
 )
 
 
-def _narrowest(wide: np.ndarray, keys: tuple[tuple[str, np.dtype], ...]) -> tuple[str, np.ndarray]:
-    """The first of ``keys`` whose dtype holds every entry of ``wide`` exactly, and the entries in it
-    (ids: in range; stamps: whole numbers in range; a bid is always float64)."""
-    for key, dtype in keys[:-1]:
-        if all(_holds(wide[name], dtype[name]) for name in dtype.names or ()):
-            return key, wide.astype(dtype)
-    return keys[-1][0], wide
-
-
-def _holds(values: np.ndarray, dtype: np.dtype) -> bool:
-    if dtype.kind == "f" or dtype == values.dtype:
-        return True
-    info = np.iinfo(dtype)
-    if not (info.min <= values.min() and values.max() <= info.max):
-        return False
-    return values.dtype.kind != "f" or bool((values == np.floor(values)).all())
-
-
-def _narrowest_key(rows: Sequence[tuple], keys: tuple[tuple[str, np.dtype], ...]) -> str:
-    """:func:`_narrowest`'s key for a few rows, found without making arrays."""
-    columns = list(zip(*rows))
-    for key, dtype in keys[:-1]:
-        fits = True
-        for name, column in zip(dtype.names or (), columns):
-            field = dtype[name]
-            if field.kind == "f" or key == keys[-1][0]:
-                continue
-            info = np.iinfo(field)
-            if not (info.min <= min(column) and max(column) <= info.max and all(v == int(v) for v in column)):
-                fits = False
-                break
-        if fits:
-            return key
-    return keys[-1][0]
-
-
-#: below this many rows a message's dtype is chosen in Python (a few numpy calls cost more)
-FEW_ROWS = 32
-
-
-def _pack(out: dict[str, Any], rows: Sequence[tuple], keys: tuple[tuple[str, np.dtype], ...]) -> None:
-    """``rows`` into ``out`` under the first of ``keys`` whose dtype holds every row exactly."""
-    if not rows:
-        return  # an empty vector is left out
-    if len(rows) < FEW_ROWS:
-        key = _narrowest_key(rows, keys)
-        out[key] = np.array(rows, dtype=dict(keys)[key]).tobytes()
-    else:
-        key, packed = _narrowest(np.array(rows, dtype=keys[-1][1]), keys)
-        out[key] = packed.tobytes()
-
-
-def _read(data: dict, keys: tuple[tuple[str, np.dtype], ...]) -> np.ndarray:
-    """The packed array under the first of ``keys`` the message has, or none for anything that is
-    not one (a torn or crafted message)."""
+def _read(data: dict, keys: tuple[tuple[str, np.dtype], ...]) -> list[tuple]:
+    """The entries under the first of ``keys`` the message has, or none for anything that is not a
+    packed vector (a torn or crafted message)."""
     for key, dtype in keys:
-        raw = data.get(key)
-        if raw is not None:
-            if not isinstance(raw, bytes) or len(raw) % dtype.itemsize:
-                break
-            return np.frombuffer(raw, dtype)
-    return np.empty(0, keys[-1][1])
+        if key in data:
+            return read_tuples(data[key], dtype)
+    return []
 
 
 def consensus_message(
@@ -124,20 +70,16 @@ def consensus_message(
     out: dict[str, Any] = {"t": _compact(t)}
     if delta:
         out["d"] = 1
-    _pack(out, winners, WINNER_KEYS)
-    _pack(out, stamps, STAMP_KEYS)
+    for rows, keys in ((winners, WINNER_KEYS), (stamps, STAMP_KEYS)):
+        if rows:  # an empty vector is left out
+            key, packed = pack_rows(rows, keys)
+            out[key] = packed
     return out
 
 
 def read_message(data: Any) -> tuple[float, list[tuple[int, int, float]], list[tuple[int, float]], bool]:
     """(stamp, winners, stamps, is a delta) of a message, as Python values."""
-    w, s = _read(data, WINNER_KEYS), _read(data, STAMP_KEYS)
-    return (
-        data["t"],
-        list(zip(w["task"].tolist(), w["winner"].tolist(), w["bid"].tolist())),
-        list(zip(s["agent"].tolist(), s["stamp"].tolist())),
-        bool(data.get("d")),
-    )
+    return data["t"], _read(data, WINNER_KEYS), _read(data, STAMP_KEYS), bool(data.get("d"))
 
 
 def _compact(t: float) -> float | int:
@@ -241,26 +183,25 @@ class ConsensusState:
         if not isinstance(data, dict) or not isinstance(data.get("t"), (int, float)):
             return  # not a message of ours: nothing in it
         delta = bool(data.get("d"))
-        w = _read(data, WINNER_KEYS)
-        names = w["task"].tolist()
-        if any(a >= b for a, b in zip(names, names[1:])):  # ours are sorted, each task once: keep the first
-            w = w[np.unique(w["task"], return_index=True)[1]]
-            names = w["task"].tolist()
-        wins, bids = w["winner"].tolist(), w["bid"].tolist()
+        entries = _read(data, WINNER_KEYS)
+        if any(a[0] >= b[0] for a, b in zip(entries, entries[1:])):  # ours are sorted, each task once
+            first: dict[int, tuple] = {}
+            for entry in entries:
+                first.setdefault(entry[0], entry)  # a task named twice: the first entry counts
+            entries = [first[t] for t in sorted(first)]
         z, y = self.z, self.y
         # the tasks whose belief differs from ours (identical entries leave every table case unchanged):
         # a delta names only the tasks it changes (NONE: a winner the sender dropped); a whole message
         # also differs on every task we hold that it does not name
         zget, yget = z.get, y.get
-        theirs = {t: (wk, bk) for t, wk, bk in zip(names, wins, bids) if zget(t, NONE) != wk or yget(t, 0.0) != bk}
+        theirs = {t: (wk, bk) for t, wk, bk in entries if zget(t, NONE) != wk or yget(t, 0.0) != bk}
         differing = set(theirs)
         if not delta:
-            named = set(names)
+            named = {e[0] for e in entries}
             differing.update(t for t in z if t not in named)
         if within is not None:
             differing = {t for t in differing if t in within and t in theirs}
-        s = _read(data, STAMP_KEYS)
-        sk: dict[int, float] = dict(zip(s["agent"].tolist(), s["stamp"].tolist()))
+        sk: dict[int, float] = dict(_read(data, STAMP_KEYS))
         sk[k] = data["t"]
         skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
 

@@ -45,13 +45,43 @@ from __future__ import annotations
 import math
 from typing import Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.extension import HALT, HOLD, Allocator, LocalView
+from swarmbed.plugins.packed import pack_rows, read_tuples
 from swarmbed.plugins.taskbook import TaskBook
 
 KIND = "grape"
 VOID = -1
+
+#: a message's partition: (agent, task) pairs packed in the narrowest of these declared dtypes that
+#: holds them (VOID, -1, marks an agent that left, in a delta): the bytes alone for the first,
+#: ``[code, bytes]`` for the others (every byte of a message is counted)
+PAIR_DTYPES = (
+    (0, np.dtype([("agent", "i1"), ("task", "i1")])),
+    (1, np.dtype([("agent", "i1"), ("task", "<i2")])),
+    (2, np.dtype([("agent", "<i2"), ("task", "<i2")])),
+    (3, np.dtype([("agent", "<i2"), ("task", "<i4")])),
+)
+
+
+def pack_pairs(pairs: list) -> bytes | list:
+    """(agent, task) pairs as they go in a message (none: an empty list, one byte)."""
+    if not pairs:
+        return []
+    code, packed = pack_rows(pairs, PAIR_DTYPES)
+    return packed if code == 0 else [code, packed]
+
+
+def read_pairs(packed: object) -> list[tuple[int, int]]:
+    """The (agent, task) pairs of a message's partition; none for anything that is not one."""
+    dtypes = dict(PAIR_DTYPES)
+    if isinstance(packed, bytes):
+        return read_tuples(packed, dtypes[0])
+    if isinstance(packed, list) and len(packed) == 2 and packed[0] in dtypes:
+        return read_tuples(packed[1], dtypes[packed[0]])
+    return []
 
 
 class GRAPEParams(BaseModel):
@@ -88,6 +118,7 @@ class GRAPE(Allocator):
     Params = GRAPEParams
     params: GRAPEParams
     message_kinds = (KIND,)
+    version = "2"  # 2: the partition travels as packed pairs (plugins/packed.py); the same decisions
 
     def __init__(self, agent_id, params, rng, run_seed=0):
         super().__init__(agent_id, params, rng, run_seed)
@@ -169,7 +200,7 @@ class GRAPE(Allocator):
         learns nothing from it: it holds the same or, having missed one, can use no delta)."""
         pairs = sorted(self.partition.items())
         if self.params.full_every == 1:
-            return [self.evolution, self.stamp, pairs]
+            return [self.evolution, self.stamp, pack_pairs(pairs)]
         due_whole = self.rounds % self.params.full_every == 0
         self.rounds += 1
         told, told_version = self.told, self.told_version
@@ -183,14 +214,15 @@ class GRAPE(Allocator):
                 return None
             if len(changed) < len(pairs):
                 self.sent += 1
-                return [self.evolution, self.stamp, sorted(changed), number, 1]
+                return [self.evolution, self.stamp, pack_pairs([tuple(c) for c in sorted(changed)]), number, 1]
         self.sent += 1
-        return [self.evolution, self.stamp, pairs, number]
+        return [self.evolution, self.stamp, pack_pairs(pairs), number]
 
     def partition_of(self, sender: int, data: list) -> dict[int, int] | None:
         """The sender's partition as its message gives it; None when a delta does not follow what
         this agent holds of the sender (it is forgotten until the sender's next whole message)."""
-        _, _, pairs, number, *delta = data
+        _, _, packed, number, *delta = data
+        pairs = read_pairs(packed)
         if not delta:
             partition = {int(a): int(t) for a, t in pairs}
         else:
@@ -218,7 +250,7 @@ class GRAPE(Allocator):
                 best, chosen = (msg.data[0], msg.data[1]), held
         if chosen is None:
             return
-        pairs = chosen.items() if isinstance(chosen, dict) else chosen  # whole messages: converted only when chosen
+        pairs = chosen.items() if isinstance(chosen, dict) else read_pairs(chosen)  # read only when chosen
         adopted = {int(a): int(t) for a, t in pairs if int(t) not in self.book.done}
         if adopted != self.partition:
             self.satisfied = False

@@ -10,7 +10,7 @@ from swarmbed.plugins.cbba import CBBA
 from swarmbed.plugins.checks.allocator import CLEAN_NETWORK as CLEAN
 from swarmbed.plugins.checks.allocator import random_instance, run_all, simulate
 from swarmbed.plugins.consensus import NONE, ConsensusState, consensus_message, read_message, table
-from swarmbed.plugins.grape import VOID
+from swarmbed.plugins.grape import VOID, pack_pairs, read_pairs
 from swarmbed.plugins.registry import entries, make
 from swarmbed.wire.codec import pack, unpack
 from swarmbed.wire.schema import NetworkSection
@@ -254,15 +254,16 @@ def test_grape_messages_between_whole_ones_carry_what_changed_and_a_missed_one_i
     sent = lambda: unpack(pack(a.message()))  # noqa: E731  as it travels
     a.partition, a.evolution = {0: 5, 1: 5, 2: 7, 3: 7, 5: 7}, 4
     whole = sent()
-    assert whole == [4, a.stamp, [[0, 5], [1, 5], [2, 7], [3, 7], [5, 7]], 0]
+    assert whole[:2] == [4, a.stamp] and whole[3:] == [0]
+    assert read_pairs(whole[2]) == [(0, 5), (1, 5), (2, 7), (3, 7), (5, 7)]
     assert b.partition_of(0, whole) == a.partition
     a.partition, a.evolution = {0: 5, 1: 5, 2: 8, 4: 7, 5: 7}, 5
     delta = sent()
-    assert delta == [5, a.stamp, [[2, 8], [3, VOID], [4, 7]], 1, 1]
+    assert delta[:2] == [5, a.stamp] and delta[3:] == [1, 1] and read_pairs(delta[2]) == [(2, 8), (3, VOID), (4, 7)]
     assert b.partition_of(0, delta) == a.partition
     a.partition[0] = 9
     missed = sent()  # lost on the way to b
-    assert missed[2:] == [[[0, 9]], 2, 1]
+    assert read_pairs(missed[2]) == [(0, 9)] and missed[3:] == [2, 1]
     a.partition[4] = 8
     assert b.partition_of(0, sent()) is None  # a gap: not used, and b forgets a's partition
     assert b.partition_of(0, delta) is None  # nor an old delta
@@ -273,7 +274,8 @@ def test_grape_messages_between_whole_ones_carry_what_changed_and_a_missed_one_i
     assert len(after) == 5 and b.partition_of(0, after) == a.partition
     assert sent() is None  # nothing changed: no message
     a.partition[3] = 9
-    assert sent()[2:] == [[[3, 9]], 6, 1]  # numbered after the last one sent
+    last = sent()
+    assert read_pairs(last[2]) == [(3, 9)] and last[3:] == [6, 1]  # numbered after the last one sent
 
 
 def test_grape_agent_hears_a_partition_newer_than_its_own_only_through_what_it_can_rebuild():
@@ -409,3 +411,14 @@ def test_a_crafted_consensus_message_names_nothing_and_changes_nothing():
     twice = consensus_message(1, [(5, 1, 1.0), (5, 2, 9.0)])
     st.receive(1, twice)
     assert st.z[5] == 1 and st.y[5] == 1.0
+
+
+def test_grape_partitions_travel_packed_in_the_narrowest_declared_dtype_and_crafted_ones_name_nothing():
+    small = pack_pairs([(0, 5), (3, 100)])
+    assert isinstance(small, bytes) and len(small) == 4  # int8 agent and task: the bytes alone
+    assert read_pairs(small) == [(0, 5), (3, 100)]
+    wide = pack_pairs([(200, 70_000), (201, VOID)])
+    assert wide[0] == 3 and read_pairs(wide) == [(200, 70_000), (201, VOID)]
+    assert pack_pairs([]) == [] and read_pairs([]) == []
+    for crafted in (b"\x01", [9, b"\x00\x00"], [3, "x"], None, 7, [[0, 5]]):
+        assert read_pairs(crafted) == [], crafted

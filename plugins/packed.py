@@ -1,0 +1,99 @@
+"""Vectors of a message as packed little-endian arrays of declared dtypes: each vector goes in the
+narrowest of a fixed, ordered list of dtypes that holds every entry exactly (ids in range, whole
+numbers where the dtype is an integer), named by a key the receiver looks its dtype up by. A
+receiver reads one with ``np.frombuffer`` and never makes a Python object per entry it does not use;
+bytes that are not a whole number of entries are read as none (plugins' messages are data anyone in
+range may have sent)."""
+
+from __future__ import annotations
+
+import functools
+import struct
+from collections.abc import Hashable, Sequence
+from typing import Any, TypeVar
+
+import numpy as np
+
+Key = TypeVar("Key", bound=Hashable)
+
+#: below this many rows a vector's dtype is chosen in Python (a few numpy calls cost more)
+FEW_ROWS = 32
+
+
+def _narrowest(wide: np.ndarray, keys: Sequence[tuple[Key, np.dtype]]) -> tuple[Key, np.ndarray]:
+    """The first of ``keys`` whose dtype holds every entry of ``wide`` exactly, and the entries in it
+    (ids: in range; stamps: whole numbers in range; a bid is always float64)."""
+    for key, dtype in keys[:-1]:
+        if all(_holds(wide[name], dtype[name]) for name in dtype.names or ()):
+            return key, wide.astype(dtype)
+    return keys[-1][0], wide
+
+
+def _holds(values: np.ndarray, dtype: np.dtype) -> bool:
+    if dtype.kind == "f" or dtype == values.dtype:
+        return True
+    info = np.iinfo(dtype)
+    if not (info.min <= values.min() and values.max() <= info.max):
+        return False
+    return values.dtype.kind != "f" or bool((values == np.floor(values)).all())
+
+
+@functools.lru_cache(maxsize=64)
+def _bounds(dtype: np.dtype) -> tuple[tuple[int, int] | None, ...]:
+    """Per field of ``dtype``: the range of an integer field, None for a float one."""
+    return tuple(
+        None if dtype[name].kind == "f" else (int(np.iinfo(dtype[name]).min), int(np.iinfo(dtype[name]).max))
+        for name in dtype.names or ()
+    )
+
+
+def _narrowest_key(rows: Sequence[tuple], keys: Sequence[tuple[Key, np.dtype]]) -> Key:
+    """:func:`_narrowest`'s key for a few rows, found without making arrays."""
+    columns = list(zip(*rows))
+    for key, dtype in keys[:-1]:
+        if all(
+            bound is None or (bound[0] <= min(column) and max(column) <= bound[1] and all(v == int(v) for v in column))
+            for bound, column in zip(_bounds(dtype), columns)
+        ):
+            return key
+    return keys[-1][0]
+
+
+def pack_rows(rows: Sequence[tuple], keys: Sequence[tuple[Key, np.dtype]]) -> tuple[Key, bytes]:
+    """``rows`` packed in the first of ``keys``' dtypes that holds every row exactly, and its key."""
+    if len(rows) < FEW_ROWS:
+        key = _narrowest_key(rows, keys)
+        dtype = dict(keys)[key]
+        entry = _struct(dtype)
+        whole = [bound is not None for bound in _bounds(dtype)]
+        return key, b"".join(entry.pack(*[int(v) if w else v for w, v in zip(whole, row)]) for row in rows)
+    key, packed = _narrowest(np.array(rows, dtype=keys[-1][1]), keys)
+    return key, packed.tobytes()
+
+
+_STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "i8": "q", "f8": "d"}
+
+
+def struct_format(dtype: np.dtype) -> str:
+    """The :mod:`struct` format of one entry of ``dtype`` (little-endian, no padding)."""
+    return "<" + "".join(_STRUCT[dtype[name].str[1:]] for name in dtype.names or ())
+
+
+@functools.lru_cache(maxsize=64)
+def _struct(dtype: np.dtype) -> struct.Struct:
+    return struct.Struct(struct_format(dtype))
+
+
+def read_tuples(raw: Any, dtype: np.dtype) -> list[tuple]:
+    """The entries ``raw`` packs in ``dtype`` as tuples (``struct.iter_unpack``: no array made, which
+    for a message of a few entries costs more than reading them); none for anything else."""
+    if not isinstance(raw, bytes) or len(raw) % dtype.itemsize:
+        return []
+    return list(_struct(dtype).iter_unpack(raw))
+
+
+def read_rows(raw: Any, dtype: np.dtype) -> np.ndarray:
+    """The entries ``raw`` packs in ``dtype``, or none for anything that is not such bytes."""
+    if not isinstance(raw, bytes) or len(raw) % dtype.itemsize:
+        return np.empty(0, dtype)
+    return np.frombuffer(raw, dtype)
