@@ -9,7 +9,8 @@ Each interpreter runs each shipped experiment file (``experiments/**/*.yaml`` th
 sweep nor a chaos plan) through ``swarmbed run``, its horizon cut to ``--duration`` simulated seconds
 (0: the file's own), in lock-step; then the reproducible result files are compared byte for byte
 (``config.yaml`` and ``provenance.json`` too, unless the versions' configurations are meant to
-differ: ``--skip-config``; ``--new-summary-key K`` compares ``summary.json`` without the key K the new
+differ: ``--skip-config``; ``--ignore-bytes`` leaves out every column and key that counts bytes, for a
+change of a message's encoding; ``--new-summary-key K`` compares ``summary.json`` without the key K the new
 install adds, a figure reported beside the results, not a result that changed; ``--new-set`` sets the
 keys that give back the old behaviour in the new install's runs only). Prints one line per
 experiment and exits 1 if any differs. Part of every commit that touches the tick path (issue 43).
@@ -61,10 +62,35 @@ def run(python: str, path: Path, out: Path, duration: float, extra: list[str]) -
     return None if done.returncode == 0 else (done.stderr.strip().splitlines() or ["failed"])[-1]
 
 
-def compare(a: Path, b: Path, config: bool, new_keys: tuple[str, ...] = ()) -> list[str]:
-    """The compared files that differ between run folders ``a`` (old) and ``b`` (new)."""
+def compare(a: Path, b: Path, config: bool, new_keys: tuple[str, ...] = (), ignore_bytes: bool = False) -> list[str]:
+    """The compared files that differ between run folders ``a`` (old) and ``b`` (new); with
+    ``ignore_bytes``, every column and summary key that counts bytes left out (a change of a
+    message's encoding: the same decisions, other byte counts)."""
     names = [*COMPARED, *(("config.yaml",) if config else ())]
+    if ignore_bytes:
+        return [n for n in names if _without_bytes(a / n) != _without_bytes(b / n)]
     return [n for n in names if _read(a / n, new_keys, n) != _read(b / n, new_keys, n)]
+
+
+def _without_bytes(path: Path) -> object:
+    """A result file's content without what counts bytes: CSV and Parquet columns, summary keys
+    (and the allocator's version, which such a change bumps)."""
+    import pandas as pd
+
+    if not path.exists():
+        return None
+    if path.suffix == ".json":
+
+        def strip(value: object) -> object:
+            if isinstance(value, dict):
+                return {k: strip(v) for k, v in value.items() if "bytes" not in k and k != "allocator_version"}
+            return value
+
+        return strip(json.loads(path.read_bytes()))
+    if path.suffix in (".csv", ".parquet"):
+        table = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
+        return table[[c for c in table.columns if "bytes" not in c]].to_csv(index=False)
+    return path.read_bytes()
 
 
 def _read(path: Path, new_keys: tuple[str, ...], name: str) -> bytes | None:
@@ -95,6 +121,11 @@ def main() -> int:
     ap.add_argument(
         "--new-summary-key", action="append", default=[], metavar="KEY", help="a summary key only the new install has"
     )
+    ap.add_argument(
+        "--ignore-bytes",
+        action="store_true",
+        help="leave out every column and summary key that counts bytes (a message encoding changed)",
+    )
     args = ap.parse_args()
     differs = 0
     with tempfile.TemporaryDirectory() as tmp:
@@ -109,7 +140,7 @@ def main() -> int:
                 print(f"FAILED    {name}: {errors}")
                 differs += 1
                 continue
-            bad = compare(old, new, not args.skip_config, tuple(args.new_summary_key))
+            bad = compare(old, new, not args.skip_config, tuple(args.new_summary_key), args.ignore_bytes)
             differs += bool(bad)
             print(f"{'DIFFERS' if bad else 'identical'} {name}{': ' + ', '.join(bad) if bad else ''}", flush=True)
     return 1 if differs else 0
