@@ -91,18 +91,23 @@ def ask_both(mine: Groot, theirs: Groot, kind: str, payload: bytes | None = None
     return mine.ask(kind, payload)[1], theirs.ask(kind, payload)[1]
 
 
-@pytest.mark.parametrize("name", ["subtrees", *(f"random {s}" for s in range(0, 40, 3))])
-def test_groot2_hears_from_us_what_btcpps_publisher_answers(name):
-    xml, scripts = CASES[name]
-    their_tree = btcpp_tree(xml, scripts)  # BehaviorTree.CPP's, with its own publisher
-    # ours: our engine's status changes into the gateway's monitored tree, served over ZeroMQ
+def our_side(xml: str, scripts, name: str):
+    """Our engine's tree of ``xml``, the recorder of its status changes, and the gateway's monitored
+    tree they feed (served over ZeroMQ beside BehaviorTree.CPP's own publisher)."""
     registry = NodeRegistry()
     registry.register(Act)
     registry.register(Cond)
     our_tree = load_tree("<test>", registry, text=xml, context=Script(scripts))
-    recorder = ChangeRecorder(our_tree)
     monitored = MonitoredTree()
     monitored.reset(tree_xml(our_tree), tree_identity("test", name), len(our_tree.nodes))
+    return our_tree, ChangeRecorder(our_tree), monitored
+
+
+@pytest.mark.parametrize("name", ["subtrees", *(f"random {s}" for s in range(0, 40, 3))])
+def test_groot2_hears_from_us_what_btcpps_publisher_answers(name):
+    xml, scripts = CASES[name]
+    their_tree = btcpp_tree(xml, scripts)  # BehaviorTree.CPP's, with its own publisher
+    our_tree, recorder, monitored = our_side(xml, scripts, name)
     with both_publishers(their_tree, monitored) as (mine, theirs):
         ours_xml, their_xml = ask_both(mine, theirs, "T")
         assert shape(ours_xml[0].decode()) == shape(their_xml[0].decode())
@@ -130,13 +135,7 @@ def test_a_recording_nobody_reads_keeps_what_btcpps_publisher_keeps():
 
     xml, scripts = CASES[next(iter(CASES))]
     their_tree = btcpp_tree(xml, scripts)
-    registry = NodeRegistry()
-    registry.register(Act)
-    registry.register(Cond)
-    our_tree = load_tree("<test>", registry, text=xml, context=Script(scripts))
-    recorder = ChangeRecorder(our_tree)
-    monitored = MonitoredTree()
-    monitored.reset(tree_xml(our_tree), tree_identity("test", "unread"), len(our_tree.nodes))
+    our_tree, recorder, monitored = our_side(xml, scripts, "unread")
     with both_publishers(their_tree, monitored) as (mine, theirs):
         ask_both(mine, theirs, "r", b"start")
         for tick in range(3000):
