@@ -241,11 +241,8 @@ class SwarmbedParallelEnv(ParallelEnv):
         self._end_run()
         if seed is None and self._seeds is not None:  # a new world each episode, drawn from the last seed
             seed = int(self._seeds.integers(2**31))
-        elif seed is None:  # the first episode: the configuration's own seed
-            seed = self.exp.run.seed
-        else:
-            self._seeds = np.random.default_rng(seed)
-        if self._seeds is None:
+        else:  # a seed given, or the first episode's: the configuration's own
+            seed = self.exp.run.seed if seed is None else seed
             self._seeds = np.random.default_rng(seed)
         exp = cfg.load(self.config, [*self.sets, f"run.seed={seed}"])
         out = self._next_run_dir()

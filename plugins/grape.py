@@ -84,6 +84,14 @@ def read_pairs(packed: object) -> list[tuple[int, int]]:
     return []
 
 
+def _well_formed(data: object, numbered: bool) -> bool:
+    """Whether ``data`` has a message's shape: [evolution, stamp, partition(, number(, 1))]."""
+    if not isinstance(data, list) or not 3 + numbered <= len(data) <= 5:
+        return False
+    numbers = data[:2] + data[3:4]
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in numbers)
+
+
 class GRAPEParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
     cost_weight: float = Field(1.0, ge=0, description="weight of the distance cost")
@@ -243,8 +251,8 @@ class GRAPE(Allocator):
         best, chosen = (self.evolution, self.stamp), None
         numbered = self.params.full_every > 1  # then every message updates what this agent holds of its sender
         for msg in view.inbox:
-            if msg.kind != KIND:
-                continue
+            if msg.kind != KIND or not _well_formed(msg.data, numbered):
+                continue  # not a GRAPE message (crafted, torn): nothing in it
             held = self.partition_of(msg.sender, msg.data) if numbered else msg.data[2]
             if held is not None and (msg.data[0], msg.data[1]) > best:
                 best, chosen = (msg.data[0], msg.data[1]), held

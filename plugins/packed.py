@@ -1,7 +1,7 @@
 """Vectors of a message as packed little-endian arrays of declared dtypes: each vector goes in the
 narrowest of a fixed, ordered list of dtypes that holds every entry exactly (ids in range, whole
 numbers where the dtype is an integer), named by a key the receiver looks its dtype up by. A
-receiver reads one with ``np.frombuffer`` and never makes a Python object per entry it does not use;
+receiver reads one with ``struct.iter_unpack`` and never makes more than a tuple per entry;
 bytes that are not a whole number of entries are read as none (plugins' messages are data anyone in
 range may have sent)."""
 
@@ -90,10 +90,3 @@ def read_tuples(raw: Any, dtype: np.dtype) -> list[tuple]:
     if not isinstance(raw, bytes) or len(raw) % dtype.itemsize:
         return []
     return list(_struct(dtype).iter_unpack(raw))
-
-
-def read_rows(raw: Any, dtype: np.dtype) -> np.ndarray:
-    """The entries ``raw`` packs in ``dtype``, or none for anything that is not such bytes."""
-    if not isinstance(raw, bytes) or len(raw) % dtype.itemsize:
-        return np.empty(0, dtype)
-    return np.frombuffer(raw, dtype)

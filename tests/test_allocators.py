@@ -422,3 +422,15 @@ def test_grape_partitions_travel_packed_in_the_narrowest_declared_dtype_and_craf
     assert pack_pairs([]) == [] and read_pairs([]) == []
     for crafted in (b"\x01", [9, b"\x00\x00"], [3, "x"], None, 7, [[0, 5]]):
         assert read_pairs(crafted) == [], crafted
+
+
+def test_a_crafted_grape_message_is_ignored_and_changes_nothing():
+    for every in (1, 4):
+        b = make("grape", {"full_every": every}, 1, np.random.default_rng(1), 0)
+        tasks = {0: TaskInfo(0, 10.0, 0.0, 30.0)}
+        b.decide(LocalView(1, 2, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, tasks, [], 1.0, 300.0))
+        before = (b.evolution, b.stamp, dict(b.partition))
+        crafted = [None, 7, [], [10**9], [10**9, 0.5], ["x", 0.5, []], [10**9, 0.5, b"", "n"], [10**9] * 9]
+        inbox = [Message(0, "grape", data) for data in crafted]
+        b.mutex(LocalView(1, 2, 1, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, tasks, inbox, 1.0, 300.0))
+        assert (b.evolution, b.stamp, b.partition) == before, every
