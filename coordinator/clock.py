@@ -17,11 +17,15 @@ from array import array
 import numpy as np
 
 from swarmbed.coordinator.live import Interval
+from swarmbed.engine.hooks import TickHook
 from swarmbed.wire.codec import NetemStep
 from swarmbed.wire.schema import RunSection
 
 
-class WallClock:
+class WallClock(TickHook):
+    """The run's wall clock, a hook of the tick loop: times every tick and, on the real-time clock,
+    paces them (waits for each tick's wall time, counts the agents that missed it)."""
+
     def __init__(self, run: RunSection) -> None:
         self.run = run
         self.realtime = run.clock == "realtime"
@@ -38,6 +42,9 @@ class WallClock:
 
     def start(self) -> None:
         self.t0 = time.perf_counter()
+
+    def run_starts(self) -> None:
+        self.start()
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.t0
@@ -73,6 +80,9 @@ class WallClock:
         if self.realtime:
             self.last_action.update(step.actions)
         return step
+
+    def row_columns(self) -> list[float]:
+        return self.columns()
 
     def columns(self) -> list[float]:
         """The real-time columns of a time-series row: agents late at this tick, its start lag (ms)."""

@@ -1,37 +1,40 @@
-"""The coordinator: owns the world and is the Zenoh transport of the lock-step engine's tick loop.
+"""The coordinator: the Zenoh transport of a run's :class:`~swarmbed.engine.Session`.
 
-:class:`swarmbed.engine.TickLoop` steps the world; per tick k the coordinator publishes the world
-(positions, membership) to the proxy and one input sample to every live agent (its observation and
-its inbox of tick k), and waits for the proxy's step (every live agent's action and message of
-tick k taken, or on the real-time clock those that came before the deadline). Around the ticks it
-paces the real-time clock (:mod:`~swarmbed.coordinator.clock`), starts, swaps and restarts agents
-(:mod:`~swarmbed.coordinator.lifecycle`) and publishes the run's progress
-(:mod:`~swarmbed.coordinator.live`). The coordinator's session is the run's Zenoh hub: it
-listens, everyone else connects to it as a client.
+The session owns the world, the recorder and the tick loop; per tick k the coordinator publishes
+the world (positions, membership) to the proxy and one input sample to every live agent (its
+observation and its inbox of tick k), and waits for the proxy's step (every live agent's action
+and message of tick k taken, or on the real-time clock those that came before the deadline). What
+a run over processes adds around a tick are the hooks it hands the loop: the wall clock
+(:mod:`~swarmbed.coordinator.clock`), the agents' lifecycle, which starts, swaps and restarts
+them and is the run's membership (:mod:`~swarmbed.coordinator.lifecycle`), ROS 2 topics
+(:mod:`~swarmbed.coordinator.ros2`) and the run's progress (:mod:`~swarmbed.coordinator.live`).
+The coordinator's session is the run's Zenoh hub: it listens, everyone else connects to it as a
+client.
 """
 
 from __future__ import annotations
 
 import logging
 import queue
-import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import zenoh
 
 from swarmbed.coordinator.clock import WallClock
-from swarmbed.coordinator.errors import RunError
 from swarmbed.coordinator.events import CONSUMED, EventQueue
 from swarmbed.coordinator.lifecycle import AgentLifecycle
 from swarmbed.coordinator.live import Interval, LiveStatus, Watched
 from swarmbed.coordinator.placement import Placement
-from swarmbed.coordinator.recorder import Recorder
 from swarmbed.coordinator.trees import TreeRecorder, TreeRelay
+from swarmbed.engine import Session, StopWhenAsked, TickHook, refusals
+from swarmbed.engine.errors import RunError
+from swarmbed.engine.hooks import Profile
+from swarmbed.engine.recorder import Recorder
 from swarmbed.extension.allocator import Allocator
-from swarmbed.extension.scenario import Scenario
+from swarmbed.extension.scenario import Scenario, World
 from swarmbed.wire.codec import (
     EMPTY_INBOX,
     NetemStep,
@@ -57,8 +60,7 @@ from swarmbed.wire.reports import (
     decode_agent_report,
     decode_netem_report,
 )
-from swarmbed.wire.schema import LOCAL, Experiment, Targets, agent_spec, netem_spec
-from swarmbed.wire.seeds import WORLD, component_rng
+from swarmbed.wire.schema import Experiment, Targets, agent_spec, netem_spec
 from swarmbed.wire.session import undeclare_all
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
@@ -66,33 +68,21 @@ from swarmbed.wire.summary import RunSummary
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
-__all__ = ["Coordinator", "RunError"]
+__all__ = ["RunError", "ZenohTransport"]
 
 
-def _check_decision_source(exp: Experiment, source: str | None, commands: Any) -> None:
-    """An allocator that takes its decisions from outside has where they come from, or the run
-    stops before any process starts."""
-    if source == "env" and commands is None:
-        raise RunError(
-            f"allocator {exp.allocator.name!r} takes its decisions from a driver in the launching "
-            "process (swarmbed.envs): swarmbed run cannot drive it"
-        )
-    if source == "ros2" and exp.ros2 is None:
-        raise RunError(
-            f"allocator {exp.allocator.name!r} takes its decisions from ROS 2 topics: the experiment "
-            "needs a ros2: section (docs/ros2.md)"
-        )
-
-
-class Coordinator:
-    """Drives one run. The launcher hands it the experiment, the scenario built from it, the
-    allocator class (for the traits the world and the results read, such as ``event_names``) and
-    the targets agents load."""
+class ZenohTransport(TickHook):
+    """The coordinator of one run: the Zenoh transport of its :class:`~swarmbed.engine.Session`. The
+    launcher hands it the experiment, the scenario, the session's world and recorder, the allocator
+    class (for where its decisions come from) and the targets agents load; :meth:`hooks` are what
+    it adds around a tick."""
 
     def __init__(
         self,
         exp: Experiment,
         scenario: Scenario,
+        world: World,
+        recorder: Recorder,
         allocator: type[Allocator],
         targets: Targets,
         keys: Keys,
@@ -111,12 +101,12 @@ class Coordinator:
         self.out_dir = out_dir
         self.n = exp.agents.count
         self.placement = placement  # starts and stops agent processes (the launcher's); None: it cannot
-        self.world = scenario.make_world(component_rng(exp.run.seed, WORLD), allocator)
+        self.world = world
         self.events = EventQueue()  # (what, data) from Zenoh callbacks
         self.agents = AgentLifecycle(
             exp, keys, self.world, self.events, hosts or {}, carriers, placement, self._decode_report, self._malformed
         )
-        self.recorder = Recorder(exp, self.world, out_dir, list(allocator.event_names))
+        self.recorder = recorder
         self.trees = TreeRecorder(out_dir, self.n, exp.run.dt, self._malformed) if exp.run.record_bt else None
         self.joined: set[str] = set()
         self.reports: dict[int, Final] = {}
@@ -125,16 +115,29 @@ class Coordinator:
         self.clock = WallClock(exp.run)  # pacing and wall-clock facts (never in a lock-step run's files)
         self.last_tick = -1
         self.wall: dict[str, float] = {}
-        self.stop_requested = threading.Event()  # end the run after the tick under way (soak's duration)
+        self.stop = StopWhenAsked()  # end the run after the tick under way (a soak's duration)
         self._entities: list = []
         self.ros2: Any = None  # a Ros2Out while the run publishes ROS 2 topics
         # where the decisions of an allocator that takes them from outside come from: ROS 2 topics
         # (a Ros2Commands, made in declare) or the decider the launcher was handed (swarmbed.envs)
         self.decision_source = allocator.decision_source
         self.commands: Any = decider if self.decision_source == "env" else None
-        self.pursuing: dict[int, list] = {}  # the actions the world was last given (for ROS 2's task markers)
         self.stages = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
         self.watched = Watched(exp, self.world, self.recorder, self.agents, self.clock, self._put_status)
+
+    def hooks(self) -> list[TickHook]:
+        """What a run over processes adds around a tick, in order: the wall clock, the agents'
+        lifecycle (swaps, restarts, checkpoints), the world sample out to the proxy, ROS 2 topics,
+        the live status, a soak's stop and the profile."""
+        hooks: list[TickHook] = [self.clock, self.agents, self]
+        if self.ros2 is not None:
+            from swarmbed.coordinator.ros2 import Ros2Publishing
+
+            hooks.append(Ros2Publishing(self.ros2, self.world, self._task_size))
+        hooks += [self.watched, self.stop]
+        if self.stages is not None:
+            hooks.append(Profile(self.stages, log, "coordinator"))
+        return hooks
 
     # -- setup -----------------------------------------------------------------------------------
     def declare(self) -> None:
@@ -168,7 +171,8 @@ class Coordinator:
             if self.decision_source == "ros2":
                 timeout = self.exp.ros2.command_timeout
                 self.commands = Ros2Commands(self.ros2, self.n, timeout, self.clock.realtime, self._malformed)
-        _check_decision_source(self.exp, self.decision_source, self.commands)
+        if self.decision_source == "env" and self.commands is None:
+            raise RunError(refusals(self.exp, "env")[0])
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -226,70 +230,37 @@ class Coordinator:
             self.trees.abandon()
         return self.recorder.abandon()
 
-    # -- the tick transport (swarmbed.engine.TickLoop drives it) ------------------------------------
-    def run_starts(self) -> None:
-        self.clock.start()
-
-    def tick_starts(self, k: int) -> None:
-        self.clock.tick_starts(k)
-        if self.stages is not None:
-            self.stages.start()
-
-    def before_world(self, k: int) -> None:
-        self.agents.due(k)
-
-    def incarnations(self) -> dict[int, int]:
-        return {a: i for a, i in self.agents.incarnation.items() if i}
-
+    # -- the transport and its own hook points (swarmbed.engine.TickLoop drives them) ---------------
     def world_ready(self, sample: WorldSample) -> None:
-        self.world_pub.put(encode_world(sample))
-        if self.stages is not None:
-            self.stages.mark("world")
+        self.world_pub.put(encode_world(sample))  # the proxy routes with it while observations are made
 
     def exchange(
-        self, k: int, sample: WorldSample, observed: Mapping[int, Observation], inboxes: Mapping[int, bytes]
+        self,
+        k: int,
+        sample: WorldSample,
+        observed: Mapping[int, Observation],
+        inboxes: Mapping[int, bytes],
+        decisions: Mapping[int, int],
     ) -> NetemStep:
         """Put every live agent's input of tick ``k`` and wait for the proxy's step; on the real-time
         clock an agent that missed the deadline keeps its last command where ``run.on_late`` says."""
         st, w = self.stages, self.world
-        decisions = self.commands.decide(k, w, observed, inboxes) if self.commands is not None else {}
+        if self.commands is not None and not decisions:
+            decisions = self.commands.decide(k, w, observed, inboxes)
         for i, obs in observed.items():
             self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX), decisions.get(i)))
         if st is not None:
             st.mark("encode and put")
-        if self.ros2 is not None:  # while the agents think
-            ids, xs, ys = sample.ids, sample.xs, sample.ys
-            pursuing = {a: self.pursuing[a] for a in ids if a in self.pursuing}
-            self.ros2.publish(k, w.time, (ids, xs, ys), w.markers(), pursuing, inboxes, self._task_size)
         step = self._await_step(k)
         if st is not None:
             st.mark("await step")
         return self.clock.answers(step)
 
-    def lose(self, agent: int, k: int) -> None:
-        self.agents.lose(agent, k, self._how_it_ended(agent))
-
-    def retire(self, agent: int, tick: int) -> None:
-        self.agents.retire(agent, tick)
-
-    def clock_columns(self) -> Sequence[float]:
-        return self.clock.columns()
-
     def tick_done(self, k: int, admitted: Mapping[int, list]) -> None:
         self.last_tick = k
-        if self.ros2 is not None:
-            self.pursuing.update(admitted)
-        if self.watched.after_tick(k):
-            self.recorder.flush()
-
-    def should_stop(self) -> bool:
-        return self.stop_requested.is_set()
 
     def run_ends(self) -> None:
-        self.watched.final(self.last_tick)
         self.wall["run_s"] = self.clock.elapsed()
-        if self.stages is not None:
-            log.info("coordinator: %s", self.stages.line())
 
     # -- for monitors in this process (soak, chaos): see coordinator/live.py --------------------------
     def live(self) -> LiveStatus:
@@ -348,7 +319,7 @@ class Coordinator:
                     if incarnation_of(data) != self.agents.incarnation.get(agent, 0):
                         continue  # a process swapped out: its agent goes on elsewhere
                     self._await_fatal_report(agent)
-                    self.agents.lose(agent, k, self._how_it_ended(agent))
+                    self.agents.gone(agent, k)
             elif what == "report":
                 self._on_report(data, k)
             elif what == "netem_report":  # mid-run, only a proxy that failed reports
@@ -379,14 +350,6 @@ class Coordinator:
         raise RunError(
             f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log" + (f"\n{how}" if how else "")
         )
-
-    def _how_it_ended(self, agent: int) -> str:
-        """Why agent ``agent``'s process is gone, as precisely as this machine can tell (a process on
-        another host: only that it exited)."""
-        if agent in self.agents.fatal or self.placement is None or self.agents.hosts.get(agent, LOCAL) != LOCAL:
-            return "its process exited"
-        how = self.placement.exit_status(self.agents.process_name(agent)).split(";", 1)[0]
-        return f"its process {how.split(' ', 1)[1]}" if how else "its process exited"
 
     def _await_fatal_report(self, agent: int, grace: float = 0.25) -> None:
         """An agent left. Its fatal report (if it failed) travels apart from its liveliness token and
@@ -464,17 +427,11 @@ class Coordinator:
                     raise RunError(f"the netem proxy failed at the end of the run: {report.error}; see logs/netem.log")
                 self.netem_report = report
 
-    def summary(self) -> RunSummary:
-        assert self.netem_report is not None, "summary() before the proxy's final report"
+    def write_results(self, run: Session, timings: dict) -> RunSummary:
+        """The run's result files, from the final reports :meth:`stop_and_collect` gathered."""
+        assert self.netem_report is not None, "results before the proxy's final report"
         clock = self.clock.summary() if self.clock.realtime else None
-        return self.recorder.summary(
-            self.last_tick + 1, self.agents, self.reports, self.netem_report, self.malformed, clock
-        )
-
-    def write_results(self, timings: dict) -> RunSummary:
-        summary = self.summary()
-        assert self.netem_report is not None
-        self.recorder.write(summary, timings, self.agents, self.reports, self.netem_report)
+        summary = run.write(self.reports, self.netem_report, self.malformed, clock, timings)
         if self.trees is not None:
             self.trees.finish(self.last_tick, set(self.agents.lost))
         return summary

@@ -20,10 +20,11 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from swarmbed.coordinator.errors import RunError
 from swarmbed.coordinator.events import CONSUMED, EventQueue
 from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.tickets import Tickets
+from swarmbed.engine.errors import RunError
+from swarmbed.engine.hooks import TickHook
 from swarmbed.extension.scenario import World
 from swarmbed.wire.codec import (
     TAG_CHECKPOINT,
@@ -61,8 +62,10 @@ MAX_QUEUED_SWAPS = 16
 MAX_SWAPS_PER_RUN = 10_000
 
 
-class AgentLifecycle:
-    """Which agents are up, down or lost, and the swaps, restarts and checkpoints that move them."""
+class AgentLifecycle(TickHook):
+    """Which agents are up, down or lost, and the swaps, restarts and checkpoints that move them:
+    the run's :class:`~swarmbed.engine.Membership` over processes, and the hook that swaps,
+    restarts and checkpoints before a tick's world sample."""
 
     def __init__(
         self,
@@ -108,7 +111,24 @@ class AgentLifecycle:
         self.checkpoint_tick = -1
         self.restart_log: list[RestartRecord] = []
 
-    # -- what the clock loop asks ------------------------------------------------------------------
+    # -- what the tick loop asks ------------------------------------------------------------------
+    def before_world(self, k: int) -> None:
+        self.due(k)
+
+    def incarnations(self) -> dict[int, int]:
+        return {a: i for a, i in self.incarnation.items() if i}
+
+    def gone(self, agent: int, k: int) -> None:
+        self.lose(agent, k, self.how_it_ended(agent))
+
+    def how_it_ended(self, agent: int) -> str:
+        """Why agent ``agent``'s process is gone, as precisely as this machine can tell (a process on
+        another host: only that it exited)."""
+        if agent in self.fatal or self.placement is None or self.hosts.get(agent, LOCAL) != LOCAL:
+            return "its process exited"
+        how = self.placement.exit_status(self.process_name(agent)).split(";", 1)[0]
+        return f"its process {how.split(' ', 1)[1]}" if how else "its process exited"
+
     def due(self, k: int) -> None:
         """Before tick ``k``: the swaps due, the restarts due and, every ``run.snapshot_every``
         ticks of a run that restarts its agents, the checkpoints."""

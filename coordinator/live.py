@@ -5,10 +5,10 @@
 Monitors run in their own threads beside the tick loop. They do not read the coordinator's
 attributes (which the loop changes mid-tick); the coordinator publishes a :class:`LiveStatus`, an
 immutable record of the run between two ticks, after every tick while a monitor is attached
-(:meth:`~swarmbed.coordinator.coordinator.Coordinator.live`), and nothing when none is, so a run
+(:meth:`~swarmbed.coordinator.coordinator.ZenohTransport.live`), and nothing when none is, so a run
 without monitors pays nothing. Wall-clock figures of the interval between two of a soak's samples
 (the slowest tick, the latest start) are taken, and reset, with
-:meth:`~swarmbed.coordinator.coordinator.Coordinator.take_interval`.
+:meth:`~swarmbed.coordinator.coordinator.ZenohTransport.take_interval`.
 
 Everything here is a wall-clock fact of one run on one machine: never part of a run's result files.
 """
@@ -26,7 +26,8 @@ import numpy as np
 from pydantic import ValidationError
 
 from swarmbed.coordinator.lifecycle import AgentLifecycle
-from swarmbed.coordinator.recorder import Recorder
+from swarmbed.engine.hooks import TickHook
+from swarmbed.engine.recorder import Recorder
 from swarmbed.extension.scenario import World
 from swarmbed.wire.reports import RestartRecord
 from swarmbed.wire.schema import Experiment
@@ -128,10 +129,10 @@ def progress_sample(
     )
 
 
-class Watched:
-    """What the coordinator shows of the run as it goes: a progress sample for ``swarmbed watch``
-    every ``STATUS_EVERY`` wall seconds (handed to ``put_status``), and, once a monitor in this
-    process asked for one (:meth:`live`), a :class:`LiveStatus` after every tick."""
+class Watched(TickHook):
+    """What the coordinator shows of the run as it goes, a hook of the tick loop: a progress sample
+    for ``swarmbed watch`` every ``STATUS_EVERY`` wall seconds (handed to ``put_status``), and, once
+    a monitor in this process asked for one (:meth:`live`), a :class:`LiveStatus` after every tick."""
 
     def __init__(
         self,
@@ -147,6 +148,7 @@ class Watched:
         self.refused = False  # a progress sample failed its model (logged once)
         self._live: LiveStatus | None = None
         self._status_at = 0.0  # perf_counter at the last progress sample
+        self.last_tick = -1
 
     def live(self, tick: int) -> LiveStatus:
         """The run as of ``tick``, the last one stepped; from the first call on, one is made after
@@ -155,6 +157,14 @@ class Watched:
             self._make_live(tick)
         assert self._live is not None
         return self._live
+
+    def tick_done(self, k: int, admitted: Mapping[int, list]) -> None:
+        self.last_tick = k
+        if self.after_tick(k):
+            self.recorder.flush()
+
+    def run_ends(self) -> None:
+        self.final(self.last_tick)
 
     def after_tick(self, tick: int) -> bool:
         """Tick ``tick`` is over: the live status if asked for, a progress sample if one is due.

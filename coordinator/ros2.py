@@ -33,8 +33,9 @@ from typing import Any
 import numpy as np
 import zenoh
 
+from swarmbed.engine.hooks import TickHook
 from swarmbed.extension.actions import ActionSpec
-from swarmbed.wire.codec import EMPTY_INBOX, WireError, decode_inbox
+from swarmbed.wire.codec import EMPTY_INBOX, WireError, WorldSample, decode_inbox
 from swarmbed.wire.ros2 import NODE_PREFIX, RADIO_INBOX, SENSOR_QOS, TASK_COMMAND, TASK_OBSERVATION, stamp
 from swarmbed.wire.ros2_node import Ros2Node
 from swarmbed.wire.schema import Ros2Section
@@ -193,6 +194,25 @@ class Ros2Out:
 
     def close(self) -> None:
         self.node.close()
+
+
+class Ros2Publishing(TickHook):
+    """The tick loop's hook that publishes each tick as ROS 2 topics, as the transport carries it
+    (``task_size``: how wide a task is drawn, the scenario's arrival diameter where it has one)."""
+
+    def __init__(self, out: Ros2Out, world: Any, task_size: float) -> None:
+        self.out, self.world, self.task_size = out, world, task_size
+        self.pursuing: dict[int, list] = {}  # the actions the world was last given (for the task markers)
+
+    def exchange_starts(
+        self, k: int, sample: WorldSample, observed: Mapping[int, Any], inboxes: Mapping[int, bytes]
+    ) -> None:
+        w, ids = self.world, sample.ids
+        pursuing = {a: self.pursuing[a] for a in ids if a in self.pursuing}
+        self.out.publish(k, w.time, (ids, sample.xs, sample.ys), w.markers(), pursuing, inboxes, self.task_size)
+
+    def tick_done(self, k: int, admitted: Mapping[int, list]) -> None:
+        self.pursuing.update(admitted)
 
 
 def _no_bytes() -> np.ndarray:

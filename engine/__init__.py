@@ -1,13 +1,29 @@
-"""The lock-step engine: the tick body written once, above the process roles, over a transport.
+"""The lock-step engine: a run's tick body and its result files, written once, below the process roles.
 
-:class:`TickLoop` advances the world tick by tick; a :class:`TickTransport` carries each tick's
-world sample and observations to the agents and brings back their actions and the inboxes of the
-next tick. Two transports: the coordinator (real processes over Zenoh, through the netem proxy)
-and :class:`InProcess` (every agent's runtime and the radio stepped in this process), which the
-calibration scripts, the conformance checks and the result-level tests use. Runs stay processes.
+A :class:`Session` builds a run's world and recorder and steps it with a :class:`TickLoop` over a
+:class:`Transport` (one call a tick: carry the observations and inboxes to the agents, bring back
+their actions and the next inboxes), with the run's :class:`Membership` and the
+:class:`~swarmbed.engine.hooks.TickHook` list around a tick. Two transports plug in from above the
+roles: the coordinator (:class:`swarmbed.coordinator.coordinator.ZenohTransport`: real processes over
+Zenoh, through the netem proxy) and the in-process one (:mod:`swarmbed.experiments.launch.inprocess`:
+every agent's runtime and the radio stepped in this process).
 """
 
-from swarmbed.engine.inprocess import InProcess
-from swarmbed.engine.loop import TickLoop, TickTransport
+from swarmbed.engine.errors import RunError
+from swarmbed.engine.hooks import StopWhenAsked, TickHook
+from swarmbed.engine.loop import Membership, OneProcess, TickInHand, TickLoop, Transport
+from swarmbed.engine.session import ENGINES, Session, refusals
 
-__all__ = ["InProcess", "TickLoop", "TickTransport"]
+__all__ = [
+    "ENGINES",
+    "Membership",
+    "OneProcess",
+    "RunError",
+    "Session",
+    "StopWhenAsked",
+    "TickHook",
+    "TickInHand",
+    "TickLoop",
+    "Transport",
+    "refusals",
+]

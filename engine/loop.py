@@ -3,7 +3,9 @@
 Tick k: record where every live agent is; draw the robots the scenario loses at k+1 (the radio
 must not deliver to them then); hand the transport the world sample and every live agent's
 observation with its inbox of tick k; take back the step (every action of tick k, the inboxes of
-k+1, the radio's counters); apply the actions the scenario declares; record.
+k+1, the radio's counters); apply the actions the scenario declares; record. What a way of running
+adds around the tick is a list of :class:`~swarmbed.engine.hooks.TickHook`; who the run's agents
+are (which processes were started again, lost or retired) is its :class:`Membership`.
 """
 
 from __future__ import annotations
@@ -12,59 +14,69 @@ from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-from swarmbed.coordinator.recorder import Recorder
+from swarmbed.engine.hooks import POINTS as _POINTS
+from swarmbed.engine.hooks import TickHook, handlers
+from swarmbed.engine.recorder import Membership as RecordedMembership
+from swarmbed.engine.recorder import Recorder
 from swarmbed.extension.actions import admit
 from swarmbed.extension.scenario import Scenario, World
 from swarmbed.wire.codec import NetemStep, WorldSample
 from swarmbed.wire.observation import Observation
+from swarmbed.wire.reports import RestartRecord, SwapRecord
 from swarmbed.wire.schema import Experiment
 from swarmbed.wire.stages import Stages
 
 
-class TickTransport(Protocol):
-    """What carries a tick to the agents and back. Every method but :meth:`exchange` may do
-    nothing (the in-process transport has no wall clock, no restarts and no watchers)."""
+class Transport(Protocol):
+    """What carries a tick to the agents and back: one call a tick."""
 
-    def run_starts(self) -> None:
-        """The first tick is about to start."""
+    def exchange(
+        self,
+        k: int,
+        sample: WorldSample,
+        observed: Mapping[int, Observation],
+        inboxes: Mapping[int, bytes],
+        decisions: Mapping[int, int],
+    ) -> NetemStep:
+        """Carry tick ``k`` to the agents ``observed`` names (with ``decisions``, agent -> task id,
+        for an allocator that takes them from outside) and return the step: their actions (those
+        the transport gives the world), the inboxes of tick k+1 and the radio's counters."""
 
-    def tick_starts(self, k: int) -> None:
-        """Tick ``k`` is about to start (a real-time clock waits for its wall time here)."""
 
-    def before_world(self, k: int) -> None:
-        """Positions of tick ``k`` are recorded; what falls due before its world sample (swaps,
-        restarts, checkpoints) happens now."""
+class Membership(RecordedMembership, Protocol):
+    """Who the run's agents are: the coordinator's
+    :class:`~swarmbed.coordinator.lifecycle.AgentLifecycle` (processes that start, swap, restart
+    and die), or :class:`OneProcess`. The results read ``lost`` and the two logs."""
 
     def incarnations(self) -> dict[int, int]:
         """Agent -> its current process's incarnation, for those started again (0s left out)."""
 
-    def world_ready(self, sample: WorldSample) -> None:
-        """Tick ``k``'s world sample, before the observations are made (a proxy may route with it
-        while the coordinator makes them)."""
-
-    def exchange(
-        self, k: int, sample: WorldSample, observed: Mapping[int, Observation], inboxes: Mapping[int, bytes]
-    ) -> NetemStep:
-        """Carry tick ``k`` to the agents ``observed`` names and return the step: their actions
-        (those the transport gives the world), the inboxes of tick k+1 and the counters."""
-
-    def lose(self, agent: int, k: int) -> None:
+    def gone(self, agent: int, k: int) -> None:
         """``agent``'s process was found gone during tick ``k``."""
 
     def retire(self, agent: int, tick: int) -> None:
         """The scenario lost ``agent``'s robot from ``tick`` on."""
 
-    def clock_columns(self) -> Sequence[float]:
-        """The real-time clock's columns of this tick's time-series row (none in lock-step)."""
 
-    def tick_done(self, k: int, admitted: Mapping[int, list]) -> None:
-        """Tick ``k`` is applied and recorded (``admitted``: the actions the world took)."""
+class OneProcess:
+    """The membership of a run whose agents all step in this process: none is ever swapped,
+    restarted or found gone; the scenario's losses are the only ones."""
 
-    def should_stop(self) -> bool:
-        """Whether to end the run before the next tick (a soak's duration is over)."""
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self.lost: dict[int, int] = {}
+        self.swap_log: list[SwapRecord] = []
+        self.restart_log: list[RestartRecord] = []
 
-    def run_ends(self) -> None:
-        """The ticks are over (the last one, or the one before a stop)."""
+    def incarnations(self) -> dict[int, int]:
+        return {}
+
+    def gone(self, agent: int, k: int) -> None:
+        raise AssertionError(f"agent {agent} found gone at tick {k} in a run of one process")
+
+    def retire(self, agent: int, tick: int) -> None:
+        self.lost[agent] = tick
+        self.world.kill(agent)
 
 
 @dataclass(frozen=True)
@@ -79,7 +91,9 @@ class TickInHand:
 
 
 class TickLoop:
-    """The world, its recorder and a transport; :meth:`run` steps them to the end of the run."""
+    """The world, its recorder, a transport, the run's membership and the hooks around a tick;
+    :meth:`run` steps them to the end of the run, or a caller owns the loop with :meth:`begin`
+    and :meth:`complete`."""
 
     def __init__(
         self,
@@ -87,81 +101,102 @@ class TickLoop:
         scenario: Scenario,
         world: World,
         recorder: Recorder,
-        transport: TickTransport,
+        transport: Transport,
+        membership: Membership,
+        hooks: Sequence[TickHook] = (),
         stages: Stages | None = None,
     ) -> None:
         self.exp, self.scenario, self.world, self.recorder = exp, scenario, world, recorder
-        self.transport = transport
-        self.stages = stages  # benchmarks/profile_tick.py
+        self.transport, self.membership = transport, membership
+        self.hooks = list(hooks)
+        self._on = {point: handlers(self.hooks, point) for point in _POINTS}
+        self.stages = stages  # benchmarks/profile_tick.py: the loop's own stages
         self.last_tick = -1
 
+    def _call(self, point: str, *args: object) -> None:
+        for handler in self._on[point]:
+            handler(*args)
+
     def start(self) -> None:
-        """Open the result tables and tell the transport the first tick is about to start."""
+        """Open the result tables and tell the hooks the first tick is about to start."""
         self.recorder.open()
-        self.transport.run_starts()
+        self._call("run_starts")
 
     def over(self, k: int) -> bool:
         """Whether the run ends before tick ``k``: its duration, a finished world where the run says
-        to stop then, or a transport that asks to stop (a soak's duration)."""
+        to stop then, or a hook that asks to stop (a soak's duration)."""
         w = self.world
-        return k >= self.exp.ticks or (w.finished and self.exp.run.stop_when_done) or self.transport.should_stop()
+        return (
+            k >= self.exp.ticks
+            or (w.finished and self.exp.run.stop_when_done)
+            or any(stop() for stop in self._on["should_stop"])
+        )
 
     def run(self, on_tick: Callable[[int, float], None] | None = None) -> int:
         """Step every tick of the run (or until the world is finished, where the run says to stop
         then); return the last tick stepped."""
-        w, t = self.world, self.transport
+        w = self.world
         self.start()
         inboxes: dict[int, bytes] = {}
         k = 0
         while not self.over(k):
-            t.tick_starts(k)
+            self._call("tick_starts", k)
             inboxes = self.tick(k, inboxes)
             if on_tick:
                 on_tick(w.tick, w.time)
             k += 1
-        t.run_ends()
+        self.end()
         return self.last_tick
 
-    def tick(self, k: int, inboxes: Mapping[int, bytes]) -> dict[int, bytes]:
+    def end(self) -> None:
+        """The ticks are over: tell the hooks."""
+        self._call("run_ends")
+
+    def tick(
+        self, k: int, inboxes: Mapping[int, bytes], decisions: Mapping[int, int] | None = None
+    ) -> dict[int, bytes]:
         """Tick ``k`` with the inboxes delivered for it; return the inboxes of tick k+1."""
-        return self.complete(self.begin(k), inboxes)
+        return self.complete(self.begin(k), inboxes, decisions)
 
     def begin(self, k: int) -> TickInHand:
         """The first half of tick ``k``: positions recorded, losses drawn, the world sample made and
         every live agent's observation. Between :meth:`begin` and :meth:`complete` a caller that owns
         the loop (a learner) reads the observations and sets its decisions."""
-        w, rec, t, st = self.world, self.recorder, self.transport, self.stages
+        w, rec, st = self.world, self.recorder, self.stages
         ids, xs, ys = w.positions()
         rec.positions(k, ids, xs, ys)
         if k > 0:
-            t.before_world(k)
+            self._call("before_world", k)
         doomed = w.draw_losses()  # lost at tick k+1: the radio must not deliver to them then
         alive_next = [i for i in ids if i not in doomed]
-        sample = WorldSample(k, ids, xs, ys, alive_next, t.incarnations())
-        t.world_ready(sample)
+        sample = WorldSample(k, ids, xs, ys, alive_next, self.membership.incarnations())
+        self._call("world_ready", sample)
         observed = w.observations()
         if st is not None:
             st.mark("observations")
         return TickInHand(k, sample, observed, doomed, len(ids))
 
-    def complete(self, hand: TickInHand, inboxes: Mapping[int, bytes]) -> dict[int, bytes]:
+    def complete(
+        self, hand: TickInHand, inboxes: Mapping[int, bytes], decisions: Mapping[int, int] | None = None
+    ) -> dict[int, bytes]:
         """The second half of a tick: the transport carries it, the world applies the actions its
         scenario declares, the recorder books it; return the inboxes of the next tick."""
-        w, rec, t, st, k = self.world, self.recorder, self.transport, self.stages, hand.k
-        step = t.exchange(k, hand.sample, hand.observed, inboxes)
+        w, rec, st, k, members = self.world, self.recorder, self.stages, hand.k, self.membership
+        self._call("exchange_starts", k, hand.sample, hand.observed, inboxes)
+        step = self.transport.exchange(k, hand.sample, hand.observed, inboxes, decisions or {})
         for j in step.lost:
-            t.lose(j, k)
+            members.gone(j, k)
         declared = self.scenario.actions  # a world sees only actions of the shapes its scenario declares
         admitted = {a: admit(act, declared) for a, act in step.actions.items() if w.alive[a]}
         w.apply(admitted)
         rec.step(step)
         for j in hand.doomed:
-            t.retire(j, k + 1)
+            members.retire(j, k + 1)
         self.last_tick = k
         if w.tick % self.exp.run.record_every == 0 or w.finished:
-            rec.row(t.clock_columns())
+            rec.row([c for columns in self._on["row_columns"] for c in columns()])
         if st is not None:
             st.mark("apply and record")
             st.ticks += hand.live  # per agent-tick, as the other processes count
-        t.tick_done(k, admitted)
+        self._call("tick_done", k, admitted)
         return step.inboxes

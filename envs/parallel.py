@@ -145,7 +145,7 @@ class _Bridge:
         decisions = self.to_run.get()
         if decisions is None:  # the environment is done with this run: end it after this tick
             self.stopping = True
-            self.coordinator.stop_requested.set()
+            self.coordinator.stop.ask()
             return {}
         return decisions
 

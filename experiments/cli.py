@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarmbed.bt import BTError, load_tree, palette_xml
-from swarmbed.coordinator.errors import RunError
+from swarmbed.engine.errors import RunError
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.extension.node_sets import node_registry
 from swarmbed.plugins import registry
@@ -126,13 +126,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 2
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
-    if args.engine == "inprocess":
-        why = _inprocess_refusals(exp)
-        if args.listen or args.admit or args.tls:
-            why.append("--listen, --admit and --tls are for a hub others join: the in-process engine has none")
-        if why:
-            print(f"error: --engine inprocess: {why[0]}", file=sys.stderr)
-            return 2
+    why = _refusals(exp, args.engine)
+    if args.engine == "inprocess" and (args.listen or args.admit or args.tls):
+        why.append("--listen, --admit and --tls are for a hub others join: the in-process engine has none")
+    if why:
+        print(f"error: {_engine_prefix(args.engine)}{why[0]}", file=sys.stderr)
+        return 2
     if args.check:
         from swarmbed.experiments.launch.check import describe_plan
 
@@ -157,11 +156,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _inprocess_refusals(exp) -> list[str]:
-    """Why ``exp`` cannot run on the in-process engine (none: it can)."""
-    from swarmbed.experiments.launch.inprocess import refusals
+def _refusals(exp, engine: str) -> list[str]:
+    """Why ``exp`` cannot run on ``engine`` from the command line (none: it can)."""
+    from swarmbed.engine import refusals
 
-    return refusals(exp, cfg.resolve_experiment(exp).allocator_cls.decision_source)
+    return refusals(exp, cfg.resolve_experiment(exp).allocator_cls.decision_source, engine)
+
+
+def _engine_prefix(engine: str) -> str:
+    return "--engine inprocess: " if engine == "inprocess" else ""
 
 
 def _add_engine(parser: argparse.ArgumentParser) -> None:
@@ -558,12 +561,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     planned = plan(sweep, out)
     first = {spec.scenario.name: spec for spec in reversed(planned)}
     every = {name: experiment_for(spec.base, spec.scenario, spec.seed, spec.extra) for name, spec in first.items()}
-    if args.engine == "inprocess":
-        for name, exp in every.items():
-            why = _inprocess_refusals(exp)
-            if why:
-                print(f"error: --engine inprocess: scenario {name}: {why[0]}", file=sys.stderr)
-                return 2
+    for name, exp in every.items():
+        why = _refusals(exp, args.engine)
+        if why:
+            print(f"error: {_engine_prefix(args.engine)}scenario {name}: {why[0]}", file=sys.stderr)
+            return 2
     if args.check:
         from swarmbed.experiments.launch.check import describe_sweep
         from swarmbed.experiments.rundir import RunDir
@@ -731,7 +733,7 @@ def register_analyze(sub: Subparsers) -> None:
 
 
 def cmd_check_allocator(args: argparse.Namespace) -> int:
-    from swarmbed.plugins.checks.allocator import GENERIC_CHECKS, ConformanceError
+    from swarmbed.experiments.checks.allocator import GENERIC_CHECKS, ConformanceError
     from swarmbed.plugins.registry import PluginError, only_scenario, validate_params
 
     args.scenario = args.scenario or only_scenario(args.allocator) or "mtsr"
@@ -855,7 +857,7 @@ def _replay_mcap(run: Path, out: Path) -> int:
 
 
 def cmd_check_scenario(args: argparse.Namespace) -> int:
-    from swarmbed.plugins.checks.scenario import ScenarioCheckError, check_scenario
+    from swarmbed.experiments.checks.scenario import ScenarioCheckError, check_scenario
 
     cls = registry.resolve_scenario(args.scenario)
     try:

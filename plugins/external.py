@@ -14,10 +14,11 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from swarmbed.extension import Allocator, LocalView
 from swarmbed.extension.allocator import DecisionSource
+from swarmbed.wire.validation import validation_lines
 
 NONE = -1  # a decision that chooses no task (the tree explores)
 DEFER = -4  # a decision that asks the fallback allocator what it would do
@@ -32,6 +33,30 @@ class ExternalParams(BaseModel):
     )
     fallback_scenario: str = Field("mtsr", description="the scenario whose implementation of `fallback` runs")
     fallback_params: dict[str, Any] = Field(default_factory=dict, description="the fallback allocator's own keys")
+
+    @model_validator(mode="after")
+    def _fallback_is_an_allocator_with_these_keys(self) -> ExternalParams:
+        """The fallback is resolved and its keys validated here, where the experiment is loaded
+        (``swarmbed run``, ``--check``, the environment), not first inside each agent's process."""
+        if self.fallback is None:
+            if self.fallback_params:
+                raise ValueError("allocator.fallback_params: given without a fallback allocator")
+            return self
+        from swarmbed.plugins import registry
+
+        try:
+            cls = registry.resolve(self.fallback, self.fallback_scenario)
+        except registry.PluginError as exc:
+            raise ValueError(f"allocator.fallback: {exc}") from None
+        if cls.decision_source is not None:
+            raise ValueError(
+                f"allocator.fallback: {self.fallback!r} takes its decisions from outside too ({cls.decision_source})"
+            )
+        try:
+            cls.Params.model_validate(self.fallback_params)
+        except ValidationError as exc:
+            raise ValueError("; ".join(validation_lines(exc, cls.Params, "allocator.fallback_params"))) from None
+        return self
 
 
 class ExternalAllocator(Allocator):

@@ -20,11 +20,11 @@ RENAMED = {
     "swarmbed.coordinator.mtsr": "swarmbed.scenarios.mtsr",
     "swarmbed.coordinator.sar": "swarmbed.scenarios.sar",
     "swarmbed.coordinator.kinematics": "swarmbed.scenarios.kinematics",
-    "swarmbed.coordinator.checker": "swarmbed.plugins.checks.scenario",
+    "swarmbed.coordinator.checker": "swarmbed.experiments.checks.scenario",
     "swarmbed.agent_runtime.allocator": "swarmbed.extension.allocator",
     "swarmbed.agent_runtime.view": "swarmbed.extension.view",
     "swarmbed.agent_runtime.context": "swarmbed.extension.context",
-    "swarmbed.plugins.conformance": "swarmbed.plugins.checks.allocator",
+    "swarmbed.plugins.conformance": "swarmbed.experiments.checks.allocator",
     # issue 45: the BT engine is its own package; SPACE's nodes, the node sets and trees sit below the roles
     "swarmbed.agent_runtime.bt": "swarmbed.bt",
     **{
@@ -35,6 +35,10 @@ RENAMED = {
     "swarmbed.agent_runtime.nodes": "swarmbed.extension.nodes",
     "swarmbed.plugins.base": "swarmbed.extension",  # the plugin author's names, all in the extension contract
     "swarmbed.agent_runtime.node_sets": "swarmbed.extension.node_sets",
+    # issue 57: the checkers sit beside the CLI, above the roles (the kit drives the radio)
+    "swarmbed.plugins.checks": "swarmbed.experiments.checks",
+    "swarmbed.plugins.checks.allocator": "swarmbed.experiments.checks.allocator",
+    "swarmbed.plugins.checks.scenario": "swarmbed.experiments.checks.scenario",
 }
 
 

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
+from swarmbed.experiments.checks.allocator import CLEAN_NETWORK as CLEAN
+from swarmbed.experiments.checks.allocator import random_instance, run_all, simulate
 from swarmbed.extension import HALT, HOLD, LocalView, Message, TaskInfo
 from swarmbed.plugins.cbba import CBBA
-from swarmbed.plugins.checks.allocator import CLEAN_NETWORK as CLEAN
-from swarmbed.plugins.checks.allocator import random_instance, run_all, simulate
 from swarmbed.plugins.consensus import NONE, ConsensusState, consensus_message, read_message, table
 from swarmbed.plugins.grape import VOID, pack_pairs, read_pairs
 from swarmbed.plugins.registry import entries, make

@@ -247,3 +247,39 @@ def test_check_allocator_finds_the_scenario_an_allocator_is_for(capsys):
 
     assert main(["check-allocator", "comm"]) == 0
     assert "PASS check_snapshot" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "allocator, needle",
+    [
+        ("{name: external, fallback: cbba, fallback_params: {max_tasks: 0}}", "allocator.fallback_params.max_tasks: "),
+        (
+            "{name: external, fallback: cbba, fallback_params: {bogus: 1}}",
+            "allocator.fallback_params.bogus: unknown key",
+        ),
+        ("{name: external, fallback: cbbx}", "allocator.fallback: unknown allocator 'cbbx'"),
+        ("{name: external, fallback: ros2}", "allocator.fallback: 'ros2' takes its decisions from outside too"),
+        ("{name: external, fallback_params: {max_tasks: 2}}", "allocator.fallback_params: given without a fallback"),
+    ],
+)
+def test_an_external_allocators_fallback_is_checked_where_the_experiment_is_loaded(allocator, needle):
+    """Issue 57: the fallback is resolved and its keys validated by config.load (so by ``--check``
+    and the environment), before any agent process would first build it."""
+    with pytest.raises(cfg.ConfigError) as info:
+        cfg.load(QUICKSTART, [f"allocator={allocator}"])
+    assert needle in str(info.value) and len(str(info.value).splitlines()) == 1, str(info.value)
+    assert cfg.load(QUICKSTART, ["allocator={name: external, fallback: cbba, fallback_params: {max_tasks: 2}}"])
+
+
+def test_what_no_run_can_do_is_refused_by_check_too(capsys):
+    """One list of refusals (engine.refusals) for the launcher, config.validate and --check: an
+    allocator whose decisions come from a learner cannot be run by ``swarmbed run`` on either engine,
+    and one that takes them from ROS 2 needs a ros2: section."""
+    from swarmbed.experiments.cli import main
+
+    for engine in ("processes", "inprocess"):
+        assert main(["run", str(QUICKSTART), "--check", "--engine", engine, "--set", "allocator.name=external"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "swarmbed run cannot drive it" in err and len(err.splitlines()) == 1, err
+    with pytest.raises(cfg.ConfigError, match="needs a ros2: section"):
+        cfg.load(QUICKSTART, ["allocator.name=ros2"])

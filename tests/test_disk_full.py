@@ -9,8 +9,8 @@ import subprocess
 
 import pytest
 
-from swarmbed.coordinator import results
-from swarmbed.coordinator.coordinator import RunError
+from swarmbed.engine import results
+from swarmbed.engine.errors import RunError
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.rowfile import RowFile, TableWriteError
 from tests.conftest import experiment, whole_rows

@@ -70,7 +70,7 @@ def test_the_in_process_engine_refuses_the_real_time_clock(tmp_path):
 
 
 def test_the_in_process_engine_refuses_an_allocator_that_takes_decisions_from_outside(tmp_path):
-    with pytest.raises(ValueError, match="no one to ask"):
+    with pytest.raises(ValueError, match="swarmbed run cannot drive it"):
         run_in_process(experiment("allocator={name: external}"), tmp_path / "run")
     assert not (tmp_path / "run").exists()  # refused before the folder was made
 
@@ -132,3 +132,103 @@ def test_a_sweep_in_process_is_verified_against_processes_and_a_difference_is_na
     again = _swarmbed(*args, "--set", "run.duration=60", "--verify", "1")
     assert again.returncode == 1 and "DIFFERS" in again.stdout and "timeseries.csv" in again.stdout, again.stdout
     assert ours.exists()
+
+
+class _Calls:
+    """What a fake transport, membership and hooks were asked, in order."""
+
+    def __init__(self):
+        self.log: list[tuple] = []
+
+
+def _tick_loop_with_fakes(tmp_path, calls: _Calls, lose_at: int | None = None, stop_after: int | None = None):
+    from swarmbed.engine import OneProcess, Session, TickHook
+    from swarmbed.experiments.launch.config import resolve_experiment
+    from swarmbed.wire.codec import NetemStep
+
+    exp = experiment("run.duration=3", "run.dt=1", "agents.count=2")  # three ticks
+    resolved = resolve_experiment(exp)
+
+    class Transport:
+        def exchange(self, k, sample, observed, inboxes, decisions):
+            calls.log.append(("exchange", k, sorted(observed), dict(decisions)))
+            lost = [1] if k == lose_at else []
+            return NetemStep(k, {}, {0: b"inbox"}, [0, 0, 0, 0, 0], lost, {}, {}, [])
+
+    class Members(OneProcess):
+        def incarnations(self):
+            calls.log.append(("incarnations",))
+            return {}
+
+        def gone(self, agent, k):
+            calls.log.append(("gone", agent, k))
+
+    class Every(TickHook):  # every point
+        def run_starts(self):
+            calls.log.append(("run_starts",))
+
+        def tick_starts(self, k):
+            calls.log.append(("tick_starts", k))
+
+        def before_world(self, k):
+            calls.log.append(("before_world", k))
+
+        def world_ready(self, sample):
+            calls.log.append(("world_ready", sample.tick))
+
+        def exchange_starts(self, k, sample, observed, inboxes):
+            calls.log.append(("exchange_starts", k, dict(inboxes)))
+
+        def row_columns(self):
+            calls.log.append(("row_columns",))
+            return ()
+
+        def tick_done(self, k, admitted):
+            calls.log.append(("tick_done", k))
+
+        def should_stop(self):
+            calls.log.append(("should_stop",))
+            return stop_after is not None and any(c == ("tick_done", stop_after) for c in calls.log)
+
+        def run_ends(self):
+            calls.log.append(("run_ends",))
+
+    class Second(TickHook):  # one point only: called after the first hook's, never at another point
+        def tick_done(self, k, admitted):
+            calls.log.append(("second tick_done", k))
+
+    session = Session(exp, resolved.scenario(), resolved.allocator_cls, tmp_path)
+    session.connect(Transport(), Members(session.world), [Every(), Second()])
+    return session
+
+
+def test_the_tick_loop_calls_its_transport_membership_and_hooks_in_order(tmp_path):
+    """TickLoop's order of calls, with a fake transport (fast lane): per tick the hooks' points in
+    the documented order, the transport once, the second hook after the first at the one point
+    it overrides, ``run_ends`` once after the last tick; the inboxes a step returns are the next
+    tick's; a process the step reports gone goes to the membership."""
+    calls = _Calls()
+    session = _tick_loop_with_fakes(tmp_path, calls, lose_at=1)
+    assert session.run() == 2
+    expected = [("run_starts",)]
+    for k in range(3):
+        inboxes = {0: b"inbox"} if k else {}
+        expected += [("should_stop",), ("tick_starts", k)]
+        expected += [("before_world", k)] if k else []
+        expected += [("incarnations",), ("world_ready", k), ("exchange_starts", k, inboxes)]
+        expected += [("exchange", k, [0, 1], {})]
+        expected += [("gone", 1, 1)] if k == 1 else []
+        expected += [("row_columns",), ("tick_done", k), ("second tick_done", k)]
+    expected += [("run_ends",)]  # the duration is over: no hook is asked whether to stop
+    assert calls.log == expected
+
+
+def test_a_caller_that_owns_the_loop_hands_its_decisions_to_the_transport_and_a_hook_can_stop_the_run(tmp_path):
+    calls = _Calls()
+    session = _tick_loop_with_fakes(tmp_path, calls, stop_after=0)
+    session.start()
+    hand = session.observe()
+    assert session.observe() is hand and sorted(hand.observed) == [0, 1]  # the first half is made once
+    session.step({0: 7})
+    assert ("exchange", 0, [0, 1], {0: 7}) in calls.log
+    assert calls.log[-1] == ("run_ends",) and session.over  # a hook asked to stop after tick 0

@@ -11,7 +11,7 @@ import psutil
 import pytest
 import zenoh
 
-from swarmbed.coordinator.coordinator import RunError
+from swarmbed.engine.errors import RunError
 from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.codec import EMPTY_INBOX, MAX_AGENT_SAMPLE_BYTES, encode_tick, pack
@@ -303,11 +303,11 @@ def test_a_coordinator_that_fails_while_being_built_leaves_no_process_or_credent
 
     from swarmbed.experiments.launch import runner
 
-    class Broken(runner.Coordinator):
+    class Broken(runner.ZenohTransport):
         def __init__(self, *args, **kwargs):
             raise RuntimeError("the world cannot be built")
 
-    monkeypatch.setattr(runner, "Coordinator", Broken)
+    monkeypatch.setattr(runner, "ZenohTransport", Broken)
     made: list[Path] = []  # this run's private folders (a test beside this one may make its own)
     mkdtemp = tempfile.mkdtemp
 

@@ -13,7 +13,7 @@ import numpy as np
 import psutil
 import pytest
 
-from swarmbed.coordinator.coordinator import RunError
+from swarmbed.engine.errors import RunError
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity
 from tests.conftest import SAR_BASE, experiment, reference_run, same_results

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
+from swarmbed.experiments.checks.allocator import random_instance, simulate
 from swarmbed.extension import LocalView, Message, TaskInfo
-from swarmbed.plugins.checks.allocator import random_instance, simulate
 from swarmbed.plugins.consensus import consensus_message
 from swarmbed.plugins.registry import make
 from swarmbed.plugins.sar.ccbba import ClusteringCBBA, kmeans_pp

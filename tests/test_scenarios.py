@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from swarmbed.experiments.checks.scenario import ScenarioCheckError, check_scenario
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.extension.scenario import Scenario
-from swarmbed.plugins.checks.scenario import ScenarioCheckError, check_scenario
 from swarmbed.plugins.registry import resolve_scenario, scenario_names
 from swarmbed.wire.codec import WireError
 from swarmbed.wire.targets import load_target

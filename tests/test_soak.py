@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from swarmbed.coordinator import results
 from swarmbed.coordinator.live import LiveStatus
+from swarmbed.engine import results
 from swarmbed.experiments.campaigns.chaos import CHAOS_COLUMNS, CUT_SHORT, Chaos, ChaosError, ChaosPlan, load_chaos
 from swarmbed.experiments.campaigns.soak import (
     PROCESSES,
@@ -339,7 +339,7 @@ def test_a_killed_soak_leaves_files_that_parse(tmp_path):
 
 def test_a_run_that_stops_keeps_its_rows_as_partial_files(tmp_path):
     """A run that fails after ticks ran keeps the rows it streamed, never under a result's name."""
-    from swarmbed.coordinator.coordinator import RunError
+    from swarmbed.engine.errors import RunError
     from swarmbed.experiments.launch.runner import run_experiment
 
     plugin = tmp_path / "boom.py"

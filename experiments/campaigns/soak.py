@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import psutil
 
-from swarmbed.coordinator import results
+from swarmbed.engine import results
 from swarmbed.experiments.campaigns.chaos import Chaos, ChaosPlan
 from swarmbed.experiments.folders import SOAK_PROCESSES as PROCESSES
 from swarmbed.experiments.folders import SOAK_RUN as RUN
@@ -136,7 +136,7 @@ class Monitor:
         while not self._stop.wait(self.interval - (time.monotonic() - self.started) % self.interval):
             self._sample()
             if time.monotonic() - self.started >= self.duration_s:
-                coord.stop_requested.set()
+                coord.stop.ask()
 
     def _watched(self) -> dict[str, int]:
         """Name -> pid of every local process of the run still there."""
@@ -436,7 +436,7 @@ def soak(
 ) -> dict[str, Any]:
     """Run ``exp`` for ``duration_s`` wall seconds under ``chaos``; write and return the verdict.
     ``hub``: where the run's hub listens and whom it admits (a soak across hosts, an operator)."""
-    from swarmbed.coordinator.coordinator import RunError
+    from swarmbed.engine.errors import RunError
 
     exp = exp.model_copy(update={"run": exp.run.model_copy(update={"duration": UNBOUNDED_S, "stop_when_done": False})})
     monitor = Monitor(duration_s, interval)

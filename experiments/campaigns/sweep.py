@@ -51,7 +51,7 @@ import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from tqdm import tqdm
 
-from swarmbed.coordinator import results
+from swarmbed.engine import results
 from swarmbed.experiments.campaigns import claims
 from swarmbed.experiments.campaigns.executors import Executor, Outcome, resources_for
 from swarmbed.experiments.folders import ATTEMPTS, DERIVED, ERROR, PARQUET, SPEC, TABLE, dotted

@@ -17,8 +17,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from swarmbed.experiments.checks.allocator import random_instance, simulate
 from swarmbed.experiments.launch import config as cfg
-from swarmbed.plugins.checks.allocator import random_instance, simulate
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.schema import Experiment, hosts_of
 

@@ -20,6 +20,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from swarmbed.bt import BTError, load_tree
+from swarmbed.engine import refusals
 from swarmbed.experiments.launch.yamlfile import YamlFileError, non_finite, parse_yaml, read_yaml
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.node_sets import node_registry, tree_path
@@ -208,11 +209,8 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
         for k, s in enumerate(exp.swaps)
         if s.agent >= exp.agents.count
     ]
-    if allocator_cls.decision_source == "ros2" and exp.ros2 is None:
-        problems.append(
-            f"allocator.name: {exp.allocator.name!r} takes its decisions from ROS 2 topics: the experiment "
-            "needs a ros2: section (docs/ros2.md)"
-        )
+    # a driver (the learning environment) may supply decisions: what no run can do is refused here
+    problems += refusals(exp, allocator_cls.decision_source, "processes", driven=True)
     if exp.swaps and not allocator_cls.snapshottable:
         problems.append(
             f"swaps: allocator {exp.allocator.name} cannot move between processes "

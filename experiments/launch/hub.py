@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from swarmbed.coordinator.errors import RunError
+from swarmbed.engine.errors import RunError
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.process import tune_malloc
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config

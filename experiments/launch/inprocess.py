@@ -1,14 +1,18 @@
-"""A lock-step run in this one process, on the in-process engine (:mod:`swarmbed.engine`):
-``swarmbed run --engine inprocess``, ``swarmbed sweep --engine inprocess`` and the learning
-environment's ``engine="inprocess"``.
+"""A lock-step run in this one process, on the in-process engine: ``swarmbed run --engine
+inprocess``, ``swarmbed sweep --engine inprocess`` and the learning environment's
+``engine="inprocess"``.
 
 The same result files as a run of processes writes for the same configuration and seed
 (``summary.json``, ``timeseries.csv``, ``agents.csv``, the ledgers, ``config.yaml``,
-``provenance.json``), byte for byte, without Zenoh, the proxy or agent processes: the agents'
-runtimes and the radio step in this process. What needs processes is refused before anything
-starts (:func:`refusals`): the real-time clock, other hosts and swaps, decisions from ROS 2,
-ROS 2 topics, behavior-tree logs, and a hub others join. ``timings.json`` and ``deployment.json``
-say which engine ran.
+``provenance.json``), byte for byte, without Zenoh, the proxy or agent processes: each live
+agent's :class:`~swarmbed.agent_runtime.runtime.AgentRuntime` steps on its observation and inbox
+as they would arrive over the wire (observation, action and messages pass through their wire
+encodings), and the proxy's :class:`~swarmbed.netem.exchange.Exchange` routes the messages with
+the same random streams (:class:`InProcess`, the transport; :class:`InProcessRun`, the run on an
+engine :class:`~swarmbed.engine.Session`). What needs processes is refused before anything starts
+(:func:`swarmbed.engine.refusals`): the real-time clock, other hosts and swaps, decisions from
+ROS 2, ROS 2 topics, behavior-tree logs, and a hub others join. ``timings.json`` and
+``deployment.json`` say which engine ran.
 """
 
 from __future__ import annotations
@@ -17,38 +21,55 @@ import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
-from swarmbed.coordinator import results
-from swarmbed.coordinator.recorder import Recorder
-from swarmbed.engine import InProcess, TickLoop
-from swarmbed.engine.loop import TickInHand
+from swarmbed.agent_runtime.runtime import AgentRuntime
+from swarmbed.engine import ENGINES, OneProcess, Session, TickInHand, refusals, results
 from swarmbed.experiments.launch.runner import RunResult, plan_run, start_result_dir
+from swarmbed.netem.exchange import Exchange
+from swarmbed.wire.codec import EMPTY_INBOX, NetemStep, WorldSample, decode_agent_out, encode_agent_out
+from swarmbed.wire.observation import Observation
+from swarmbed.wire.reports import Final, NetemFinal
 from swarmbed.wire.rundir import DEPLOYMENT
-from swarmbed.wire.schema import Experiment
-from swarmbed.wire.seeds import WORLD, component_rng
+from swarmbed.wire.schema import Experiment, Targets, agent_spec, netem_spec
 
-#: the engines a run can be stepped by
-ENGINES = ("processes", "inprocess")
+__all__ = ["ENGINES", "InProcess", "InProcessRun", "refusals", "run_in_process"]
 
 
-def refusals(exp: Experiment, decision_source: str | None = None, env: bool = False) -> list[str]:
-    """Why ``exp`` cannot run on the in-process engine, one reason a line (none: it can).
-    ``decision_source``: the allocator's (``ros2``, ``env``); ``env``: the learning environment
-    drives the run and supplies the ``env`` decisions itself."""
-    why = []
-    if exp.run.clock != "lockstep":
-        why.append("run.clock is realtime: the in-process engine steps lock-step runs only")
-    if exp.placement or exp.swaps or exp.may_carry:
-        why.append("placement, swaps or may_carry name other hosts: agents on hosts are processes")
-    if decision_source == "ros2" or (decision_source == "env" and not env):
-        why.append(
-            f"allocator {exp.allocator.name!r} takes its decisions from outside ({decision_source}): "
-            "the in-process engine has no one to ask"
-        )
-    if exp.ros2 is not None:
-        why.append("ros2: ROS 2 topics are published from a run's hub, which the in-process engine has none of")
-    if exp.run.record_bt:
-        why.append("run.record_bt: behavior-tree logs are written by agent processes")
-    return why
+class InProcess:
+    """The in-process :class:`~swarmbed.engine.Transport`: every agent's runtime and the radio, stepped
+    here; the radio's ledger goes to ``out_dir`` as the proxy's would."""
+
+    def __init__(self, exp: Experiment, targets: Targets, out_dir: Path) -> None:
+        if exp.run.clock != "lockstep":
+            raise ValueError("the in-process engine steps lock-step runs only (run.clock: lockstep)")
+        spec = agent_spec(exp, targets)
+        self.runtimes = {i: AgentRuntime(spec, i) for i in range(exp.agents.count)}
+        self.radio_exchange = Exchange(netem_spec(exp), out_dir)
+
+    def exchange(
+        self,
+        k: int,
+        sample: WorldSample,
+        observed: Mapping[int, Observation],
+        inboxes: Mapping[int, bytes],
+        decisions: Mapping[int, int],
+    ) -> NetemStep:
+        self.radio_exchange.radio.confirm()  # the inboxes made for this tick arrived
+        outs = {}
+        for i, obs in observed.items():
+            runtime = self.runtimes[i]
+            action, messages, events = runtime.step(
+                k, runtime.decode_observation(obs.to_wire()), inboxes.get(i, EMPTY_INBOX), decisions.get(i)
+            )
+            outs[i] = decode_agent_out(encode_agent_out(k, i, action, messages, events))
+        return self.radio_exchange.route(sample, outs)
+
+    def reports(self) -> dict[int, Final]:
+        """Every agent's final report, as its process would send it."""
+        return {i: runtime.report() for i, runtime in self.runtimes.items()}
+
+    def finish(self, last_tick: int) -> NetemFinal:
+        """Close the radio's ledger and make the proxy's final report."""
+        return self.radio_exchange.finish(last_tick, malformed=0)
 
 
 class InProcessRun:
@@ -60,44 +81,40 @@ class InProcessRun:
         self.t0 = time.perf_counter()
         plan = plan_run(exp, out_dir)
         resolved = plan.resolved
-        why = refusals(exp, resolved.allocator_cls.decision_source, env)
+        why = refusals(exp, resolved.allocator_cls.decision_source, "inprocess", driven=env)
         if why:
             raise ValueError(f"--engine inprocess: {why[0]}")
         self.exp, self.out_dir = exp, Path(out_dir)
         start_result_dir(plan)
-        self.scenario = resolved.scenario()
-        self.world = self.scenario.make_world(component_rng(exp.run.seed, WORLD), resolved.allocator_cls)
-        self.recorder = Recorder(exp, self.world, out_dir, list(resolved.allocator_cls.event_names))
-        self.engine = InProcess(exp, resolved.targets, self.world, out_dir)
-        self.loop = TickLoop(exp, self.scenario, self.world, self.recorder, self.engine)
-        self.k = 0
-        self.inboxes: dict[int, bytes] = {}
-        self.hand: TickInHand | None = None
+        self.session = Session(exp, resolved.scenario(), resolved.allocator_cls, self.out_dir)
+        self.world = self.session.world
+        self.engine = InProcess(exp, resolved.targets, self.out_dir)
+        self.session.connect(self.engine, OneProcess(self.world))
         self.result: RunResult | None = None
-        self.loop.start()
+        self.session.start()
 
     @property
     def over(self) -> bool:
-        return self.result is not None or self.loop.over(self.k)
+        return self.result is not None or self.session.over
+
+    @property
+    def inboxes(self) -> dict[int, bytes]:
+        """The inboxes the radio delivers at the tick in hand."""
+        return self.session.inboxes
 
     def observe(self) -> TickInHand:
         """The tick in hand's first half (its observations), made once."""
-        if self.hand is None or self.hand.k != self.k:
-            self.hand = self.loop.begin(self.k)
-        return self.hand
+        return self.session.observe()
 
     def advance(self, decisions: Mapping[int, int] | None = None) -> None:
         """Complete the tick in hand with ``decisions`` (agent -> task id, for an ``external``
         allocator) and move to the next one; write the result files when the run is over."""
-        self.engine.decisions = decisions or {}
         try:
-            hand = self.observe()
-            self.inboxes = self.loop.complete(hand, self.inboxes)
+            self.session.step(decisions)
         except BaseException:
-            self.recorder.abandon()
+            self.session.abandon()
             raise
-        self.k += 1
-        if self.loop.over(self.k):
+        if self.session.over:
             self.finish()
 
     def run(self, on_tick: Callable[[int, float], None] | None = None) -> RunResult:
@@ -112,15 +129,12 @@ class InProcessRun:
         """Write the result files of the ticks stepped so far (once)."""
         if self.result is not None:
             return self.result
-        self.engine.run_ends()
-        last = self.loop.last_tick
         try:
-            reports, netem = self.engine.reports(), self.engine.finish(last)
-            summary = self.recorder.summary(last + 1, self.engine, reports, netem, malformed=0, clock=None)
+            reports, netem = self.engine.reports(), self.engine.finish(self.session.last_tick)
             timings = {"engine": "inprocess", "run_s": time.perf_counter() - self.t0}
-            self.recorder.write(summary, timings, self.engine, reports, netem)
+            summary = self.session.write(reports, netem, malformed=0, clock=None, timings=timings)
         except BaseException:
-            self.recorder.abandon()
+            self.session.abandon()
             raise
         results.write_json(self.out_dir / DEPLOYMENT, {"engine": "inprocess", "agents": "this process"})
         self.result = RunResult(self.out_dir, summary.document, timings)

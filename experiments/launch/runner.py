@@ -20,9 +20,9 @@ from typing import Any, Protocol
 import zenoh
 from tqdm import tqdm
 
-from swarmbed.coordinator import results
-from swarmbed.coordinator.coordinator import Coordinator, RunError
-from swarmbed.engine import TickLoop
+from swarmbed.coordinator.coordinator import ZenohTransport
+from swarmbed.engine import Session, results
+from swarmbed.engine.errors import RunError
 from swarmbed.experiments.hosts.client import HostError, host_info, wait_for_hosts
 from swarmbed.experiments.launch.access import RunAccess
 from swarmbed.experiments.launch.config import Experiment, Resolved, resolve_experiment, to_yaml
@@ -54,7 +54,7 @@ class LiveRun:
 
     exp: Experiment
     out_dir: Path
-    coordinator: Coordinator
+    coordinator: ZenohTransport
     children: Children
     session: zenoh.Session
     keys: Keys
@@ -159,7 +159,8 @@ class _Setup:
     session: zenoh.Session
     endpoint: str
     placement: AgentPlacement
-    coord: Coordinator
+    coord: ZenohTransport
+    run: Session
     t_server: float  # when the fork server was up
     identity: Callable[[str], list[str]]  # a process's credentials arguments
 
@@ -217,9 +218,13 @@ def _set_up(plan: RunPlan, fork_agents: bool, decider: Any) -> _Setup:
             join_timeout=exp.run.join_timeout,
         )
         resolved = plan.resolved
-        coord = Coordinator(
+        scenario = resolved.scenario()
+        run = Session(exp, scenario, resolved.allocator_cls, plan.out_dir)
+        coord = ZenohTransport(
             exp,
-            resolved.scenario(),
+            scenario,
+            run.world,
+            run.recorder,
             resolved.allocator_cls,
             resolved.targets,
             keys,
@@ -231,7 +236,7 @@ def _set_up(plan: RunPlan, fork_agents: bool, decider: Any) -> _Setup:
             decider,
         )
         undo.pop_all()
-    return _Setup(access, children, session, endpoint, placement, coord, t_server, identity)
+    return _Setup(access, children, session, endpoint, placement, coord, run, t_server, identity)
 
 
 def _start_processes(plan: RunPlan, setup: _Setup) -> dict[str, Any]:
@@ -352,7 +357,8 @@ def _execute(
                 observer.start(live)
                 running.append(observer)
             loop_start = _tick_costs(children)
-            TickLoop(exp, coord.scenario, coord.world, coord.recorder, coord, coord.stages).run(on_tick)
+            setup.run.connect(coord, coord.agents, coord.hooks(), coord.stages)
+            setup.run.run(on_tick)
             loop_end = _tick_costs(children)
             if coord.agents.swap_log:
                 _record_swaps(plan, setup, deployment, hosts)
@@ -369,7 +375,7 @@ def _execute(
         if coord.decision_source == "ros2":  # robot-ticks without a ROS 2 decision in time: not reproducible
             timings["ros2_command_timeouts"] = coord.commands.timeouts
         timings["per_agent_tick"] = _per_agent_tick(loop_start, loop_end, exp.agents.count, coord.last_tick + 1)
-        return RunResult(out_dir, coord.write_results(timings).document, timings)
+        return RunResult(out_dir, coord.write_results(setup.run, timings).document, timings)
     except TableWriteError as exc:  # a full disk: one line, the first error, not what clean-up meets next
         raise RunError(str(exc)) from None
     finally:
@@ -419,7 +425,7 @@ def _usage(children: Children) -> dict[str, dict]:
 
 def _timings(
     usage: dict[str, dict],
-    coord: Coordinator,
+    coord: ZenohTransport,
     marks: dict[str, float],
     hub_cpu_before: float,
     forked: bool,
@@ -456,7 +462,7 @@ def _timings(
     }
 
 
-def _keep_no_torn_result(coord: Coordinator, out_dir: Path) -> None:
+def _keep_no_torn_result(coord: ZenohTransport, out_dir: Path) -> None:
     """A run that did not complete leaves no half-written file under a result's name: the rows it
     streamed are kept as partial_<name> once ticks ran (readable, for a post-mortem)."""
     coord.abandon_tables()

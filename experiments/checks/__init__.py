@@ -4,7 +4,7 @@ the allocator conformance kit (:func:`run_all`, :func:`check_snapshot`) runs an 
 in-process on static instances with the real radio model. ``swarmbed check-scenario`` and
 ``swarmbed check-allocator`` run them from the command line."""
 
-from swarmbed.plugins.checks.allocator import ConformanceError, check_snapshot, run_all
-from swarmbed.plugins.checks.scenario import ScenarioCheckError, check_scenario
+from swarmbed.experiments.checks.allocator import ConformanceError, check_snapshot, run_all
+from swarmbed.experiments.checks.scenario import ScenarioCheckError, check_scenario
 
 __all__ = ["ConformanceError", "ScenarioCheckError", "check_scenario", "check_snapshot", "run_all"]

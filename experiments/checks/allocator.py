@@ -48,6 +48,9 @@ class Instance:
     awareness_range: float = math.inf
     agent_colors: list[int] | None = None  # search and rescue: robots' colours
     task_colors: dict[int, int] | None = None  # and victims' colours, shown as when bidding
+    #: what else a standing agent's observation says, for scenarios whose observation has more
+    #: fields than the generic ones (search and rescue: its reach, nothing inspected or rescued)
+    observed: dict[str, Any] = field(default_factory=dict)
 
 
 def random_instance(
@@ -73,6 +76,7 @@ def random_instance(
         tasks,
         agent_colors=[i % 3 for i in range(n_agents)],
         task_colors={j: int(rng.integers(3)) for j in tasks},
+        observed={"reach": 5.0, "robots": [], "inspected": [], "rescued": [], "busy": 0},
     )
 
 
@@ -151,15 +155,7 @@ def simulate(
                 x,
                 y,
                 visible,
-                {
-                    "color": color,
-                    "reach": 5.0,
-                    "robots": [],
-                    "inspected": [],
-                    "rescued": [],
-                    "busy": 0,
-                    "team": team if k == 0 else None,
-                },
+                {**inst.observed, "color": color, "team": team if k == 0 else None},
             )
             view = LocalView(
                 i,

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
-from swarmbed.coordinator import results
+from swarmbed.engine import results
 from swarmbed.extension.scenario import World
 from swarmbed.wire.codec import NetemStep
 from swarmbed.wire.reports import Final, NetemFinal, RestartRecord, SwapRecord, Transport
