@@ -41,7 +41,7 @@ from swarmbed.wire.reports import (
     encode_report,
 )
 from swarmbed.wire.schema import AgentSpec
-from swarmbed.wire.session import open_from_args, single_worker
+from swarmbed.wire.session import one_receiving_worker, open_from_args
 from swarmbed.wire.state import StateError
 from swarmbed.wire.tickdecode import TickDecoder
 from swarmbed.wire.transport import tcp_counters
@@ -71,12 +71,13 @@ def serve(
     ``snapshot`` this process hands its state to the coordinator and freezes (answers no tick),
     then either ``retire``s (its successor goes on) or ``resume``s (the swap failed).
 
-    ``tick_in_callback`` (default: whether Zenoh runs on the single worker): a tick is answered
-    inside the subscriber's own callback, so a sample in and a sample out wake that one thread and
-    nothing else. Whatever may block (orders, reports, a failing tick, an answer too large to put
-    from there) goes to the main thread, and so does every sample behind it, in arrival order."""
+    ``tick_in_callback`` (default: whether Zenoh receives on one worker, as ``run.zenoh_threads``
+    ``default`` and ``single`` have it): a tick is answered inside the subscriber's own callback, so
+    a sample in and a sample out wake that one thread and nothing else. Whatever may block (orders,
+    reports, a failing tick, an answer too large to put from there) goes to the main thread, and so
+    does every sample behind it, in arrival order."""
     if tick_in_callback is None:
-        tick_in_callback = single_worker()
+        tick_in_callback = one_receiving_worker()
     with _Agent(session, keys, runtime, incarnation, malformed) as agent:
         return agent.loop(tick_in_callback, restored)
 

@@ -14,8 +14,8 @@ figures differ by more than 10 % is flagged with ``!``):
     python benchmarks/lockstep.py --relay         # also the retired relay baseline
 
 For each N it prints ticks per second of every case and swarmbed's ratio to each floor (with
-Zenoh's default threads and with ``run.zenoh_threads=single``); then, per case, what one
-agent-tick cost over the tick loop in wake-ups (voluntary context switches of every thread of
+each ``run.zenoh_threads``: ``zenoh``, Zenoh's own threads; ``default``; ``single``); then, per case,
+what one agent-tick cost over the tick loop in wake-ups (voluntary context switches of every thread of
 every process of the case, hub included) and, for swarmbed, CPU microseconds by process kind:
 counts that do not move with the machine's day. The hub (this process) keeps Zenoh's default
 layout in every case.
@@ -150,6 +150,10 @@ def _pair(first: dict, second: dict) -> tuple[float, float, bool, list[float]]:
     return (a + b) / 2, (first["wakeups"] + second["wakeups"]) / 2, abs(a - b) > DRIFT * max(a, b), cpu
 
 
+#: the thread layouts of ``run.zenoh_threads`` measured
+LAYOUTS = ("zenoh", "default", "single")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, nargs="+", default=[50, 100, 200])
@@ -163,17 +167,17 @@ def main() -> None:
         runs: dict[str, list[dict]] = {k: [] for k in FLOORS}
         for kind in FLOORS:
             runs[kind].append(floor(kind, n, ticks))
-        ours = {t: swarmbed_run(n, ticks, t) for t in ("default", "single")}
+        ours = {t: swarmbed_run(n, ticks, t) for t in LAYOUTS}
         for kind in FLOORS:
             runs[kind].append(floor(kind, n, ticks))
         relay = floor("relay", n, ticks) if args.relay else None
         print(f"N = {n}, {ticks} ticks per case")
-        print(f"  {'case':<18} {'ticks/s':>8} {'wake-ups/agent-tick':>20}   swarmbed default / single")
+        print(f"  {'case':<18} {'ticks/s':>8} {'wake-ups/agent-tick':>20}   swarmbed {' / '.join(LAYOUTS)}")
         rates = {}
         for kind in FLOORS:
             rate, woke, drift, cpu = _pair(*runs[kind])
             rates[kind] = rate
-            ratios = f"{ours['default']['ticks_per_s'] / rate:.2f} / {ours['single']['ticks_per_s'] / rate:.2f}"
+            ratios = " / ".join(f"{ours[t]['ticks_per_s'] / rate:.2f}" for t in LAYOUTS)
             print(f"  {kind + (' !' if drift else ''):<18} {rate:>8.1f} {woke:>20.2f}   {ratios}", flush=True)
             proxy = f", proxy {cpu[1]:.0f}" if kind == "B2" else ""
             print(f"      per agent-tick: CPU us clients {cpu[0]:.0f}{proxy}, hub {cpu[2]:.0f}", flush=True)

@@ -110,7 +110,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=50, help="agents")
     ap.add_argument("--ticks", type=int, default=400)
-    ap.add_argument("--threads", choices=("default", "single"), default="single")
+    ap.add_argument("--threads", choices=("zenoh", "default", "single"), default="single")
     ap.add_argument("--allocator", default="noop")
     args = ap.parse_args()
     print(f"N = {args.n}, {args.ticks} ticks, zenoh_threads {args.threads}, allocator {args.allocator}")

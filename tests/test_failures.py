@@ -143,7 +143,7 @@ BOOM = textwrap.dedent("""
 """)
 
 
-@pytest.mark.parametrize("threads", ["default", "single"])
+@pytest.mark.parametrize("threads", ["default", "single", "zenoh"])
 def test_plugin_that_raises_stops_the_run_with_its_traceback(tmp_path, threads):
     plugin = tmp_path / "boom.py"
     plugin.write_text(BOOM)
@@ -210,14 +210,17 @@ LONG_TICK = textwrap.dedent("""
 """)
 
 
-def test_a_tick_longer_than_zenohs_lease_keeps_the_single_workers_agent(tmp_path):
-    """On the single worker an agent's tick runs on Zenoh's only thread, which sends no keep-alive
-    meanwhile: the agent's lease is a minute, so a 14 s tick does not cost it its session."""
+@pytest.mark.parametrize("threads", ["default", "single"])
+def test_a_tick_longer_than_zenohs_lease_keeps_the_agent(tmp_path, threads):
+    """An agent answers ticks in the receiving worker's callback. On the single worker that is
+    Zenoh's only thread, which sends no keep-alive meanwhile: the agent's lease is a minute. On the
+    default layout a worker of its own transmits, so keep-alives flow under Zenoh's 10 s lease.
+    Either way a 14 s tick does not cost the agent its session."""
     # its own file name: plugin files load as modules named by their stem (test_realtime has a sleepy.py)
     plugin = tmp_path / "long_tick.py"
     plugin.write_text(LONG_TICK)
     sets = [f"allocator={{name: '{plugin}:LongTick'}}", "agents.count=4", "run.duration=10", "run.stop_when_done=false"]
-    result = run_experiment(experiment(*sets, "run.zenoh_threads=single"), tmp_path / "run", progress=False)
+    result = run_experiment(experiment(*sets, f"run.zenoh_threads={threads}"), tmp_path / "run", progress=False)
     assert result.summary["ticks"] == 10
 
 

@@ -388,6 +388,26 @@ def test_a_killed_agent_is_lost_or_restarted_and_copies_to_it_are_booked(policy,
         assert alive.loc[2, "alive"] == 1 and alive.loc[2, "messages_sent"] > 0
 
 
+def test_a_frozen_agent_is_given_up_within_zenohs_lease_on_the_default_thread_layout(tmp_path):
+    """Issue 58: the default thread layout keeps Zenoh's 10 s lease, so an agent that stops
+    answering altogether (SIGSTOP for 24 s: no keep-alive either, as a host cut off) is given up
+    by the hub after Zenoh's lease (measured: the ticks stall 14 s), not the single worker's minute,
+    and the run goes on without it."""
+    plan = ChaosPlan.model_validate({"events": [{"action": "stop_agent", "at": [2], "for": 24, "agents": [1]}]})
+    exp = experiment(
+        "agents.count=3",
+        "allocator={name: noop, peers: 2}",
+        "run.stop_when_done=false",
+        "run.on_agent_loss=continue",
+        "run.tick_timeout=40",
+    )
+    limits = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=30.0)
+    v = soak(exp, tmp_path / "soak", 30, plan, interval=0.5, limits=limits)
+    assert v["passed"], v["breaches"]
+    assert list(v["agents_lost"]) == ["1"], v["agents_lost"]
+    assert 8.0 < v["longest_stall_s"] < 20.0, v["longest_stall_s"]  # the lease, not the 24 s freeze
+
+
 def test_on_the_real_time_clock_a_stopped_agent_misses_ticks_and_the_soak_says_how_many(tmp_path):
     """SIGSTOP for 1.5 s at 10 ticks per second: the agent misses about 15 ticks (booked late), the
     run's clock goes on, and the fault's outcome counts them."""

@@ -73,11 +73,13 @@ class RunSection(Strict):
     log_backups: int = Field(2, ge=0, description="rotated log files kept per process (name.log.1, ...)")
     record_every: int = Field(1, ge=1, description="ticks between time-series rows")
     record_trajectories: bool = Field(False, description="write trajectories.csv and markers.csv (for swarmbed replay)")
-    zenoh_threads: Literal["default", "single"] = Field(
+    zenoh_threads: Literal["default", "single", "zenoh"] = Field(
         "default",
-        description="Zenoh's threads in the agents and the proxy this machine starts: its default layout, or "
-        "single (every runtime handed to one worker, agents answering ticks in its callback: one wake-up per "
-        "agent-tick; such agents take a 60 s lease, so a cut-off host's are given up later; docs/benchmarks.md)",
+        description="Zenoh's threads in the agents and the proxy this machine starts: default (one worker receives "
+        "and agents answer ticks in its callback, one more transmits, so keep-alives flow during a long tick), "
+        "single (every runtime on one worker: the fewest wake-ups, but such agents take a 60 s lease, so a "
+        "cut-off host's are given up later), or zenoh (Zenoh's own layout); results are the same with each "
+        "(docs/benchmarks.md)",
     )
     record_bt: bool = Field(
         False,

@@ -32,6 +32,17 @@ SINGLE_WORKER = (
 )
 
 
+#: ZENOH_RUNTIME for ``run.zenoh_threads: default``: as the single worker, but Zenoh's transmit runtime
+#: on a worker of its own, so keep-alives go out while a tick runs on the receiving worker (a client
+#: keeps Zenoh's 10 s lease: a cut-off host is noticed as soon as with Zenoh's own layout)
+SPLIT_WORKERS = (
+    "(app: (handover: rx), acc: (handover: rx), net: (handover: rx), rx: (worker_threads: 1), tx: (worker_threads: 1))"
+)
+
+#: the ZENOH_RUNTIME of each ``run.zenoh_threads`` value (``zenoh``, Zenoh's own layout: none)
+RUNTIMES = {"default": SPLIT_WORKERS, "single": SINGLE_WORKER}
+
+
 #: A client on the single worker answers ticks on Zenoh's only thread, which sends no keep-alive
 #: while a tick runs: its lease (how long its router waits before giving it up) is a minute, not
 #: Zenoh's 10 s, so that a long tick does not cost the agent its session
@@ -42,6 +53,12 @@ def single_worker() -> bool:
     """Whether this process's Zenoh runs on the single worker (``run.zenoh_threads: single``, or
     the same ``ZENOH_RUNTIME`` given by hand on another host)."""
     return os.environ.get("ZENOH_RUNTIME") == SINGLE_WORKER
+
+
+def one_receiving_worker() -> bool:
+    """Whether this process's Zenoh receives on one worker that may answer inside its callbacks
+    (``run.zenoh_threads: default`` or ``single``)."""
+    return os.environ.get("ZENOH_RUNTIME") in (SINGLE_WORKER, SPLIT_WORKERS)
 
 
 def zenoh_config(

@@ -34,7 +34,7 @@ from swarmbed.experiments.launch.forkmessages import (
     decode_event,
     encode,
 )
-from swarmbed.wire.session import SINGLE_WORKER
+from swarmbed.wire.session import RUNTIMES
 
 log = logging.getLogger("swarmbed.launcher")
 
@@ -47,7 +47,7 @@ class ChildExited(RuntimeError):
 
 def zenoh_env(threads: str) -> dict[str, str]:
     """The environment that gives a run's processes ``run.zenoh_threads``."""
-    return {"ZENOH_RUNTIME": SINGLE_WORKER} if threads == "single" else {}
+    return {"ZENOH_RUNTIME": RUNTIMES[threads]} if threads in RUNTIMES else {}
 
 
 def python_env(extra: Mapping[str, str] | None = None) -> dict[str, str]:
