@@ -1,7 +1,7 @@
-"""What the coordinator's Zenoh callbacks hand its clock loop: one queue of ``(what, data)`` events.
+"""What the coordinator's Zenoh callbacks hand the tick loop's thread: one queue of ``(what, data)`` events.
 
 Callbacks run on Zenoh's threads and only put events here; everything that acts on them runs on
-the clock loop's thread. A part that waits for one kind of event (a swap's snapshot, a proxy's last
+the tick loop's thread. A part that waits for one kind of event (a swap's snapshot, a proxy's last
 report) takes what it wants with :meth:`EventQueue.wait_for` and leaves every other event for the
 tick loop, in the order it came.
 """

@@ -6,7 +6,7 @@ and asking for the checkpoints.
 A process is one *incarnation* of an agent: the first is 0, each swap or restart try makes the
 next. State is accepted only when the coordinator asked for it (:mod:`.tickets`). Processes are
 started and stopped through the :class:`~swarmbed.coordinator.placement.Placement` the launcher
-gives; the clock loop calls :meth:`AgentLifecycle.due` before each tick.
+gives; as a hook of the engine's tick loop it swaps, restarts and checkpoints before each tick.
 """
 
 from __future__ import annotations
