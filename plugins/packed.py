@@ -71,7 +71,7 @@ def pack_rows(rows: Sequence[tuple], keys: Sequence[tuple[Key, np.dtype]]) -> tu
     return key, packed.tobytes()
 
 
-_STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "i8": "q", "f8": "d"}
+_STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "i8": "q", "f4": "f", "f8": "d"}
 
 
 def struct_format(dtype: np.dtype) -> str:

@@ -434,3 +434,78 @@ def test_a_crafted_grape_message_is_ignored_and_changes_nothing():
         inbox = [Message(0, "grape", data) for data in crafted]
         b.mutex(LocalView(1, 2, 1, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, tasks, inbox, 1.0, 300.0))
         assert (b.evolution, b.stamp, b.partition) == before, every
+
+
+# -- centralized allocators through a leader (issue 60) ------------------------------------------------
+
+
+def _leader_rounds(n_agents: int) -> int:
+    """Round 0: every agent leads itself; round 1: the lowest id leads, followers report; round 2: the
+    leader solves with every report; round 3: every follower acts on it."""
+    return 4
+
+
+@pytest.mark.parametrize("case", range(60))
+def test_sga_through_a_leader_is_sequential_greedy_and_converged_cbba(case):
+    """On a clean radio with everyone in range, the leader's sequential greedy assignment (solved
+    afresh each tick) is the reference SGA of this file, and CBBA's converged assignment with one task
+    per bundle and the same path-independent score."""
+    rng = np.random.default_rng(case)
+    n_a, n_t = int(rng.integers(2, 7)), int(rng.integers(1, 12))
+    inst = random_instance(3000 + case, n_a, n_t)
+    params = {"discount": 0.99, "commit": False}
+    trace = simulate("sga", params, inst, _leader_rounds(n_a), seed=case)
+    got = {j: i for i, j in trace.decisions[-1].items() if j is not None}
+    assert got == sequential_greedy(inst, 1, 0.99, inst.max_speed), f"case {case}"
+    cbba = {"max_tasks": 1, "score": "distance_discounted", "discount": 0.99, "reset_after": None}
+    agents = simulate("cbba", cbba, inst, min(n_t, n_a) + 4, seed=case).allocators
+    assert got == {t: a.agent_id for a in agents for t in a.bundle}, f"case {case}"
+
+
+def test_the_hungarian_leaders_assignment_travels_least_of_all_assignments():
+    """Brute force on small instances: no assignment of min(agents, tasks) pairs travels less in all
+    than the one the leader sends (SciPy's linear_sum_assignment), which every agent then acts on."""
+    import itertools
+
+    from swarmbed.plugins.central import least_travel
+
+    for case in range(40):
+        rng = np.random.default_rng(case)
+        n_a, n_t = int(rng.integers(1, 6)), int(rng.integers(1, 6))
+        inst = random_instance(4000 + case, n_a, n_t)
+        agents = dict(enumerate(inst.agents))
+        plan = least_travel(agents, inst.tasks, inst.max_speed)
+
+        def travel(pairs, agents=agents, tasks=inst.tasks):
+            return sum(math.dist(agents[a], tasks[t][:2]) for a, t in pairs)
+
+        k = min(n_a, n_t)
+        best = min(
+            travel(zip(chosen, order))
+            for chosen in itertools.combinations(range(n_a), k)
+            for order in itertools.permutations(inst.tasks, k)
+        )
+        assert len(plan) == k and travel(plan.items()) <= best + 1e-9, f"case {case}"
+        trace = simulate("hungarian", {"commit": False}, inst, _leader_rounds(n_a), seed=case)
+        assert {a: t for a, t in trace.decisions[-1].items() if t is not None} == plan, f"case {case}"
+
+
+def test_a_leader_knows_only_what_reached_it_and_the_lowest_id_in_reach_leads():
+    """Agents 0 and 1 stand together, 2 and 3 together, far apart, range 50. With a fixed leader 0,
+    agents 2 and 3 never reach it: they are never in its assignment and, hearing nothing, explore.
+    With ``lowest_alive`` each group elects its own lowest id."""
+    from swarmbed.experiments.checks.allocator import Instance
+
+    inst = Instance(
+        agents=[(0.0, 0.0), (10.0, 0.0), (500.0, 0.0), (510.0, 0.0)],
+        tasks={0: (5.0, 5.0, 30.0), 1: (505.0, 5.0, 30.0), 2: (20.0, 0.0, 30.0)},
+    )
+    near = NetworkSection(range=50.0)
+    fixed = simulate("sga", {"leader": 0}, inst, 8, seed=1, network=near)
+    leader = fixed.allocators[0]
+    assert set(leader.plan) <= {0, 1} and set(leader.positions) == {0, 1}
+    assert all(d.get(2) is None and d.get(3) is None for d in fixed.decisions)
+    assert fixed.decisions[-1][1] is not None  # the follower in reach works
+    elected = simulate("sga", {}, inst, 8, seed=1, network=near)
+    assert [a.leader(a.heard[max(a.heard, key=a.heard.get)]) for a in elected.allocators] == [0, 0, 2, 2]
+    assert elected.decisions[-1][2] == 1  # the far group's own leader took the task beside it

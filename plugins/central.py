@@ -1,0 +1,250 @@
+"""Centralized allocators through a leader, over the emulated radio: the baselines reviewers ask for.
+
+Every agent runs the same allocator; one of them is the leader. Each tick a follower sends the leader
+a report (its position and the tasks it sees, as packed rows) and the leader, from the reports that
+reached it and what it sees itself, solves the assignment of the agents it heard from to the tasks
+it knows, and broadcasts it (packed (agent, task) pairs). Reports and assignments are radio messages
+like any other: range, loss, rates, queues and the ledger apply to both directions, so what the
+leader decides on is only what reached it. A follower works on its last assignment for ``hold_for``
+simulated seconds without a fresh one, then explores (its tree's exploration), until an assignment
+reaches it again.
+
+Who leads (``leader``): a fixed agent id, or ``lowest_alive``: the lowest id among this agent and
+those it heard from in the last ``heard_within`` simulated seconds. At the first tick every agent
+has heard no one and leads itself; their assignments reach each other and from the next tick the
+lowest id leads. When the leader is lost (its robot, its process) its followers stop hearing it,
+and ``heard_within`` seconds later the lowest id that they still hear (themselves, at worst) takes
+over by the same rule.
+
+What the leader knows of a task: its position and remaining workload from the latest report that
+named it. A task it knew that a fresh report leaves out although the reporter stood within the
+awareness range of it is done (forgotten); so is one nobody reported for ``heard_within`` seconds.
+
+The solvers (:meth:`Centralized.solve`): sequential greedy assignment (``sga``: the pair of agent
+and task with the best score, again and again; a task's score is CBBA's path-independent one,
+``discount ** (d / v) * R``) and the Hungarian method (``hungarian``: the assignment of least total
+travel time, by :func:`scipy.optimize.linear_sum_assignment`). Each agent gets at most one task and
+each task at most one agent, as CBBA's and GRAPE's single-task robots do.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from swarmbed.extension import Allocator, LocalView
+from swarmbed.plugins.packed import read_tuples
+
+REPORT, ASSIGN = "report", "assign"
+
+#: a report's task rows: id, position and remaining workload as a robot would send them (float32)
+TASK_ROW = np.dtype([("task", "<i4"), ("x", "<f4"), ("y", "<f4"), ("remaining", "<f4")])
+#: an assignment's rows: the agent, its task and where the task is (a goal, as a leader would send it)
+ASSIGN_ROW = np.dtype([("agent", "<i2"), ("task", "<i4"), ("x", "<f4"), ("y", "<f4")])
+
+
+class CentralParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    leader: int | Literal["lowest_alive"] = Field(
+        "lowest_alive",
+        description="who solves the assignment: an agent id, or the lowest id this agent heard from in the last "
+        "heard_within seconds (itself included), which also chooses the next leader when one is lost",
+    )
+    heard_within: float = Field(
+        5.0, gt=0, description="simulated seconds after which an agent (or a task) not heard of counts as gone"
+    )
+    hold_for: float = Field(
+        10.0, ge=0, description="simulated seconds a follower works on its last assignment without a fresh one"
+    )
+    discount: float = Field(0.999, gt=0, le=1, description="sga: lambda of the score discount ** (d / v) * R")
+    commit: bool = Field(
+        True,
+        description="the leader keeps an agent on its task until the task is done or the agent is gone, and "
+        "solves for the others (a task's score falls as it is worked on: re-solving every tick would pull "
+        "agents off half-done tasks); false: solve for everyone every tick",
+    )
+
+
+class Centralized(Allocator):
+    """The leader and follower roles every agent of a centralized allocator plays; subclasses say how
+    the leader assigns (:meth:`solve`)."""
+
+    Params = CentralParams
+    params: CentralParams
+    message_kinds = (REPORT, ASSIGN)
+    event_names = ("assignments_sent", "reports_sent")
+
+    def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator, run_seed: int = 0) -> None:
+        super().__init__(agent_id, params, rng, run_seed)
+        self.heard: dict[int, float] = {}  # agent -> simulated time it was last heard from
+        self.positions: dict[int, tuple[float, float]] = {}  # agent -> its reported position (the leader's)
+        self.tasks: dict[int, tuple[float, float, float, float]] = {}  # task -> x, y, remaining, time (leader's)
+        self.assigned: tuple[int, float, float, float] | None = None  # (task, x, y, time the assignment came)
+        self.plan: dict[int, int] = {}  # agent -> task, the leader's last assignment
+
+    # -- the roles ------------------------------------------------------------------------------
+    def leader(self, now: float) -> int:
+        """Who leads as this agent sees it at ``now``."""
+        if self.params.leader != "lowest_alive":
+            return int(self.params.leader)
+        recent = [a for a, t in self.heard.items() if now - t <= self.params.heard_within]
+        return min([self.agent_id, *recent])
+
+    def decide(self, view: LocalView) -> int | None:
+        now = view.time
+        self._read(view, now)
+        leader = self.leader(now)
+        if leader == self.agent_id:
+            seen = [(t.id, t.x, t.y, t.remaining) for t in view.tasks.values()]
+            self._learn(self.agent_id, view.x, view.y, seen, view)
+            self._forget(now)
+            fresh = self.params.heard_within
+            agents = {a: p for a, p in self.positions.items() if a == self.agent_id or now - self.heard[a] <= fresh}
+            plan = self._plan(agents, view.max_speed)
+            goals = [(a, j, *self.tasks[j][:2]) for a, j in sorted(plan.items())]
+            view.broadcast(ASSIGN, _pack(goals, ASSIGN_ROW))
+            self.count("assignments_sent")
+            mine = plan.get(self.agent_id)
+            self.assigned = None if mine is None else (mine, *self.tasks[mine][:2], now)
+            return mine
+        rows = [(t.id, t.x, t.y, t.remaining) for t in view.tasks.values()]
+        view.send(leader, REPORT, [view.x, view.y, _pack(rows, TASK_ROW)])
+        self.count("reports_sent")
+        if self.assigned is None or now - self.assigned[3] > self.params.hold_for:
+            return None  # nothing fresh enough from the leader: the tree explores
+        task, x, y, _ = self.assigned
+        if task not in view.tasks and math.hypot(x - view.x, y - view.y) < view.awareness_range:
+            self.assigned = None  # in sight of where it stood, and gone: done
+            return None
+        return task
+
+    def _read(self, view: LocalView, now: float) -> None:
+        """Note who was heard; keep a report (as the leader would use it) and the leader's assignment."""
+        for msg in view.inbox:
+            if msg.sender == self.agent_id or not 0 <= msg.sender < view.n_agents:
+                continue
+            self.heard[msg.sender] = now
+            data = msg.data
+            if msg.kind == REPORT and isinstance(data, list) and len(data) == 3:
+                x, y, packed = data
+                if isinstance(x, (int, float)) and isinstance(y, (int, float)) and math.isfinite(x + y):
+                    self._learn(msg.sender, float(x), float(y), read_tuples(packed, TASK_ROW), view)
+            elif msg.kind == ASSIGN and msg.sender == self.leader(now):
+                for agent, task, x, y in read_tuples(data, ASSIGN_ROW):
+                    if agent == self.agent_id and math.isfinite(x + y):
+                        self.assigned = (int(task), float(x), float(y), now)
+                        break
+                else:
+                    self.assigned = None  # the leader left this agent out
+
+    def _learn(self, reporter: int, x: float, y: float, rows: list[tuple], view: LocalView) -> None:
+        """A report (or the leader's own view): where ``reporter`` is, the tasks it sees, and the
+        tasks it should see but does not (done)."""
+        now = view.time
+        self.positions[reporter] = (x, y)
+        named = set()
+        for task, tx, ty, remaining in rows:
+            if math.isfinite(tx + ty + remaining):
+                self.tasks[int(task)] = (float(tx), float(ty), float(remaining), now)
+                named.add(int(task))
+        reach = view.awareness_range
+        for task, (tx, ty, _r, _t) in list(self.tasks.items()):
+            if task not in named and math.hypot(tx - x, ty - y) < reach:
+                del self.tasks[task]
+
+    def _plan(self, agents: dict[int, tuple[float, float]], speed: float) -> dict[int, int]:
+        """The leader's assignment: the committed pairs that still stand, and the solver's for the rest."""
+        kept = {a: j for a, j in self.plan.items() if a in agents and j in self.tasks} if self.params.commit else {}
+        taken = set(kept.values())
+        free = {a: p for a, p in agents.items() if a not in kept}
+        plan = kept | self.solve(free, {j: v[:3] for j, v in self.tasks.items() if j not in taken}, speed)
+        self.plan = plan
+        return plan
+
+    def _forget(self, now: float) -> None:
+        for task, (_x, _y, _r, seen) in list(self.tasks.items()):
+            if now - seen > self.params.heard_within:
+                del self.tasks[task]
+
+    # -- the assignment -------------------------------------------------------------------------
+    def solve(
+        self, agents: dict[int, tuple[float, float]], tasks: dict[int, tuple[float, float, float]], speed: float
+    ) -> dict[int, int]:
+        """Agent -> task for the agents and tasks the leader knows (each at most once)."""
+        raise NotImplementedError
+
+
+def _pack(rows: Sequence[tuple], dtype: np.dtype) -> bytes:
+    return np.array(rows, dtype=dtype).tobytes() if rows else b""
+
+
+def sequential_greedy(
+    agents: dict[int, tuple[float, float]], tasks: dict[int, tuple[float, float, float]], speed: float, discount: float
+) -> dict[int, int]:
+    """Sequential greedy assignment: the (agent, task) pair of the best score ``discount ** (d / v) *
+    R`` (CBBA's path-independent score, computed as CBBA computes it), again and again over the agents
+    and tasks left; equal scores to the lower agent id, then the lower task id."""
+    if not agents or not tasks:
+        return {}
+    ids, tids = sorted(agents), sorted(tasks)
+    ax = np.array([agents[a] for a in ids])
+    tx = np.array([tasks[t][:2] for t in tids])
+    rem = np.array([tasks[t][2] for t in tids])
+    d = np.hypot(tx[None, :, 0] - ax[:, None, 0], tx[None, :, 1] - ax[:, None, 1])
+    score = np.exp(math.log(discount) * d / speed) * rem[None, :]
+    plan: dict[int, int] = {}
+    live = score > 0
+    for _ in range(min(len(ids), len(tids))):
+        masked = np.where(live, score, -np.inf)
+        best = masked.max()
+        if not np.isfinite(best):
+            break
+        i, j = np.argwhere(masked == best)[0]  # row-major: the lower agent, then the lower task
+        plan[ids[i]] = tids[j]
+        live[i, :] = False
+        live[:, j] = False
+    return plan
+
+
+class SGA(Centralized):
+    """Sequential greedy assignment by a leader (the centralized counterpart of CBBA: with the same
+    path-independent score, CBBA's converged assignment with one task per bundle is this one)."""
+
+    def solve(
+        self, agents: dict[int, tuple[float, float]], tasks: dict[int, tuple[float, float, float]], speed: float
+    ) -> dict[int, int]:
+        return sequential_greedy(agents, tasks, speed, self.params.discount)
+
+
+def least_travel(
+    agents: dict[int, tuple[float, float]], tasks: dict[int, tuple[float, float, float]], speed: float
+) -> dict[int, int]:
+    """The assignment of min(agents, tasks) pairs of least total travel time (SciPy's
+    ``linear_sum_assignment``, the Hungarian method's problem)."""
+    from scipy.optimize import linear_sum_assignment
+
+    if not agents or not tasks:
+        return {}
+    ids, tids = sorted(agents), sorted(tasks)
+    ax = np.array([agents[a] for a in ids])
+    tx = np.array([tasks[t][:2] for t in tids])
+    cost = np.hypot(tx[None, :, 0] - ax[:, None, 0], tx[None, :, 1] - ax[:, None, 1]) / speed
+    rows, cols = linear_sum_assignment(cost)
+    return {ids[i]: tids[j] for i, j in zip(rows, cols)}
+
+
+class Hungarian(Centralized):
+    """The Hungarian method by a leader: the agents it heard from matched to the tasks it knows with
+    the least total travel time."""
+
+    def solve(
+        self, agents: dict[int, tuple[float, float]], tasks: dict[int, tuple[float, float, float]], speed: float
+    ) -> dict[int, int]:
+        return least_travel(agents, tasks, speed)
+
+
+__all__ = ["SGA", "Centralized", "CentralParams", "Hungarian", "least_travel", "sequential_greedy"]
