@@ -526,3 +526,27 @@ def test_sessions_map_no_shared_memory_pools():
             time.sleep(0.05)
         assert got == [64_000, 64_000]
         assert pools() == []
+
+
+def test_a_centralized_allocator_survives_its_leader_killed_and_the_next_lowest_id_leads(tmp_path):
+    """Issue 60: SGA's leader is agent 0 (the lowest id alive). Its process is killed mid-run; the
+    followers stop hearing it, and ``heard_within`` simulated seconds later the lowest id they hear
+    leads: assignments go out again every tick and tasks go on being completed."""
+    plan = ChaosPlan.model_validate({"events": [{"action": "kill_agent", "at": [3], "agents": [0]}]})
+    exp = experiment(
+        "agents.count=5",
+        "allocator={name: sga, heard_within: 5}",
+        "run.stop_when_done=false",
+        "run.on_agent_loss=continue",
+        "network.range=null",  # everyone in reach of everyone: one leader
+        base=ROOT / "experiments" / "space_mtsr_code.yaml",
+    )
+    v = soak(exp, tmp_path / "soak", 10, plan, interval=1.0, limits=SHORT)
+    assert v["passed"], v["breaches"]
+    killed = v["agents_lost"]["0"]
+    rows = pd.read_csv(tmp_path / "soak" / "timeseries.csv")
+    rows["sent"] = rows["assignments_sent"].diff()  # the event columns are running totals
+    before, after = rows[(rows["tick"] > 5) & (rows["tick"] < killed)], rows[rows["tick"] > killed + 20]
+    assert (before["sent"] == 1).all()  # one leader, one assignment a tick
+    assert len(after) > 100 and (after["sent"] == 1).all()  # and again one, once the next is elected
+    assert after["tasks_completed"].iloc[-1] > after["tasks_completed"].iloc[0]  # the work goes on
