@@ -23,8 +23,9 @@ awareness range of it is done (forgotten); so is one nobody reported for ``heard
 The solvers (:meth:`Centralized.solve`): sequential greedy assignment (``sga``: the pair of agent
 and task with the best score, again and again; a task's score is CBBA's path-independent one,
 ``discount ** (d / v) * R``) and the Hungarian method (``hungarian``: the assignment of least total
-travel time, by :func:`scipy.optimize.linear_sum_assignment`). Each agent gets at most one task and
-each task at most one agent, as CBBA's and GRAPE's single-task robots do.
+travel time, by :func:`scipy.optimize.linear_sum_assignment`), where each agent gets at most one
+task and each task at most one agent, as CBBA's single-task robots do; and GRAPE's game solved in
+one place (``central-grape``: a Nash-stable partition, several agents to a task as GRAPE allows).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.extension import Allocator, LocalView
+from swarmbed.plugins.grape import utility as grape_utility
 from swarmbed.plugins.packed import read_tuples
 
 REPORT, ASSIGN = "report", "assign"
@@ -247,4 +249,80 @@ class Hungarian(Centralized):
         return least_travel(agents, tasks, speed)
 
 
-__all__ = ["SGA", "Centralized", "CentralParams", "Hungarian", "least_travel", "sequential_greedy"]
+class CentralGRAPEParams(CentralParams):
+    cost_weight: float = Field(1.0, ge=0, description="GRAPE's weight of the distance cost (SPACE Eq. 1)")
+    social_inhibition: float = Field(100.0, ge=0, description="GRAPE's f_s: exponent on the coalition size")
+
+
+def nash_stable_partition(
+    agents: dict[int, tuple[float, float]],
+    tasks: dict[int, tuple[float, float, float]],
+    cost_weight: float,
+    social_inhibition: float,
+    start: dict[int, int] | None = None,
+    max_passes: int = 1000,
+) -> dict[int, int]:
+    """GRAPE's game solved in one place: from ``start`` (else every agent on its nearest task), each
+    agent in id order joins the coalition of highest utility (SPACE's Eq. 1, :func:`grape.utility`)
+    where it beats its own, until a whole pass moves no one: a Nash-stable partition (GRAPE's
+    anonymous hedonic game with SPAO preferences converges, Jang et al. 2018, Theorem 1)."""
+    if not tasks:
+        return {}
+    tids = sorted(tasks)
+
+    def dist(a: int, j: int) -> float:
+        return math.hypot(tasks[j][0] - agents[a][0], tasks[j][1] - agents[a][1])
+
+    part = {a: j for a, j in (start or {}).items() if a in agents and j in tasks}
+    for a in sorted(agents):
+        if a not in part:
+            part[a] = min(tids, key=lambda j: (dist(a, j), j))
+    size = dict.fromkeys(tids, 0)
+    for j in part.values():
+        size[j] += 1
+    for _ in range(max_passes):
+        moved = False
+        for a in sorted(agents):
+            here = part[a]
+            u_here = grape_utility(tasks[here][2], dist(a, here), size[here], cost_weight, social_inhibition)
+            best, u_best = here, u_here
+            for j in tids:
+                if j != here:
+                    u = grape_utility(tasks[j][2], dist(a, j), size[j] + 1, cost_weight, social_inhibition)
+                    if u > u_best:
+                        best, u_best = j, u
+            if best != here:
+                size[here] -= 1
+                size[best] += 1
+                part[a] = best
+                moved = True
+        if not moved:
+            break
+    return part
+
+
+class CentralGRAPE(Centralized):
+    """GRAPE's game solved by a leader: a Nash-stable partition of the agents it heard from over the
+    tasks it knows (several agents may share a task), warm-started from its last one."""
+
+    Params = CentralGRAPEParams
+    params: CentralGRAPEParams
+
+    def _plan(self, agents: dict[int, tuple[float, float]], speed: float) -> dict[int, int]:
+        p = self.params
+        tasks = {j: v[:3] for j, v in self.tasks.items()}
+        start = self.plan if p.commit else None
+        self.plan = nash_stable_partition(agents, tasks, p.cost_weight, p.social_inhibition, start)
+        return self.plan
+
+
+__all__ = [
+    "SGA",
+    "CentralGRAPE",
+    "CentralParams",
+    "Centralized",
+    "Hungarian",
+    "least_travel",
+    "nash_stable_partition",
+    "sequential_greedy",
+]

@@ -84,6 +84,16 @@ def read_pairs(packed: object) -> list[tuple[int, int]]:
     return []
 
 
+def utility(remaining: float, distance: float, size: int, cost_weight: float, social_inhibition: float) -> float:
+    """SPACE's Eq. 1: ``R_j / |S_j| - cost_weight * d_ij * |S_j| ** social_inhibition``."""
+    try:
+        inhibition = float(size) ** social_inhibition
+    except OverflowError:
+        inhibition = math.inf
+    cost = cost_weight * distance
+    return remaining / size - (cost * inhibition if cost else 0.0)
+
+
 def _well_formed(data: object, numbered: bool) -> bool:
     """Whether ``data`` has a message's shape: [evolution, stamp, partition(, number(, 1))]."""
     if not isinstance(data, list) or not 3 + numbered <= len(data) <= 5:
@@ -147,12 +157,8 @@ class GRAPE(Allocator):
         if task == VOID:
             return 0.0
         t = view.tasks[task]
-        try:
-            inhibition = float(size) ** self.params.social_inhibition
-        except OverflowError:
-            inhibition = math.inf
-        cost = self.params.cost_weight * view.distance_to(t)
-        return t.remaining / size - (cost * inhibition if cost else 0.0)
+        p = self.params
+        return utility(t.remaining, view.distance_to(t), size, p.cost_weight, p.social_inhibition)
 
     def coalition_size(self, task: int, with_me: bool) -> int:
         others = sum(1 for a, t in self.partition.items() if t == task and a != self.agent_id)

@@ -202,6 +202,7 @@ register("grape", "swarmbed.plugins.grape:GRAPE", "mtsr")
 # centralized baselines: a leader solves the assignment from what reaches it over the radio
 register("sga", "swarmbed.plugins.central:SGA", "mtsr")
 register("hungarian", "swarmbed.plugins.central:Hungarian", "mtsr")
+register("central-grape", "swarmbed.plugins.central:CentralGRAPE", "mtsr")
 # the six coordination strategies of the CBBA-ETC evaluation (search and rescue)
 register("tree", "swarmbed.plugins.sar.reactive:TreeStrategy", "sar")
 register("comm", "swarmbed.plugins.sar.reactive:CommStrategy", "sar")

@@ -509,3 +509,46 @@ def test_a_leader_knows_only_what_reached_it_and_the_lowest_id_in_reach_leads():
     elected = simulate("sga", {}, inst, 8, seed=1, network=near)
     assert [a.leader(a.heard[max(a.heard, key=a.heard.get)]) for a in elected.allocators] == [0, 0, 2, 2]
     assert elected.decisions[-1][2] == 1  # the far group's own leader took the task beside it
+
+
+def _unilateral_gains(part, agents, tasks, cost_weight=1.0, social_inhibition=100.0):
+    """The agents that would gain by moving alone to another task (none: Nash stable)."""
+    from swarmbed.plugins.grape import utility
+
+    size = {j: list(part.values()).count(j) for j in tasks}
+    gains = []
+    for a, here in part.items():
+        u_here = utility(
+            tasks[here][2], math.dist(agents[a], tasks[here][:2]), size[here], cost_weight, social_inhibition
+        )
+        for j in tasks:
+            if j != here:
+                u = utility(
+                    tasks[j][2], math.dist(agents[a], tasks[j][:2]), size[j] + 1, cost_weight, social_inhibition
+                )
+                if u > u_here + 1e-9:
+                    gains.append((a, here, j))
+    return gains
+
+
+@pytest.mark.parametrize("social_inhibition", [100.0, 0.5])
+def test_central_grape_is_a_nash_stable_partition_and_grapes_own_result_is_one_of_its_game(social_inhibition):
+    """The leader's partition leaves no agent better off moving alone (SPACE's Eq. 1), every agent
+    acts on it; and the partition GRAPE's own distributed run converges to on a connected graph is
+    stable under the leader's game too (the same utility): started from it, the leader moves no one."""
+    from swarmbed.plugins.central import nash_stable_partition
+
+    for case in range(25):
+        rng = np.random.default_rng(case)
+        n_a, n_t = int(rng.integers(2, 7)), int(rng.integers(1, 6))
+        inst = random_instance(5000 + case, n_a, n_t, size=40.0)
+        agents = dict(enumerate(inst.agents))
+        part = nash_stable_partition(agents, inst.tasks, 1.0, social_inhibition)
+        assert set(part) == set(agents) and not _unilateral_gains(part, agents, inst.tasks, 1.0, social_inhibition)
+        params = {"commit": False, "social_inhibition": social_inhibition}
+        trace = simulate("central-grape", params, inst, _leader_rounds(n_a), seed=case)
+        assert trace.decisions[-1] == part, f"case {case}"
+        grape = {"social_inhibition": social_inhibition, "hold_while_converging": False}
+        own = simulate("grape", grape, inst, 60, seed=case).allocators[0].partition
+        assert not _unilateral_gains(own, agents, inst.tasks, 1.0, social_inhibition), f"case {case}"
+        assert nash_stable_partition(agents, inst.tasks, 1.0, social_inhibition, start=own) == own, f"case {case}"
