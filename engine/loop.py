@@ -112,6 +112,7 @@ class TickLoop:
         self._on = {point: handlers(self.hooks, point) for point in _POINTS}
         self.stages = stages  # benchmarks/profile_tick.py: the loop's own stages
         self.last_tick = -1
+        self.ended = False
 
     def _call(self, point: str, *args: object) -> None:
         for handler in self._on[point]:
@@ -149,8 +150,10 @@ class TickLoop:
         return self.last_tick
 
     def end(self) -> None:
-        """The ticks are over: tell the hooks."""
-        self._call("run_ends")
+        """The ticks are over: tell the hooks (once, however often the end is reached)."""
+        if not self.ended:
+            self.ended = True
+            self._call("run_ends")
 
     def tick(
         self, k: int, inboxes: Mapping[int, bytes], decisions: Mapping[int, int] | None = None

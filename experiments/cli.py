@@ -141,19 +141,35 @@ def cmd_run(args: argparse.Namespace) -> int:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
+    views = _live_views(exp, args.foxglove)
     if args.engine == "inprocess":
         from swarmbed.experiments.launch.inprocess import InProcessRun
         from swarmbed.experiments.launch.runner import progress_bar
 
         bar, on_tick = progress_bar(exp, not args.no_progress)
         with bar:
-            result = InProcessRun(exp, out).run(on_tick)
+            result = InProcessRun(exp, out, views=views).run(on_tick)
         print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
         return 0
     hub = HubOptions(listen=args.listen, auth=not args.no_auth, admit=admitted, tls=tls)
-    result = run_experiment(exp, out, progress=not args.no_progress, hub=hub)
+    result = run_experiment(exp, out, progress=not args.no_progress, hub=hub, views=views)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
+
+
+def _live_views(exp, port: int | None) -> list:
+    """The live views ``swarmbed run`` was asked for (``--foxglove``), each made from the run's session."""
+    if port is None:
+        return []
+
+    def foxglove(session):
+        from swarmbed.experiments.views.live import FoxgloveLive
+
+        view = FoxgloveLive(session.world, exp.run.dt, port)
+        print(f"Foxglove: open connection ws://127.0.0.1:{view.port}", file=sys.stderr, flush=True)
+        return view
+
+    return [foxglove]
 
 
 def _refusals(exp, engine: str) -> list[str]:
@@ -196,6 +212,15 @@ def register_run(sub: Subparsers) -> None:
     )
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument(
+        "--foxglove",
+        nargs="?",
+        const=8765,
+        type=int,
+        metavar="PORT",
+        help="serve the run live to Foxglove over its WebSocket protocol on 127.0.0.1:PORT (default 8765; "
+        "the channels of replay --mcap; the viewers extra)",
+    )
     _add_engine(run)
     run.add_argument(
         "--listen",

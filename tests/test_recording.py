@@ -107,3 +107,64 @@ def test_a_run_without_trajectories_is_refused_with_the_flag_to_set(tmp_path):
     done = replay_mcap(tmp_path / "run", tmp_path / "run.mcap")
     assert done.returncode == 2 and "--set run.record_trajectories=true" in done.stderr
     assert not (tmp_path / "run.mcap").exists()
+
+
+@pytest.mark.slow  # a run of real processes
+def test_a_run_is_served_live_to_a_foxglove_client_over_its_websocket_protocol(tmp_path):
+    """Issue 62: ``swarmbed run --foxglove``'s hook serves the recording's channels while the run
+    goes. A WebSocket client speaking the SDK's protocol (as Foxglove does) reads the server's
+    advertisement (the channels, their well-known schemas), subscribes to ``/agents/poses`` and
+    decodes a message with the advertised schema: every agent's pose, at positions of the run. The
+    server is gone once the run ended."""
+    import base64
+    import struct
+    import threading
+    import time
+
+    import websocket
+    from mcap.records import Schema
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from swarmbed.experiments.views.live import TOPICS, FoxgloveLive
+
+    PROTOCOL = "foxglove.sdk.v1"  # Foxglove's WebSocket protocol, as the SDK's server names it
+
+    exp = experiment(
+        "agents.count=3", "run.clock=realtime", "run.speed=10", "run.duration=60", "run.stop_when_done=false"
+    )
+    made: list[FoxgloveLive] = []
+
+    def view(session):
+        made.append(FoxgloveLive(session.world, exp.run.dt, port=0))
+        return made[-1]
+
+    result: list = []
+    runner = threading.Thread(target=lambda: result.append(run_experiment(exp, tmp_path / "run", False, views=[view])))
+    runner.start()
+    deadline = time.monotonic() + 30
+    while not made and time.monotonic() < deadline:
+        time.sleep(0.05)
+    url = f"ws://127.0.0.1:{made[0].port}"
+    ws = websocket.create_connection(url, subprotocols=[PROTOCOL], timeout=10)
+    channels: dict[str, dict] = {}
+    while not set(TOPICS) <= set(channels):
+        message = json.loads(ws.recv())
+        if message["op"] == "advertise":
+            channels.update({c["topic"]: c for c in message["channels"]})
+    assert channels["/agents/poses"]["schemaName"] == "foxglove.PosesInFrame"
+    assert {channels[t]["schemaName"] for t in ("/agents", "/markers", "/radio")} == {"foxglove.SceneUpdate"}
+    poses = channels["/agents/poses"]
+    ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 7, "channelId": poses["id"]}]}))
+    frame = ws.recv()
+    while not isinstance(frame, bytes):
+        frame = ws.recv()
+    opcode, subscription, _stamp = struct.unpack_from("<BIQ", frame)
+    assert (opcode, subscription) == (1, 7)  # message data, of our subscription
+    schema = Schema(id=1, name=poses["schemaName"], encoding="protobuf", data=base64.b64decode(poses["schema"]))
+    decoded = DecoderFactory().decoder_for("protobuf", schema)(frame[13:])
+    assert decoded.frame_id == "world" and len(decoded.poses) == 3
+    ws.close()
+    runner.join(timeout=60)
+    assert result and result[0].summary["ticks"] == 60
+    with pytest.raises(OSError):
+        websocket.create_connection(url, subprotocols=[PROTOCOL], timeout=2)

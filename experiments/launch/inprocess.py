@@ -18,12 +18,12 @@ ROS 2, ROS 2 topics, behavior-tree logs, and a hub others join. ``timings.json``
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
 from swarmbed.engine import ENGINES, OneProcess, Session, TickInHand, refusals, results
-from swarmbed.experiments.launch.runner import RunResult, plan_run, start_result_dir
+from swarmbed.experiments.launch.runner import RunResult, View, plan_run, start_result_dir
 from swarmbed.netem.exchange import Exchange
 from swarmbed.wire.codec import EMPTY_INBOX, NetemStep, WorldSample, decode_agent_out, encode_agent_out
 from swarmbed.wire.observation import Observation
@@ -77,7 +77,7 @@ class InProcessRun:
     caller may own the loop (:meth:`observe`, :meth:`advance`: a learner, one tick a step) or let
     :meth:`run` step it to the end."""
 
-    def __init__(self, exp: Experiment, out_dir: Path, env: bool = False) -> None:
+    def __init__(self, exp: Experiment, out_dir: Path, env: bool = False, views: Sequence[View] = ()) -> None:
         self.t0 = time.perf_counter()
         plan = plan_run(exp, out_dir)
         resolved = plan.resolved
@@ -89,7 +89,7 @@ class InProcessRun:
         self.session = Session(exp, resolved.scenario(), resolved.allocator_cls, self.out_dir)
         self.world = self.session.world
         self.engine = InProcess(exp, resolved.targets, self.out_dir)
-        self.session.connect(self.engine, OneProcess(self.world))
+        self.session.connect(self.engine, OneProcess(self.world), [view(self.session) for view in views])
         self.result: RunResult | None = None
         self.session.start()
 
@@ -129,6 +129,7 @@ class InProcessRun:
         """Write the result files of the ticks stepped so far (once)."""
         if self.result is not None:
             return self.result
+        self.session.loop.end()  # a run cut short (a learner's episode): the hooks hear it end too
         try:
             reports, netem = self.engine.reports(), self.engine.finish(self.session.last_tick)
             timings = {"engine": "inprocess", "run_s": time.perf_counter() - self.t0}

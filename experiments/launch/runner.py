@@ -21,7 +21,7 @@ import zenoh
 from tqdm import tqdm
 
 from swarmbed.coordinator.coordinator import ZenohTransport
-from swarmbed.engine import Session, results
+from swarmbed.engine import Session, TickHook, results
 from swarmbed.engine.errors import RunError
 from swarmbed.experiments.hosts.client import HostError, host_info, wait_for_hosts
 from swarmbed.experiments.launch.access import RunAccess
@@ -59,6 +59,10 @@ class LiveRun:
     session: zenoh.Session
     keys: Keys
     hosts: dict[str, HostInfo | None]  # host name -> what its daemon said of itself (cores, memory, pid)
+
+
+#: what makes, from a run's session, a hook that shows the run as it goes
+View = Callable[[Session], TickHook]
 
 
 class RunObserver(Protocol):
@@ -136,6 +140,7 @@ def run_experiment(
     fork_agents: bool = True,
     observers: Sequence[RunObserver] = (),
     decider: Any = None,
+    views: Sequence[View] = (),
 ) -> RunResult:
     """Run ``exp`` into ``out_dir``. ``on_ready(keys, endpoint)`` is called once everyone joined
     (tests use it to reach the run's keys from outside). ``hub``: where the hub listens and whom it
@@ -144,10 +149,11 @@ def run_experiment(
     everything once (:mod:`.forkserver`); without it each is a fresh interpreter. ``observers``
     are started once everyone joined and stopped when the ticks are over (:mod:`.soak`). ``decider``:
     for an allocator that takes its decisions from the launching process (``external``), what makes
-    them each tick (:mod:`swarmbed.envs`)."""
+    them each tick (:mod:`swarmbed.envs`). ``views``: each makes, from the run's session, a hook
+    that shows the run as it goes (a live Foxglove server, :mod:`swarmbed.experiments.views.live`)."""
     plan = plan_run(exp, out_dir, hub)
     start_result_dir(plan)
-    return _execute(plan, progress, on_ready, fork_agents, observers, decider)
+    return _execute(plan, progress, on_ready, fork_agents, observers, decider, views)
 
 
 @dataclass
@@ -316,6 +322,7 @@ def _execute(
     fork_agents: bool,
     observers: Sequence[RunObserver],
     decider: Any = None,
+    views: Sequence[View] = (),
 ) -> RunResult:
     exp, out_dir, keys = plan.exp, plan.out_dir, plan.keys
     t_start = time.perf_counter()
@@ -357,7 +364,8 @@ def _execute(
                 observer.start(live)
                 running.append(observer)
             loop_start = _tick_costs(children)
-            setup.run.connect(coord, coord.agents, coord.hooks(), coord.stages)
+            shown = [view(setup.run) for view in views]
+            setup.run.connect(coord, coord.agents, coord.hooks() + shown, coord.stages)
             setup.run.run(on_tick)
             loop_end = _tick_costs(children)
             if coord.agents.swap_log:
