@@ -165,7 +165,7 @@ class ZenohTransport(TickHook):
             from swarmbed.coordinator.ros2 import Ros2Commands, Ros2Out
 
             try:
-                self.ros2 = Ros2Out(s, self.exp.ros2, self.n, self.scenario.actions)
+                self.ros2 = Ros2Out(s, self.exp.ros2, self.n, self.scenario.actions, self.exp.run.dt)
             except ImportError as exc:  # the ros2 extra is not installed: say so before any process starts
                 raise RunError(str(exc)) from None
             if self.decision_source == "ros2":

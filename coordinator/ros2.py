@@ -7,7 +7,11 @@ With ``ros2:`` in the experiment, the coordinator's session (the hub) is also a 
 topic                      type                                    what
 =========================  ======================================  ==================================
 ``/clock``                 ``rosgraph_msgs/msg/Clock``             simulated time (for ``use_sim_time``)
-``/robot_<i>/pose``        ``geometry_msgs/msg/PoseStamped``       robot i's position, simulated time
+``/robot_<i>/pose``        ``geometry_msgs/msg/PoseStamped``       robot i's pose (its heading), simulated time
+``/tf``                    ``tf2_msgs/msg/TFMessage``              map -> robot_<i>/base_link, every robot
+``/robot_<i>/odom``        ``nav_msgs/msg/Odometry``               robot i's pose and speed along its heading
+``/robots``                ``geometry_msgs/msg/PoseArray``         every robot's pose
+``/radio``                 ``visualization_msgs/msg/MarkerArray``  the tick's delivered copies as lines
 ``/tasks``                 ``visualization_msgs/msg/MarkerArray``  every task on the map, its holders
 ``/robot_<i>/radio/       ``swarmbed_msgs/msg/RadioInbox``        what robot i received this tick
 received``
@@ -25,6 +29,7 @@ with publishing on or off (tests/test_ros2_run.py holds them byte-identical).
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -45,6 +50,8 @@ log = logging.getLogger("swarmbed.coordinator")
 #: wall seconds between two reports of ticks that waited for commands that never came
 WAIT_REPORT_EVERY_S = 10.0
 CLOCK, POSE, MARKERS = "rosgraph_msgs/msg/Clock", "geometry_msgs/msg/PoseStamped", "visualization_msgs/msg/MarkerArray"
+TF, ODOMETRY, POSE_ARRAY = "tf2_msgs/msg/TFMessage", "nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseArray"
+RADIO_LINES = (0.12, 0.47, 0.71, 0.8)  # RGBA of a delivered copy's line, sender to receiver
 TASK_HEIGHT = 2.0  # metres of a task's cylinder; its diameter is the arrival radius, at least 1
 FREE, HELD = (0.6, 0.6, 0.6, 0.8), (1.0, 0.55, 0.0, 0.9)  # RGBA of a task nobody / somebody pursues
 
@@ -52,14 +59,22 @@ FREE, HELD = (0.6, 0.6, 0.6, 0.8), (1.0, 0.55, 0.0, 0.9)  # RGBA of a task nobod
 class Ros2Out:
     """The ``/swarmbed`` node of one run, on the hub's session."""
 
-    def __init__(self, session: zenoh.Session, settings: Ros2Section, n_agents: int, actions: ActionSpec) -> None:
+    def __init__(
+        self, session: zenoh.Session, settings: Ros2Section, n_agents: int, actions: ActionSpec, dt: float = 1.0
+    ) -> None:
         self.node = Ros2Node(session, settings.domain, NODE_NAME)
+        self.dt = dt
         self.types = t = self.node.types
         self.settings = settings
         self.clock = self.node.publisher("/clock", CLOCK, SENSOR_QOS)
         self.tasks = self.node.publisher("/tasks", MARKERS)
         self.poses = [self.node.publisher(f"/robot_{i}/pose", POSE) for i in range(n_agents)]
         self.radio = [self.node.publisher(f"/robot_{i}/radio/received", RADIO_INBOX) for i in range(n_agents)]
+        # what RViz2's TF, Odometry, PoseArray and Marker displays read
+        self.tf = self.node.publisher("/tf", TF)
+        self.odom = [self.node.publisher(f"/robot_{i}/odom", ODOMETRY) for i in range(n_agents)]
+        self.robots = self.node.publisher("/robots", POSE_ARRAY)
+        self.radio_lines = self.node.publisher("/radio", MARKERS)
         # the actions that name a task or victim by its id (["goto_task", 12]): who pursues what
         self.aiming = frozenset(name for name, kinds in actions.items() if kinds == (int,))
         self.Header, self.Pose, self.PoseStamped = (
@@ -79,20 +94,29 @@ class Ros2Out:
         actions: Mapping[int, list],
         inboxes: Mapping[int, bytes],
         marker_size: float,
+        motion: Mapping[int, tuple[float, float]] | None = None,
     ) -> None:
         """Tick ``tick`` at ``sim_time``: the clock always; the rest every ``every`` ticks. ``inboxes``
-        are the encoded inboxes the proxy made for the next tick (what each robot received)."""
+        are the encoded inboxes the proxy made for the next tick (what each robot received);
+        ``motion``: each robot's heading (radians from +x) and speed, from its observation."""
         t = self.types
         now = stamp(t, sim_time)
         self.node.put(self.clock, t.cls(CLOCK)(clock=now))
         if tick % self.settings.every:
             return
         header = self.Header(stamp=now, frame_id=self.settings.frame_id)
+        motion = motion or {}
+        poses, transforms = [], []
         for i, x, y in zip(*positions):
-            pose = self.Pose(
-                position=self.Point(x=x, y=y, z=0.0), orientation=self.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
-            )
+            heading, speed = motion.get(i, (0.0, 0.0))
+            pose = self._pose(x, y, 0.0, heading)
+            poses.append(pose)
             self.node.put(self.poses[i], self.PoseStamped(header=header, pose=pose))
+            self.node.put(self.odom[i], self._odometry(header, i, pose, speed))
+            transforms.append(self._transform(header, i, x, y, pose))
+        self.node.put(self.tf, t.cls(TF)(transforms=transforms))
+        self.node.put(self.robots, t.cls(POSE_ARRAY)(header=header, poses=poses))
+        self.node.put(self.radio_lines, self._radio_lines(header, positions, inboxes))
         pursuers: dict[int, list[int]] = {}
         for agent, action in sorted(actions.items()):
             if action and action[0] in self.aiming:
@@ -102,6 +126,65 @@ class Ros2Out:
             self.node.put(self.tasks, self._markers(header, markers, pursuers, marker_size))
         for i in positions[0]:  # every live robot, an empty inbox too
             self.node.put(self.radio[i], self._inbox(header, i, inboxes.get(i, EMPTY_INBOX)))
+
+    def _odometry(self, header: object, robot: int, pose: object, speed: float) -> object:
+        """Robot ``robot``'s odometry: its pose in the map, its speed along its heading (base_link's x)."""
+        t = self.types
+        zeros = np.zeros(36)
+        Vector3 = t.cls("geometry_msgs/msg/Vector3")
+        twist = t.cls("geometry_msgs/msg/Twist")(
+            linear=Vector3(x=speed, y=0.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=0.0)
+        )
+        return t.cls(ODOMETRY)(
+            header=header,
+            child_frame_id=f"robot_{robot}/base_link",
+            pose=t.cls("geometry_msgs/msg/PoseWithCovariance")(pose=pose, covariance=zeros),
+            twist=t.cls("geometry_msgs/msg/TwistWithCovariance")(twist=twist, covariance=zeros),
+        )
+
+    def _transform(self, header: object, robot: int, x: float, y: float, pose: Any) -> object:
+        """map -> robot_<i>/base_link, as TF carries it."""
+        t = self.types
+        return t.cls("geometry_msgs/msg/TransformStamped")(
+            header=header,
+            child_frame_id=f"robot_{robot}/base_link",
+            transform=t.cls("geometry_msgs/msg/Transform")(
+                translation=t.cls("geometry_msgs/msg/Vector3")(x=x, y=y, z=0.0), rotation=pose.orientation
+            ),
+        )
+
+    def _radio_lines(
+        self,
+        header: object,
+        positions: tuple[Sequence[int], Sequence[float], Sequence[float]],
+        inboxes: Mapping[int, bytes],
+    ) -> object:
+        """The copies delivered for the next tick as one line list, sender to receiver, living one tick
+        (``RadioInbox`` says the same in our own type, which RViz cannot draw)."""
+        where = {i: (x, y) for i, x, y in zip(*positions)}
+        points = []
+        for receiver in sorted(inboxes):
+            try:
+                senders = [d.sender for d in decode_inbox(inboxes[receiver])]
+            except WireError:
+                continue
+            points += [p for s in senders if s in where and receiver in where for p in (where[s], where[receiver])]
+        Marker = self.types.cls("visualization_msgs/msg/Marker")
+        tick_ns = round(self.settings.every * self.dt * 1e9)
+        line = self._marker(
+            header,
+            "radio",
+            0,
+            Marker.LINE_LIST,
+            Marker.ADD,
+            (0.0, 0.0, 0.0),
+            (0.3, 0.0, 0.0),
+            RADIO_LINES,
+            "",
+            points,
+            tick_ns,
+        )
+        return self.types.cls(MARKERS)(markers=[line] if points else [])
 
     def _inbox(self, header: object, robot: int, data: bytes) -> object:
         try:
@@ -125,37 +208,10 @@ class Ros2Out:
     ) -> object:
         """A cylinder per task (grey when nobody pursues it, orange when someone does) and a label
         naming it and its pursuers; the array starts with DELETEALL, so tasks done disappear."""
-        t = self.types
-        Marker, Color, Vector3 = (
-            t.cls("visualization_msgs/msg/Marker"),
-            t.cls("std_msgs/msg/ColorRGBA"),
-            t.cls("geometry_msgs/msg/Vector3"),
-        )
+        Marker = self.types.cls("visualization_msgs/msg/Marker")
 
         def marker(ns: str, ident: int, kind: int, action: int, x: float, y: float, z: float, scale, rgba, text: str):
-            return Marker(
-                header=header,
-                ns=ns,
-                id=ident,
-                type=kind,
-                action=action,
-                pose=self.Pose(
-                    position=self.Point(x=x, y=y, z=z), orientation=self.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
-                ),
-                scale=Vector3(x=scale[0], y=scale[1], z=scale[2]),
-                color=Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
-                lifetime=t.cls("builtin_interfaces/msg/Duration")(sec=0, nanosec=0),
-                frame_locked=False,
-                points=[],
-                colors=[],
-                texture_resource="",
-                texture=t.cls("sensor_msgs/msg/CompressedImage")(header=header, format="", data=_no_bytes()),
-                uv_coordinates=[],
-                text=text,
-                mesh_resource="",
-                mesh_file=t.cls("visualization_msgs/msg/MeshFile")(filename="", data=_no_bytes()),
-                mesh_use_embedded_materials=False,
-            )
+            return self._marker(header, ns, ident, kind, action, (x, y, z), scale, rgba, text)
 
         out = [marker("", 0, Marker.CUBE, Marker.DELETEALL, 0.0, 0.0, 0.0, (1.0, 1.0, 1.0), FREE, "")]
         d = max(size, 1.0)
@@ -190,7 +246,55 @@ class Ros2Out:
                     text,
                 )
             )
-        return t.cls(MARKERS)(markers=out)
+        return self.types.cls(MARKERS)(markers=out)
+
+    def _marker(
+        self,
+        header: object,
+        ns: str,
+        ident: int,
+        kind: int,
+        action: int,
+        where: tuple[float, float, float],
+        scale: Sequence[float],
+        rgba: Sequence[float],
+        text: str = "",
+        points: Sequence[tuple[float, float]] = (),
+        lifetime_ns: int = 0,
+    ) -> object:
+        t = self.types
+        Color, Vector3 = t.cls("std_msgs/msg/ColorRGBA"), t.cls("geometry_msgs/msg/Vector3")
+        return t.cls("visualization_msgs/msg/Marker")(
+            header=header,
+            ns=ns,
+            id=ident,
+            type=kind,
+            action=action,
+            pose=self._pose(*where, 0.0),
+            scale=Vector3(x=scale[0], y=scale[1], z=scale[2]),
+            color=Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
+            lifetime=t.cls("builtin_interfaces/msg/Duration")(
+                sec=lifetime_ns // 1_000_000_000, nanosec=lifetime_ns % 1_000_000_000
+            ),
+            frame_locked=False,
+            points=[self.Point(x=x, y=y, z=0.0) for x, y in points],
+            colors=[],
+            texture_resource="",
+            texture=t.cls("sensor_msgs/msg/CompressedImage")(header=header, format="", data=_no_bytes()),
+            uv_coordinates=[],
+            text=text,
+            mesh_resource="",
+            mesh_file=t.cls("visualization_msgs/msg/MeshFile")(filename="", data=_no_bytes()),
+            mesh_use_embedded_materials=False,
+        )
+
+    def _pose(self, x: float, y: float, z: float, heading: float) -> object:
+        """A pose at (x, y, z) facing ``heading`` (radians from +x, about +z)."""
+        half = heading / 2
+        return self.Pose(
+            position=self.Point(x=x, y=y, z=z),
+            orientation=self.Quaternion(x=0.0, y=0.0, z=math.sin(half), w=math.cos(half)),
+        )
 
     def close(self) -> None:
         self.node.close()
@@ -209,7 +313,8 @@ class Ros2Publishing(TickHook):
     ) -> None:
         w, ids = self.world, sample.ids
         pursuing = {a: self.pursuing[a] for a in ids if a in self.pursuing}
-        self.out.publish(k, w.time, (ids, sample.xs, sample.ys), w.markers(), pursuing, inboxes, self.task_size)
+        motion = {i: (float(o.heading), float(o.speed)) for i, o in observed.items()}
+        self.out.publish(k, w.time, (ids, sample.xs, sample.ys), w.markers(), pursuing, inboxes, self.task_size, motion)
 
     def tick_done(self, k: int, admitted: Mapping[int, list]) -> None:
         self.pursuing.update(admitted)

@@ -145,3 +145,21 @@ def test_a_command_key_names_a_robot_of_the_run():
     ):
         with pytest.raises(WireError):
             _robot_of(key, 5)
+
+
+def test_the_shipped_rviz_configuration_shows_topics_the_run_publishes():
+    """docs/ros2/swarmbed.rviz parses, is in the map frame, and every topic it names is one the
+    hub's node publishes (coordinator/ros2.py)."""
+    import yaml
+
+    from tests.conftest import ROOT
+
+    config = yaml.safe_load((ROOT / "docs" / "ros2" / "swarmbed.rviz").read_text())
+    manager = config["Visualization Manager"]
+    assert manager["Global Options"]["Fixed Frame"] == "map"
+    topics = {d["Topic"]["Value"] for d in manager["Displays"] if "Topic" in d}
+    source = (ROOT / "coordinator" / "ros2.py").read_text()
+    assert topics == {"/robots", "/tasks", "/radio", "/robot_0/odom"}
+    for topic in topics:
+        assert f'"{topic}"' in source or 'f"/robot_{i}/odom"' in source, topic
+    assert {d["Class"] for d in manager["Displays"]} >= {"rviz_default_plugins/TF", "rviz_default_plugins/PoseArray"}

@@ -4,6 +4,7 @@ it reads is checked against the run's own record (trajectories, markers, ledger)
 
 import csv
 import json
+import math
 import subprocess
 import sys
 import threading
@@ -103,6 +104,10 @@ def test_every_topic_is_on_rmw_zenohs_key_with_its_type_hash_and_attachment(seen
         **{f"/robot_{i}/pose": "geometry_msgs/msg/PoseStamped" for i in range(4)},
         **{f"/robot_{i}/radio/received": "swarmbed_msgs/msg/RadioInbox" for i in range(4)},
         **{f"/robot_{i}/radio/sent": "swarmbed_msgs/msg/RadioOutbox" for i in range(4)},  # the proxy's node
+        "/tf": "tf2_msgs/msg/TFMessage",
+        "/robots": "geometry_msgs/msg/PoseArray",
+        "/radio": "visualization_msgs/msg/MarkerArray",
+        **{f"/robot_{i}/odom": "nav_msgs/msg/Odometry" for i in range(4)},
     }
     assert set(reader.samples) == set(expected)
     tokens = {t.split("/")[9].replace("%", "/"): t for t in reader.tokens if "/MP/" in t}
@@ -195,6 +200,56 @@ def test_inboxes_carry_every_delivered_copy(seen):
             sent += len(msg.kinds)
             sent_bytes += int(msg.sizes.sum())
     assert (sent, sent_bytes) == (net["messages_sent"], net["bytes_sent"]) != (0, 0)
+
+
+def _yaw(q) -> float:
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+
+
+def test_tf_odometry_pose_array_and_radio_lines_are_what_rviz_reads(seen):
+    """Issue 62: /tf (map -> robot_<i>/base_link), /robot_<i>/odom, /robots and /radio, decoded with
+    rosbags' Jazzy types, against the run's own record: positions are the trajectories', every pose
+    faces the robot's heading (the direction it moved from the tick before, wherever it moved), the
+    same in TF, odometry, PoseStamped and the pose array, odometry's speed is the distance it then
+    covers per tick, and /radio's lines are the copies delivered, sender to receiver."""
+    on, _off, reader = seen
+    types = Ros2Types()
+    trajectory = {
+        (int(r["tick"]), int(r["agent"])): (float(r["x"]), float(r["y"]))
+        for r in _rows(on.out_dir / "trajectories.csv")
+    }
+    tf = [types.deserialize(p, "tf2_msgs/msg/TFMessage").transforms for _, p, _ in reader.samples["/tf"]]
+    robots = [types.deserialize(p, "geometry_msgs/msg/PoseArray").poses for _, p, _ in reader.samples["/robots"]]
+    turned = 0
+    for i in range(4):
+        odom = [types.deserialize(p, "nav_msgs/msg/Odometry") for _, p, _ in reader.samples[f"/robot_{i}/odom"]]
+        pose = [
+            types.deserialize(p, "geometry_msgs/msg/PoseStamped").pose for _, p, _ in reader.samples[f"/robot_{i}/pose"]
+        ]
+        for k, o in enumerate(odom):
+            (t,) = [t for t in tf[k] if t.child_frame_id == f"robot_{i}/base_link"]
+            assert (t.header.frame_id, o.header.frame_id, o.child_frame_id) == ("map", "map", f"robot_{i}/base_link")
+            x, y = trajectory[(k, i)]
+            assert (t.transform.translation.x, t.transform.translation.y) == pytest.approx((x, y))
+            yaw = _yaw(t.transform.rotation)
+            assert yaw == pytest.approx(_yaw(o.pose.pose.orientation)) == pytest.approx(_yaw(pose[k].orientation))
+            assert yaw == pytest.approx(_yaw(robots[k][i].orientation))
+            if (k - 1, i) in trajectory:
+                px, py = trajectory[(k - 1, i)]
+                moved = math.hypot(x - px, y - py)
+                assert o.twist.twist.linear.x * 1.0 == pytest.approx(moved, abs=1e-6)  # the quick start's dt
+                if moved > 1e-6:
+                    assert math.cos(yaw - math.atan2(y - py, x - px)) == pytest.approx(1.0, abs=1e-6)
+                    turned += abs(yaw) > 1e-3
+        assert len(odom) == on.summary["ticks"]
+    assert turned > 0  # headings are not all +x
+    lines = 0
+    for _, payload, _ in reader.samples["/radio"]:
+        markers = types.deserialize(payload, "visualization_msgs/msg/MarkerArray").markers
+        for m in markers:
+            assert (m.type, m.ns, m.header.frame_id) == (5, "radio", "map")  # LINE_LIST
+            lines += len(m.points) // 2
+    assert lines == on.summary["network"]["delivered"] > 0
 
 
 def test_results_are_byte_identical_with_publishing_on_and_off(seen):
