@@ -172,6 +172,20 @@ def _live_views(exp, port: int | None) -> list:
     return [foxglove]
 
 
+def _mlflow_logger(uri: str | None, name: str, out: Path):
+    """What logs each completed run of the sweep to MLflow (``--mlflow``), or None."""
+    if uri is None:
+        return None
+    from swarmbed.experiments.campaigns.tracking import MlflowLog, default_uri
+
+    log = MlflowLog(uri or default_uri(out), name)
+
+    def log_run(spec) -> None:
+        log.log(Path(spec.out_dir), Path(spec.out_dir).relative_to(out).as_posix())
+
+    return log_run
+
+
 def _refusals(exp, engine: str) -> list[str]:
     """Why ``exp`` cannot run on ``engine`` from the command line (none: it can)."""
     from swarmbed.engine import refusals
@@ -608,7 +622,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         return 2
     try:
         executor = _sweep_executor(args, out)
-    except ExecutorError as exc:
+        on_complete = _mlflow_logger(args.mlflow, sweep.name, out)
+    except (ExecutorError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     try:
@@ -621,6 +636,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             stale_after=args.stale_after,
             redo_mismatched=args.redo_mismatched,
             in_process=args.engine == "inprocess",
+            on_complete=on_complete,
         )
     except ExecutorError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -690,6 +706,15 @@ def register_sweep(sub: Subparsers) -> None:
         metavar="S",
         help="a run claimed by a process that has not shown life for S seconds is taken over "
         "(default 120; a dead process on this host at once)",
+    )
+    sw.add_argument(
+        "--mlflow",
+        nargs="?",
+        const="",
+        metavar="URI",
+        help="log each completed run to MLflow: the sweep as the experiment, the configuration as params, the "
+        "summary's figures as metrics, the folder as artifacts; a local store in <out>/mlruns unless a tracking "
+        "URI is given; a resumed sweep logs no run twice (the tracking extra)",
     )
     sw.add_argument(
         "--redo-mismatched",

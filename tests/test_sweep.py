@@ -316,3 +316,46 @@ def test_ctrl_c_while_a_resumed_sweep_plans_still_leaves_the_table_of_what_compl
         sweeps.run_sweep(plan, tmp_path / "out", jobs=2, progress=False)
     table = pd.read_csv(tmp_path / "out" / "sweep.csv")
     assert list(table["status"]) == ["ok", "ok"]
+
+
+def test_a_sweep_logs_each_completed_run_to_mlflow_once(tmp_path):
+    """Issue 62: ``--mlflow`` logs every completed run to a local MLflow store: the sweep as the
+    experiment, the resolved configuration as params, the summary's figures as metrics, the run's
+    folder as artifacts. Running the sweep again logs nothing twice; a run added later is logged."""
+    import json
+    import os
+
+    from mlflow.tracking import MlflowClient
+
+    from swarmbed.experiments.campaigns.tracking import TAG, default_uri
+    from swarmbed.experiments.cli import main
+
+    (tmp_path / "s.yaml").write_text(
+        f"name: tracked\nbase: {QUICKSTART}\nruns: 1\nscenarios:\n"
+        "  - {name: a, set: {run.duration: 40}}\n  - {name: b, set: {run.duration: 40, network.loss: 0.2}}\n"
+    )
+    out = tmp_path / "out"
+    args = ["sweep", str(tmp_path / "s.yaml"), "--out", str(out), "--engine", "inprocess", "--no-progress", "--mlflow"]
+    assert main(args) == 0
+    os.environ.setdefault("MLFLOW_ALLOW_FILE_STORE", "true")
+    client = MlflowClient(tracking_uri=default_uri(out))
+    experiment = client.get_experiment_by_name("tracked")
+
+    def logged():
+        return {r.data.tags[TAG]: r for r in client.search_runs([experiment.experiment_id])}
+
+    runs = logged()
+    assert set(runs) == {"a/run_000", "b/run_000"}
+    b = runs["b/run_000"]
+    summary = json.loads((out / "b" / "run_000" / "summary.json").read_text())
+    assert (
+        b.data.params["network.loss"] == "0.2"
+        and b.data.params["agents.count"] == runs["a/run_000"].data.params["agents.count"]
+    )
+    assert b.data.metrics["ticks"] == summary["ticks"] == 40
+    assert b.data.metrics["network.delivered"] == summary["network"]["delivered"]
+    artifacts = {f.path for f in client.list_artifacts(b.info.run_id, "run")}
+    assert {"run/summary.json", "run/config.yaml", "run/timeseries.csv"} <= artifacts
+    assert main(args) == 0 and len(client.search_runs([experiment.experiment_id])) == 2  # resumed: none twice
+    assert main([*args, "--runs", "2"]) == 0
+    assert set(logged()) == {"a/run_000", "b/run_000", "a/run_001", "b/run_001"}

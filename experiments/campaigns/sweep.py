@@ -40,7 +40,7 @@ import socket
 import sys
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -521,13 +521,16 @@ def run_sweep(
     stale_after: float = claims.STALE_AFTER_S,
     redo_mismatched: bool = False,
     in_process: bool = False,
+    on_complete: Callable[[RunSpec], None] | None = None,
 ) -> pd.DataFrame:
     """Run every incomplete run of ``sweep`` into ``out`` through ``executor`` (default: the local
     process pool with ``jobs`` workers), then write the tables (on Ctrl-C too, of what completed).
     Runs another command holds are left to it; runs that never started because a worker died are
     started again once. A completed run made under another configuration than planned is refused
     (or, with ``redo_mismatched``, run again). ``in_process``: each run on the in-process engine
-    (lock-step only; the same result files as processes, for tests and calibration sweeps)."""
+    (lock-step only; the same result files as processes, for tests and calibration sweeps).
+    ``on_complete``: called in this process with each run that is complete, those completed before
+    first (a resumed sweep), then each as it completes (``--mlflow`` logs them)."""
     from swarmbed.experiments.campaigns import executors
 
     if jobs is not None and jobs < 1:
@@ -553,6 +556,10 @@ def run_sweep(
     executor = executor or executors.get("local", jobs=jobs)
     todo = [s for s in specs if run_status(Path(s.out_dir), stale_after) != "ok"]
     done_before = len(specs) - len(todo)
+    if on_complete is not None:
+        for spec in specs:
+            if spec not in todo:
+                on_complete(spec)
     bar = tqdm(total=len(specs), initial=done_before, unit="run", desc=sweep.name, disable=not progress)
     fn = partial(execute, stale_after=stale_after, in_process=in_process)
     retried: set[str] = set()
@@ -568,6 +575,8 @@ def run_sweep(
                     continue
                 if state != "ok":
                     bar.write(f"{state}: {spec.out_dir}: {detail}", file=sys.stderr)
+                elif on_complete is not None:
+                    on_complete(spec)
                 bar.update(1)
             todo = again
     except KeyboardInterrupt:
