@@ -12,6 +12,7 @@ topic                      type                                    what
 ``/robot_<i>/odom``        ``nav_msgs/msg/Odometry``               robot i's pose and speed along its heading
 ``/robots``                ``geometry_msgs/msg/PoseArray``         every robot's pose
 ``/radio``                 ``visualization_msgs/msg/MarkerArray``  the tick's delivered copies as lines
+``/robot_<i>/path``        ``nav_msgs/msg/Path``                   with ``ros2.path``: its last poses
 ``/tasks``                 ``visualization_msgs/msg/MarkerArray``  every task on the map, its holders
 ``/robot_<i>/radio/       ``swarmbed_msgs/msg/RadioInbox``        what robot i received this tick
 received``
@@ -32,6 +33,7 @@ import logging
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -51,6 +53,7 @@ log = logging.getLogger("swarmbed.coordinator")
 WAIT_REPORT_EVERY_S = 10.0
 CLOCK, POSE, MARKERS = "rosgraph_msgs/msg/Clock", "geometry_msgs/msg/PoseStamped", "visualization_msgs/msg/MarkerArray"
 TF, ODOMETRY, POSE_ARRAY = "tf2_msgs/msg/TFMessage", "nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseArray"
+PATH = "nav_msgs/msg/Path"
 RADIO_LINES = (0.12, 0.47, 0.71, 0.8)  # RGBA of a delivered copy's line, sender to receiver
 TASK_HEIGHT = 2.0  # metres of a task's cylinder; its diameter is the arrival radius, at least 1
 FREE, HELD = (0.6, 0.6, 0.6, 0.8), (1.0, 0.55, 0.0, 0.9)  # RGBA of a task nobody / somebody pursues
@@ -75,6 +78,9 @@ class Ros2Out:
         self.odom = [self.node.publisher(f"/robot_{i}/odom", ODOMETRY) for i in range(n_agents)]
         self.robots = self.node.publisher("/robots", POSE_ARRAY)
         self.radio_lines = self.node.publisher("/radio", MARKERS)
+        # with ros2.path: each robot's recent poses, as nav_msgs/Path (bounded)
+        self.paths = [self.node.publisher(f"/robot_{i}/path", PATH) for i in range(n_agents)] if settings.path else []
+        self.trails: dict[int, deque] = {i: deque(maxlen=settings.path) for i in range(n_agents)}
         # the actions that name a task or victim by its id (["goto_task", 12]): who pursues what
         self.aiming = frozenset(name for name, kinds in actions.items() if kinds == (int,))
         self.Header, self.Pose, self.PoseStamped = (
@@ -111,8 +117,12 @@ class Ros2Out:
             heading, speed = motion.get(i, (0.0, 0.0))
             pose = self._pose(x, y, 0.0, heading)
             poses.append(pose)
-            self.node.put(self.poses[i], self.PoseStamped(header=header, pose=pose))
+            stamped = self.PoseStamped(header=header, pose=pose)
+            self.node.put(self.poses[i], stamped)
             self.node.put(self.odom[i], self._odometry(header, i, pose, speed))
+            if self.paths:
+                self.trails[i].append(stamped)
+                self.node.put(self.paths[i], t.cls(PATH)(header=header, poses=list(self.trails[i])))
             transforms.append(self._transform(header, i, x, y, pose))
         self.node.put(self.tf, t.cls(TF)(transforms=transforms))
         self.node.put(self.robots, t.cls(POSE_ARRAY)(header=header, poses=poses))

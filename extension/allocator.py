@@ -12,6 +12,7 @@ from swarmbed.extension.view import LocalView
 
 if TYPE_CHECKING:
     from swarmbed.bt import TreeNode
+    from swarmbed.wire.schema import Experiment
 
 
 class DecisionError(ValueError):
@@ -62,6 +63,12 @@ class Allocator(abc.ABC):
     #: where its decisions come from when not from its own ``decide``: a driver in the launching
     #: process (``env``: swarmbed.envs) or ROS 2 topics (``ros2``); None for every other allocator
     decision_source: ClassVar[DecisionSource | None] = None
+
+    @classmethod
+    def check(cls, exp: Experiment, params: BaseModel) -> list[str]:
+        """Problems between this allocator's parameters and the rest of the experiment, as
+        ``dotted.key: message`` (default: none), found where the experiment is loaded."""
+        return []
 
     def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator, run_seed: int = 0) -> None:
         self.agent_id = agent_id

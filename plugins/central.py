@@ -40,6 +40,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from swarmbed.extension import Allocator, LocalView
 from swarmbed.plugins.grape import utility as grape_utility
 from swarmbed.plugins.packed import read_tuples
+from swarmbed.wire.schema import Experiment
 
 REPORT, ASSIGN = "report", "assign"
 
@@ -79,6 +80,13 @@ class Centralized(Allocator):
     params: CentralParams
     message_kinds = (REPORT, ASSIGN)
     event_names = ("assignments_sent", "reports_sent")
+
+    @classmethod
+    def check(cls, exp: Experiment, params: BaseModel) -> list[str]:
+        leader = getattr(params, "leader", "lowest_alive")
+        if isinstance(leader, int) and not 0 <= leader < exp.agents.count:
+            return [f"allocator.leader: agent {leader} is not one of this run's agents 0..{exp.agents.count - 1}"]
+        return []
 
     def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator, run_seed: int = 0) -> None:
         super().__init__(agent_id, params, rng, run_seed)

@@ -283,3 +283,13 @@ def test_what_no_run_can_do_is_refused_by_check_too(capsys):
         assert "swarmbed run cannot drive it" in err and len(err.splitlines()) == 1, err
     with pytest.raises(cfg.ConfigError, match="needs a ros2: section"):
         cfg.load(QUICKSTART, ["allocator.name=ros2"])
+
+
+def test_a_centralized_allocators_leader_is_one_of_the_runs_agents():
+    """Allocator.check, as Scenario.check: a fixed leader outside the run's agents is refused where
+    the experiment is loaded (its followers would wait for it forever)."""
+    with pytest.raises(cfg.ConfigError, match=r"allocator.leader: agent 9 is not one of this run's agents 0..4"):
+        cfg.load(QUICKSTART, ["agents.count=5", "allocator={name: sga, leader: 9}"])
+    assert (
+        cfg.load(QUICKSTART, ["agents.count=5", "allocator={name: sga, leader: 4}"]).allocator.params()["leader"] == 4
+    )

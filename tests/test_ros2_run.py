@@ -23,6 +23,7 @@ from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
 from tests.conftest import experiment, read_ledger, reference_run, same_results
 
 DOMAIN = 7
+PATH = 5  # ros2.path: each robot's last 5 poses on /robot_<i>/path
 SETTINGS = ("agents.count=4", "run.duration=80", "run.stop_when_done=false", "run.record_trajectories=true")
 
 
@@ -74,7 +75,7 @@ def seen(tmp_path_factory):
         time.sleep(0.2)
         forger.close()
 
-    exp = experiment(*SETTINGS, f"ros2={{domain: {DOMAIN}}}")
+    exp = experiment(*SETTINGS, f"ros2={{domain: {DOMAIN}, path: {PATH}}}")
     on = run_experiment(
         exp,
         base / "on",
@@ -108,6 +109,7 @@ def test_every_topic_is_on_rmw_zenohs_key_with_its_type_hash_and_attachment(seen
         "/robots": "geometry_msgs/msg/PoseArray",
         "/radio": "visualization_msgs/msg/MarkerArray",
         **{f"/robot_{i}/odom": "nav_msgs/msg/Odometry" for i in range(4)},
+        **{f"/robot_{i}/path": "nav_msgs/msg/Path" for i in range(4)},
     }
     assert set(reader.samples) == set(expected)
     tokens = {t.split("/")[9].replace("%", "/"): t for t in reader.tokens if "/MP/" in t}
@@ -242,6 +244,11 @@ def test_tf_odometry_pose_array_and_radio_lines_are_what_rviz_reads(seen):
                     assert math.cos(yaw - math.atan2(y - py, x - px)) == pytest.approx(1.0, abs=1e-6)
                     turned += abs(yaw) > 1e-3
         assert len(odom) == on.summary["ticks"]
+        paths = [types.deserialize(p, "nav_msgs/msg/Path").poses for _, p, _ in reader.samples[f"/robot_{i}/path"]]
+        for k, trail in enumerate(paths):  # the last PATH poses, oldest first, ending with this tick's
+            assert len(trail) == min(k + 1, PATH)
+            xy = [c for p in trail for c in (p.pose.position.x, p.pose.position.y)]
+            assert xy == pytest.approx([c for j in range(k + 1 - len(trail), k + 1) for c in trajectory[(j, i)]])
     assert turned > 0  # headings are not all +x
     lines = 0
     for _, payload, _ in reader.samples["/radio"]:

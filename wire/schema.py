@@ -205,6 +205,12 @@ class Ros2Section(Strict):
     domain: int = Field(0, ge=0, le=232, description="ROS_DOMAIN_ID: the first chunk of every topic key")
     frame_id: str = Field("map", pattern=r"^[A-Za-z_][A-Za-z0-9_/]{0,63}$", description="frame of poses and markers")
     every: int = Field(1, ge=1, description="ticks between poses, task markers and inboxes (/clock: every tick)")
+    path: int = Field(
+        0,
+        ge=0,
+        le=10_000,
+        description="publish /robot_<i>/path (nav_msgs/Path): each robot's last this many published poses (0: off)",
+    )
     command_timeout: float = Field(
         10.0,
         gt=0,

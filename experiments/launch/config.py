@@ -198,7 +198,7 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
             "allocator": AllocatorSection(name=exp.allocator.name, **allocator_params.model_dump(mode="json")),
         }
     )
-    problems = scenario_cls.check(exp, scenario_params)
+    problems = scenario_cls.check(exp, scenario_params) + allocator_cls.check(exp, allocator_params)
     for check in (lambda: hosts_of(exp.placement, exp.agents.count), lambda: carriers(exp)):
         try:
             check()
