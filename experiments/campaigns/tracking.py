@@ -88,25 +88,21 @@ class MlflowLog:
         return True
 
 
-def flatten(value: Any, prefix: str = "") -> dict[str, str]:
-    """A nested mapping as dotted keys and text values (lists as their JSON-like text)."""
-    if isinstance(value, Mapping):
-        out: dict[str, str] = {}
-        for k, v in value.items():
-            out.update(flatten(v, f"{prefix}{k}."))
-        return out
-    return {prefix.rstrip("."): "null" if value is None else str(value)}
+def leaves(value: Any, prefix: str = "") -> dict[str, Any]:
+    """The leaves of a nested mapping, by dotted key."""
+    if not isinstance(value, Mapping):
+        return {prefix.rstrip("."): value}
+    out: dict[str, Any] = {}
+    for k, v in value.items():
+        out.update(leaves(v, f"{prefix}{k}."))
+    return out
 
 
-def numbers(value: Any, prefix: str = "") -> dict[str, float]:
+def flatten(value: Any) -> dict[str, str]:
+    """A nested mapping as dotted keys and text values (lists as their text, None as null)."""
+    return {k: "null" if v is None else str(v) for k, v in leaves(value).items()}
+
+
+def numbers(value: Any) -> dict[str, float]:
     """The numbers of a nested mapping (booleans as 0/1), as dotted keys."""
-    if isinstance(value, Mapping):
-        out: dict[str, float] = {}
-        for k, v in value.items():
-            out.update(numbers(v, f"{prefix}{k}."))
-        return out
-    if isinstance(value, bool):
-        return {prefix.rstrip("."): float(value)}
-    if isinstance(value, (int, float)):
-        return {prefix.rstrip("."): float(value)}
-    return {}
+    return {k: float(v) for k, v in leaves(value).items() if isinstance(v, (bool, int, float))}
