@@ -42,7 +42,7 @@ import zenoh
 
 from swarmbed.engine.hooks import TickHook
 from swarmbed.extension.actions import ActionSpec
-from swarmbed.wire.codec import EMPTY_INBOX, WireError, WorldSample, decode_inbox
+from swarmbed.wire.codec import Delivered, WireError, WorldSample, delivered_in
 from swarmbed.wire.ros2 import NODE_PREFIX, RADIO_INBOX, SENSOR_QOS, TASK_COMMAND, TASK_OBSERVATION, stamp
 from swarmbed.wire.ros2_node import Ros2Node
 from swarmbed.wire.schema import Ros2Section
@@ -126,7 +126,8 @@ class Ros2Out:
             transforms.append(self._transform(header, i, x, y, pose))
         self.node.put(self.tf, t.cls(TF)(transforms=transforms))
         self.node.put(self.robots, t.cls(POSE_ARRAY)(header=header, poses=poses))
-        self.node.put(self.radio_lines, self._radio_lines(header, positions, inboxes))
+        received = {i: delivered_in(inboxes.get(i)) for i in positions[0]}  # every live robot, decoded once
+        self.node.put(self.radio_lines, self._radio_lines(header, positions, received))
         pursuers: dict[int, list[int]] = {}
         for agent, action in sorted(actions.items()):
             if action and action[0] in self.aiming:
@@ -134,8 +135,8 @@ class Ros2Out:
         if (markers, pursuers) != self._tasks_shown:  # markers stay on a ROS 2 display until replaced
             self._tasks_shown = (dict(markers), pursuers)
             self.node.put(self.tasks, self._markers(header, markers, pursuers, marker_size))
-        for i in positions[0]:  # every live robot, an empty inbox too
-            self.node.put(self.radio[i], self._inbox(header, i, inboxes.get(i, EMPTY_INBOX)))
+        for i, items in received.items():  # an empty inbox too
+            self.node.put(self.radio[i], self._inbox(header, i, items))
 
     def _odometry(self, header: object, robot: int, pose: object, speed: float) -> object:
         """Robot ``robot``'s odometry: its pose in the map, its speed along its heading (base_link's x)."""
@@ -167,18 +168,14 @@ class Ros2Out:
         self,
         header: object,
         positions: tuple[Sequence[int], Sequence[float], Sequence[float]],
-        inboxes: Mapping[int, bytes],
+        received: Mapping[int, list[Delivered]],
     ) -> object:
         """The copies delivered for the next tick as one line list, sender to receiver, living one tick
         (``RadioInbox`` says the same in our own type, which RViz cannot draw)."""
         where = {i: (x, y) for i, x, y in zip(*positions)}
-        points = []
-        for receiver in sorted(inboxes):
-            try:
-                senders = [d.sender for d in decode_inbox(inboxes[receiver])]
-            except WireError:
-                continue
-            points += [p for s in senders if s in where and receiver in where for p in (where[s], where[receiver])]
+        points = [
+            p for r, items in received.items() for d in items if d.sender in where for p in (where[d.sender], where[r])
+        ]
         Marker = self.types.cls("visualization_msgs/msg/Marker")
         tick_ns = round(self.settings.every * self.dt * 1e9)
         line = self._marker(
@@ -196,11 +193,7 @@ class Ros2Out:
         )
         return self.types.cls(MARKERS)(markers=[line] if points else [])
 
-    def _inbox(self, header: object, robot: int, data: bytes) -> object:
-        try:
-            items = decode_inbox(data)
-        except WireError:  # the proxy's own encoding: the agent it goes to counts it; shown empty here
-            items = []
+    def _inbox(self, header: object, robot: int, items: list[Delivered]) -> object:
         return self.types.cls(RADIO_INBOX)(
             header=header,
             robot=robot,

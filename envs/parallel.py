@@ -55,7 +55,7 @@ from swarmbed.experiments.launch.access import claim_folder, remove_orphaned_fol
 from swarmbed.experiments.launch.inprocess import ENGINES, InProcessRun
 from swarmbed.experiments.launch.runner import RunResult, run_experiment
 from swarmbed.plugins.external import DEFER
-from swarmbed.wire.codec import EMPTY_INBOX, WireError, decode_inbox
+from swarmbed.wire.codec import delivered_in
 
 QUICKSTART = Path(__file__).resolve().parent.parent / "experiments" / "quickstart.yaml"
 STEP_TIMEOUT = 600.0  # wall seconds a step waits for the run's next tick before calling the run stuck
@@ -84,12 +84,8 @@ def agent_view(obs: Any, inbox: bytes | None, max_tasks: int, n: int) -> tuple[d
         mask[:m] = 1
         chosen = [ids[j] for j in order]
     heard = np.zeros(n, dtype=np.int8)
-    if inbox and inbox != EMPTY_INBOX:
-        try:
-            senders = [copy.sender for copy in decode_inbox(inbox)]
-        except WireError:  # the proxy's own encoding: never expected; heard nothing
-            senders = []
-        heard[[i for i in senders if 0 <= i < n]] = 1
+    senders = [copy.sender for copy in delivered_in(inbox)]
+    heard[[i for i in senders if 0 <= i < n]] = 1
     me = np.array((x, y, obs.heading, obs.speed), dtype=np.float32)
     return {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}, chosen
 

@@ -108,8 +108,8 @@ class Centralized(Allocator):
         now = view.time
         self._read(view, now)
         leader = self.leader(now)
+        seen = [(t.id, t.x, t.y, t.remaining) for t in view.tasks.values()]
         if leader == self.agent_id:
-            seen = [(t.id, t.x, t.y, t.remaining) for t in view.tasks.values()]
             self._learn(self.agent_id, view.x, view.y, seen, view)
             self._forget(now)
             fresh = self.params.heard_within
@@ -121,8 +121,7 @@ class Centralized(Allocator):
             mine = plan.get(self.agent_id)
             self.assigned = None if mine is None else (mine, *self.tasks[mine][:2], now)
             return mine
-        rows = [(t.id, t.x, t.y, t.remaining) for t in view.tasks.values()]
-        view.send(leader, REPORT, [view.x, view.y, _pack(rows, TASK_ROW)])
+        view.send(leader, REPORT, [view.x, view.y, _pack(seen, TASK_ROW)])
         self.count("reports_sent")
         if self.assigned is None or now - self.assigned[3] > self.params.hold_for:
             return None  # nothing fresh enough from the leader: the tree explores

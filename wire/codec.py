@@ -122,6 +122,18 @@ def decode_inbox(data: bytes) -> list[Delivered]:
         return decode_inbox_checked(data)  # malformed: its checks name what
 
 
+def delivered_in(data: bytes | None) -> list[Delivered]:
+    """The copies of an inbox the proxy made, for a view of it (ROS 2 topics, a live view, an
+    environment's observation): none for an empty one, and none where it does not decode (never
+    expected; the agent it goes to counts it)."""
+    if not data or data == EMPTY_INBOX:
+        return []
+    try:
+        return decode_inbox(data)
+    except WireError:
+        return []
+
+
 def decode_inbox_checked(data: bytes) -> list[Delivered]:
     """The inbox checked one entry at a time in Python: what ``decode_inbox`` accepts, and the
     error that names what is wrong where it does not."""

@@ -27,7 +27,7 @@ from swarmbed.experiments.views.recording import (
     _stamp,
 )
 from swarmbed.extension.scenario import World
-from swarmbed.wire.codec import EMPTY_INBOX, WireError, WorldSample, decode_inbox
+from swarmbed.wire.codec import WorldSample, delivered_in
 from swarmbed.wire.observation import Observation
 
 #: Foxglove's default WebSocket port
@@ -79,7 +79,7 @@ class FoxgloveLive(TickHook):
         self.poses.log(PosesInFrame(timestamp=stamp, frame_id=FRAME, poses=poses), log_time=log_time)
         self._markers(stamp, log_time)
         where = dict(zip(sample.ids, zip(sample.xs, sample.ys)))
-        copies = [(s, r, "delivered") for r, data in inboxes.items() for s in _senders(data)]
+        copies = [(d.sender, r, "delivered") for r, data in inboxes.items() for d in delivered_in(data)]
         if copies:
             table = pd.DataFrame(copies, columns=["sender", "receiver", "outcome"])
             self.radio.log(_radio_update(table, where, stamp, self.dt), log_time=log_time)
@@ -98,12 +98,3 @@ class FoxgloveLive(TickHook):
 
     def close(self) -> None:
         self.server.stop()
-
-
-def _senders(data: bytes) -> list[int]:
-    if data == EMPTY_INBOX:
-        return []
-    try:
-        return [item.sender for item in decode_inbox(data)]
-    except WireError:
-        return []
