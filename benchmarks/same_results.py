@@ -44,8 +44,8 @@ def experiments(only: str | None) -> list[Path]:
     out = []
     for path in sorted((ROOT / "experiments").rglob("*.yaml")):
         data = yaml.safe_load(path.read_text()) or {}
-        if "base" in data or "events" in data or (only and only not in str(path)):
-            continue
+        if "base" in data or "events" in data or set(data) <= {"obstacles"} or (only and only not in str(path)):
+            continue  # a sweep, a chaos plan, or an obstacles map file
         out.append(path)
     return out
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import abc
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -27,6 +27,7 @@ from swarmbed.extension.actions import MOVE_ACTIONS, ActionSpec
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.wire.observation import Observation as BaseObservation
+from swarmbed.wire.obstacles import ObstaclesSection
 from swarmbed.wire.schema import AgentsSection, Experiment
 
 if TYPE_CHECKING:
@@ -55,6 +56,18 @@ def within(dx: np.ndarray, dy: np.ndarray, reach: float) -> np.ndarray:
     if edge.any():
         near[edge] = np.hypot(dx[edge], dy[edge]) <= reach
     return near
+
+
+def obstacles_outside(exp: Experiment, inside: Callable[[float, float], bool], arena: str) -> list[str]:
+    """Problems of an experiment's obstacles with a scenario's arena: every vertex must lie in it
+    (``inside(x, y)``; ``arena`` says what the arena is, for the message)."""
+    if exp.obstacles is None:
+        return []
+    return [
+        f"obstacles.{where}: [{x:g}, {y:g}] lies outside the arena ({arena})"
+        for where, (x, y) in exp.obstacles.points()
+        if not inside(x, y)
+    ][:1]
 
 
 class World(abc.ABC):
@@ -156,10 +169,15 @@ class Scenario(abc.ABC):
     #: it (provenance.json) and ``swarmbed analyze`` refuses to pool runs of two versions
     version: ClassVar[str] = "1"
 
-    def __init__(self, params: BaseModel, agents: AgentsSection, dt: float) -> None:
+    def __init__(
+        self, params: BaseModel, agents: AgentsSection, dt: float, obstacles: ObstaclesSection | None = None
+    ) -> None:
         self.params = params
         self.agents = agents
         self.dt = dt
+        #: the experiment's walls (the coordinator's copy; agents are built without them: the world
+        #: decides what a wall hides and where a robot goes around one)
+        self.obstacles = obstacles
 
     @classmethod
     def check(cls, exp: Experiment, params: BaseModel) -> list[str]:

@@ -13,6 +13,7 @@ from pathlib import Path
 from swarmbed.netem.ledger import Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio, drop_reasons, measured
 from swarmbed.wire.codec import AgentOut, NetemStep, WorldSample, encode_inbox
+from swarmbed.wire.radio import WallsSection
 from swarmbed.wire.reports import NetemFinal, Transport
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.rundir import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER
@@ -31,7 +32,10 @@ class Exchange:
         if spec.network.ledger == "per_receiver":
             self.receivers = ReceiverLog(out_dir / (RECEIVER_LEDGER + ".part"), measured=measured(spec.network))
         self.ledger = Ledger(self.sink, self.receivers, drop_reasons(spec.network))
-        self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger)
+        walls = None
+        if spec.obstacles is not None:
+            walls = spec.obstacles.compile((spec.network.walls or WallsSection()).loss_db)
+        self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger, walls)
         self._last = [0, 0, 0, 0, 0]
         self._last_drops: dict[str, int] = dict(self.ledger.dropped)
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from swarmbed.netem.normal import erfc
 from swarmbed.netem.stage import Stage, TickCopies
+from swarmbed.netem.walls import wall_loss_db
 from swarmbed.wire.radio import PropagationSection
 
 if TYPE_CHECKING:
@@ -55,11 +56,14 @@ def bit_error_rate(p: PropagationSection, snr_db: np.ndarray) -> np.ndarray:
     return 0.5 * erfc(np.sqrt(per_bit))
 
 
-def delivery_probability(p: PropagationSection, d: np.ndarray, payload_bytes: float, nodes: int = 64) -> np.ndarray:
-    """The probability that a copy of ``payload_bytes`` is received at distance ``d``: the formula the
-    drawn copies follow, averaged over shadowing (Gauss-Hermite quadrature over the normal in dB)
-    and fading (the gain's quantiles at ``nodes`` midpoints). Propagation alone: a disk, independent
-    or burst loss and the shared channel multiply or cap it (what a report's model curve shows)."""
+def delivery_probability(
+    p: PropagationSection, d: np.ndarray, payload_bytes: float, nodes: int = 64, wall_loss_db: float | np.ndarray = 0.0
+) -> np.ndarray:
+    """The probability that a copy of ``payload_bytes`` is received at distance ``d`` behind walls
+    that cost ``wall_loss_db`` (per distance, or one figure): the formula the drawn copies follow,
+    averaged over shadowing (Gauss-Hermite quadrature over the normal in dB) and fading (the gain's
+    quantiles at ``nodes`` midpoints). Propagation alone: a disk, independent or burst loss and the
+    shared channel multiply or cap it (what a report's model curve shows)."""
     d = np.asarray(d, dtype=float)
     if p.shadowing_db > 0:
         z, w = np.polynomial.hermite_e.hermegauss(nodes)
@@ -74,7 +78,7 @@ def delivery_probability(p: PropagationSection, d: np.ndarray, payload_bytes: fl
         fades, fade_weights = 10 * np.log10(gains), np.full(nodes, 1 / nodes)
     else:
         fades, fade_weights = np.zeros(1), np.ones(1)
-    mean_dbm = p.tx_power_dbm - path_loss_db(p, d)
+    mean_dbm = p.tx_power_dbm - path_loss_db(p, d) - np.broadcast_to(np.asarray(wall_loss_db, dtype=float), d.shape)
     power = mean_dbm[:, None, None] - shadows[None, :, None] + fades[None, None, :]
     received = (power >= p.sensitivity_dbm).astype(float)
     if p.reception == "per":
@@ -172,6 +176,8 @@ def _below_sensitivity(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.n
     assert model is not None
     copies.power = np.full(len(copies.rows), np.nan)
     copies.power[at] = model.received_dbm(copies.senders[at], copies.receivers[at], copies.distance[at])
+    if radio.walls is not None:
+        copies.power[at] -= wall_loss_db(radio, copies, at)
     return ~model.detected(copies.power[at])
 
 

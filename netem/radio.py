@@ -10,8 +10,10 @@ Order of the checks for one message sent at tick k (a copy gets the first reason
 2. sender queue (tc-netem ``limit``): if ``limit`` messages already wait behind the rate cap, the
    whole message is tail-dropped -> ``queue_full`` for every copy.
 3. range: distance between sender and receiver at tick k greater than ``range`` -> ``out_of_range``.
-4. propagation (``network.propagation``, :mod:`.propagation`): received power under the
-   sensitivity -> ``below_sensitivity``.
+   walls (``network.walls.line_of_sight``, :mod:`.walls`): the straight path crosses a wall of the
+   ``obstacles:`` section -> ``blocked_by_wall``.
+4. propagation (``network.propagation``, :mod:`.propagation`): received power (less the walls'
+   loss, :mod:`.walls`) under the sensitivity -> ``below_sensitivity``.
 5. the shared channel (``network.channel``, :mod:`.channel`): the receiver's airtime for the tick
    is spent -> ``channel_busy``.
 6. propagation again: a bit error in the copy -> ``packet_error``.
@@ -51,7 +53,9 @@ from swarmbed.netem.ledger import DELIVERED, DROP_REASONS, MEASURE_COLUMNS, Ledg
 from swarmbed.netem.propagation import ERROR_STAGE, SENSITIVITY_STAGE, Propagation
 from swarmbed.netem.stage import EPS as _EPS
 from swarmbed.netem.stage import Stage, TickCopies
+from swarmbed.netem.walls import WALLS_STAGE
 from swarmbed.wire.codec import BROADCAST, RadioMessage
+from swarmbed.wire.obstacles import Walls
 from swarmbed.wire.schema import NetworkSection
 
 
@@ -81,6 +85,7 @@ def _loss(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray:
 #: A new model adds its stage here, where its copies should meet it.
 STAGES: tuple[Stage, ...] = (
     Stage("out_of_range", "#9467bd", lambda p: p.range is not None, _out_of_range),
+    WALLS_STAGE,
     SENSITIVITY_STAGE,
     CHANNEL_STAGE,
     ERROR_STAGE,
@@ -109,8 +114,15 @@ class _Send(NamedTuple):
 
 class Radio:
     def __init__(
-        self, params: NetworkSection, n_agents: int, dt: float, rng: np.random.Generator, ledger: Ledger | None = None
+        self,
+        params: NetworkSection,
+        n_agents: int,
+        dt: float,
+        rng: np.random.Generator,
+        ledger: Ledger | None = None,
+        walls: Walls | None = None,
     ) -> None:
+        self.walls = walls  # the world's walls (:mod:`.walls`), None: open ground
         self.params = params  # also the stages it turns on (see the setter)
         self.n_agents = n_agents
         self.dt = dt

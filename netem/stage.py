@@ -37,6 +37,8 @@ class TickCopies:
         self.rows, self.from_rows = rows, from_rows  # each copy's receiver and sender, as rows of alive
         self._sends, self._counts = sends, counts
         self.power: np.ndarray | None = None  # received dBm, set by the sensitivity stage (NaN: not reached)
+        self.wall_loss: np.ndarray | None = None  # dB lost to walls, where the walls were asked (NaN: not yet)
+        self.crossed: np.ndarray | None = None  # whether the copy's straight path crosses a wall (with wall_loss)
 
     @property
     def receivers(self) -> np.ndarray:

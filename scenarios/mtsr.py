@@ -19,8 +19,9 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
-from swarmbed.extension.scenario import Scenario, Sensing, World, within
+from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, within
 from swarmbed.scenarios.kinematics import Limits, step
+from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
@@ -130,7 +131,11 @@ class MTSR(Scenario):
         assert isinstance(params, MTSRParams)
         if params.agent_positions is not None and len(params.agent_positions) != exp.agents.count:
             return [f"scenario.agent_positions: needs one [x, y] per agent ({exp.agents.count})"]
-        return []
+        return obstacles_outside(
+            exp,
+            lambda x, y: 0 <= x <= params.width and 0 <= y <= params.height,
+            f"[0, {params.width:g}] x [0, {params.height:g}]",
+        )
 
     def make_world(self, rng: np.random.Generator, allocator: type[Allocator] | None = None) -> MTSRWorld:
         return MTSRWorld(self, rng)
@@ -175,6 +180,15 @@ class MTSRWorld(World):
         self.ay = rng.uniform(0, self.sc.height, self.n)
         if self.sc.agent_positions is not None:
             self.ax, self.ay = (np.array(c, dtype=float) for c in zip(*self.sc.agent_positions))
+        # with obstacles: a start inside one is drawn again (after the first draws), and moves plan around them
+        self.walls = scenario.obstacles.compile() if scenario.obstacles is not None else None
+        self.navigator: Navigator | None = None
+        if self.walls is not None:
+            if self.sc.agent_positions is None:
+                self.ax, self.ay = free_places(self.walls, self.ax, self.ay, lambda: self._point())
+            w, h = self.sc.width, self.sc.height
+            planner = Planner(self.walls, lambda x, y: (x >= 0) & (x <= w) & (y >= 0) & (y <= h))
+            self.navigator = Navigator(planner, reach=self.walls.clearance / 2)
         self.heading = rng.uniform(-math.pi, math.pi, self.n)
         self.speed = np.zeros(self.n)
         self.alive = np.ones(self.n, dtype=bool)
@@ -201,6 +215,9 @@ class MTSRWorld(World):
     def time(self) -> float:
         return self.tick * self.dt
 
+    def _point(self) -> tuple[float, float]:
+        return float(self.rng.uniform(0, self.sc.width)), float(self.rng.uniform(0, self.sc.height))
+
     @property
     def tasks_total_planned(self) -> int:
         g = self.sc.generations
@@ -213,6 +230,9 @@ class MTSRWorld(World):
         self.tx = np.concatenate([self.tx, self.rng.uniform(0, self.sc.width, count)])
         self.ty = np.concatenate([self.ty, self.rng.uniform(0, self.sc.height, count)])
         w = self.rng.uniform(lo, hi, count)
+        if self.walls is not None:  # a task inside an obstacle is placed again, after the draws above
+            new = slice(len(self.tx) - count, len(self.tx))
+            self.tx[new], self.ty[new] = free_places(self.walls, self.tx[new], self.ty[new], self._point)
         self.workload = np.concatenate([self.workload, w])
         # SPACE's code: arrival threshold + initial amount / 3; a factor of 0 leaves arrival_radius
         self.work_radius = np.concatenate(
@@ -264,6 +284,10 @@ class MTSRWorld(World):
             self.ty[open_idx][None, :] - self.ay[alive, None],
             self.awareness,
         )
+        if self.walls is not None:  # a wall between them hides a task
+            r, c = np.nonzero(near)
+            hidden = ~self.walls.clear(self.ax[alive[r]], self.ay[alive[r]], self.tx[open_idx[c]], self.ty[open_idx[c]])
+            near[r[hidden], c[hidden]] = False
         # every agent's visible tasks in one gather (of raw records: a structured gather is ~3x slower);
         # each agent's table is a slice of it
         rows, cols = np.nonzero(near)
@@ -302,14 +326,22 @@ class MTSRWorld(World):
         """Advance one tick: every live agent moves or works on the state of this tick."""
         dt = self.dt
         working: dict[int, list[int]] = {}
-        for i in map(int, np.flatnonzero(self.alive)):
+        live = np.flatnonzero(self.alive)
+        before = (self.ax[live].copy(), self.ay[live].copy(), self.distance[live].copy())
+        for i in map(int, live):
             target, task = self._target(i, actions.get(i, ["stop"]))
             if (
                 task is not None
                 and math.hypot(self.tx[task] - self.ax[i], self.ty[task] - self.ay[i]) <= self.work_radius[task]
+                and (
+                    self.walls is None
+                    or self.walls.clear([self.ax[i]], [self.ay[i]], [self.tx[task]], [self.ty[task]])[0]
+                )
             ):
                 working.setdefault(task, []).append(i)
                 target = None  # brake while working
+            if target is not None and self.navigator is not None:
+                target = self.navigator.toward(i, float(self.ax[i]), float(self.ay[i]), target)
             x, y, h, v = step(
                 float(self.ax[i]),
                 float(self.ay[i]),
@@ -321,6 +353,11 @@ class MTSRWorld(World):
             )
             self.distance[i] += math.hypot(x - self.ax[i], y - self.ay[i])
             self.ax[i], self.ay[i], self.heading[i], self.speed[i] = x, y, h, v
+        if self.walls is not None:  # a move that would cross a wall does not happen: the robot stops short
+            stopped = live[blocked_moves(self.walls, before[0], before[1], self.ax[live], self.ay[live])]
+            back = np.searchsorted(live, stopped)
+            self.ax[stopped], self.ay[stopped], self.distance[stopped] = (b[back] for b in before)
+            self.speed[stopped] = 0.0
         for task in sorted(working):
             agents = working[task]
             capacity = self.work_rate * dt * len(agents)

@@ -41,12 +41,14 @@ from swarmbed.extension.actions import MOVE_ACTIONS
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
-from swarmbed.extension.scenario import Scenario, Sensing, World
+from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside
 from swarmbed.scenarios.budget import ACTIVITIES, IDLE, INSPECTING, MOVING, PENALTY, RESCUING, TimeBudget
+from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places
 from swarmbed.scenarios.victims import ALIVE, EXPIRED, RESCUED, VictimRows
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
+from swarmbed.wire.schema import Experiment
 
 FORGET_AFTER = 2.0  # lifetimes after its spawn a victim's row may leave the world's arrays
 COLOR_NAMES = ("red", "green", "blue")
@@ -185,6 +187,12 @@ class SAR(Scenario):
     )
     params: SARParams
 
+    @classmethod
+    def check(cls, exp: Experiment, params: BaseModel) -> list[str]:
+        assert isinstance(params, SARParams)
+        r = params.arena_radius
+        return obstacles_outside(exp, lambda x, y: math.hypot(x, y) <= r, f"a disc of radius {r:g} about [0, 0]")
+
     def make_world(self, rng: np.random.Generator, allocator: type[Allocator] | None = None) -> SARWorld:
         return SARWorld(self, rng, bids_with_colors=allocator is not None and allocator.bids_with_colors)
 
@@ -237,6 +245,14 @@ class SARWorld(VictimRows, World):
         start = [scenario.random_point(self.spawn_rng) for _ in range(self.n)]
         self.ax = np.array([p[0] for p in start])
         self.ay = np.array([p[1] for p in start])
+        # with obstacles: a start inside one is drawn again (after the first draws); moves plan around them
+        self.walls = scenario.obstacles.compile() if scenario.obstacles is not None else None
+        self.navigator: Navigator | None = None
+        if self.walls is not None:
+            self.ax, self.ay = free_places(self.walls, self.ax, self.ay, lambda: scenario.random_point(self.spawn_rng))
+            r = sc.arena_radius
+            planner = Planner(self.walls, lambda x, y: np.hypot(x, y) <= r)
+            self.navigator = Navigator(planner, reach=self.walls.clearance / 2)
         self.heading = self.spawn_rng.uniform(-math.pi, math.pi, self.n)
         self.color = np.arange(self.n) % sc.colors
         self.alive = np.ones(self.n, dtype=bool)
@@ -278,6 +294,9 @@ class SARWorld(VictimRows, World):
         for _ in range(count):
             v = self._next_row(keep_after=self.time - FORGET_AFTER * self.sc.lifetime)
             self.vx[v], self.vy[v] = self.scenario.random_point(self.spawn_rng)
+            if self.walls is not None:  # not inside an obstacle: drawn again before its colour
+                (x,), (y,) = free_places(self.walls, self.vx[v : v + 1], self.vy[v : v + 1], self._random_point)
+                self.vx[v], self.vy[v] = x, y
             self.vcolor[v] = int(self.spawn_rng.integers(self.sc.colors))
             self.vspawn[v] = self.time
             self.vstatus[v] = ALIVE
@@ -285,6 +304,9 @@ class SARWorld(VictimRows, World):
         if first and self.sc.first_ages == "spread" and count:
             ages = np.sort(self.spawn_rng.uniform(0.0, self.sc.lifetime, count))[::-1]
             self.vspawn[self.nv - self.base - count : self.nv - self.base] = self.time - ages
+
+    def _random_point(self) -> tuple[float, float]:
+        return self.scenario.random_point(self.spawn_rng)
 
     def _end(self, victim: int, status: int) -> None:
         self.vstatus[victim - self.base] = status
@@ -316,6 +338,8 @@ class SARWorld(VictimRows, World):
         self.alive[agent_id] = False
         self.pending.pop(agent_id, None)  # what it was doing dies with it
         self.goal.pop(agent_id, None)
+        if self.navigator is not None:
+            self.navigator.forget(agent_id)
 
     def draw_losses(self) -> list[int]:
         """Robots lost at the next tick (one draw per live robot once the grace period is over)."""
@@ -328,7 +352,11 @@ class SARWorld(VictimRows, World):
         dx, dy = x - self.ax[i], y - self.ay[i]
         near = np.hypot(dx, dy) <= self.sc.vision_range
         off = (np.arctan2(dy, dx) - self.heading[i] + math.pi) % (2 * math.pi) - math.pi
-        return near & ((np.abs(off) <= self.sc.vision_angle / 2) | ((dx == 0) & (dy == 0)))
+        seen = near & ((np.abs(off) <= self.sc.vision_angle / 2) | ((dx == 0) & (dy == 0)))
+        if self.walls is not None and seen.any():  # and no wall between
+            at = np.flatnonzero(seen)
+            seen[at] = self.walls.clear(np.full(len(at), self.ax[i]), np.full(len(at), self.ay[i]), x[at], y[at])
+        return seen
 
     def observations(self) -> dict[int, SARObservation]:
         live = np.flatnonzero(self.vstatus == ALIVE)
@@ -439,6 +467,8 @@ class SARWorld(VictimRows, World):
             self.goal.pop(i, None)  # it tries this move again once the penalty is over
             return
         self.goal[i] = goal
+        if self.navigator is not None:
+            tx, ty = self.navigator.toward(i, float(self.ax[i]), float(self.ay[i]), (tx, ty))
         dx, dy = tx - self.ax[i], ty - self.ay[i]
         dist = math.hypot(dx, dy)
         if dist < 1e-12:
@@ -465,11 +495,16 @@ class SARWorld(VictimRows, World):
             r is not None
             and self.vstatus[r] == ALIVE
             and math.hypot(self.vx[r] - self.ax[i], self.vy[r] - self.ay[i]) <= self.sc.inspect_range + 1e-9
+            and (
+                self.walls is None or bool(self.walls.clear([self.ax[i]], [self.ay[i]], [self.vx[r]], [self.vy[r]])[0])
+            )
         )
 
     def apply(self, actions: dict[int, list]) -> None:
         """Advance one tick; robots act in id order on the state of this tick."""
-        for i in map(int, np.flatnonzero(self.alive)):
+        live = np.flatnonzero(self.alive)
+        before = (self.ax[live].copy(), self.ay[live].copy(), self.distance[live].copy())
+        for i in map(int, live):
             action = actions.get(i, ["stop"])
             if self.busy_until[i] > self.tick and self._interrupted(i, action):
                 self.busy_until[i] = self.tick
@@ -481,6 +516,10 @@ class SARWorld(VictimRows, World):
             self.budget.doing(i, IDLE)  # unless what it does now says otherwise
             self._act(i, action)
             self.budget.book(i)
+        if self.walls is not None:  # a move that would cross a wall does not happen: the robot stays
+            stopped = live[blocked_moves(self.walls, before[0], before[1], self.ax[live], self.ay[live])]
+            back = np.searchsorted(live, stopped)
+            self.ax[stopped], self.ay[stopped], self.distance[stopped] = (b[back] for b in before)
         self.tick += 1
         expired = (self.vstatus == ALIVE) & (self.vspawn + self.sc.lifetime <= self.time + 1e-9)
         for v in [int(r) + self.base for r in np.flatnonzero(expired)]:  # ids: _end may move the rows

@@ -159,6 +159,28 @@ class ChannelSection(_Section):
     capacity: float = Field(gt=0, description="bytes per second a receiver hears, all senders together")
 
 
+class WallsSection(_Section):
+    """What walls (the ``obstacles:`` section) do to the radio: the multi-wall model of COST 231
+    (each wall a copy's straight path crosses adds its material's loss, in dB, to the path loss;
+    with ``propagation``) and, for the disc model, a line-of-sight switch."""
+
+    loss_db: dict[str, float] = Field(
+        default_factory=lambda: {"light": 3.4, "heavy": 6.9},
+        description="dB a copy loses per wall it crosses, by material (COST 231's multi-wall model, 1999, "
+        "section 4.7.3: light 3.4, heavy 6.9); used with network.propagation",
+    )
+    line_of_sight: bool = Field(
+        False, description="drop every copy whose straight path crosses a wall (blocked_by_wall), with any model"
+    )
+
+    @model_validator(mode="after")
+    def _finite(self) -> WallsSection:
+        bad = [m for m, v in self.loss_db.items() if not (math.isfinite(v) and v >= 0)]
+        if bad:
+            raise ValueError(f"loss_db[{bad[0]}] must be a finite number of dB >= 0")
+        return self
+
+
 class NetworkSection(BaseModel):
     """The radio's parameters, named as tc-netem names them; the one definition of their bounds."""
 
@@ -178,6 +200,9 @@ class NetworkSection(BaseModel):
     burst: BurstSection | None = Field(None, description="Gilbert-Elliott burst loss per link or receiver")
     delay: DelaySection | None = Field(None, description="seconds added to each copy's arrival, with jitter")
     channel: ChannelSection | None = Field(None, description="a receiver's airtime per tick, shared by what it hears")
+    walls: WallsSection | None = Field(
+        None, description="what the obstacles' walls do to copies (loss per wall, line of sight); null: the defaults"
+    )
 
     @model_serializer(mode="wrap")
     def _models_left_out_stay_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:

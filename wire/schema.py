@@ -16,9 +16,10 @@ from __future__ import annotations
 import re
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer, model_validator
 
-from swarmbed.wire.radio import NetworkSection
+from swarmbed.wire.obstacles import ObstaclesSection
+from swarmbed.wire.radio import NetworkSection, WallsSection
 
 #: a name that becomes a folder (experiments, sweeps, their scenarios): no path separators, no ``..``
 SAFE_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.+=-]{0,99}$"
@@ -249,10 +250,33 @@ class Experiment(Strict):
     ros2: Ros2Section | None = Field(
         None, exclude=True, description="publish poses, tasks, inboxes and /clock as ROS 2 topics; null: off"
     )
+    obstacles: ObstaclesSection | None = Field(
+        None, description="walls and polygons that block motion, sight and the radio (docs/walls.md); null: open ground"
+    )
 
     @property
     def ticks(self) -> int:
         return int(round(self.run.duration / self.run.dt))
+
+    @model_serializer(mode="wrap")
+    def _no_obstacles_stay_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """A world without obstacles writes the config.yaml it wrote before they existed."""
+        data = handler(self)
+        if data.get("obstacles", 0) is None:
+            data.pop("obstacles")
+        return data
+
+    @model_validator(mode="after")
+    def _materials_known(self) -> Experiment:
+        if self.obstacles is not None:
+            table = (self.network.walls or WallsSection()).loss_db
+            for material in self.obstacles.materials():
+                if material not in table:
+                    raise ValueError(
+                        f"obstacles: material {material!r} has no loss in network.walls.loss_db "
+                        f"(known: {', '.join(sorted(table)) or 'none'})"
+                    )
+        return self
 
     @model_validator(mode="after")
     def _bounded(self) -> Experiment:
@@ -301,6 +325,7 @@ class NetemSpec(Strict):
     network: NetworkSection
     answer_within: float | None = None
     ros2: Ros2Section | None = None  # publish what each robot sent as ROS 2 topics
+    obstacles: ObstaclesSection | None = None  # the walls the radio's copies may cross
 
 
 def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
@@ -319,5 +344,11 @@ def netem_spec(exp: Experiment) -> NetemSpec:
     r = exp.run
     within = r.deadline * r.dt / r.speed if r.clock == "realtime" else None
     return NetemSpec(
-        seed=r.seed, dt=r.dt, agents=exp.agents.count, network=exp.network, answer_within=within, ros2=exp.ros2
+        seed=r.seed,
+        dt=r.dt,
+        agents=exp.agents.count,
+        network=exp.network,
+        answer_within=within,
+        ros2=exp.ros2,
+        obstacles=exp.obstacles,
     )

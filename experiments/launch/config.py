@@ -81,7 +81,9 @@ class Resolved:
 
     def scenario(self) -> Scenario:
         sc = self.scenario_cls
-        return sc(sc.Params.model_validate(self.exp.scenario.params()), self.exp.agents, self.exp.run.dt)
+        return sc(
+            sc.Params.model_validate(self.exp.scenario.params()), self.exp.agents, self.exp.run.dt, self.exp.obstacles
+        )
 
 
 #: the key that says which plugin a section is for: a section naming another replaces the old one
@@ -247,7 +249,7 @@ def resolve_experiment(exp: Experiment) -> Resolved:
 
 #: keys whose values may be file paths: relative ones resolve from the experiment file's folder
 #: when written in the file, and from the current directory when given with ``--set``
-PATH_KEYS = ("agents.behavior_tree", "allocator.name", "scenario.kind")
+PATH_KEYS = ("agents.behavior_tree", "allocator.name", "scenario.kind", "obstacles")
 
 
 def _absolute(key: str, value: Any, base: Path) -> Any:
@@ -255,7 +257,7 @@ def _absolute(key: str, value: Any, base: Path) -> Any:
     if not isinstance(value, str) or value == "default":
         return value
     ref, sep, cls = value.rpartition(":") if ".py:" in value else (value, "", "")
-    if sep or key == "agents.behavior_tree":
+    if sep or key in ("agents.behavior_tree", "obstacles"):
         path = Path(ref)
         return str(path if path.is_absolute() else (base / path).resolve()) + (sep + cls)
     return value
@@ -298,11 +300,27 @@ def load(
     pairs = [parse_override(text) for text in overrides]
     pairs = [(k, _absolute(k, v, Path.cwd()) if k in PATH_KEYS else v) for k, v in pairs]  # from the shell: from here
     apply_overrides(data, pairs, str(path))
+    if isinstance(data.get("obstacles"), str):
+        data["obstacles"] = _map_file(data["obstacles"], str(path))
     overridden: dict[str, Any] = dict(pairs)
     if seed is not None:
         _set_dotted(data, "run.seed", seed, str(path))
         overridden = {k: v for k, v in overridden.items() if k != "run.seed"} | {SEED_FLAG: seed}
     return validate(data, str(path), overridden, origin)
+
+
+def _map_file(name: str, where: str) -> Any:
+    """The obstacles of a map file (``obstacles: rooms.yaml``): a YAML file whose top level is the
+    ``obstacles:`` section, or a mapping with that key; written into the resolved config in full."""
+    try:
+        data = read_yaml(Path(name))
+    except YamlFileError as exc:
+        raise ConfigError(f"{where}: obstacles: {exc}") from None
+    if isinstance(data, dict) and set(data) == {"obstacles"}:
+        data = data["obstacles"]
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: obstacles: {name} must hold a mapping with walls and/or polygons")
+    return data
 
 
 def to_yaml(exp: Experiment) -> str:
