@@ -14,6 +14,11 @@ shared channel) at
 interleaved (disk, chain, disk); the disk's two figures are printed, and if they differ by more
 than 10 % the machine was not idle and the ratio is flagged. Target (issue 33): the chain at most
 twice the disk at 200 agents.
+
+A third table puts walls in (issue 61): 50 agents, a range of 300, 0 / 50 / 200 random wall
+segments (20-80 units long) with line of sight (each crossing copy dropped), and 200 with
+propagation (each crossing costs 6.9 dB): milliseconds per tick and the walls' cost as a multiple
+of the same radio without them, measured in the same run.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import numpy as np
 from swarmbed.netem.ledger import Ledger
 from swarmbed.netem.radio import Radio, drop_reasons
 from swarmbed.wire.codec import BROADCAST, RadioMessage
+from swarmbed.wire.obstacles import ObstaclesSection, Walls
 from swarmbed.wire.schema import NetworkSection
 
 
@@ -57,11 +63,25 @@ CHAIN = {
 }
 
 
-def chain_ms(network: dict, agents: int, ticks: int, seed: int = 1) -> tuple[float, float]:
+def random_walls(count: int, seed: int = 5) -> Walls | None:
+    """``count`` wall segments 20-80 units long at random in the arena (heavy: 6.9 dB each)."""
+    if not count:
+        return None
+    rng = np.random.default_rng(seed)
+    x, y = rng.uniform(50, 1350, count), rng.uniform(50, 950, count)
+    angle, length = rng.uniform(0, np.pi, count), rng.uniform(20, 80, count)
+    walls = [
+        {"start": [float(a), float(b)], "end": [float(a + L * np.cos(t)), float(b + L * np.sin(t))]}
+        for a, b, t, L in zip(x, y, angle, length)
+    ]
+    return ObstaclesSection(walls=walls).compile({"heavy": 6.9})
+
+
+def chain_ms(network: dict, agents: int, ticks: int, seed: int = 1, walls: Walls | None = None) -> tuple[float, float]:
     """Median ms per tick and copies per tick, agents moving at random."""
     rng = np.random.default_rng(seed)
     params = NetworkSection.model_validate(network)
-    radio = Radio(params, agents, 0.25, np.random.default_rng(seed), Ledger(reasons=drop_reasons(params)))
+    radio = Radio(params, agents, 0.25, np.random.default_rng(seed), Ledger(reasons=drop_reasons(params)), walls)
     ids = list(range(agents))
     x, y = rng.uniform(0, 1400, agents), rng.uniform(0, 1000, agents)
     outs = {i: [RadioMessage(BROADCAST, "bid", bytes(120))] for i in ids}
@@ -83,7 +103,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, nargs="+", default=[50, 100, 200, 500])
     ap.add_argument("--ticks", type=int, default=40)
-    ap.add_argument("--chain-n", type=int, nargs="+", default=[200, 500], help="agents for the disk/chain table")
+    ap.add_argument("--chain-n", type=int, nargs="*", default=[200, 500], help="agents for the disk/chain table")
     args = ap.parse_args()
     print(f"{'N':>5} {'range':>6} {'copies/tick':>12} {'delivered/tick':>15} {'ms/tick':>8}")
     for n in args.n:
@@ -101,6 +121,15 @@ def main() -> None:
         busy = "" if abs(disk_a - disk_b) <= 0.1 * disk else "  disk figures differ by > 10 %: machine busy?"
         print(f"{n:>5} {'disk':>6} {copies:>12.0f} {disk:>8.2f} {1.0:>7.2f}  ({disk_a:.2f}, {disk_b:.2f}){busy}")
         print(f"{n:>5} {'chain':>6} {chain_copies:>12.0f} {chain:>8.2f} {chain / disk:>7.2f}", flush=True)
+    print(f"\n{'N':>5} {'walls':>6} {'model':>13} {'copies/tick':>12} {'ms/tick':>8} {'x none':>7}")
+    sight = {"range": 300.0, "loss": 0.1, "walls": {"line_of_sight": True}}
+    power = {"loss": 0.0, "propagation": {}}
+    for network, label, counts in ((sight, "line of sight", (0, 50, 200)), (power, "propagation", (0, 200))):
+        base = None
+        for count in counts:
+            ms, copies = chain_ms(network, 50, args.ticks, walls=random_walls(count))
+            base = ms if base is None else base
+            print(f"{50:>5} {count:>6} {label:>13} {copies:>12.0f} {ms:>8.2f} {ms / base:>7.2f}", flush=True)
 
 
 if __name__ == "__main__":

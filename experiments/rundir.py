@@ -17,10 +17,12 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from pydantic import ValidationError
 
 from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml
 from swarmbed.wire import rundir as names
 from swarmbed.wire.errors import WireError
+from swarmbed.wire.obstacles import ObstaclesSection
 from swarmbed.wire.rundir import (
     CONFIG,
     LEDGER_COLUMNS,
@@ -141,6 +143,17 @@ class RunDir:
         if dt <= 0:
             raise RunFileError(f"{self.path / CONFIG}: run.dt is {dt}; a tick must last more than 0 s")
         return dt
+
+    def walls(self) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+        """The run's walls (its config's ``obstacles:``, checked by the schema) as line segments,
+        for the views to draw; none for a run on open ground."""
+        data = self.config().get("obstacles")
+        if data is None:
+            return []
+        try:
+            return ObstaclesSection.model_validate(data).compile().lines
+        except ValidationError as exc:
+            raise RunFileError(f"{self.path / CONFIG}: obstacles: {str(exc).splitlines()[0][:200]}") from None
 
     def ticks(self) -> int:
         """The ticks the run's summary says it ran (bounded by :data:`MAX_TICKS`)."""

@@ -40,10 +40,14 @@ def wall_loss_db(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray
     todo = at[np.isnan(copies.wall_loss[at])]
     if len(todo):
         n = len(copies.alive)
-        pair = copies.from_rows[todo] * n + copies.rows[todo]
-        unique, back = np.unique(pair, return_inverse=True)
-        f, r = unique // n, unique % n
-        loss, crossed = walls.loss(copies.x[f], copies.y[f], copies.x[r], copies.y[r])
+        # a wall between two robots is between them both ways: one test per unordered pair
+        lo, hi = (
+            np.minimum(copies.from_rows[todo], copies.rows[todo]),
+            np.maximum(copies.from_rows[todo], copies.rows[todo]),
+        )
+        unique, back = np.unique(lo * n + hi, return_inverse=True)
+        hit = walls.crossings_among(copies.x, copies.y, unique // n, unique % n)
+        loss, crossed = hit.astype(float) @ walls.loss_db, hit.any(axis=1)
         copies.wall_loss[todo] = loss[back]
         copies.crossed = copies.crossed if copies.crossed is not None else np.zeros(len(copies.rows), dtype=bool)
         copies.crossed[todo] = crossed[back]
@@ -58,4 +62,4 @@ def _blocked(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray:
 
 
 #: on with ``network.walls.line_of_sight``; a run without obstacles has no wall to cross
-WALLS_STAGE = Stage(BLOCKED_BY_WALL, "#8c564b", lambda p: p.walls is not None and p.walls.line_of_sight, _blocked)
+WALLS_STAGE = Stage(BLOCKED_BY_WALL, "#843c39", lambda p: p.walls is not None and p.walls.line_of_sight, _blocked)

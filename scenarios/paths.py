@@ -16,8 +16,6 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import shortest_path
 
 from swarmbed.wire.obstacles import Point, Walls
 
@@ -46,6 +44,10 @@ class Planner:
     """Shortest paths around a world's walls for a point robot, within an arena."""
 
     def __init__(self, walls: Walls, in_arena: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
+        # only a world with obstacles plans: agents import this module and never load SciPy
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import shortest_path
+
         self.walls = walls
         nodes = corner_nodes(walls)
         if len(nodes):

@@ -23,7 +23,8 @@ ROOT = Path(__file__).resolve().parent.parent
 TREES = sorted([*(ROOT / "extension" / "trees").glob("*.xml"), *(ROOT / "plugins").rglob("*.xml")])
 YAML = sorted((ROOT / "experiments").rglob("*.yaml"))
 CHAOS = [f for f in YAML if "events" in (yaml.safe_load(f.read_text()) or {})]  # faults for swarmbed soak
-FILES = [f for f in YAML if f not in CHAOS]
+MAPS = [f for f in YAML if set(yaml.safe_load(f.read_text()) or {}) == {"obstacles"}]  # obstacles: a map file
+FILES = [f for f in YAML if f not in CHAOS and f not in MAPS]
 SWEEPS = [f for f in FILES if "base" in (yaml.safe_load(f.read_text()) or {})]
 EXPERIMENTS = [f for f in FILES if f not in SWEEPS]
 
@@ -33,12 +34,20 @@ def _id(path: Path) -> str:
 
 
 def test_there_are_examples():
-    assert len(TREES) >= 6 and len(EXPERIMENTS) >= 3 and len(SWEEPS) >= 16 and CHAOS
+    assert len(TREES) >= 6 and len(EXPERIMENTS) >= 3 and len(SWEEPS) >= 16 and CHAOS and len(MAPS) >= 2
 
 
 @pytest.mark.parametrize("path", CHAOS, ids=_id)
 def test_every_shipped_chaos_file_loads(path):
     assert load_chaos(path).events
+
+
+@pytest.mark.parametrize("path", MAPS, ids=_id)
+def test_every_shipped_map_file_is_an_obstacles_section(path):
+    from swarmbed.wire.obstacles import ObstaclesSection
+
+    section = ObstaclesSection.model_validate(yaml.safe_load(path.read_text())["obstacles"])
+    assert len(section.compile()) > 0
 
 
 def test_every_shipped_tree_loads(capsys):

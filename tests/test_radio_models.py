@@ -501,6 +501,7 @@ def test_every_reason_a_radio_may_drop_for_has_its_colour_in_every_view():
         propagation={},
         burst={"mean_loss": 0.2, "mean_burst": 5.0},
         channel={"capacity": 1000},
+        walls={"line_of_sight": True},
         delay={"mean": 0.1},
     )
     reasons = drop_reasons(every)

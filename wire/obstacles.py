@@ -187,6 +187,20 @@ class Walls:
             out[s] = segments_cross(px[s, None], py[s, None], qx[s, None], qy[s, None], ax, ay, bx, by)
         return out
 
+    def crossings_among(self, x: np.ndarray, y: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """:meth:`crossings` for the lines from point ``i[k]`` to point ``j[k]`` of one set of points
+        (the radio's agents): which side of each wall's line every point lies on is computed once,
+        and only the lines whose ends do not lie strictly on one side are tested in full."""
+        out = np.zeros((len(i), len(self.xy)), dtype=bool)
+        if not len(self.xy) or not len(i):
+            return out
+        ax, ay, bx, by = self.xy.T
+        side = np.sign((bx - ax) * (y[:, None] - ay) - (by - ay) * (x[:, None] - ax)).astype(np.int8)
+        rows, walls = np.nonzero(side[i] * side[j] <= 0)
+        p, q = i[rows], j[rows]
+        out[rows, walls] = segments_cross(x[p], y[p], x[q], y[q], ax[walls], ay[walls], bx[walls], by[walls])
+        return out
+
     def clear(self, px, py, qx, qy) -> np.ndarray:  # type: ignore[no-untyped-def]
         """Whether each line p-q crosses no wall (line of sight)."""
         return np.asarray(~self.crossings(px, py, qx, qy).any(axis=1))

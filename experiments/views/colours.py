@@ -17,6 +17,7 @@ DROP_COLORS = {
     reason: _STAGE_COLORS.get(reason) or _OTHER_DROPS[reason]
     for reason in DROP_REASONS + tuple(r for r in _STAGE_COLORS if r not in DROP_REASONS)
 }
+WALL_COLOUR = "#3b3b3b"  # obstacles' walls, in every view that draws the map
 LABEL_COLORS = {"red": "#d62728", "green": "#2ca02c", "blue": "#1f77b4"}  # SAR's robot and victim colours
 
 # Strategies as the papers name and order them (CBBA-ETC Section 5.2; SPACE Fig. 3), each with one

@@ -12,6 +12,8 @@ does. Topics, all in the frame ``world`` (the arena's x, y; z up):
   when they vanish;
 - ``/radio`` (foxglove.SceneUpdate): each tick's copies as lines from sender to receiver, one
   colour per outcome (delivered, or the drop reason), with ``network.ledger: per_receiver``;
+- ``/walls`` (foxglove.SceneUpdate): the obstacles' walls as lines, once, living for the whole run
+  (a run with ``obstacles:`` only);
 - ``/counters`` (JSON): the run's counters of each tick (``timeseries.csv``);
 - ``/agents/tree`` (JSON): each agent's behavior tree status changes of each tick, with
   ``run.record_bt`` (node uids as in ``bt/agent_<id>.btlog``, whose trees Groot2 opens).
@@ -33,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from swarmbed.experiments.rundir import RunDir
-from swarmbed.experiments.views.colours import DROP_COLORS
+from swarmbed.experiments.views.colours import DROP_COLORS, WALL_COLOUR
 from swarmbed.wire.btlog import EPOCH_US, BtLogError, read_btlog
 from swarmbed.wire.rundir import (
     BT,
@@ -148,6 +150,12 @@ def _write_mcap(run: Path, out: Path) -> dict:
         context=context,
     )
     sent = dict.fromkeys(("/agents", "/agents/poses", "/markers", "/radio", "/counters", "/agents/tree"), 0)
+    walls = RunDir(run).walls()
+    if walls:
+        walls_ch = channels.SceneUpdateChannel("/walls", context=context)
+        first = int(traj["tick"].min())
+        walls_ch.log(_walls_update(walls, _stamp(first, dt)), log_time=EPOCH_NS + round(first * dt * 1e9))
+        sent["/walls"] = 1
 
     marker_rows = {int(t): r for t, r in markers.groupby("tick")} if markers is not None else {}
     copy_rows = {int(t): r for t, r in copies.groupby("tick")} if copies is not None else {}
@@ -275,6 +283,21 @@ def _marker_update(rows: pd.DataFrame, stamp: Any, size: float) -> Any:
                 SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.MatchingId, id=f"marker/{marker}")
             )
     return SceneUpdate(entities=appeared, deletions=vanished)
+
+
+def _walls_update(walls: list, stamp: Any) -> Any:
+    """The obstacles' walls as one entity of lines that never expires."""
+    from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity, SceneUpdate
+
+    points = [Point3(x=float(x), y=float(y), z=0.0) for wall in walls for x, y in wall]
+    line = LinePrimitive(
+        type=LinePrimitiveLineType.LineList,
+        thickness=2.0,
+        scale_invariant=True,
+        points=points,
+        color=_rgba(WALL_COLOUR),
+    )
+    return SceneUpdate(entities=[SceneEntity(timestamp=stamp, frame_id=FRAME, id="walls", lines=[line])])
 
 
 def _radio_update(rows: pd.DataFrame, where: dict[int, tuple[float, float]], stamp: Any, dt: float) -> Any:

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from swarmbed.experiments.rundir import RunDir
-from swarmbed.experiments.views.colours import DROP_COLORS, LABEL_COLORS
+from swarmbed.experiments.views.colours import DROP_COLORS, LABEL_COLORS, WALL_COLOUR
 from swarmbed.wire.rundir import MARKERS, RECEIVER_LEDGER, SUMMARY, TRAJECTORIES, RunFileError
 
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
@@ -52,20 +52,22 @@ def _checked_output(
     return out
 
 
-def _recorded(run: Path) -> tuple[float, int, pd.DataFrame, pd.DataFrame, pd.DataFrame | None]:
-    """The run's tick length and ticks, its trajectories, its markers and (per-receiver ledger) its copies."""
+def _recorded(run: Path) -> tuple[float, int, pd.DataFrame, pd.DataFrame, pd.DataFrame | None, list]:
+    """The run's tick length and ticks, its trajectories, its markers, (per-receiver ledger) its
+    copies and its walls."""
     folder = RunDir(run)
     try:
         dt, ticks = folder.dt(), folder.ticks()
         traj, markers = folder.trajectories(), folder.markers()
         copies = folder.receivers() if folder.has(RECEIVER_LEDGER) else None
+        walls = folder.walls()
     except RunFileError as exc:
         raise ReplayError(str(exc)) from None
     if traj.empty:
         raise ReplayError(f"{run / TRAJECTORIES}: no row")
     if "label" not in traj:  # recorded before agents had labels
         traj["label"] = ""
-    return dt, ticks, traj, markers, copies
+    return dt, ticks, traj, markers, copies, walls
 
 
 def _frame_ticks(traj: pd.DataFrame, dt: float, start: float | None, end: float | None, every: int | None) -> list[int]:
@@ -116,15 +118,16 @@ def replay(
     from matplotlib.collections import LineCollection
 
     out = _checked_output(run, out, start, end, fps, every)
-    dt, ticks, traj, markers, copies = _recorded(run)
+    dt, ticks, traj, markers, copies, walls = _recorded(run)
     frames = _frame_ticks(traj, dt, start, end, every)
 
     marker_xy = markers.assign(
         x=pd.to_numeric(markers["x"], errors="coerce"), y=pd.to_numeric(markers["y"], errors="coerce")
     )
     marker_xy = marker_xy[np.isfinite(marker_xy["x"]) & np.isfinite(marker_xy["y"])]
-    xs = np.concatenate([traj["x"].to_numpy(dtype=float), marker_xy["x"].to_numpy(dtype=float)])
-    ys = np.concatenate([traj["y"].to_numpy(dtype=float), marker_xy["y"].to_numpy(dtype=float)])
+    wall_xy = np.array(walls, dtype=float).reshape(-1, 2)
+    xs = np.concatenate([traj["x"].to_numpy(dtype=float), marker_xy["x"].to_numpy(dtype=float), wall_xy[:, 0]])
+    ys = np.concatenate([traj["y"].to_numpy(dtype=float), marker_xy["y"].to_numpy(dtype=float), wall_xy[:, 1]])
     pad = 0.05 * max(float(np.ptp(xs)), float(np.ptp(ys)), 1.0)
     by_tick = dict(tuple(traj.groupby("tick")))
     # a marker drawn where no number is (a crafted file) is left out; a vanishing one needs none
@@ -136,6 +139,7 @@ def replay(
     ax.set_xlim(xs.min() - pad, xs.max() + pad)
     ax.set_ylim(ys.min() - pad, ys.max() + pad)
     ax.set_aspect("equal")
+    ax.add_collection(LineCollection(walls, colors=WALL_COLOUR, linewidths=2.0, zorder=1))
     links = LineCollection([], colors="#1f77b4", linewidths=0.6, alpha=0.5)
     drops = LineCollection([], linewidths=0.8, linestyles="dashed", alpha=0.8)
     ax.add_collection(links)

@@ -25,13 +25,13 @@ import plotly.graph_objects as go
 import swarmbed
 from swarmbed.experiments.folders import PARQUET, SOAK_PROCESSES, TABLE, read_table
 from swarmbed.experiments.rundir import RunDir
-from swarmbed.experiments.views.colours import DROP_COLORS
+from swarmbed.experiments.views.colours import DROP_COLORS, WALL_COLOUR
 from swarmbed.experiments.views.page import Page, _fmt
 from swarmbed.experiments.views.pooling import mixed_configurations
 from swarmbed.experiments.views.radio_pages import radio_pages
 from swarmbed.experiments.views.soak_page import soak_report
 from swarmbed.plugins.registry import registered_scenario
-from swarmbed.wire.rundir import RECEIVER_LEDGER, TIMESERIES, TRANSPORT, RunFileError
+from swarmbed.wire.rundir import RECEIVER_LEDGER, TIMESERIES, TRAJECTORIES, TRANSPORT, RunFileError
 from swarmbed.wire.summary import NetworkSummary, RunSummary
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
@@ -72,6 +72,8 @@ def run_report(run: Path) -> tuple[str, int]:
         wire = folder.json(TRANSPORT) if folder.has(TRANSPORT) else None
         receivers = folder.receivers() if folder.has(RECEIVER_LEDGER) else None
         series = folder.timeseries() if folder.has(TIMESERIES) else None
+        walls = folder.walls()
+        paths = folder.trajectories() if walls and folder.has(TRAJECTORIES) else None
     except RunFileError as exc:
         raise ReportError(str(exc)) from None
     sent = ledger[ledger["outcome"] == "sent"]
@@ -84,6 +86,8 @@ def run_report(run: Path) -> tuple[str, int]:
     _over_time(page, sent, copies, ticks, dt)
     _who_to_whom(page, receivers, copies, summary.agents)
     radio_pages(page, receivers, config)
+    if walls:
+        _map(page, walls, paths)
     _outcome_beside_traffic(page, _benefit(summary.scenario_kind), series)
     subtitle = (
         f"run {run} · seed {summary.seed} · swarmbed {swarmbed.__version__} · "
@@ -182,6 +186,22 @@ def _on_the_wire(page: Page, run: Path, wire: dict, agents: pd.DataFrame) -> Non
         xaxis={"type": "category", "categoryorder": "array", "categoryarray": names},
     )
     page.figure(fig, "transport.json, agents.csv")
+
+
+def _map(page: Page, walls: list, paths: pd.DataFrame | None) -> None:
+    """The obstacles' walls, and each agent's path where trajectories were recorded."""
+    page.heading("Map", "the walls of the run's obstacles; each agent's path with run.record_trajectories")
+    xs = [v for (a, b) in walls for v in (a[0], b[0], None)]
+    ys = [v for (a, b) in walls for v in (a[1], b[1], None)]
+    traces = [go.Scatter(x=xs, y=ys, mode="lines", name="walls", line={"color": WALL_COLOUR, "width": 3})]
+    if paths is not None:
+        for agent, rows in paths.groupby("agent", sort=True):
+            traces.append(
+                go.Scattergl(x=rows["x"], y=rows["y"], mode="lines", name=f"agent {agent}", line={"width": 1})
+            )
+    fig = go.Figure(traces)
+    fig.update_layout(title="Walls and paths", yaxis={"scaleanchor": "x"}, legend=LEGEND_BELOW)
+    page.figure(fig, "config.yaml, trajectories.csv")
 
 
 def _per_agent(page: Page, agents: pd.DataFrame) -> None:
