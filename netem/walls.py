@@ -47,7 +47,7 @@ def wall_loss_db(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray
         )
         unique, back = np.unique(lo * n + hi, return_inverse=True)
         hit = walls.crossings_among(copies.x, copies.y, unique // n, unique % n)
-        loss, crossed = hit.astype(float) @ walls.loss_db, hit.any(axis=1)
+        loss, crossed = hit.astype(float) @ walls.loss_db, np.asarray(hit.any(axis=1))
         copies.wall_loss[todo] = loss[back]
         copies.crossed = copies.crossed if copies.crossed is not None else np.zeros(len(copies.rows), dtype=bool)
         copies.crossed[todo] = crossed[back]
