@@ -165,7 +165,8 @@ class ZenohTransport(TickHook):
             from swarmbed.coordinator.ros2 import Ros2Commands, Ros2Out
 
             try:
-                self.ros2 = Ros2Out(s, self.exp.ros2, self.n, self.scenario.actions, self.exp.run.dt)
+                walls = self.exp.obstacles.compile().lines if self.exp.obstacles is not None else []
+                self.ros2 = Ros2Out(s, self.exp.ros2, self.n, self.scenario.actions, self.exp.run.dt, walls)
             except ImportError as exc:  # the ros2 extra is not installed: say so before any process starts
                 raise RunError(str(exc)) from None
             if self.decision_source == "ros2":

@@ -12,6 +12,7 @@ topic                      type                                    what
 ``/robot_<i>/odom``        ``nav_msgs/msg/Odometry``               robot i's pose and speed along its heading
 ``/robots``                ``geometry_msgs/msg/PoseArray``         every robot's pose
 ``/radio``                 ``visualization_msgs/msg/MarkerArray``  the tick's delivered copies as lines
+``/walls``                 ``visualization_msgs/msg/MarkerArray``  the obstacles' walls (with obstacles:)
 ``/robot_<i>/path``        ``nav_msgs/msg/Path``                   with ``ros2.path``: its last poses
 ``/tasks``                 ``visualization_msgs/msg/MarkerArray``  every task on the map, its holders
 ``/robot_<i>/radio/       ``swarmbed_msgs/msg/RadioInbox``        what robot i received this tick
@@ -55,6 +56,9 @@ CLOCK, POSE, MARKERS = "rosgraph_msgs/msg/Clock", "geometry_msgs/msg/PoseStamped
 TF, ODOMETRY, POSE_ARRAY = "tf2_msgs/msg/TFMessage", "nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseArray"
 PATH = "nav_msgs/msg/Path"
 RADIO_LINES = (0.12, 0.47, 0.71, 0.8)  # RGBA of a delivered copy's line, sender to receiver
+WALL_LINES = (0.23, 0.23, 0.23, 1.0)  # RGBA of the obstacles' walls
+#: published ticks between two copies of /walls (volatile: a display started late gets the next)
+WALLS_EVERY = 50
 TASK_HEIGHT = 2.0  # metres of a task's cylinder; its diameter is the arrival radius, at least 1
 FREE, HELD = (0.6, 0.6, 0.6, 0.8), (1.0, 0.55, 0.0, 0.9)  # RGBA of a task nobody / somebody pursues
 
@@ -63,9 +67,19 @@ class Ros2Out:
     """The ``/swarmbed`` node of one run, on the hub's session."""
 
     def __init__(
-        self, session: zenoh.Session, settings: Ros2Section, n_agents: int, actions: ActionSpec, dt: float = 1.0
+        self,
+        session: zenoh.Session,
+        settings: Ros2Section,
+        n_agents: int,
+        actions: ActionSpec,
+        dt: float = 1.0,
+        walls: Sequence[tuple[tuple[float, float], tuple[float, float]]] = (),
     ) -> None:
         self.node = Ros2Node(session, settings.domain, NODE_NAME)
+        # the obstacles' walls as one line list (a run with obstacles: only)
+        self.walls = list(walls)
+        self.walls_topic = self.node.publisher("/walls", MARKERS) if self.walls else None
+        self._published = 0
         self.dt = dt
         self.types = t = self.node.types
         self.settings = settings
@@ -111,6 +125,9 @@ class Ros2Out:
         if tick % self.settings.every:
             return
         header = self.Header(stamp=now, frame_id=self.settings.frame_id)
+        if self.walls_topic is not None and self._published % WALLS_EVERY == 0:
+            self.node.put(self.walls_topic, self._wall_lines(header))
+        self._published += 1
         motion = motion or {}
         poses, transforms = [], []
         for i, x, y in zip(*positions):
@@ -192,6 +209,15 @@ class Ros2Out:
             tick_ns,
         )
         return self.types.cls(MARKERS)(markers=[line] if points else [])
+
+    def _wall_lines(self, header: object) -> object:
+        """The walls as one line list that never expires."""
+        Marker = self.types.cls("visualization_msgs/msg/Marker")
+        points = [p for wall in self.walls for p in wall]
+        line = self._marker(
+            header, "walls", 0, Marker.LINE_LIST, Marker.ADD, (0.0, 0.0, 0.0), (0.5, 0.0, 0.0), WALL_LINES, "", points
+        )
+        return self.types.cls(MARKERS)(markers=[line])
 
     def _inbox(self, header: object, robot: int, items: list[Delivered]) -> object:
         return self.types.cls(RADIO_INBOX)(

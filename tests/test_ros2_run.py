@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from swarmbed.coordinator.ros2 import WALLS_EVERY
 from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity, write_credentials
@@ -24,7 +25,14 @@ from tests.conftest import experiment, read_ledger, reference_run, same_results
 
 DOMAIN = 7
 PATH = 5  # ros2.path: each robot's last 5 poses on /robot_<i>/path
-SETTINGS = ("agents.count=4", "run.duration=80", "run.stop_when_done=false", "run.record_trajectories=true")
+WALL = ((100.0, 20.0), (100.0, 130.0))  # one wall across the quickstart's 200 x 150 floor
+SETTINGS = (
+    "agents.count=4",
+    "run.duration=80",
+    "run.stop_when_done=false",
+    "run.record_trajectories=true",
+    f"obstacles={{walls: [{{start: {list(WALL[0])}, end: {list(WALL[1])}}}]}}",
+)
 
 
 class RosReader:
@@ -110,6 +118,7 @@ def test_every_topic_is_on_rmw_zenohs_key_with_its_type_hash_and_attachment(seen
         "/radio": "visualization_msgs/msg/MarkerArray",
         **{f"/robot_{i}/odom": "nav_msgs/msg/Odometry" for i in range(4)},
         **{f"/robot_{i}/path": "nav_msgs/msg/Path" for i in range(4)},
+        "/walls": "visualization_msgs/msg/MarkerArray",
     }
     assert set(reader.samples) == set(expected)
     tokens = {t.split("/")[9].replace("%", "/"): t for t in reader.tokens if "/MP/" in t}
@@ -118,7 +127,8 @@ def test_every_topic_is_on_rmw_zenohs_key_with_its_type_hash_and_attachment(seen
         package, _, name = ros_type.split("/")
         key = f"{DOMAIN}{topic}/{package}::msg::dds_::{name}_/{types.hash(ros_type)}"
         assert {k for k, _, _ in samples} == {key}, topic
-        published = ticks if topic != "/tasks" else len(samples)  # /tasks: when it changed
+        # /tasks: when it changed; /walls: every WALLS_EVERY published ticks, from the first
+        published = {"/tasks": len(samples), "/walls": -(-ticks // WALLS_EVERY)}.get(topic, ticks)
         assert len(samples) == published, topic  # one a tick, none lost on loopback, none forged
         # the publisher's token names the same topic, type and hash; the attachment's GID is its hash
         token = tokens[topic]
@@ -257,6 +267,15 @@ def test_tf_odometry_pose_array_and_radio_lines_are_what_rviz_reads(seen):
             assert (m.type, m.ns, m.header.frame_id) == (5, "radio", "map")  # LINE_LIST
             lines += len(m.points) // 2
     assert lines == on.summary["network"]["delivered"] > 0
+
+
+def test_the_walls_are_one_line_list_that_never_expires(seen):
+    _on, _off, reader = seen
+    types = Ros2Types()
+    for _, payload, _ in reader.samples["/walls"]:
+        (marker,) = types.deserialize(payload, "visualization_msgs/msg/MarkerArray").markers
+        assert marker.type == marker.LINE_LIST and marker.lifetime.sec == 0 and marker.lifetime.nanosec == 0
+        assert [(p.x, p.y) for p in marker.points] == list(WALL)
 
 
 def test_results_are_byte_identical_with_publishing_on_and_off(seen):
