@@ -19,8 +19,11 @@ Spaces, per agent (``max_tasks`` = K, N agents):
   ``heard_from`` (the agents whose radio messages it
   received this tick: range, loss, bursts and caps shape it);
 * action, ``Discrete(K + 1)``: 0 chooses no task (the agent's tree explores), j the j-th row of
-  ``tasks``; a row the mask marks empty also chooses none. With a ``fallback`` allocator,
-  ``Discrete(K + 2)``: K + 1 lets it decide.
+  ``tasks``; a row the mask marks empty also chooses none. With ``broadcast=True``, K more actions:
+  K + j chooses row j *and* broadcasts a claim of its task over the radio (a ``claim`` message,
+  counted, ranged and lost like any other), and the observation gains ``claimed`` (K counts: the
+  claims heard this tick for each row's task). With a ``fallback`` allocator, one more action, the
+  last, lets it decide.
 
 Rewards: the team's progress over the tick, the increase of the scenario's ``reward_key``
 (``tasks_completed`` in MT-SR, ``rescued`` in search and rescue), to every live agent.
@@ -54,8 +57,9 @@ from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.access import claim_folder, remove_orphaned_folders
 from swarmbed.experiments.launch.inprocess import ENGINES, InProcessRun
 from swarmbed.experiments.launch.runner import RunResult, run_experiment
-from swarmbed.plugins.external import DEFER
-from swarmbed.wire.codec import delivered_in
+from swarmbed.plugins.external import ANNOUNCE, CLAIM, DEFER
+from swarmbed.wire.codec import delivered_in, unpack
+from swarmbed.wire.errors import WireError
 
 QUICKSTART = Path(__file__).resolve().parent.parent / "experiments" / "quickstart.yaml"
 STEP_TIMEOUT = 600.0  # wall seconds a step waits for the run's next tick before calling the run stuck
@@ -65,8 +69,11 @@ class EnvError(RuntimeError):
     """The run under the environment failed (its processes, its configuration)."""
 
 
-def agent_view(obs: Any, inbox: bytes | None, max_tasks: int, n: int) -> tuple[dict[str, np.ndarray], list[int]]:
-    """One agent's observation (the spaces of the module docstring) and the task ids of its rows."""
+def agent_view(
+    obs: Any, inbox: bytes | None, max_tasks: int, n: int, claims: bool = False
+) -> tuple[dict[str, np.ndarray], list[int]]:
+    """One agent's observation (the spaces of the module docstring) and the task ids of its rows;
+    ``claims``: with ``claimed``, the claims its inbox holds for each row's task."""
     tasks = obs.tasks
     x, y = obs.x, obs.y
     rows = np.zeros((max_tasks, 3), dtype=np.float32)
@@ -84,18 +91,38 @@ def agent_view(obs: Any, inbox: bytes | None, max_tasks: int, n: int) -> tuple[d
         mask[:m] = 1
         chosen = [ids[j] for j in order]
     heard = np.zeros(n, dtype=np.int8)
-    senders = [copy.sender for copy in delivered_in(inbox)]
-    heard[[i for i in senders if 0 <= i < n]] = 1
+    copies = delivered_in(inbox)
+    heard[[c.sender for c in copies if 0 <= c.sender < n]] = 1
     me = np.array((x, y, obs.heading, obs.speed), dtype=np.float32)
-    return {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}, chosen
+    view = {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}
+    if claims:
+        row_of = {task: j for j, task in enumerate(chosen)}
+        claimed = np.zeros(max_tasks, dtype=np.float32)
+        for c in copies:
+            if c.kind == CLAIM and (j := row_of.get(_claimed_task(c.payload))) is not None:
+                claimed[j] += 1
+        view["claimed"] = claimed
+    return view, chosen
 
 
-def with_action_mask(view: dict[str, np.ndarray], deferring: bool) -> dict[str, np.ndarray]:
+def _claimed_task(payload: bytes) -> int | None:
+    """The task id a claim message holds; None for anything else (a crafted payload)."""
+    try:
+        task = unpack(payload)
+    except WireError:
+        return None
+    return task if isinstance(task, int) and not isinstance(task, bool) else None
+
+
+def with_action_mask(view: dict[str, np.ndarray], deferring: bool, announcing: bool = False) -> dict[str, np.ndarray]:
     """``view`` with ``action_mask``: the actions that choose something (0, no task, always; j where
-    row j holds a task; the fallback's action where there is one), as sb3-contrib's MaskablePPO and
-    TorchRL's PettingZoo wrapper read it."""
-    legal = np.ones(len(view["task_mask"]) + (2 if deferring else 1), dtype=np.int8)
-    legal[1 : 1 + len(view["task_mask"])] = view["task_mask"]
+    row j holds a task, and K + j with ``announcing``; the fallback's action where there is one), as
+    sb3-contrib's MaskablePPO and TorchRL's PettingZoo wrapper read it."""
+    k = len(view["task_mask"])
+    legal = np.ones(1 + k * (2 if announcing else 1) + (1 if deferring else 0), dtype=np.int8)
+    legal[1 : 1 + k] = view["task_mask"]
+    if announcing:
+        legal[1 + k : 1 + 2 * k] = view["task_mask"]
     view["action_mask"] = legal
     return view
 
@@ -109,8 +136,8 @@ class _Bridge:
     """The coordinator's side: it hands each tick's observations to the environment and waits for
     the decisions (the coordinator calls :meth:`decide` from the run's thread before each tick)."""
 
-    def __init__(self, max_tasks: int, n: int, reward_key: str) -> None:
-        self.max_tasks, self.n, self.reward_key = max_tasks, n, reward_key
+    def __init__(self, max_tasks: int, n: int, reward_key: str, claims: bool = False) -> None:
+        self.max_tasks, self.n, self.reward_key, self.claims = max_tasks, n, reward_key, claims
         self.counters: list[str] = []  # the world's numeric counters, as of the first tick
         self.to_env: queue.Queue = queue.Queue()
         self.to_run: queue.Queue = queue.Queue()
@@ -146,7 +173,7 @@ class _Bridge:
         return decisions
 
     def _view(self, obs: Any, inbox: bytes | None) -> tuple[dict[str, np.ndarray], list[int]]:
-        return agent_view(obs, inbox, self.max_tasks, self.n)
+        return agent_view(obs, inbox, self.max_tasks, self.n, self.claims)
 
 
 class SwarmbedParallelEnv(ParallelEnv):
@@ -158,7 +185,9 @@ class SwarmbedParallelEnv(ParallelEnv):
     :meth:`close`). ``fallback``: a registered allocator (``fcg``, ``cbba``, ``grape``) that runs in
     every agent beside the learner's decisions, observing and talking over the radio as in a run of
     its own; the action :attr:`defer` (K + 1) lets it decide, so it plays as a policy on the same
-    seeds (its parameters: the experiment's ``allocator:`` keys when it names the same allocator)."""
+    seeds (its parameters: the experiment's ``allocator:`` keys when it names the same allocator).
+    ``broadcast``: K more actions, each choosing a row and broadcasting a claim of its task, and
+    ``claimed`` in the observation (the module docstring)."""
 
     metadata = {"name": "swarmbed_v0", "render_modes": [], "is_parallelizable": True}
     render_mode = None  # nothing to render (SuperSuit's vector wrappers read it)
@@ -172,6 +201,7 @@ class SwarmbedParallelEnv(ParallelEnv):
         out_dir: str | Path | None = None,
         fallback: str | None = None,
         engine: str = "processes",
+        broadcast: bool = False,
     ) -> None:
         if engine not in ENGINES:
             raise ValueError(f"engine {engine!r}: one of {', '.join(ENGINES)}")
@@ -194,18 +224,21 @@ class SwarmbedParallelEnv(ParallelEnv):
         self.possible_agents = [f"agent_{i}" for i in range(n)]
         self._index = {name: i for i, name in enumerate(self.possible_agents)}
         inf = np.float32(np.inf)
-        self._observation_space = spaces.Dict(
-            {
-                "self": spaces.Box(-inf, inf, (4,), np.float32),
-                "tasks": spaces.Box(-inf, inf, (max_tasks, 3), np.float32),
-                "task_mask": spaces.MultiBinary(max_tasks),
-                "heard_from": spaces.MultiBinary(n),
-                "action_mask": spaces.MultiBinary(max_tasks + (2 if fallback is not None else 1)),
-            }
-        )
-        #: the action that lets the fallback allocator decide (only with ``fallback``)
-        self.defer: int | None = max_tasks + 1 if fallback is not None else None
-        self._action_space = spaces.Discrete(max_tasks + (2 if fallback is not None else 1))
+        self.broadcast = bool(broadcast)
+        actions = 1 + max_tasks * (2 if self.broadcast else 1) + (1 if fallback is not None else 0)
+        space = {
+            "self": spaces.Box(-inf, inf, (4,), np.float32),
+            "tasks": spaces.Box(-inf, inf, (max_tasks, 3), np.float32),
+            "task_mask": spaces.MultiBinary(max_tasks),
+            "heard_from": spaces.MultiBinary(n),
+            "action_mask": spaces.MultiBinary(actions),
+        }
+        if self.broadcast:
+            space["claimed"] = spaces.Box(np.float32(0), np.float32(n), (max_tasks,), np.float32)
+        self._observation_space = spaces.Dict(space)
+        #: the action that lets the fallback allocator decide (only with ``fallback``): the last
+        self.defer: int | None = actions - 1 if fallback is not None else None
+        self._action_space = spaces.Discrete(actions)
         self._own_dir = out_dir is None
         if out_dir is None:  # removed by close(), at exit, or by the next swarmbed process if this one was killed
             remove_orphaned_folders()
@@ -247,7 +280,7 @@ class SwarmbedParallelEnv(ParallelEnv):
             self._inprocess = InProcessRun(exp, out, env=True)
             counters = _counters(self._inprocess.world)
             return self._first(self._inprocess_item(), counters)
-        self._bridge = bridge = _Bridge(self.max_tasks, exp.agents.count, self.reward_key)
+        self._bridge = bridge = _Bridge(self.max_tasks, exp.agents.count, self.reward_key, self.broadcast)
         self._failure = None
 
         def run() -> None:
@@ -338,18 +371,22 @@ class SwarmbedParallelEnv(ParallelEnv):
             choice = int(action)
             if not 0 <= choice <= top:
                 raise ValueError(f"{agent}: action {choice} is not in 0..{top}")
-            ids = self._choices[agent]
+            ids, k = self._choices[agent], self.max_tasks
+            announce = self.broadcast and k < choice <= 2 * k
+            row = choice - k if announce else choice
             if choice == self.defer:
                 decisions[self._index[agent]] = DEFER
+            elif 0 < row <= len(ids):
+                decisions[self._index[agent]] = ids[row - 1] + (ANNOUNCE if announce else 0)
             else:
-                decisions[self._index[agent]] = ids[choice - 1] if 0 < choice <= len(ids) else -1
+                decisions[self._index[agent]] = -1
         return decisions
 
     def _observe(self, views: Mapping[int, tuple[dict, list[int]]]) -> dict[str, dict[str, np.ndarray]]:
         obs = {}
         for i, (view, ids) in views.items():
             name = self.possible_agents[i]
-            obs[name], self._choices[name] = with_action_mask(view, self.defer is not None), ids
+            obs[name], self._choices[name] = with_action_mask(view, self.defer is not None, self.broadcast), ids
         self._last_obs.update(obs)
         return obs
 
@@ -363,7 +400,10 @@ class SwarmbedParallelEnv(ParallelEnv):
             self.results.append(run.finish())
             return ("end", progress, bool(run.world.finished))
         hand, n = run.observe(), self.exp.agents.count
-        views = {i: agent_view(obs, run.inboxes.get(i), self.max_tasks, n) for i, obs in hand.observed.items()}
+        views = {
+            i: agent_view(obs, run.inboxes.get(i), self.max_tasks, n, self.broadcast)
+            for i, obs in hand.observed.items()
+        }
         return ("tick", hand.k, views, progress)
 
     def _next(self) -> tuple:

@@ -22,6 +22,10 @@ from swarmbed.wire.validation import validation_lines
 
 NONE = -1  # a decision that chooses no task (the tree explores)
 DEFER = -4  # a decision that asks the fallback allocator what it would do
+#: a bit of a decision: choose the task ``decision - ANNOUNCE`` and broadcast a claim of it over the
+#: radio (a ``claim`` message holding the task id), so that a learned policy can use the radio
+ANNOUNCE = 1 << 30
+CLAIM = "claim"
 
 
 class ExternalParams(BaseModel):
@@ -93,6 +97,10 @@ class ExternalAllocator(Allocator):
             chosen = self.inner.decide(view)
             self._take_events()
             return chosen
+        if view.decision is not None and view.decision >= ANNOUNCE:
+            task = view.decision - ANNOUNCE
+            view.broadcast(CLAIM, task)
+            return task
         return None if view.decision is None or view.decision == NONE else view.decision
 
     def _take_events(self) -> None:

@@ -227,3 +227,65 @@ def test_both_engines_give_the_same_observations_and_result_files(tmp_path, conf
         for view in step.values():
             assert view["action_mask"] == [1, *view["task_mask"]]
     same_results(tmp_path / "processes" / "run_0", tmp_path / "inprocess" / "run_0")
+
+
+def test_a_claim_broadcast_through_the_env_reaches_the_others_over_the_radio(tmp_path):
+    """With ``broadcast=True`` the learner's K extra actions choose a row and broadcast a claim of its
+    task: the claims are real radio messages (booked as ``claim`` in the ledger, ranged and lost like
+    any other), and the agents that hear one see it against their own row of that task. Both engines
+    give the same observations and files; PettingZoo's checks pass."""
+    sets = ("agents.count=3", "run.duration=40", "network.range=null", "agents.awareness_range=400")
+    env = SwarmbedParallelEnv(sets=sets, engine="inprocess", broadcast=True)
+    try:
+        parallel_api_test(env, num_cycles=20)
+    finally:
+        env.close()
+    seen = {}
+    for engine in ("processes", "inprocess"):
+        env = SwarmbedParallelEnv(sets=sets, out_dir=tmp_path / engine, engine=engine, broadcast=True)
+        k = env.max_tasks
+        heard, trace = 0, []
+        try:
+            obs, _ = env.reset(seed=4)
+            assert env.action_space("agent_0").n == 2 * k + 1 and len(obs["agent_0"]["action_mask"]) == 2 * k + 1
+            while env.agents:
+                # everyone claims its nearest task, out loud
+                last = {a: o for a, o in obs.items()}
+                obs, *_ = env.step({a: k + 1 if o["task_mask"][0] else 0 for a, o in obs.items()})
+                trace.append({a: o["claimed"].tolist() for a, o in sorted(obs.items())})
+                # a claim heard is counted against the hearer's own row of that task
+                for a, o in obs.items():
+                    heard += int(o["claimed"].sum())
+                    assert o["claimed"].sum() <= sum(1 for b in last if b != a)
+        finally:
+            env.close()
+        seen[engine] = trace
+        ledger = (tmp_path / engine / "run_0" / "network_ledger.csv").read_text()
+        assert ",claim," in ledger
+        assert heard > 0, "no claim was heard: every robot sees every task, and all of them claim the nearest"
+    assert seen["processes"] == seen["inprocess"]
+    same_results(tmp_path / "processes" / "run_0", tmp_path / "inprocess" / "run_0")
+
+
+def test_several_inprocess_environments_step_side_by_side_in_one_process(tmp_path):
+    """What a vector wrapper (SuperSuit's, TorchRL's) does: several in-process environments in one
+    process, stepped in turn, each leaving the files it leaves alone."""
+    envs = [SwarmbedParallelEnv(sets=SMALL, out_dir=tmp_path / f"side_{i}", engine="inprocess") for i in range(3)]
+    try:
+        obs = [env.reset(seed=20 + i)[0] for i, env in enumerate(envs)]
+        while any(env.agents for env in envs):
+            for i, env in enumerate(envs):
+                if env.agents:
+                    obs[i] = env.step({a: 1 for a in env.agents})[0]
+    finally:
+        for env in envs:
+            env.close()
+    for i in range(3):
+        alone = SwarmbedParallelEnv(sets=SMALL, out_dir=tmp_path / f"alone_{i}", engine="inprocess")
+        try:
+            alone.reset(seed=20 + i)
+            while alone.agents:
+                alone.step({a: 1 for a in alone.agents})
+        finally:
+            alone.close()
+        same_results(tmp_path / f"side_{i}" / "run_0", tmp_path / f"alone_{i}" / "run_0")
