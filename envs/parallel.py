@@ -94,9 +94,9 @@ def agent_view(
     copies = delivered_in(inbox)
     heard[[c.sender for c in copies if 0 <= c.sender < n]] = 1
     me = np.array((x, y, obs.heading, obs.speed), dtype=np.float32)
-    view = {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}
+    view: dict[str, np.ndarray] = {"self": me, "tasks": rows, "task_mask": mask, "heard_from": heard}
     if claims:
-        row_of = {task: j for j, task in enumerate(chosen)}
+        row_of: dict[int | None, int] = {task: j for j, task in enumerate(chosen)}
         claimed = np.zeros(max_tasks, dtype=np.float32)
         for c in copies:
             if c.kind == CLAIM and (j := row_of.get(_claimed_task(c.payload))) is not None:

@@ -250,7 +250,7 @@ def test_a_claim_broadcast_through_the_env_reaches_the_others_over_the_radio(tmp
             assert env.action_space("agent_0").n == 2 * k + 1 and len(obs["agent_0"]["action_mask"]) == 2 * k + 1
             while env.agents:
                 # everyone claims its nearest task, out loud
-                last = {a: o for a, o in obs.items()}
+                last = dict(obs)
                 obs, *_ = env.step({a: k + 1 if o["task_mask"][0] else 0 for a, o in obs.items()})
                 trace.append({a: o["claimed"].tolist() for a, o in sorted(obs.items())})
                 # a claim heard is counted against the hearer's own row of that task
@@ -276,7 +276,7 @@ def test_several_inprocess_environments_step_side_by_side_in_one_process(tmp_pat
         while any(env.agents for env in envs):
             for i, env in enumerate(envs):
                 if env.agents:
-                    obs[i] = env.step({a: 1 for a in env.agents})[0]
+                    obs[i] = env.step(dict.fromkeys(env.agents, 1))[0]
     finally:
         for env in envs:
             env.close()
@@ -285,7 +285,7 @@ def test_several_inprocess_environments_step_side_by_side_in_one_process(tmp_pat
         try:
             alone.reset(seed=20 + i)
             while alone.agents:
-                alone.step({a: 1 for a in alone.agents})
+                alone.step(dict.fromkeys(alone.agents, 1))
         finally:
             alone.close()
         same_results(tmp_path / f"side_{i}" / "run_0", tmp_path / f"alone_{i}" / "run_0")
