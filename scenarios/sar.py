@@ -22,7 +22,8 @@ victim): it fails at its start and leaves the robot stuck for ``move_penalty`` s
 it tries again (``move_failure: per_move``, which converges as dt shrinks); ``per_tick`` draws on
 every tick of moving, as before 2026-11-26. In steady state a rescued or expired victim is
 replaced at once; in finite mode it is not. After ``agent_loss_grace`` seconds each robot is lost
-for good with probability ``agent_loss`` per step (tick).
+for good with probability ``agent_loss`` per step: per tick, or per simulated second
+(``agent_loss_per: second``, one draw a tick at 1 - (1 - p)^dt).
 
 For the consensus strategies colours are known when bidding ("bid-then-verify"): their
 observations carry the victims' colours, but a rescue still needs the robot's own inspection.
@@ -119,6 +120,12 @@ class SARParams(BaseModel):
     )
     agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
     agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
+    agent_loss_per: Literal["tick", "second"] = Field(
+        "tick",
+        description="the 'step' agent_loss is a probability per (the text: 'per step'; its SimPy world's steps "
+        "are read as seconds by one caption, 'a specific time step (233 seconds)'): tick (runs before "
+        "2026-11-28) or second (per tick 1 - (1 - p)^dt: the same loss per simulated second at any run.dt)",
+    )
     colors_for_bidding: Literal["auto", "always", "never"] = Field(
         "auto", description="show victims' colours to bidders (auto: when the allocator bids with colours)"
     )
@@ -346,6 +353,8 @@ class SARWorld(VictimRows, World):
         p = self.sc.agent_loss
         if p <= 0 or self.time < self.sc.agent_loss_grace:
             return []
+        if self.sc.agent_loss_per == "second":  # the same draws, each at the chance of a tick's share of a second
+            p = -math.expm1(self.dt * math.log1p(-p)) if p < 1 else 1.0
         return [int(i) for i in np.flatnonzero(self.alive) if self.loss_rng.random() < p]
 
     def _in_cone(self, i: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -11,7 +11,9 @@ from swarmbed.extension.scenario import within
 from swarmbed.scenarios import sar
 from swarmbed.scenarios.kinematics import Limits, step
 from swarmbed.scenarios.sar import ALIVE
-from tests.conftest import experiment
+from tests.conftest import ROOT, experiment
+
+ROOT_EXPERIMENTS = ROOT / "experiments"
 
 
 def MTSRWorld(exp, rng):
@@ -427,3 +429,30 @@ def test_within_agrees_with_hypot_to_the_last_bit():
         ]
         for dx, dy in cases:
             assert np.array_equal(within(dx, dy, reach), np.hypot(dx, dy) <= reach), reach
+
+
+@pytest.mark.parametrize("dt", [0.25, 1.0])
+def test_agent_loss_per_second_loses_robots_at_the_same_rate_per_simulated_second_at_any_tick(dt):
+    """``agent_loss_per: second``: a robot survives a simulated second with probability 1 - p whatever
+    run.dt is (the formula); per tick (the default) it would at dt = 0.25 lose four times as often."""
+    p, robots, seconds = 0.02, 400, 60
+    exp = experiment(
+        f"agents.count={robots}",
+        "scenario.kind=sar",
+        f"run.dt={dt}",
+        f"run.duration={seconds}",
+        f"scenario.agent_loss={p}",
+        "scenario.agent_loss_grace=0",
+        "scenario.agent_loss_per=second",
+        "scenario.victims=1",
+        "allocator.name=tree",
+        base=ROOT_EXPERIMENTS / "sar" / "_base.yaml",
+    )
+    world = resolve_experiment(exp).scenario().make_world(np.random.default_rng(1))
+    for _ in range(int(round(seconds / dt))):
+        for lost in world.draw_losses():
+            world.kill(lost)
+        world.tick += 1
+    survived = world.alive.sum() / robots
+    expected = (1 - p) ** seconds
+    assert abs(survived - expected) <= 4.5 * math.sqrt(expected * (1 - expected) / robots), (survived, expected)
