@@ -84,6 +84,13 @@ class SARParams(BaseModel):
     inspect_fail: float = Field(0.0, ge=0, le=1, description="probability that an inspection fails")
     rescue_fail: float = Field(0.0, ge=0, le=1, description="probability that a rescue fails")
     move_penalty: float = Field(0.5, ge=0, description="seconds a robot is stuck after a failed move")
+    abandon_time: float = Field(
+        0.0,
+        ge=0,
+        description="seconds the 'abandon' action takes (the text: 'the robot executes an \"abandon\" action'; "
+        "no duration given): the robot is busy for it, booked in the time budget as penalty; 0: instant, "
+        "as before 2026-11-28 (docs/reproduction.md section 9, M3)",
+    )
     inspect_time: float = Field(
         INSPECT_TIME,
         ge=0,
@@ -574,6 +581,9 @@ class SARWorld(VictimRows, World):
             self._begin(i, "rescue", v, self.sc.rescue_time)
         elif name == "abandon" and v is not None:
             self.counts["abandons"] += 1
+            if self.sc.abandon_time > 0:  # it takes time: busy, and booked as time lost
+                self.budget.doing(i, PENALTY)
+                self._busy(i, self.sc.abandon_time)
         elif name in ("inspect", "rescue", "goto_task") and v is not None and (r is None or self.vstatus[r] != ALIVE):
             self.stale_actions[i] += 1  # someone was faster, or it expired: not the robot's fault
         elif name not in ("stop", "halt"):  # robots here move at a set speed: halting is stopping

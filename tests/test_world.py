@@ -456,3 +456,29 @@ def test_agent_loss_per_second_loses_robots_at_the_same_rate_per_simulated_secon
     survived = world.alive.sum() / robots
     expected = (1 - p) ** seconds
     assert abs(survived - expected) <= 4.5 * math.sqrt(expected * (1 - expected) / robots), (survived, expected)
+
+
+@pytest.mark.parametrize("abandon_time", [0.0, 5.0])
+def test_abandoning_takes_abandon_time_during_which_the_robot_stays_put(abandon_time):
+    """``scenario.abandon_time``: the robot that abandons a victim is busy that long (whole ticks),
+    booked as penalty; 0 (the default) leaves it free the next tick, as before."""
+    exp = experiment(
+        "scenario.kind=sar",
+        "agents.count=2",
+        "run.dt=0.25",
+        f"scenario.abandon_time={abandon_time}",
+        "allocator.name=tree",
+        base=ROOT_EXPERIMENTS / "sar" / "_base.yaml",
+    )
+    world = resolve_experiment(exp).scenario().make_world(np.random.default_rng(2))
+    world.apply({0: ["abandon", world.base], 1: ["stop"]})  # tick 0
+    assert world.counts["abandons"] == 1
+    first_move = None
+    for _ in range(40):
+        before = world.distance[0]
+        tick = world.tick
+        world.apply({0: ["goto", 30.0, 0.0], 1: ["stop"]})
+        if first_move is None and world.distance[0] > before:
+            first_move = tick
+    assert first_move == (round(abandon_time / 0.25) if abandon_time else 1)
+    assert (world.budget.summary(0.25)["penalty"] > 0) == (abandon_time > 0)
