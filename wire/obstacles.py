@@ -176,15 +176,21 @@ class Walls:
         return len(self.xy)
 
     def crossings(self, px: np.ndarray, py: np.ndarray, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
-        """One row per line p-q, one column per wall: whether the line crosses it."""
+        """One row per line p-q, one column per wall: whether the line crosses it. Only the pairs
+        whose line ends do not lie strictly on one side of the wall's line are tested in full."""
         px, py, qx, qy = (np.asarray(a, dtype=float).reshape(-1) for a in (px, py, qx, qy))
         out = np.zeros((len(px), len(self.xy)), dtype=bool)
         if not len(self.xy):
             return out
         ax, ay, bx, by = self.xy.T
+        vx, vy = bx - ax, by - ay
         for lo in range(0, len(px), self.CHUNK):
             s = slice(lo, lo + self.CHUNK)
-            out[s] = segments_cross(px[s, None], py[s, None], qx[s, None], qy[s, None], ax, ay, bx, by)
+            side_p = np.sign(vx * (py[s, None] - ay) - vy * (px[s, None] - ax))
+            side_q = np.sign(vx * (qy[s, None] - ay) - vy * (qx[s, None] - ax))
+            rows, walls = np.nonzero(side_p * side_q <= 0)
+            at = rows + lo
+            out[at, walls] = segments_cross(px[at], py[at], qx[at], qy[at], ax[walls], ay[walls], bx[walls], by[walls])
         return out
 
     def crossings_among(self, x: np.ndarray, y: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
