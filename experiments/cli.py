@@ -165,7 +165,8 @@ def _live_views(exp, port: int | None) -> list:
     def foxglove(session):
         from swarmbed.experiments.views.live import FoxgloveLive
 
-        view = FoxgloveLive(session.world, exp.run.dt, port)
+        walls = exp.obstacles.compile().lines if exp.obstacles is not None else []
+        view = FoxgloveLive(session.world, exp.run.dt, port, walls=walls)
         print(f"Foxglove: open connection ws://127.0.0.1:{view.port}", file=sys.stderr, flush=True)
         return view
 
@@ -1051,12 +1052,28 @@ def cmd_watch(args: argparse.Namespace) -> int:
     session = _client_session(args, connect_timeout_s=args.wait)  # the run may not be up yet
     if session is None:
         return 2
+    live = None
+    if args.foxglove is not None:
+        from swarmbed.experiments.views.live import StatusFoxglove
+        from swarmbed.experiments.views.recording import RecordingError
+
+        try:
+            live = StatusFoxglove(args.foxglove)
+        except RecordingError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        print(f"Foxglove: open connection ws://127.0.0.1:{live.port}", file=sys.stderr, flush=True)
     with session:
         try:
-            return watch(session, args.run, wait=args.wait, map_file=Path(args.map) if args.map else None)
+            return watch(
+                session, args.run, wait=args.wait, map_file=Path(args.map) if args.map else None, foxglove=live
+            )
         except WatchError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        finally:
+            if live is not None:
+                live.close()
 
 
 def register_watch(sub: Subparsers) -> None:
@@ -1067,6 +1084,15 @@ def register_watch(sub: Subparsers) -> None:
         "--wait", type=float, default=10.0, help="seconds to wait for the hub to listen and the run to answer"
     )
     wat.add_argument("--map", metavar="FILE.html", help="also keep a map of the run in FILE.html (reloads itself)")
+    wat.add_argument(
+        "--foxglove",
+        nargs="?",
+        const=8765,
+        type=int,
+        metavar="PORT",
+        help="also serve the run to Foxglove on 127.0.0.1:PORT (default 8765; 0: a free port): agents, poses "
+        "and markers from the run's progress samples (the viewers extra)",
+    )
     add_zenoh_args(wat)
     wat.set_defaults(func=cmd_watch)
 

@@ -97,3 +97,53 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
     assert "http-equiv='refresh'" in page and "tick 2,500 of 2,500" in page
     assert page.count("<circle") == 6 and page.count("<title>agent") == 6
     assert page.count("<rect") == summary["tasks_total"] - summary["tasks_completed"]
+
+
+def test_watch_serves_a_running_run_to_foxglove(tmp_path, operator):
+    """``swarmbed watch --foxglove 0``, an operator's watcher started while the run goes, serves the
+    run to a WebSocket client speaking Foxglove's protocol: the advertised channels, and poses of
+    every agent decoded with the advertised schema, at positions inside the quick start's floor."""
+    import base64
+    import json
+
+    import websocket
+    from mcap.records import Schema
+    from mcap_protobuf.decoder import DecoderFactory
+
+    endpoint = free_loopback_endpoint()
+    results: dict = {}
+    runner = threading.Thread(target=_run_in_background, args=(tmp_path, endpoint, results, operator))
+    runner.start()
+    watcher = subprocess.Popen(
+        [sys.executable, "-m", "swarmbed", "watch", "--connect", endpoint, "--wait", "30", *operator.args]
+        + ["--foxglove", "0"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        line = watcher.stderr.readline()
+        port = int(re.search(r"ws://127\.0\.0\.1:(\d+)", line).group(1))
+        ws = websocket.create_connection(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], timeout=30)
+        channels: dict[str, dict] = {}
+        while not {"/agents", "/agents/poses", "/markers"} <= set(channels):
+            message = json.loads(ws.recv())
+            if message["op"] == "advertise":
+                channels.update({c["topic"]: c for c in message["channels"]})
+        poses = channels["/agents/poses"]
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 3, "channelId": poses["id"]}]}))
+        frame = ws.recv()
+        while not isinstance(frame, bytes):
+            frame = ws.recv()
+        schema = Schema(id=1, name=poses["schemaName"], encoding="protobuf", data=base64.b64decode(poses["schema"]))
+        decoded = DecoderFactory().decoder_for("protobuf", schema)(frame[13:])
+        assert len(decoded.poses) == 6
+        assert all(0 <= p.position.x <= 200 and 0 <= p.position.y <= 150 for p in decoded.poses)
+        ws.close()
+        assert watcher.wait(timeout=180) == 0
+    finally:
+        if watcher.poll() is None:
+            watcher.kill()
+            watcher.wait()
+        runner.join(timeout=180)
+    assert results["run"].summary["ticks"] == 2500

@@ -1,4 +1,5 @@
-"""``swarmbed run --foxglove [PORT]``: the recording's channels served live while the run goes.
+"""``swarmbed run --foxglove [PORT]`` and ``swarmbed watch --foxglove [PORT]``: the recording's
+channels served live while the run goes.
 
 A hook of the engine's tick loop (:class:`~swarmbed.engine.TickHook`) that starts Foxglove's
 WebSocket server (its SDK, the one that writes the MCAP recordings) on 127.0.0.1 and logs, at each
@@ -6,17 +7,26 @@ tick as the transport carries it, what :mod:`.recording` writes after a run: ``/
 ``/agents/poses`` (each agent with its heading, from its observation), ``/markers`` (tasks or
 victims as they appear and vanish) and ``/radio`` (the copies delivered at this tick, as lines
 from sender to receiver). Foxglove (or Lichtblick) connects with "Open connection" to
-``ws://127.0.0.1:PORT``. Nothing feeds back into the run; a run without it pays nothing.
+``ws://127.0.0.1:PORT``. Nothing feeds back into the run; a run without it pays nothing. A run with
+obstacles also has ``/walls`` (its walls as lines, again every 50 ticks for a viewer that joins late).
+
+``watch --foxglove`` (:class:`StatusFoxglove`) serves a run already under way, from anywhere its
+hub is reachable, out of the progress samples ``swarmbed watch`` reads: ``/agents``,
+``/agents/poses`` (headings from the direction each agent last moved) and ``/markers``, at the
+samples' pace (about one a wall second), without the radio's lines (an operator does not read the
+agents' inboxes).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
 import pandas as pd
 
 from swarmbed.engine.hooks import TickHook
+from swarmbed.experiments.views.colours import LABEL_COLORS
 from swarmbed.experiments.views.recording import (
     EPOCH_NS,
     FRAME,
@@ -24,34 +34,59 @@ from swarmbed.experiments.views.recording import (
     _agent_entities,
     _marker_update,
     _radio_update,
+    _rgba,
     _stamp,
+    _walls_update,
 )
 from swarmbed.extension.scenario import World
 from swarmbed.wire.codec import WorldSample, delivered_in
 from swarmbed.wire.observation import Observation
+from swarmbed.wire.status import RunStatus
 
 #: Foxglove's default WebSocket port
 DEFAULT_PORT = 8765
 TOPICS = ("/agents", "/agents/poses", "/markers", "/radio")
+#: ticks between two copies of /walls
+WALLS_EVERY = 50
+
+
+def _serve(host: str, port: int) -> tuple[Any, Any, dict[str, Any]]:
+    """Foxglove's server on host:port (0: a free one) with the live view's scene channels."""
+    try:
+        import foxglove
+        from foxglove import channels
+    except ImportError:
+        raise RecordingError("a live view needs Foxglove's SDK: pip install 'swarmbed[viewers]'") from None
+    context = foxglove.Context()
+    server = foxglove.start_server(name="swarmbed", host=host, port=port, context=context)
+    made = {
+        "/agents": channels.SceneUpdateChannel("/agents", context=context),
+        "/agents/poses": channels.PosesInFrameChannel("/agents/poses", context=context),
+        "/markers": channels.SceneUpdateChannel("/markers", context=context),
+    }
+    return context, server, made
 
 
 class FoxgloveLive(TickHook):
     """Serves ``world``'s run on ``host:port`` (port 0: a free one, then :attr:`port`) until it ends."""
 
-    def __init__(self, world: World, dt: float, port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> None:
-        try:
-            import foxglove
-            from foxglove import channels
-        except ImportError:
-            raise RecordingError("a live view needs Foxglove's SDK: pip install 'swarmbed[viewers]'") from None
+    def __init__(
+        self,
+        world: World,
+        dt: float,
+        port: int = DEFAULT_PORT,
+        host: str = "127.0.0.1",
+        walls: list[tuple[tuple[float, float], tuple[float, float]]] | None = None,
+    ) -> None:
+        from foxglove import channels
+
         self.world, self.dt = world, dt
-        self.context = foxglove.Context()
-        self.server = foxglove.start_server(name="swarmbed", host=host, port=port, context=self.context)
+        self.context, self.server, made = _serve(host, port)
         self.port = self.server.port
-        self.agents = channels.SceneUpdateChannel("/agents", context=self.context)
-        self.poses = channels.PosesInFrameChannel("/agents/poses", context=self.context)
-        self.markers = channels.SceneUpdateChannel("/markers", context=self.context)
+        self.agents, self.poses, self.markers = made["/agents"], made["/agents/poses"], made["/markers"]
         self.radio = channels.SceneUpdateChannel("/radio", context=self.context)
+        self.walls = list(walls or [])
+        self.walls_channel = channels.SceneUpdateChannel("/walls", context=self.context) if self.walls else None
         self.shown: dict[int, tuple[float, float, str]] = {}  # the markers on the map as last sent
         self.size = 1.0
 
@@ -78,6 +113,8 @@ class FoxgloveLive(TickHook):
         self.agents.log(SceneUpdate(entities=entities), log_time=log_time)
         self.poses.log(PosesInFrame(timestamp=stamp, frame_id=FRAME, poses=poses), log_time=log_time)
         self._markers(stamp, log_time)
+        if self.walls_channel is not None and k % WALLS_EVERY == 0:
+            self.walls_channel.log(_walls_update(self.walls, stamp), log_time=log_time)
         where = dict(zip(sample.ids, zip(sample.xs, sample.ys)))
         copies = [(d.sender, r, "delivered") for r, data in inboxes.items() for d in delivered_in(data)]
         if copies:
@@ -95,6 +132,71 @@ class FoxgloveLive(TickHook):
 
     def run_ends(self) -> None:
         self.close()
+
+    def close(self) -> None:
+        self.server.stop()
+
+
+class StatusFoxglove:
+    """``swarmbed watch --foxglove``: a running run's progress samples, served to Foxglove."""
+
+    def __init__(self, port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> None:
+        self.context, self.server, made = _serve(host, port)
+        self.port = self.server.port
+        self.agents, self.poses, self.markers = made["/agents"], made["/agents/poses"], made["/markers"]
+        self.last_tick = -2
+        self.where: dict[int, tuple[float, float]] = {}  # each agent's position in the last sample
+        self.heading: dict[int, float] = {}
+        self.size = 0.0
+
+    def show(self, status: RunStatus) -> None:
+        """Log ``status`` if it is a tick not shown yet."""
+        from foxglove.messages import (
+            CubePrimitive,
+            Pose,
+            PosesInFrame,
+            Quaternion,
+            SceneEntity,
+            SceneUpdate,
+            Vector3,
+        )
+
+        if status.tick <= self.last_tick:
+            return
+        self.last_tick = status.tick
+        stamp = _stamp(1, status.time)
+        log_time = EPOCH_NS + round(status.time * 1e9)
+        for agent, x, y in status.positions:  # heading: the direction it moved since the last sample
+            before = self.where.get(agent)
+            if before is not None and (x, y) != before:
+                self.heading[agent] = math.atan2(y - before[1], x - before[0])
+            self.where[agent] = (x, y)
+        rows = pd.DataFrame(
+            {
+                "agent": [a for a, _, _ in status.positions],
+                "x": [x for _, x, _ in status.positions],
+                "y": [y for _, _, y in status.positions],
+                "heading": [self.heading.get(a, 0.0) for a, _, _ in status.positions],
+                "label": [status.labels.get(a, "") for a, _, _ in status.positions],
+            }
+        )
+        if not self.size and len(rows):
+            span = max(float(rows["x"].max() - rows["x"].min()), float(rows["y"].max() - rows["y"].min()), 1.0)
+            self.size = span / 100
+        entities, poses = _agent_entities(rows, stamp, self.size or 1.0)
+        self.agents.log(SceneUpdate(entities=entities), log_time=log_time)
+        self.poses.log(PosesInFrame(timestamp=stamp, frame_id=FRAME, poses=poses), log_time=log_time)
+        size = self.size or 1.0
+        cubes = [
+            CubePrimitive(
+                pose=Pose(position=Vector3(x=x, y=y, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+                size=Vector3(x=size, y=size, z=size),
+                color=_rgba(LABEL_COLORS.get(label, "#999999")),
+            )
+            for x, y, label in status.markers
+        ]
+        entity = SceneEntity(timestamp=stamp, frame_id=FRAME, id="markers", cubes=cubes)
+        self.markers.log(SceneUpdate(entities=[entity]), log_time=log_time)
 
     def close(self) -> None:
         self.server.stop()

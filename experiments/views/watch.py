@@ -18,6 +18,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import zenoh
 from rich.console import Console, Group
@@ -226,8 +227,10 @@ def watch(
     refresh: float = 4.0,
     wait: float = 10.0,
     map_file: Path | None = None,
+    foxglove: Any = None,
 ) -> int:
-    """Show one run until it ends (0) or Ctrl-C (130); 1 when no such run answers within ``wait`` s."""
+    """Show one run until it ends (0) or Ctrl-C (130); 1 when no such run answers within ``wait`` s.
+    ``foxglove``: a :class:`~swarmbed.experiments.views.live.StatusFoxglove` each sample is shown on."""
     console = console or Console()
     if run_id is None:
         deadline = time.monotonic() + wait
@@ -253,6 +256,8 @@ def watch(
     def draw_map() -> None:
         if map_file is not None and view.status is not None:
             write_map(view.status, map_file, bounds)
+        if foxglove is not None and view.status is not None:
+            foxglove.show(view.status)
 
     try:
         if console.is_terminal:
