@@ -12,9 +12,10 @@ topic                      type                                    what
 ``/robot_<i>/odom``        ``nav_msgs/msg/Odometry``               robot i's pose and speed along its heading
 ``/robots``                ``geometry_msgs/msg/PoseArray``         every robot's pose
 ``/radio``                 ``visualization_msgs/msg/MarkerArray``  the tick's delivered copies as lines
-``/walls``                 ``visualization_msgs/msg/MarkerArray``  the obstacles' walls (with obstacles:)
+``/walls``                 ``visualization_msgs/msg/MarkerArray``  the obstacles' walls, once, latched
 ``/robot_<i>/path``        ``nav_msgs/msg/Path``                   with ``ros2.path``: its last poses
 ``/tasks``                 ``visualization_msgs/msg/MarkerArray``  every task on the map, its holders
+                                                                   (transient local: late joiners get it)
 ``/robot_<i>/radio/       ``swarmbed_msgs/msg/RadioInbox``        what robot i received this tick
 received``
 =========================  ======================================  ==================================
@@ -44,7 +45,15 @@ import zenoh
 from swarmbed.engine.hooks import TickHook
 from swarmbed.extension.actions import ActionSpec
 from swarmbed.wire.codec import Delivered, WireError, WorldSample, delivered_in
-from swarmbed.wire.ros2 import NODE_PREFIX, RADIO_INBOX, SENSOR_QOS, TASK_COMMAND, TASK_OBSERVATION, stamp
+from swarmbed.wire.ros2 import (
+    LATCHED_QOS,
+    NODE_PREFIX,
+    RADIO_INBOX,
+    SENSOR_QOS,
+    TASK_COMMAND,
+    TASK_OBSERVATION,
+    stamp,
+)
 from swarmbed.wire.ros2_node import Ros2Node
 from swarmbed.wire.schema import Ros2Section
 
@@ -57,8 +66,6 @@ TF, ODOMETRY, POSE_ARRAY = "tf2_msgs/msg/TFMessage", "nav_msgs/msg/Odometry", "g
 PATH = "nav_msgs/msg/Path"
 RADIO_LINES = (0.12, 0.47, 0.71, 0.8)  # RGBA of a delivered copy's line, sender to receiver
 WALL_LINES = (0.23, 0.23, 0.23, 1.0)  # RGBA of the obstacles' walls
-#: published ticks between two copies of /walls (volatile: a display started late gets the next)
-WALLS_EVERY = 50
 TASK_HEIGHT = 2.0  # metres of a task's cylinder; its diameter is the arrival radius, at least 1
 FREE, HELD = (0.6, 0.6, 0.6, 0.8), (1.0, 0.55, 0.0, 0.9)  # RGBA of a task nobody / somebody pursues
 
@@ -78,13 +85,14 @@ class Ros2Out:
         self.node = Ros2Node(session, settings.domain, NODE_NAME)
         # the obstacles' walls as one line list (a run with obstacles: only)
         self.walls = list(walls)
-        self.walls_topic = self.node.publisher("/walls", MARKERS) if self.walls else None
-        self._published = 0
+        # once, latched: a display that starts late gets them from the publisher's cache
+        self.walls_topic = self.node.publisher("/walls", MARKERS, LATCHED_QOS) if self.walls else None
         self.dt = dt
         self.types = t = self.node.types
         self.settings = settings
         self.clock = self.node.publisher("/clock", CLOCK, SENSOR_QOS)
-        self.tasks = self.node.publisher("/tasks", MARKERS)
+        # latched, as ROS keeps such state: a display that starts late gets the last markers
+        self.tasks = self.node.publisher("/tasks", MARKERS, LATCHED_QOS)
         self.poses = [self.node.publisher(f"/robot_{i}/pose", POSE) for i in range(n_agents)]
         self.radio = [self.node.publisher(f"/robot_{i}/radio/received", RADIO_INBOX) for i in range(n_agents)]
         # what RViz2's TF, Odometry, PoseArray and Marker displays read
@@ -125,9 +133,9 @@ class Ros2Out:
         if tick % self.settings.every:
             return
         header = self.Header(stamp=now, frame_id=self.settings.frame_id)
-        if self.walls_topic is not None and self._published % WALLS_EVERY == 0:
+        if self.walls_topic is not None:
             self.node.put(self.walls_topic, self._wall_lines(header))
-        self._published += 1
+            self.walls_topic = None  # sent: the cache keeps it
         motion = motion or {}
         poses, transforms = [], []
         for i, x, y in zip(*positions):

@@ -15,7 +15,6 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from swarmbed.coordinator.ros2 import WALLS_EVERY
 from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity, write_credentials
@@ -127,8 +126,8 @@ def test_every_topic_is_on_rmw_zenohs_key_with_its_type_hash_and_attachment(seen
         package, _, name = ros_type.split("/")
         key = f"{DOMAIN}{topic}/{package}::msg::dds_::{name}_/{types.hash(ros_type)}"
         assert {k for k, _, _ in samples} == {key}, topic
-        # /tasks: when it changed; /walls: every WALLS_EVERY published ticks, from the first
-        published = {"/tasks": len(samples), "/walls": -(-ticks // WALLS_EVERY)}.get(topic, ticks)
+        # /tasks: when it changed; /walls: once (latched)
+        published = {"/tasks": len(samples), "/walls": 1}.get(topic, ticks)
         assert len(samples) == published, topic  # one a tick, none lost on loopback, none forged
         # the publisher's token names the same topic, type and hash; the attachment's GID is its hash
         token = tokens[topic]
@@ -453,3 +452,56 @@ def test_a_tick_that_waits_for_a_node_says_so_and_check_counts_the_wait(tmp_path
         timeout=120,
     )
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "command_timeout" in bad.stderr
+
+
+def test_a_display_that_starts_late_gets_the_last_tasks_markers(tmp_path, operator):
+    """/tasks is transient local, as rmw_zenoh makes such a topic (an advanced publisher with a cache
+    of one): an operator's subscription that joins after the run published it, as rmw_zenoh's
+    advanced subscriber does (history, late-publisher detection), is handed the markers at once;
+    a plain (volatile) subscription joined at the same moment gets nothing, for nothing changed.
+    The tasks never change here: the robots run no allocator, so no one works a task."""
+    from zenoh import ext
+
+    endpoint = free_loopback_endpoint()
+    exp = experiment(
+        "agents.count=3",
+        "allocator.name=noop",
+        "run.clock=realtime",
+        "run.duration=12",
+        "run.stop_when_done=false",
+        f"ros2={{domain: {DOMAIN}}}",
+    )
+    result: list = []
+    runner = threading.Thread(
+        target=lambda: result.append(
+            run_experiment(
+                exp, tmp_path / "run", progress=False, hub=HubOptions(listen=[endpoint], admit=[operator.identity])
+            )
+        )
+    )
+    runner.start()
+    types = Ros2Types()
+    key = (
+        f"{DOMAIN}/tasks/visualization_msgs::msg::dds_::MarkerArray_/{types.hash('visualization_msgs/msg/MarkerArray')}"
+    )
+    time.sleep(5)  # well after tick 0, when /tasks was published (and never again)
+    session = zenoh.open(zenoh_config("client", [endpoint], credentials=str(operator.path)))
+    late, plain = [], []
+    history = ext.HistoryConfig(detect_late_publishers=True, max_samples=1)
+    advanced = ext.declare_advanced_subscriber(
+        session, key, lambda s: late.append(s.payload.to_bytes()), history=history
+    )
+    volatile = session.declare_subscriber(key, lambda s: plain.append(s.payload.to_bytes()))
+    deadline = time.monotonic() + 5
+    while not late and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)
+    advanced.undeclare()
+    volatile.undeclare()
+    session.close()
+    runner.join(timeout=60)
+    assert result and result[0].summary["ticks"] == 12
+    assert len(late) == 1 and plain == []
+    markers = types.deserialize(late[0], "visualization_msgs/msg/MarkerArray").markers
+    cubes = [m for m in markers if m.ns == "tasks"]
+    assert len(cubes) == result[0].summary["tasks_total"]

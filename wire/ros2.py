@@ -73,6 +73,7 @@ class Qos:
 
 RMW_ZENOH_DEFAULT_QOS = Qos(RELIABLE, VOLATILE, KEEP_LAST, 42)  # qos.cpp's RMW_ZENOH_DEFAULT_*
 SENSOR_QOS = Qos(BEST_EFFORT, VOLATILE, KEEP_LAST, 1)  # /clock, as rclcpp's ClockQoS
+LATCHED_QOS = Qos(RELIABLE, TRANSIENT_LOCAL, KEEP_LAST, 1)  # /tasks: the last state for late joiners (as /tf_static)
 
 
 def dds_type_name(ros_type: str) -> str:

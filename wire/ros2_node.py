@@ -3,6 +3,11 @@ publishers and subscriptions each with its own token, GID and sequence numbers.
 
 The hub (the coordinator's session) and the netem proxy each hold one when a run publishes ROS 2
 topics (``docs/ros2.md``); the conventions themselves are in :mod:`swarmbed.wire.ros2`.
+
+A publisher whose QoS is TRANSIENT_LOCAL is a Zenoh *advanced* publisher with a cache of ``depth``
+samples and publisher detection, as rmw_zenoh declares one (ros2/rmw_zenoh#368, which replaced the
+publication cache): a subscription that joins late (rmw_zenoh's advanced subscriber, with history
+and late-publisher detection) is handed the last ``depth`` samples.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import zenoh
 from swarmbed.wire.ros2 import (
     PUBLISHER,
     SUBSCRIPTION,
+    TRANSIENT_LOCAL,
     Qos,
     Ros2Types,
     encode_attachment,
@@ -33,7 +39,7 @@ class Topic:
     """One publisher: its Zenoh publisher, token, GID and sequence number."""
 
     ros_type: str
-    publisher: zenoh.Publisher
+    publisher: Any  # a zenoh.Publisher, or a zenoh.ext.AdvancedPublisher for TRANSIENT_LOCAL
     token: zenoh.LivelinessToken
     gid: bytes
     sequence: int = 0
@@ -61,13 +67,22 @@ class Ros2Node:
         return topic_key(self.domain, topic, ros_type, self.types.hash(ros_type))
 
     def publisher(self, topic: str, ros_type: str, qos: Qos | None = None) -> Topic:
-        token = self._token(PUBLISHER, topic, ros_type, qos or Qos())
-        made = Topic(
-            ros_type,
-            self.session.declare_publisher(self.key(topic, ros_type), congestion_control=zenoh.CongestionControl.DROP),
-            self.session.liveliness().declare_token(token),
-            gid(token),
-        )
+        qos = qos or Qos()
+        token = self._token(PUBLISHER, topic, ros_type, qos)
+        key, drop = self.key(topic, ros_type), zenoh.CongestionControl.DROP
+        if qos.durability == TRANSIENT_LOCAL:
+            from zenoh import ext
+
+            publisher = ext.declare_advanced_publisher(
+                self.session,
+                key,
+                congestion_control=drop,
+                cache=ext.CacheConfig(max_samples=qos.depth),
+                publisher_detection=True,
+            )
+        else:
+            publisher = self.session.declare_publisher(key, congestion_control=drop)
+        made = Topic(ros_type, publisher, self.session.liveliness().declare_token(token), gid(token))
         self._entities += [made.publisher, made.token]
         return made
 
