@@ -70,6 +70,7 @@ class Ros2Node:
         qos = qos or Qos()
         token = self._token(PUBLISHER, topic, ros_type, qos)
         key, drop = self.key(topic, ros_type), zenoh.CongestionControl.DROP
+        publisher: Any
         if qos.durability == TRANSIENT_LOCAL:
             from zenoh import ext
 
