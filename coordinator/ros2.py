@@ -52,6 +52,7 @@ from swarmbed.wire.ros2 import (
     SENSOR_QOS,
     TASK_COMMAND,
     TASK_OBSERVATION,
+    Ros2Types,
     stamp,
 )
 from swarmbed.wire.ros2_node import Ros2Node
@@ -82,7 +83,7 @@ class Ros2Out:
         dt: float = 1.0,
         walls: Sequence[tuple[tuple[float, float], tuple[float, float]]] = (),
     ) -> None:
-        self.node = Ros2Node(session, settings.domain, NODE_NAME)
+        self.node = Ros2Node(session, settings.domain, NODE_NAME, Ros2Types(settings.distro))
         # the obstacles' walls as one line list (a run with obstacles: only)
         self.walls = list(walls)
         # once, latched: a display that starts late gets them from the publisher's cache

@@ -12,7 +12,7 @@ import numpy as np
 import zenoh
 
 from swarmbed.wire.codec import BROADCAST
-from swarmbed.wire.ros2 import NODE_PREFIX, RADIO_OUTBOX, stamp
+from swarmbed.wire.ros2 import NODE_PREFIX, RADIO_OUTBOX, Ros2Types, stamp
 from swarmbed.wire.ros2_node import Ros2Node
 from swarmbed.wire.schema import NetemSpec
 
@@ -23,7 +23,7 @@ class Ros2Outboxes:
     def __init__(self, session: zenoh.Session, spec: NetemSpec) -> None:
         assert spec.ros2 is not None
         self.settings, self.dt = spec.ros2, spec.dt
-        self.node = Ros2Node(session, spec.ros2.domain, NODE_NAME)
+        self.node = Ros2Node(session, spec.ros2.domain, NODE_NAME, Ros2Types(spec.ros2.distro))
         self.sent = [self.node.publisher(f"/robot_{i}/radio/sent", RADIO_OUTBOX) for i in range(spec.agents)]
         t = self.node.types
         self.Header, self.Outbox = t.cls("std_msgs/msg/Header"), t.cls(RADIO_OUTBOX)

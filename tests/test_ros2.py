@@ -163,3 +163,33 @@ def test_the_shipped_rviz_configuration_shows_topics_the_run_publishes():
     for topic in topics:
         assert f'"{topic}"' in source or 'f"/robot_{i}/odom"' in source, topic
     assert {d["Class"] for d in manager["Displays"]} >= {"rviz_default_plugins/TF", "rviz_default_plugins/PoseArray"}
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy", "kilted", "lyrical", "rolling"])
+def test_each_distribution_s_keys_and_cdr_are_rosbags_store_of_it(distro):
+    """``ros2.distro``: the type hash in keys and tokens is the one rosidl computes from that
+    distribution's definitions (rosbags' store of it, asked directly here), and Humble's is
+    rmw_zenoh's placeholder; a message serialised for the distribution decodes with its store."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from swarmbed.wire.ros2 import DISTRO_STORES, NO_TYPE_HASH
+
+    types = Ros2Types(distro)
+    reference = get_typestore(getattr(Stores, DISTRO_STORES[distro]))
+    for ros_type in ("visualization_msgs/msg/MarkerArray", "nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage"):
+        expected = NO_TYPE_HASH if distro == "humble" else reference.hash_rihs01(ros_type)
+        assert types.hash(ros_type) == expected
+        key = topic_key(0, "/x", ros_type, types.hash(ros_type))
+        assert key.endswith("/" + expected)
+    clock = types.cls("rosgraph_msgs/msg/Clock")(clock=stamp(types, 12.5))
+    decoded = reference.deserialize_cdr(types.serialize(clock, "rosgraph_msgs/msg/Clock"), "rosgraph_msgs/msg/Clock")
+    assert (decoded.clock.sec, decoded.clock.nanosec) == (12, 500_000_000)
+
+
+def test_a_distribution_rosbags_does_not_offer_is_refused_in_one_line():
+    from swarmbed.experiments.launch.config import ConfigError
+    from tests.conftest import experiment
+
+    with pytest.raises(ConfigError) as exc:
+        experiment("ros2={distro: iron}")
+    assert "ros2.distro" in str(exc.value) and len(str(exc.value).splitlines()) == 1

@@ -18,8 +18,9 @@ beside each:
   delta against its default profile (``qos_to_keyexpr``, defaults in ``qos.cpp``). An entity's GID
   is the XXH3-128 hash of its token (:func:`gid`), as rmw_zenoh derives it.
 
-Type hashes are what ROS 2 Iron and newer put in keys; rmw_zenoh exists from Jazzy on, which is
-therefore the oldest distribution this speaks to (``docs/ros2.md``).
+Type hashes are what ROS 2 Iron and newer put in keys, from the message definitions of the
+distribution named in ``ros2.distro`` (rosbags' store of it); on Humble, whose rosidl has none,
+rmw_zenoh writes ``TypeHashNotSupported`` in their place (``docs/ros2.md``).
 
 Nothing here opens a session or needs a ROS installation; ``rosbags`` and ``xxhash`` come with the
 ``ros2`` extra and are imported only when a run asks for ROS 2.
@@ -221,23 +222,40 @@ OUR_TYPES = {
 }
 
 
-class Ros2Types:
-    """CDR and type hashes for the messages a run publishes: rosbags' Jazzy type store plus ours."""
+#: ``ros2.distro`` -> rosbags' type store of that distribution (rolling: its latest)
+DISTRO_STORES = {
+    "humble": "ROS2_HUMBLE",
+    "jazzy": "ROS2_JAZZY",
+    "kilted": "ROS2_KILTED",
+    "lyrical": "ROS2_LYRICAL",
+    "rolling": "LATEST",
+}
+#: what rmw_zenoh puts where a type hash goes on Humble, whose rosidl has none
+NO_TYPE_HASH = "TypeHashNotSupported"
 
-    def __init__(self) -> None:
+
+class Ros2Types:
+    """CDR and type hashes for the messages a run publishes: rosbags' type store of one
+    distribution (``distro``, Jazzy by default) plus ours."""
+
+    def __init__(self, distro: str = "jazzy") -> None:
         try:
             from rosbags.typesys import Stores, get_types_from_msg, get_typestore
         except ImportError as exc:
             raise ImportError(EXTRA_HINT) from exc
-        self.store = get_typestore(Stores.ROS2_JAZZY)
+        if distro not in DISTRO_STORES:
+            raise ValueError(f"ros2.distro {distro!r}: one of {', '.join(DISTRO_STORES)}")
+        self.distro = distro
+        self.store = get_typestore(getattr(Stores, DISTRO_STORES[distro]))
         for name, text in OUR_TYPES.items():
             self.store.register(get_types_from_msg(text, name))
         self._hashes: dict[str, str] = {}
 
     def hash(self, ros_type: str) -> str:
-        """``RIHS01_<sha256>``, as rosidl computes it (REP-2016)."""
+        """``RIHS01_<sha256>``, as rosidl computes it (REP-2016) from this distribution's
+        definition; on Humble, which has no type hashes, rmw_zenoh's placeholder."""
         if ros_type not in self._hashes:
-            self._hashes[ros_type] = self.store.hash_rihs01(ros_type)
+            self._hashes[ros_type] = NO_TYPE_HASH if self.distro == "humble" else self.store.hash_rihs01(ros_type)
         return self._hashes[ros_type]
 
     def serialize(self, msg: Any, ros_type: str) -> bytes:

@@ -218,6 +218,11 @@ class Ros2Section(Strict):
         le=3600,
         description="allocator ros2, lock-step: wall seconds a tick waits for every robot's command (at most 3600)",
     )
+    distro: Literal["humble", "jazzy", "kilted", "lyrical", "rolling"] = Field(
+        "jazzy",
+        description="the ROS 2 distribution whose message definitions and type hashes the keys carry (rosbags' "
+        "store of it; rolling: rosbags' latest); humble's keys carry rmw_zenoh's TypeHashNotSupported",
+    )
 
 
 class Experiment(Strict):
