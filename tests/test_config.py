@@ -293,3 +293,37 @@ def test_a_centralized_allocators_leader_is_one_of_the_runs_agents():
     assert (
         cfg.load(QUICKSTART, ["agents.count=5", "allocator={name: sga, leader: 4}"]).allocator.params()["leader"] == 4
     )
+
+
+def test_names_are_resolved_once_where_the_experiment_is_checked_and_again_only_for_an_edited_file(
+    tmp_path, monkeypatch
+):
+    """config.load resolves the scenario and allocator names and the experiment carries what they
+    resolved to: the plan, the CLI's summary and refusals ask resolve_experiment, which resolves
+    nothing again, unless a plugin file named by path was edited since (its digest) or the names
+    changed (a copy with another allocator)."""
+    from swarmbed.plugins import registry
+
+    calls: list[str] = []
+    real = registry.resolve
+
+    def counting(name, *args, **kwargs):
+        calls.append(name)
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(cfg, "resolve", counting)
+    exp = cfg.load(QUICKSTART)
+    loaded = len(calls)
+    for _ in range(3):
+        assert resolve_experiment(exp).allocator_cls.__name__ == "FirstClaimedGreedy"
+    assert len(calls) == loaded, "resolve_experiment resolved the names again"
+    other = exp.model_copy(update={"allocator": cfg.AllocatorSection(name="nearest")})
+    assert resolve_experiment(other).allocator_cls is not resolve_experiment(exp).allocator_cls
+    assert len(calls) == loaded + 1
+    # a plugin given by path: edited after the check, it is resolved (and checked) anew
+    plugin = tmp_path / "mine.py"
+    plugin.write_text("from swarmbed.plugins.nearest import NearestTask\n\n\nclass Mine(NearestTask):\n    pass\n")
+    mine = cfg.load(QUICKSTART, [f"allocator.name={plugin}:Mine"])
+    first = resolve_experiment(mine).targets.digests
+    plugin.write_text(plugin.read_text() + "# edited\n")
+    assert resolve_experiment(mine).targets.digests != first

@@ -16,7 +16,15 @@ from __future__ import annotations
 import re
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    SerializerFunctionWrapHandler,
+    model_serializer,
+    model_validator,
+)
 
 from swarmbed.wire.obstacles import ObstaclesSection
 from swarmbed.wire.radio import NetworkSection, WallsSection
@@ -258,6 +266,9 @@ class Experiment(Strict):
     obstacles: ObstaclesSection | None = Field(
         None, description="walls and polygons that block motion, sight and the radio (docs/walls.md); null: open ground"
     )
+    #: what the launcher resolved the scenario and allocator names to when it checked this experiment
+    #: (``swarmbed.experiments.launch.config.resolve_experiment`` reads it; never serialised)
+    _resolved: Any = PrivateAttr(default=None)
 
     @property
     def ticks(self) -> int:

@@ -124,36 +124,9 @@ def access_rules(
     operator_rules = ["operator-read", "operator-tokens", "operator-ask", "operator-find", "operator-monitor"]
     netem_ros2: list[str] = []
     if ros2_domain is not None:
-        graph = f"{ROS2_ADMIN_SPACE}/{ros2_domain}/**"
-        history = f"{ros2_domain}/**/@adv/**"
-        rules += [
-            _allow("ros2-read", ["declare_subscriber"], [f"{ros2_domain}/**"]),
-            _allow("ros2-graph", ["declare_liveliness_subscriber", "liveliness_query", "liveliness_token"], [graph]),
-            # `**` never matches an `@` chunk: the graph's tokens need their own way out
-            _allow("ros2-deliver", EVERY_MESSAGE, [graph], flow="egress"),
-            # a late subscription to a transient-local topic (/tasks) finds the advanced publisher's
-            # token and asks its cache, below the topic's key under @adv
-            _allow("ros2-history", ["declare_liveliness_subscriber", "liveliness_query", "query"], [history]),
-            _allow("ros2-history-deliver", EVERY_MESSAGE, [history], flow="egress"),
-        ]
-        # ... but never a token of the run's own nodes (/swarmbed, /swarmbed_radio): a viewer declares
-        # its own node's; one that dropped the hub's would tell every ROS 2 node the run had ended
-        ours = f"{ROS2_ADMIN_SPACE}/{ros2_domain}/*/*/*/*/*/*/{ROS2_NODE_PREFIX}$*/**"
-        rules.append({**_allow("ros2-not-ours", ["liveliness_token"], [ours]), "permission": "deny"})
-        operator_rules += [
-            "ros2-read",
-            "ros2-graph",
-            "ros2-deliver",
-            "ros2-history",
-            "ros2-history-deliver",
-            "ros2-not-ours",
-        ]
-        rules.append(_allow("ros2-command", ["put"], [f"{ros2_domain}/robot_$*/cmd/**"]))
-        rules += [  # the proxy's own ROS 2 node publishes what each robot sent
-            _allow("netem-ros2", ["put"], [f"{ros2_domain}/robot_$*/radio/sent/**"]),
-            _allow("netem-ros2-graph", ["liveliness_token"], [graph]),
-        ]
-        netem_ros2 = ["netem-ros2", "netem-ros2-graph"]
+        ros2, readers, netem_ros2 = _ros2_rules(ros2_domain)
+        rules += ros2
+        operator_rules += readers
     subjects: list[dict] = [{"id": "netem", "usernames": ["netem"]}]
     policies: list[dict] = [
         {
@@ -199,6 +172,34 @@ def access_rules(
             }
         )
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
+
+
+def _ros2_rules(domain: int) -> tuple[list[dict], list[str], list[str]]:
+    """The rules of a run that publishes ROS 2 topics on ``domain``, and the ids of those an
+    operator and the proxy get."""
+    graph = f"{ROS2_ADMIN_SPACE}/{domain}/**"
+    history = f"{domain}/**/@adv/**"
+    rules = [
+        _allow("ros2-read", ["declare_subscriber"], [f"{domain}/**"]),
+        _allow("ros2-graph", ["declare_liveliness_subscriber", "liveliness_query", "liveliness_token"], [graph]),
+        # `**` never matches an `@` chunk: the graph's tokens need their own way out
+        _allow("ros2-deliver", EVERY_MESSAGE, [graph], flow="egress"),
+        # a late subscription to a transient-local topic (/tasks) finds the advanced publisher's
+        # token and asks its cache, below the topic's key under @adv
+        _allow("ros2-history", ["declare_liveliness_subscriber", "liveliness_query", "query"], [history]),
+        _allow("ros2-history-deliver", EVERY_MESSAGE, [history], flow="egress"),
+    ]
+    # ... but never a token of the run's own nodes (/swarmbed, /swarmbed_radio): a viewer declares
+    # its own node's; one that dropped the hub's would tell every ROS 2 node the run had ended
+    ours = f"{ROS2_ADMIN_SPACE}/{domain}/*/*/*/*/*/*/{ROS2_NODE_PREFIX}$*/**"
+    rules.append({**_allow("ros2-not-ours", ["liveliness_token"], [ours]), "permission": "deny"})
+    readers = ["ros2-read", "ros2-graph", "ros2-deliver", "ros2-history", "ros2-history-deliver", "ros2-not-ours"]
+    rules.append(_allow("ros2-command", ["put"], [f"{domain}/robot_$*/cmd/**"]))
+    rules += [  # the proxy's own ROS 2 node publishes what each robot sent
+        _allow("netem-ros2", ["put"], [f"{domain}/robot_$*/radio/sent/**"]),
+        _allow("netem-ros2-graph", ["liveliness_token"], [graph]),
+    ]
+    return rules, readers, ["netem-ros2", "netem-ros2-graph"]
 
 
 class RunAccess:

@@ -223,6 +223,10 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
     tree_problem = _check_tree(exp, scenario_cls, allocator_cls)
     if tree_problem:
         raise fail([f"agents.behavior_tree: {tree_problem}"])
+    # the names were resolved once, here: the experiment carries what they resolved to
+    scenario, allocator = scenario_target(kind), allocator_target(exp.allocator.name, kind)
+    targets = Targets(scenario=scenario, allocator=allocator, digests=file_digests(scenario, allocator))
+    exp._resolved = (kind, exp.allocator.name, scenario_cls, allocator_cls, targets)
     return exp
 
 
@@ -240,8 +244,15 @@ def _check_tree(exp: Experiment, scenario_cls: type[Scenario], allocator_cls: ty
 
 
 def resolve_experiment(exp: Experiment) -> Resolved:
-    """The classes and targets of a validated experiment (what the launcher hands its processes)."""
+    """The classes and targets of a validated experiment (what the launcher hands its processes):
+    those :func:`validate` resolved its names to, while its names are the same and every plugin
+    file named by path is the file it checked (its digest); else resolved anew."""
     kind, name = exp.scenario.kind, exp.allocator.name
+    cached = exp._resolved
+    if cached is not None and cached[:2] == (kind, name):
+        _, _, scenario_cls, allocator_cls, targets = cached
+        if file_digests(targets.scenario, targets.allocator) == targets.digests:
+            return Resolved(exp, scenario_cls, allocator_cls, targets)
     scenario, allocator = scenario_target(kind), allocator_target(name, kind)
     targets = Targets(scenario=scenario, allocator=allocator, digests=file_digests(scenario, allocator))
     return Resolved(exp, resolve_scenario(kind), resolve(name, kind), targets)
