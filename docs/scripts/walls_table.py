@@ -1,0 +1,69 @@
+"""The paired table of docs/walls.md: each allocator's runs with walls against the same seeds
+without them, from a walls sweep's table (sweep.csv). Each cell: the two means, then the paired
+difference with its 95 % confidence interval (t) and the Wilcoxon signed-rank test's p.
+
+    python docs/scripts/walls_table.py runs/walls_office_sweep walls open
+    python docs/scripts/walls_table.py runs/walls_rubble_sweep rubble open
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+MTSR = {
+    "mission_time": "mission time (s)",
+    "time_95": "time to 95 % (s)",
+    "network.messages_sent": "messages",
+    "network.bytes_sent": "payload bytes",
+    "network.delivered": "copies delivered",
+}
+SAR = {
+    "rescued": "rescued",
+    "failed_rescues": "failed rescues",
+    "expired": "expired",
+    "network.messages_sent": "messages",
+    "network.dropped.blocked_by_wall": "blocked by wall",
+    "network.delivered": "copies delivered",
+}
+
+
+def table(sweep: Path, walled: str, open_: str) -> str:
+    runs = pd.read_csv(sweep / "sweep.csv")
+    runs = runs[runs["status"] == "ok"]
+    metrics = SAR if (runs["scenario_kind"] == "sar").all() else MTSR
+    heads = " | ".join(f"{label}: {walled} / {open_}" for label in metrics.values())
+    lines = [
+        f"| allocator | n | {heads} |",
+        "| --- | ---: | " + " | ".join("---" for _ in metrics) + " |",
+    ]
+    done = "all_tasks_completed" in runs
+    for allocator in dict.fromkeys(runs["allocator"]):
+        a = runs[(runs["allocator"] == allocator) & runs["scenario"].str.startswith(walled + "_")].set_index("run")
+        b = runs[(runs["allocator"] == allocator) & runs["scenario"].str.startswith(open_ + "_")].set_index("run")
+        both = a.index.intersection(b.index)
+        cells = []
+        for key in metrics:
+            if key not in runs:
+                cells.append("-")
+                continue
+            x, y = a.loc[both, key].astype(float).fillna(0), b.loc[both, key].astype(float).fillna(0)
+            d = x - y
+            half = stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
+            p = stats.wilcoxon(x, y).pvalue if len(d) > 1 and d.abs().sum() > 0 else float("nan")
+            cells.append(f"{x.mean():,.0f} / {y.mean():,.0f} ({d.mean():+,.0f} ± {half:,.0f}; p {p:.3f})")
+        finished = (
+            f" ({int(a.loc[both, 'all_tasks_completed'].sum())} / {int(b.loc[both, 'all_tasks_completed'].sum())} done)"
+            if done
+            else ""
+        )
+        lines.append(f"| {allocator} | {len(both)}{finished} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(table(Path(sys.argv[1]), sys.argv[2], sys.argv[3]))
