@@ -286,7 +286,8 @@ class MTSRWorld(World):
         )
         if self.walls is not None:  # a wall between them hides a task
             r, c = np.nonzero(near)
-            hidden = ~self.walls.clear(self.ax[alive[r]], self.ay[alive[r]], self.tx[open_idx[c]], self.ty[open_idx[c]])
+            ax, ay, tx, ty = self.ax[alive], self.ay[alive], self.tx[open_idx], self.ty[open_idx]
+            hidden = self.walls.crossings_between(ax, ay, tx, ty, r, c).any(axis=1)
             near[r[hidden], c[hidden]] = False
         # every agent's visible tasks in one gather (of raw records: a structured gather is ~3x slower);
         # each agent's table is a slice of it

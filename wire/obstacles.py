@@ -195,16 +195,29 @@ class Walls:
 
     def crossings_among(self, x: np.ndarray, y: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """:meth:`crossings` for the lines from point ``i[k]`` to point ``j[k]`` of one set of points
-        (the radio's agents): which side of each wall's line every point lies on is computed once,
-        and only the lines whose ends do not lie strictly on one side are tested in full."""
+        (the radio's agents)."""
+        return self.crossings_between(x, y, x, y, i, j)
+
+    def crossings_between(
+        self, px: np.ndarray, py: np.ndarray, qx: np.ndarray, qy: np.ndarray, i: np.ndarray, j: np.ndarray
+    ) -> np.ndarray:
+        """:meth:`crossings` for the lines from point ``i[k]`` of P to point ``j[k]`` of Q (robots to
+        the tasks they might see): which side of each wall's line every point lies on is computed
+        once per point, and only the lines whose ends do not lie strictly on one side are tested in
+        full."""
         out = np.zeros((len(i), len(self.xy)), dtype=bool)
         if not len(self.xy) or not len(i):
             return out
         ax, ay, bx, by = self.xy.T
-        side = np.sign((bx - ax) * (y[:, None] - ay) - (by - ay) * (x[:, None] - ax)).astype(np.int8)
-        rows, walls = np.nonzero(side[i] * side[j] <= 0)
+
+        def sides(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+            return np.sign((bx - ax) * (y[:, None] - ay) - (by - ay) * (x[:, None] - ax)).astype(np.int8)
+
+        side_p = sides(px, py)
+        side_q = side_p if qx is px and qy is py else sides(qx, qy)
+        rows, walls = np.nonzero(side_p[i] * side_q[j] <= 0)
         p, q = i[rows], j[rows]
-        out[rows, walls] = segments_cross(x[p], y[p], x[q], y[q], ax[walls], ay[walls], bx[walls], by[walls])
+        out[rows, walls] = segments_cross(px[p], py[p], qx[q], qy[q], ax[walls], ay[walls], bx[walls], by[walls])
         return out
 
     def clear(self, px, py, qx, qy) -> np.ndarray:  # type: ignore[no-untyped-def]
