@@ -6,8 +6,10 @@ reached it and what it sees itself, solves the assignment of the agents it heard
 it knows, and broadcasts it (packed (agent, task) pairs). Reports and assignments are radio messages
 like any other: range, loss, rates, queues and the ledger apply to both directions, so what the
 leader decides on is only what reached it. A follower works on its last assignment for ``hold_for``
-simulated seconds without a fresh one, then explores (its tree's exploration), until an assignment
-reaches it again.
+simulated seconds without a fresh one, then explores (its tree's exploration), or, with
+``fallback`` (a registered allocator, e.g. ``fcg``, with its own ``fallback_params``), lets that
+allocator decide, which observes and talks over the radio all along; until an assignment reaches it
+again.
 
 Who leads (``leader``): a fixed agent id, or ``lowest_alive``: the lowest id among this agent and
 those it heard from in the last ``heard_within`` simulated seconds. At the first tick every agent
@@ -35,9 +37,10 @@ from collections.abc import Sequence
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, Field
 
-from swarmbed.extension import Allocator, LocalView
+from swarmbed.extension import LocalView
+from swarmbed.plugins.external import FallbackParams, WithFallback
 from swarmbed.plugins.grape import utility as grape_utility
 from swarmbed.plugins.packed import read_tuples
 from swarmbed.wire.schema import Experiment
@@ -50,8 +53,7 @@ TASK_ROW = np.dtype([("task", "<i4"), ("x", "<f4"), ("y", "<f4"), ("remaining", 
 ASSIGN_ROW = np.dtype([("agent", "<i2"), ("task", "<i4"), ("x", "<f4"), ("y", "<f4")])
 
 
-class CentralParams(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class CentralParams(FallbackParams):
     leader: int | Literal["lowest_alive"] = Field(
         "lowest_alive",
         description="who solves the assignment: an agent id, or the lowest id this agent heard from in the last "
@@ -72,7 +74,7 @@ class CentralParams(BaseModel):
     )
 
 
-class Centralized(Allocator):
+class Centralized(WithFallback):
     """The leader and follower roles every agent of a centralized allocator plays; subclasses say how
     the leader assigns (:meth:`solve`)."""
 
@@ -124,11 +126,12 @@ class Centralized(Allocator):
         view.send(leader, REPORT, [view.x, view.y, _pack(seen, TASK_ROW)])
         self.count("reports_sent")
         if self.assigned is None or now - self.assigned[3] > self.params.hold_for:
-            return None  # nothing fresh enough from the leader: the tree explores
+            # nothing fresh enough from the leader: the fallback allocator decides, or the tree explores
+            return self.fallback_decide(view)
         task, x, y, _ = self.assigned
         if task not in view.tasks and math.hypot(x - view.x, y - view.y) < view.awareness_range:
             self.assigned = None  # in sight of where it stood, and gone: done
-            return None
+            return self.fallback_decide(view)
         return task
 
     def _read(self, view: LocalView, now: float) -> None:

@@ -28,18 +28,20 @@ ANNOUNCE = 1 << 30
 CLAIM = "claim"
 
 
-class ExternalParams(BaseModel):
+class FallbackParams(BaseModel):
+    """The keys of an allocator that hosts a registered one beside its own decisions (``fallback``)."""
+
     model_config = ConfigDict(extra="forbid")
     fallback: str | None = Field(
         None,
-        description="a registered allocator that runs beside the outside decisions (it observes, talks over "
-        "the radio, and decides whenever the decision is DEFER = -4): a built-in allocator as a policy",
+        description="a registered allocator that runs beside this one (it observes, talks over the radio, and "
+        "decides where this one leaves the decision to it)",
     )
     fallback_scenario: str = Field("mtsr", description="the scenario whose implementation of `fallback` runs")
     fallback_params: dict[str, Any] = Field(default_factory=dict, description="the fallback allocator's own keys")
 
     @model_validator(mode="after")
-    def _fallback_is_an_allocator_with_these_keys(self) -> ExternalParams:
+    def _fallback_is_an_allocator_with_these_keys(self) -> FallbackParams:
         """The fallback is resolved and its keys validated here, where the experiment is loaded
         (``swarmbed run``, ``--check``, the environment), not first inside each agent's process."""
         if self.fallback is None:
@@ -63,22 +65,26 @@ class ExternalParams(BaseModel):
         return self
 
 
-class ExternalAllocator(Allocator):
-    """Decisions from a driver in the launching process (a PettingZoo environment's learner). With
-    ``fallback``, a built-in allocator lives inside it with its own parameters and stream: it is
-    shown every tick's view (``observe``) and, where the decision is :data:`DEFER`, it decides (and
-    sends what its ``decide`` sends), so "CBBA as a policy" is DEFER at every tick and gives CBBA's
-    run."""
+class ExternalParams(FallbackParams):
+    fallback: str | None = Field(
+        None,
+        description="a registered allocator that runs beside the outside decisions (it observes, talks over "
+        "the radio, and decides whenever the decision is DEFER = -4): a built-in allocator as a policy",
+    )
 
-    Params = ExternalParams
-    params: ExternalParams
-    decision_source: ClassVar[DecisionSource | None] = "env"
+
+class WithFallback(Allocator):
+    """An allocator that hosts a registered one (its params' ``fallback``) with its own parameters
+    and stream: shown every tick's view (``observe``), deciding where the host calls
+    :meth:`fallback_decide` (and sending what its ``decide`` sends), its counters the host's."""
+
     CONSTRUCTED = (*Allocator.CONSTRUCTED, "inner")  # the fallback travels as its own snapshot
 
     def __init__(self, agent_id: int, params: BaseModel, rng: np.random.Generator, run_seed: int = 0) -> None:
         super().__init__(agent_id, params, rng, run_seed)
         self.inner: Allocator | None = None
         p = self.params
+        assert isinstance(p, FallbackParams)
         if p.fallback is not None:
             from swarmbed.plugins import registry
 
@@ -90,18 +96,13 @@ class ExternalAllocator(Allocator):
             self.inner.observe(view)
             self._take_events()
 
-    def decide(self, view: LocalView) -> int | None:
-        if view.decision == DEFER:
-            if self.inner is None:
-                return None
-            chosen = self.inner.decide(view)
-            self._take_events()
-            return chosen
-        if view.decision is not None and view.decision >= ANNOUNCE:
-            task = view.decision - ANNOUNCE
-            view.broadcast(CLAIM, task)
-            return task
-        return None if view.decision is None or view.decision == NONE else view.decision
+    def fallback_decide(self, view: LocalView) -> int | None:
+        """What the fallback decides (None without one: the tree explores)."""
+        if self.inner is None:
+            return None
+        chosen = self.inner.decide(view)
+        self._take_events()
+        return chosen
 
     def _take_events(self) -> None:
         assert self.inner is not None
@@ -121,6 +122,27 @@ class ExternalAllocator(Allocator):
         if self.inner is not None and inner is not None:
             self.inner.restore(inner)
             self.inner.rng = self.rng  # one stream, as in the fallback's own run
+
+
+class ExternalAllocator(WithFallback):
+    """Decisions from a driver in the launching process (a PettingZoo environment's learner). With
+    ``fallback``, a built-in allocator lives inside it with its own parameters and stream: it is
+    shown every tick's view (``observe``) and, where the decision is :data:`DEFER`, it decides (and
+    sends what its ``decide`` sends), so "CBBA as a policy" is DEFER at every tick and gives CBBA's
+    run."""
+
+    Params = ExternalParams
+    params: ExternalParams
+    decision_source: ClassVar[DecisionSource | None] = "env"
+
+    def decide(self, view: LocalView) -> int | None:
+        if view.decision == DEFER:
+            return self.fallback_decide(view)
+        if view.decision is not None and view.decision >= ANNOUNCE:
+            task = view.decision - ANNOUNCE
+            view.broadcast(CLAIM, task)
+            return task
+        return None if view.decision is None or view.decision == NONE else view.decision
 
 
 class Ros2Allocator(ExternalAllocator):

@@ -1,5 +1,6 @@
 """Algorithm properties on random static instances with full connectivity (fixed seeds)."""
 
+import json
 import math
 
 import numpy as np
@@ -14,6 +15,7 @@ from swarmbed.plugins.grape import VOID, pack_pairs, read_pairs
 from swarmbed.plugins.registry import entries, make
 from swarmbed.wire.codec import pack, unpack
 from swarmbed.wire.schema import NetworkSection
+from tests.conftest import experiment
 
 LOSSY = NetworkSection(loss=0.3)
 
@@ -552,3 +554,33 @@ def test_central_grape_is_a_nash_stable_partition_and_grapes_own_result_is_one_o
         own = simulate("grape", grape, inst, 60, seed=case).allocators[0].partition
         assert not _unilateral_gains(own, agents, inst.tasks, 1.0, social_inhibition), f"case {case}"
         assert nash_stable_partition(agents, inst.tasks, 1.0, social_inhibition, start=own) == own, f"case {case}"
+
+
+@pytest.mark.slow
+def test_a_follower_that_hears_no_leader_lets_its_fallback_allocator_decide(tmp_path):
+    """A centralized allocator's ``fallback``: a follower without a fresh assignment lets a registered
+    allocator decide (here FCG), which observes and talks over the radio all along; without one it
+    explores. With a 1 m radio no follower hears the fixed leader, so only the fallback gets work
+    done; its claims are real messages of the run."""
+    from swarmbed.experiments.launch.inprocess import run_in_process
+
+    done = {}
+    for name, allocator in (
+        ("alone", "{name: sga, leader: 0}"),
+        ("fallback", "{name: sga, leader: 0, fallback: fcg}"),
+    ):
+        exp = experiment(f"allocator={allocator}", "network.range=1", "run.duration=600", "run.stop_when_done=false")
+        out = tmp_path / name
+        run_in_process(exp, out)
+        summary = json.loads((out / "summary.json").read_text())
+        done[name] = (summary["tasks_completed"], (out / "network_ledger.csv").read_text())
+    assert done["fallback"][0] > done["alone"][0]
+    assert ",claim," in done["fallback"][1] and ",claim," not in done["alone"][1]
+
+
+def test_a_fallback_that_is_not_an_allocator_is_refused_where_the_experiment_is_loaded():
+    from swarmbed.experiments.launch.config import ConfigError
+
+    with pytest.raises(ConfigError) as exc:
+        experiment("allocator={name: hungarian, fallback: nosuch}")
+    assert "allocator.fallback" in str(exc.value) and len(str(exc.value).splitlines()) == 1
