@@ -111,3 +111,36 @@ def test_a_run_without_a_disk_has_its_own_group_in_the_range_figures(tmp_path, m
     assert views._by_range_one(df, "mission_time", canvas) is not None
     assert drawn == [[2, 2]]  # both groups drawn, two runs each
     assert views._range_label(float("nan")) == "no disk" and views._range_label(100.0) == "100"
+
+
+def test_tost_agrees_with_the_ninety_percent_interval_and_calls_only_close_groups_equivalent():
+    """TOST at 0.05 says "equivalent within the margin" exactly when Welch's 90 % confidence interval
+    of the difference (scipy's own) lies inside it: checked on many random pairs of groups."""
+    from scipy import stats
+
+    from swarmbed.experiments.views.stats import tost_p
+
+    rng = np.random.default_rng(7)
+    agree = 0
+    for _ in range(300):
+        a = rng.normal(rng.uniform(-1, 1), rng.uniform(0.5, 2), int(rng.integers(5, 60)))
+        b = rng.normal(0, rng.uniform(0.5, 2), int(rng.integers(5, 60)))
+        margin = float(rng.uniform(0.2, 1.5))
+        low, high = stats.ttest_ind(a, b, equal_var=False).confidence_interval(0.90)
+        inside = -margin < low and high < margin
+        agree += (tost_p(a, b, margin) < 0.05) == inside
+    assert agree == 300
+    same = rng.normal(100, 5, 200)
+    table = compare(
+        pd.DataFrame(
+            {
+                "g": ["c"] * 200 + ["s"] * 200 + ["far"] * 200,
+                "m": [*same, *rng.normal(100, 5, 200), *rng.normal(120, 5, 200)],
+            }
+        ),
+        "g",
+        ["m"],
+        "c",
+    ).set_index("strategy")
+    assert table.loc["s", "tost_p"] < 0.05 and table.loc["far", "tost_p"] > 0.5
+    assert table.loc["s", "tost_margin"] == pytest.approx(0.05 * same.mean())

@@ -1,6 +1,11 @@
 """Comparing strategies (CBBA-ETC paper, Section 5.4): per metric, a one-way ANOVA across the
 strategies, then Dunnett's test of every strategy against a control, and Cohen's d against the
-control (pooled standard deviation; positive when the strategy's mean is above the control's)."""
+control (pooled standard deviation; positive when the strategy's mean is above the control's).
+
+Where two strategies are to be called similar, absence of a significant difference is not evidence
+of one: each row also has the two one-sided tests (TOST, Welch's t) of equivalence within a stated
+margin, :data:`EQUIVALENCE` of the control's mean; ``tost_p`` below 0.05 says the means differ by
+less than the margin."""
 
 from __future__ import annotations
 
@@ -11,6 +16,21 @@ import pandas as pd
 from scipy import stats
 
 DUNNETT_SEED = 20240521  # any fixed value; documented so that a reader can recompute the p-values
+#: the equivalence margin of the TOST column, as a share of the control's mean (5 %: stated here,
+#: before any table uses it)
+EQUIVALENCE = 0.05
+
+
+def tost_p(a: np.ndarray, b: np.ndarray, margin: float) -> float:
+    """The p-value of the two one-sided Welch t-tests that mean(a) - mean(b) lies within
+    (-margin, +margin): the larger of the two one-sided p-values."""
+    if len(a) < 2 or len(b) < 2 or not margin > 0:
+        return float("nan")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        above = stats.ttest_ind(a + margin, b, equal_var=False, alternative="greater").pvalue
+        below = stats.ttest_ind(a - margin, b, equal_var=False, alternative="less").pvalue
+    return float(max(above, below))
 
 
 def cohens_d(a: np.ndarray, b: np.ndarray) -> float:
@@ -64,6 +84,8 @@ def compare(df: pd.DataFrame, group: str, metrics: list[str], control: str) -> p
                     "anova_p": float(p_anova),
                     "dunnett_p": float(p),
                     "cohens_d": cohens_d(samples[g], samples[control]),
+                    "tost_margin": EQUIVALENCE * abs(samples[control].mean()),
+                    "tost_p": tost_p(samples[g], samples[control], EQUIVALENCE * abs(samples[control].mean())),
                     "n": len(samples[g]),
                 }
             )
