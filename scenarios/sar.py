@@ -263,7 +263,7 @@ class SARWorld(VictimRows, World):
         self.walls = scenario.obstacles.compile() if scenario.obstacles is not None else None
         self.navigator: Navigator | None = None
         if self.walls is not None:
-            self.ax, self.ay = free_places(self.walls, self.ax, self.ay, lambda: scenario.random_point(self.spawn_rng))
+            self.ax, self.ay = free_places(self.walls, self.ax, self.ay, self._random_point)
             r = sc.arena_radius
             planner = Planner(self.walls, lambda x, y: np.hypot(x, y) <= r)
             self.navigator = Navigator(planner, reach=self.walls.clearance / 2)
