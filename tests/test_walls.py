@@ -220,3 +220,35 @@ def test_the_shipped_walls_experiments_run_in_process_and_are_deterministic(tmp_
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     if path == RUBBLE:
         assert "blocked_by_wall" in (a / "summary.json").read_text()
+
+
+@pytest.mark.slow
+def test_views_draw_a_runs_walls_and_refuse_crafted_ones_in_one_line(tmp_path):
+    """The report, the replay and the MCAP recording draw the walls of the run's config.yaml; a
+    config.yaml whose obstacles were tampered with (a self-crossing polygon) is refused by each in
+    one line naming the file, never drawn half."""
+    import yaml
+
+    from swarmbed.experiments.views.recording import RecordingError, write_mcap
+    from swarmbed.experiments.views.replay import ReplayError, replay
+    from swarmbed.experiments.views.report import ReportError, report
+
+    exp = experiment("run.duration=20", "run.record_trajectories=true", "network.ledger=per_receiver", base=RUBBLE)
+    run = tmp_path / "run"
+    run_in_process(exp, run)
+    page = report(run).read_text()
+    assert "Walls and paths" in page
+    movie, frames = replay(run, tmp_path / "m.gif", every=10)
+    assert frames > 0 and movie.stat().st_size > 0
+    made = write_mcap(run, tmp_path / "r.mcap")
+    assert made["messages"]["/walls"] == 1
+    config = yaml.safe_load((run / "config.yaml").read_text())
+    config["obstacles"]["polygons"][0]["points"] = [[0, 0], [6, 6], [6, 0], [0, 5]]
+    (run / "config.yaml").write_text(yaml.safe_dump(config))
+    for view, error in ((lambda: report(run), ReportError), (lambda: replay(run, tmp_path / "n.gif"), ReplayError)):
+        with pytest.raises(error) as exc:
+            view()
+        assert "config.yaml: obstacles" in str(exc.value) and len(str(exc.value).splitlines()) == 1
+    with pytest.raises(RecordingError) as exc:
+        write_mcap(run, tmp_path / "s.mcap")
+    assert "config.yaml: obstacles" in str(exc.value) and len(str(exc.value).splitlines()) == 1

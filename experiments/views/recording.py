@@ -129,6 +129,10 @@ def _write_mcap(run: Path, out: Path) -> dict:
         raise RecordingError(f"{run}: no {TRAJECTORIES}; run it again with --set run.record_trajectories=true")
     started = time.perf_counter()
     dt, traj, markers, counters, copies, trees = _recorded(run)
+    try:
+        walls = RunDir(run).walls()
+    except RunFileError as exc:
+        raise RecordingError(str(exc)) from None
     traj["heading"] = _headings(traj)
     span = max(float(np.ptp(traj["x"])), float(np.ptp(traj["y"])), 1.0)
     size = span / 100  # an agent's sphere: a hundredth of the arena's extent
@@ -150,7 +154,6 @@ def _write_mcap(run: Path, out: Path) -> dict:
         context=context,
     )
     sent = dict.fromkeys(("/agents", "/agents/poses", "/markers", "/radio", "/counters", "/agents/tree"), 0)
-    walls = RunDir(run).walls()
     if walls:
         walls_ch = channels.SceneUpdateChannel("/walls", context=context)
         first = int(traj["tick"].min())
