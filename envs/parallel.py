@@ -273,7 +273,10 @@ class SwarmbedParallelEnv(ParallelEnv):
         else:  # a seed given, or the first episode's: the configuration's own
             seed = self.exp.run.seed if seed is None else seed
             self._seeds = np.random.default_rng(seed)
-        exp = cfg.load(self.config, [*self.sets, f"run.seed={seed}"])
+        if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed {seed!r}: a whole number of at least 0")
+        # the configuration checked once, in the constructor; each episode changes only its seed
+        exp = self.exp.model_copy(update={"run": self.exp.run.model_copy(update={"seed": int(seed)})})
         out = self._next_run_dir()
         self.runs += 1
         if self.engine == "inprocess":
