@@ -11,8 +11,10 @@ two heavy walls arrives 13.8 dB weaker). With ``network.walls.line_of_sight: tru
 stage drops every copy that crosses any wall as ``blocked_by_wall``, with the disc model or any
 other: it comes right after the range check, before anything draws a random number for the copy.
 
-The walls are tested once per tick for the distinct (sender, receiver) pairs among the copies still
-in play (a broadcast's copies share nothing but their sender), vectorised over pairs and walls.
+The walls are tested once per tick for each unordered pair of robots among the copies still in
+play (a wall between two robots is between them both ways), vectorised over pairs and walls: which
+side of each wall's line every robot lies on is computed once, and only the pairs on both sides of
+a line are tested in full.
 Nothing here draws a random number, so walls never shift another model's draws.
 """
 
