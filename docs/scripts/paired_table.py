@@ -1,9 +1,12 @@
-"""The paired table of docs/walls.md: each allocator's runs with walls against the same seeds
-without them, from a walls sweep's table (sweep.csv). Each cell: the two means, then the paired
-difference with its 95 % confidence interval (t) and the Wilcoxon signed-rank test's p.
+"""A paired table of two cells of a sweep, allocator by allocator, run r of one against run r of the
+other (the same seed): docs/walls.md's walls against no walls, docs/reproduction.md's time-sink
+levels against today's world. From the sweep's table (sweep.csv); a cell is ``<name>_allocator-<a>``.
+Each entry: the two means, then the paired difference with its 95 % confidence interval (t) and
+the Wilcoxon signed-rank test's p.
 
-    python docs/scripts/walls_table.py runs/walls_office_sweep walls open
-    python docs/scripts/walls_table.py runs/walls_rubble_sweep rubble open
+    python docs/scripts/paired_table.py runs/walls_office_sweep walls open
+    python docs/scripts/paired_table.py runs/walls_rubble_sweep rubble open
+    python docs/scripts/paired_table.py runs/timesink_m3 abandon5 abandon0
 """
 
 from __future__ import annotations
@@ -43,8 +46,10 @@ def table(sweep: Path, walled: str, open_: str) -> str:
     ]
     done = "all_tasks_completed" in runs
     for allocator in dict.fromkeys(runs["allocator"]):
-        a = runs[(runs["allocator"] == allocator) & runs["scenario"].str.startswith(walled + "_")].set_index("run")
-        b = runs[(runs["allocator"] == allocator) & runs["scenario"].str.startswith(open_ + "_")].set_index("run")
+        a = runs[runs["scenario"] == f"{walled}_allocator-{allocator}"].set_index("run")
+        b = runs[runs["scenario"] == f"{open_}_allocator-{allocator}"].set_index("run")
+        if a.empty or b.empty:
+            continue
         both = a.index.intersection(b.index)
         cells = []
         for key in metrics:
