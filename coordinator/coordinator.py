@@ -50,6 +50,7 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of
 from swarmbed.wire.membership import accept_handovers, serve_text
 from swarmbed.wire.observation import Observation
+from swarmbed.wire.obstacles import wall_lines
 from swarmbed.wire.reports import (
     AgentReport,
     Checkpoint,
@@ -165,7 +166,7 @@ class ZenohTransport(TickHook):
             from swarmbed.coordinator.ros2 import Ros2Commands, Ros2Out
 
             try:
-                walls = self.exp.obstacles.compile().lines if self.exp.obstacles is not None else []
+                walls = wall_lines(self.exp.obstacles)
                 self.ros2 = Ros2Out(s, self.exp.ros2, self.n, self.scenario.actions, self.exp.run.dt, walls)
             except ImportError as exc:  # the ros2 extra is not installed: say so before any process starts
                 raise RunError(str(exc)) from None

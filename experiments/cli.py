@@ -164,8 +164,9 @@ def _live_views(exp, port: int | None) -> list:
 
     def foxglove(session):
         from swarmbed.experiments.views.live import FoxgloveLive
+        from swarmbed.wire.obstacles import wall_lines
 
-        walls = exp.obstacles.compile().lines if exp.obstacles is not None else []
+        walls = wall_lines(exp.obstacles)
         view = FoxgloveLive(session.world, exp.run.dt, port, walls=walls)
         print(f"Foxglove: open connection ws://127.0.0.1:{view.port}", file=sys.stderr, flush=True)
         return view

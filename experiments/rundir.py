@@ -22,7 +22,7 @@ from pydantic import ValidationError
 from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml
 from swarmbed.wire import rundir as names
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.obstacles import ObstaclesSection
+from swarmbed.wire.obstacles import ObstaclesSection, wall_lines
 from swarmbed.wire.rundir import (
     CONFIG,
     LEDGER_COLUMNS,
@@ -151,7 +151,7 @@ class RunDir:
         if data is None:
             return []
         try:
-            return ObstaclesSection.model_validate(data).compile().lines
+            return wall_lines(ObstaclesSection.model_validate(data))
         except ValidationError as exc:
             raise RunFileError(f"{self.path / CONFIG}: obstacles: {str(exc).splitlines()[0][:200]}") from None
 

@@ -162,12 +162,14 @@ def segments_cross(px, py, qx, qy, ax, ay, bx, by) -> np.ndarray:  # type: ignor
     return crossing
 
 
+def wall_lines(section: ObstaclesSection | None) -> list[tuple[Point, Point]]:
+    """A run's walls as line segments for a view to draw (none without obstacles)."""
+    return section.compile().lines if section is not None else []
+
+
 class Walls:
     """A world's walls as arrays: ``xy`` (one row ``x1, y1, x2, y2`` per wall), each wall's
     ``loss_db``, the polygons' vertex rings (their insides are solid) and the clearance."""
-
-    #: lines tested against every wall at once (bounds the temporary arrays to ~ this x walls)
-    CHUNK = 4096
 
     def __init__(self, xy: np.ndarray, loss_db: np.ndarray, rings: list[np.ndarray], clearance: float) -> None:
         self.xy, self.loss_db, self.rings, self.clearance = xy, loss_db, rings, clearance
@@ -175,23 +177,11 @@ class Walls:
     def __len__(self) -> int:
         return len(self.xy)
 
-    def crossings(self, px: np.ndarray, py: np.ndarray, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
-        """One row per line p-q, one column per wall: whether the line crosses it. Only the pairs
-        whose line ends do not lie strictly on one side of the wall's line are tested in full."""
-        px, py, qx, qy = (np.asarray(a, dtype=float).reshape(-1) for a in (px, py, qx, qy))
-        out = np.zeros((len(px), len(self.xy)), dtype=bool)
-        if not len(self.xy):
-            return out
-        ax, ay, bx, by = self.xy.T
-        vx, vy = bx - ax, by - ay
-        for lo in range(0, len(px), self.CHUNK):
-            s = slice(lo, lo + self.CHUNK)
-            side_p = np.sign(vx * (py[s, None] - ay) - vy * (px[s, None] - ax))
-            side_q = np.sign(vx * (qy[s, None] - ay) - vy * (qx[s, None] - ax))
-            rows, walls = np.nonzero(side_p * side_q <= 0)
-            at = rows + lo
-            out[at, walls] = segments_cross(px[at], py[at], qx[at], qy[at], ax[walls], ay[walls], bx[walls], by[walls])
-        return out
+    def crossings(self, px: ArrayLike, py: ArrayLike, qx: ArrayLike, qy: ArrayLike) -> np.ndarray:
+        """One row per line p-q, one column per wall: whether the line crosses it."""
+        px, py, qx, qy = (np.asarray(v, dtype=float).reshape(-1) for v in (px, py, qx, qy))
+        every = np.arange(len(px))
+        return self.crossings_between(px, py, qx, qy, every, every)
 
     def crossings_among(self, x: np.ndarray, y: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """:meth:`crossings` for the lines from point ``i[k]`` to point ``j[k]`` of one set of points
@@ -223,12 +213,6 @@ class Walls:
     def clear(self, px, py, qx, qy) -> np.ndarray:  # type: ignore[no-untyped-def]
         """Whether each line p-q crosses no wall (line of sight)."""
         return np.asarray(~self.crossings(px, py, qx, qy).any(axis=1))
-
-    def loss(self, px, py, qx, qy) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
-        """The dB each line p-q loses to the walls it crosses (the multi-wall model's sum), and
-        whether it crosses any."""
-        hit = self.crossings(px, py, qx, qy)
-        return hit.astype(float) @ self.loss_db, np.asarray(hit.any(axis=1))
 
     def inside(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """Whether each point is inside a polygon (even-odd rule; on an edge counts as inside)."""
