@@ -88,6 +88,12 @@ class LocalView(Generic[ObsT]):
         off = (math.atan2(dy, dx) - self.heading + math.pi) % (2 * math.pi) - math.pi
         return abs(off) <= self.vision_angle / 2
 
+    def coalitions(self) -> dict[int, tuple[int, int]]:
+        """Task -> (robots it needs at once, robots on it at the last tick) for the tasks in view that
+        need a team (an ST-MR observation's ``coalitions``); empty where every task needs one robot."""
+        rows = getattr(self.obs, "coalitions", None)
+        return {t: (k, on) for t, k, on in rows} if rows else {}
+
     def distance_to(self, task: TaskInfo) -> float:
         return math.hypot(task.x - self.x, task.y - self.y)
 

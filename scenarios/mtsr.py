@@ -6,15 +6,26 @@ periodic generations; point-mass agents. An agent works on a task while within `
 of it; the work rates of agents on one task add, and the workload never goes below zero (work
 beyond what was left is not counted). A task is done when its workload reaches zero.
 
+Single-task multi-robot (ST-MR) tasks (``robots_needed``, SPACE's ST-MR setting and GRAPE's home): a
+task that needs k robots progresses only while at least k of them are on it (within its work radius
+and acting on it); fewer wait there, braking, and do no work. Each agent's observation then lists,
+for the tasks it sees that need more than one robot, how many they need and how many were on them at
+the last tick (:class:`MTSRObservation` ``coalitions``); with every task needing one robot the field
+is left out and the run is byte for byte what it was. A range [lo, hi] draws each task's k uniformly
+from a stream spawned off the world's (``Generator.spawn``, which leaves the world's own draws as
+they were), so the tasks' places and workloads are those of the same seed with k = 1.
+
 Agents act on the state of tick k, all at once: no agent sees another's move of the same tick.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer, model_validator
 
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
@@ -26,6 +37,14 @@ from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
 from swarmbed.wire.schema import Experiment
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class MTSRObservation(Observation):
+    """An MT-SR observation; ``coalitions`` only where some task needs a team: (task, robots it
+    needs, robots on it at the last tick) for each task in view that needs more than one."""
+
+    coalitions: list[tuple[int, int, int]] | None = None
 
 
 class Generations(BaseModel):
@@ -59,22 +78,48 @@ class MTSRParams(BaseModel):
     generations: Generations = Field(Generations(), description="tasks added during the run")
     agent_positions: list[tuple[float, float]] | None = Field(None, description="fixed start positions (else uniform)")
     task_positions: list[tuple[float, float]] | None = Field(None, description="fixed initial task positions")
+    robots_needed: int | tuple[int, int] = Field(
+        1,
+        description="robots a task needs at once to progress (ST-MR coalition tasks): a number, or [min, max] "
+        "drawn per task from a stream spawned off the world's; 1: every task is worked by whoever is on it",
+    )
 
     @model_validator(mode="after")
     def _check(self):
         lo, hi = self.workload
         if not 0 < lo <= hi:
             raise ValueError("workload must be [min, max] with 0 < min <= max")
+        k_lo, k_hi = self.needed_range
+        if not 1 <= k_lo <= k_hi:
+            raise ValueError("robots_needed must be a number >= 1 or [min, max] with 1 <= min <= max")
         if self.task_positions is not None and len(self.task_positions) != self.initial_tasks:
             raise ValueError("task_positions needs one [x, y] per initial task")
         return self
+
+    @model_serializer(mode="wrap")
+    def _one_robot_stays_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """Tasks that need one robot write the config.yaml (and the sweep digests) they did before teams."""
+        data = handler(self)
+        if data.get("robots_needed") == 1:
+            data.pop("robots_needed")
+        return data
+
+    @property
+    def needed_range(self) -> tuple[int, int]:
+        k = self.robots_needed
+        return (k, k) if isinstance(k, int) else k
+
+    @property
+    def teamwork(self) -> bool:
+        """Whether a task may need more than one robot."""
+        return self.needed_range[1] > 1
 
 
 class MTSR(Scenario):
     """SPACE's multi-task single-robot workload scenario."""
 
     Params = MTSRParams
-    Observation = Observation
+    Observation = MTSRObservation
     bt_nodes = SPACE_NODES
     outcome_metrics = ("mission_time", "time_95", "time_99", "tasks_completed", "all_tasks_completed")
     benefit_metric = "tasks_completed"
@@ -131,6 +176,11 @@ class MTSR(Scenario):
         assert isinstance(params, MTSRParams)
         if params.agent_positions is not None and len(params.agent_positions) != exp.agents.count:
             return [f"scenario.agent_positions: needs one [x, y] per agent ({exp.agents.count})"]
+        if params.needed_range[1] > exp.agents.count:
+            return [
+                f"scenario.robots_needed: a task may need {params.needed_range[1]} robots, "
+                f"the run has {exp.agents.count} agents"
+            ]
         return obstacles_outside(
             exp,
             lambda x, y: 0 <= x <= params.width and 0 <= y <= params.height,
@@ -203,6 +253,10 @@ class MTSRWorld(World):
         self.remaining = np.zeros(0)
         self.spawned_at = np.zeros(0)
         self.done_at = np.full(0, np.nan)
+        self.needed = np.zeros(0, dtype=np.int64)  # robots each task needs at once
+        self.present = np.zeros(0, dtype=np.int64)  # robots on each task at the last tick
+        k_lo, k_hi = self.sc.needed_range
+        self.team_rng = rng.spawn(1)[0] if k_lo < k_hi else None  # spawning draws nothing from rng
         self.tick = 0
         self.finished_tick: int | None = None  # the tick at whose start every task was done
         self._generations_done = 0
@@ -241,6 +295,10 @@ class MTSRWorld(World):
         self.remaining = np.concatenate([self.remaining, w])
         self.spawned_at = np.concatenate([self.spawned_at, np.full(count, self.time)])
         self.done_at = np.concatenate([self.done_at, np.full(count, np.nan)])
+        k_lo, k_hi = self.sc.needed_range
+        k = np.full(count, k_lo) if self.team_rng is None else self.team_rng.integers(k_lo, k_hi + 1, count)
+        self.needed = np.concatenate([self.needed, k])
+        self.present = np.concatenate([self.present, np.zeros(count, dtype=np.int64)])
 
     def _maybe_generate(self) -> None:
         g = self.sc.generations
@@ -270,7 +328,7 @@ class MTSRWorld(World):
         self.alive[agent_id] = False
         self.speed[agent_id] = 0.0
 
-    def observations(self) -> dict[int, Observation]:
+    def observations(self) -> dict[int, MTSRObservation]:
         """What each live agent senses at this tick: itself and the open tasks within awareness range
         (as a binary task table, see ``wire.codec.TASK_DTYPE``)."""
         open_idx = np.flatnonzero(np.isnan(self.done_at))
@@ -295,17 +353,27 @@ class MTSRWorld(World):
         seen = table.view(np.uint8).reshape(len(table), TASK_DTYPE.itemsize)[cols].view(TASK_DTYPE).reshape(-1)
         bounds = np.searchsorted(rows, np.arange(len(alive) + 1)).tolist()
         t = self.time
+        coalitions = self._coalitions(seen["id"], bounds) if self.sc.teamwork else [None] * len(alive)
         return {
-            int(i): Observation(
+            int(i): MTSRObservation(
                 t,
                 float(self.ax[i]),
                 float(self.ay[i]),
                 float(self.heading[i]),
                 float(self.speed[i]),
                 seen[bounds[row] : bounds[row + 1]],
+                coalitions[row],
             )
             for row, i in enumerate(alive)
         }
+
+    def _coalitions(self, seen: np.ndarray, bounds: list[int]) -> list[list[tuple[int, int, int]] | None]:
+        """Per agent (a slice of ``seen``, the ids of the tasks it sees): (task, needed, on it) for the
+        tasks that need a team; None where it sees none."""
+        team = self.needed[seen] > 1
+        rows = np.stack([seen, self.needed[seen], self.present[seen]], axis=1)[team].tolist()
+        cuts = np.concatenate([[0], np.cumsum(team)])[bounds].tolist()
+        return [[tuple(r) for r in rows[a:b]] or None for a, b in zip(cuts, cuts[1:])]
 
     def _target(self, i: int, action: list) -> tuple[tuple[float, float] | None, int | None]:
         """Where agent i moves to and which task it may work on, from its action."""
@@ -359,8 +427,12 @@ class MTSRWorld(World):
             back = np.searchsorted(live, stopped)
             self.ax[stopped], self.ay[stopped], self.distance[stopped] = (b[back] for b in before)
             self.speed[stopped] = 0.0
+        self.present[:] = 0
         for task in sorted(working):
             agents = working[task]
+            self.present[task] = len(agents)
+            if len(agents) < self.needed[task]:
+                continue  # a team task waits for its team: no work
             capacity = self.work_rate * dt * len(agents)
             done = min(capacity, float(self.remaining[task]))
             for i in agents:
