@@ -36,6 +36,13 @@ None or y_i.get(j) is None: continue``; an agent's ``y`` gains keys only by its 
 ``consensus_scope: local_bids`` does that, with what our messages carry: the tasks in view that this
 agent has bid on since its knowledge was last cleared and that the message names. (SPACE's message
 also names the tasks a sender bid on and has since reset; ours does not carry those.)
+
+Team tasks (ST-MR, a task that needs k robots at once; :meth:`LocalView.coalitions`): the task is
+bid on as k slots (:func:`slot_id`), each won by one agent through the same consensus, each worth
+1/k of the task's workload and its work time; an agent holds at most one slot of a task, and a
+slot of a team task goes last in its path and closes its bundle, so that agents waiting for their
+teams never wait on each other (the slot expansion of coupled-constraint CBBA without its timing
+constraints: a team forms where its slots' winners meet).
 """
 
 from __future__ import annotations
@@ -49,6 +56,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from swarmbed.extension import Allocator, LocalView, TaskInfo
 from swarmbed.plugins.consensus import ConsensusState
 from swarmbed.plugins.taskbook import TaskBook
+from swarmbed.plugins.teams import slot_id, task_of
 
 KIND = "cbba"
 
@@ -95,6 +103,8 @@ class CBBA(Allocator):
         self.state = ConsensusState(agent_id, self.params.full_every)
         self.book = TaskBook()
         self.empty_since: float | None = None
+        self.team_k: dict[int, int] = {}  # team tasks seen: task -> robots it needs
+        self.done_slots: set[int] = set()  # the slot ids (s >= 1) of team tasks done
 
     # the consensus state, under CBBA's own names
     bundle = property(lambda self: self.state.bundle)
@@ -106,15 +116,22 @@ class CBBA(Allocator):
         st = self.state
         every = self.params.stamp_every
         st.now = view.time if every is None else math.floor(view.time / every) * every
+        for task, (k, _on) in view.coalitions().items():
+            self.team_k[task] = k
         for task in self.book.update(view):
             st.forget(task)
+            k = self.team_k.pop(task, 1)
+            for slot in range(1, k):
+                st.forget(slot_id(task, slot))
+                self.done_slots.add(slot_id(task, slot))
         before = list(st.bundle)
         within = None
         if self.params.consensus_scope == "local_bids":
-            within = {t for t in view.tasks if t in st.bid_on}
+            within = {t for t in st.bid_on if task_of(t) in view.tasks}
+        ignore = self.book.done | self.done_slots if self.done_slots else self.book.done
         for msg in view.inbox:
             if msg.kind == KIND:
-                st.receive(msg.sender, msg.data, ignore=self.book.done, within=within)
+                st.receive(msg.sender, msg.data, ignore=ignore, within=within)
         st.release()
         settled = bool(before) and st.bundle == before
         self.build_bundle(view)
@@ -122,16 +139,40 @@ class CBBA(Allocator):
         view.broadcast(KIND, st.message())
         if not st.path or (self.params.execute == "settled" and not settled):
             return None
-        return st.path[0]
+        return task_of(st.path[0])
 
     # -- bundle building (Algorithm 3) -----------------------------------------------------------
-    def _task(self, view: LocalView, task: int) -> TaskInfo:
-        return view.tasks.get(task) or self.book.known[task]
+    def _task(self, view: LocalView, item: int) -> TaskInfo:
+        """The task of a bid item as this agent knows it; a team task's slot carries its share of
+        the task's workload (each of its k robots does 1/k of it)."""
+        task = task_of(item)
+        info = view.tasks.get(task) or self.book.known[task]
+        k = self.team_k.get(task, 1)
+        return info if k == 1 else info._replace(remaining=info.remaining / k)
+
+    def _candidates(self, view: LocalView) -> list[int]:
+        """The bid items this agent may add: tasks in view not in its bundle and, for a team task
+        (ST-MR), one of its k slots while the bundle holds no team task. A team slot closes the
+        bundle (it goes last): an agent waits for a team only at the end of its path, so no two
+        agents can each wait at a task the other has still to reach."""
+        st = self.state
+        if not self.team_k:
+            return sorted(t for t in view.tasks if t not in st.bundle)
+        held = {task_of(t) for t in st.bundle}
+        if any(self.team_k.get(t, 1) > 1 for t in held):
+            return []
+        cands = []
+        for t in view.tasks:
+            if t in held:
+                continue
+            k = self.team_k.get(t, 1)
+            cands.extend([t] if k == 1 else [slot_id(t, s) for s in range(k)])
+        return sorted(cands)
 
     def build_bundle(self, view: LocalView) -> None:
         st = self.state
         while len(st.bundle) < self.params.max_tasks:
-            cands = sorted(t for t in view.tasks if t not in st.bundle)
+            cands = self._candidates(view)
             if not cands:
                 return
             gains, positions = self._marginal_gains(view, cands)
@@ -146,7 +187,7 @@ class CBBA(Allocator):
         """Best marginal score of each candidate over every insertion position, and that position."""
         p, v, rate = self.params, view.max_speed, view.work_rate
         log_l = math.log(p.discount)
-        info = [view.tasks[t] for t in cands]
+        info = [self._task(view, t) for t in cands] if self.team_k else [view.tasks[t] for t in cands]
         cx = np.array([t.x for t in info])
         cy = np.array([t.y for t in info])
         cr = np.array([t.remaining for t in info])
@@ -168,7 +209,11 @@ class CBBA(Allocator):
         if len(path):
             delay[:, :-1] = (d[:, :-1] + d[:, 1:] - seg[None, :]) / v + (cr / rate)[:, None]
         gain = np.exp(log_l * tau) * cr[:, None] + (np.exp(log_l * delay) - 1.0) * suffix[None, :]
-        return gain.max(axis=1), gain.argmax(axis=1)
+        best, where = gain.max(axis=1), gain.argmax(axis=1)
+        if self.team_k:  # a team slot goes at the end of the path
+            team = np.array([self.team_k.get(task_of(t), 1) > 1 for t in cands])
+            best[team], where[team] = gain[team, -1], len(path)
+        return best, where
 
     def _reset_if_idle(self, now: float) -> None:
         st = self.state

@@ -28,11 +28,17 @@ and task with the best score, again and again; a task's score is CBBA's path-ind
 travel time, by :func:`scipy.optimize.linear_sum_assignment`), where each agent gets at most one
 task and each task at most one agent, as CBBA's single-task robots do; and GRAPE's game solved in
 one place (``central-grape``: a Nash-stable partition, several agents to a task as GRAPE allows).
+
+Team tasks (ST-MR, a task that needs k robots at once): reports also carry each task's k; SGA and
+the Hungarian method solve over the tasks' slots (k copies of a team task, each with 1/k of its
+workload) and drop a team they leave short, solving again without it (:func:`~swarmbed.plugins.teams.by_slots`); a
+kept team's open places are solved for; central GRAPE uses the utility that peaks at k members.
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 from typing import Literal
 
@@ -43,12 +49,16 @@ from swarmbed.extension import LocalView
 from swarmbed.plugins.external import FallbackParams, WithFallback
 from swarmbed.plugins.grape import utility as grape_utility
 from swarmbed.plugins.packed import read_tuples
+from swarmbed.plugins.teams import by_slots
 from swarmbed.wire.schema import Experiment
 
 REPORT, ASSIGN = "report", "assign"
 
 #: a report's task rows: id, position and remaining workload as a robot would send them (float32)
 TASK_ROW = np.dtype([("task", "<i4"), ("x", "<f4"), ("y", "<f4"), ("remaining", "<f4")])
+#: the rows of a report that names a team task (ST-MR): also the robots each task needs; such a
+#: report is ``[x, y, rows, 1]``, so that runs without team tasks send the bytes they did
+TEAM_TASK_ROW = np.dtype([("task", "<i4"), ("x", "<f4"), ("y", "<f4"), ("remaining", "<f4"), ("needed", "u1")])
 #: an assignment's rows: the agent, its task and where the task is (a goal, as a leader would send it)
 ASSIGN_ROW = np.dtype([("agent", "<i2"), ("task", "<i4"), ("x", "<f4"), ("y", "<f4")])
 
@@ -97,6 +107,7 @@ class Centralized(WithFallback):
         self.tasks: dict[int, tuple[float, float, float, float]] = {}  # task -> x, y, remaining, time (leader's)
         self.assigned: tuple[int, float, float, float] | None = None  # (task, x, y, time the assignment came)
         self.plan: dict[int, int] = {}  # agent -> task, the leader's last assignment
+        self.needed: dict[int, int] = {}  # team tasks (ST-MR) the leader knows: task -> robots it needs
 
     # -- the roles ------------------------------------------------------------------------------
     def leader(self, now: float) -> int:
@@ -110,7 +121,12 @@ class Centralized(WithFallback):
         now = view.time
         self._read(view, now)
         leader = self.leader(now)
-        seen = [(t.id, t.x, t.y, t.remaining) for t in view.tasks.values()]
+        teams = view.coalitions()
+        seen: list[tuple]
+        if teams:
+            seen = [(t.id, t.x, t.y, t.remaining, teams.get(t.id, (1, 0))[0]) for t in view.tasks.values()]
+        else:
+            seen = [(t.id, t.x, t.y, t.remaining) for t in view.tasks.values()]
         if leader == self.agent_id:
             self._learn(self.agent_id, view.x, view.y, seen, view)
             self._forget(now)
@@ -123,7 +139,8 @@ class Centralized(WithFallback):
             mine = plan.get(self.agent_id)
             self.assigned = None if mine is None else (mine, *self.tasks[mine][:2], now)
             return mine
-        view.send(leader, REPORT, [view.x, view.y, _pack(seen, TASK_ROW)])
+        report = [view.x, view.y, _pack(seen, TEAM_TASK_ROW), 1] if teams else [view.x, view.y, _pack(seen, TASK_ROW)]
+        view.send(leader, REPORT, report)
         self.count("reports_sent")
         if self.assigned is None or now - self.assigned[3] > self.params.hold_for:
             # nothing fresh enough from the leader: the fallback allocator decides, or the tree explores
@@ -141,10 +158,11 @@ class Centralized(WithFallback):
                 continue
             self.heard[msg.sender] = now
             data = msg.data
-            if msg.kind == REPORT and isinstance(data, list) and len(data) == 3:
-                x, y, packed = data
+            if msg.kind == REPORT and isinstance(data, list) and (len(data) == 3 or data[3:] == [1]):
+                x, y, packed = data[:3]
                 if isinstance(x, (int, float)) and isinstance(y, (int, float)) and math.isfinite(x + y):
-                    self._learn(msg.sender, float(x), float(y), read_tuples(packed, TASK_ROW), view)
+                    rows = read_tuples(packed, TASK_ROW if len(data) == 3 else TEAM_TASK_ROW)
+                    self._learn(msg.sender, float(x), float(y), rows, view)
             elif msg.kind == ASSIGN and msg.sender == self.leader(now):
                 for agent, task, x, y in read_tuples(data, ASSIGN_ROW):
                     if agent == self.agent_id and math.isfinite(x + y):
@@ -159,21 +177,30 @@ class Centralized(WithFallback):
         now = view.time
         self.positions[reporter] = (x, y)
         named = set()
-        for task, tx, ty, remaining in rows:
+        for task, tx, ty, remaining, *needed in rows:
             if math.isfinite(tx + ty + remaining):
                 self.tasks[int(task)] = (float(tx), float(ty), float(remaining), now)
                 named.add(int(task))
+                if needed and needed[0] > 1:
+                    self.needed[int(task)] = int(needed[0])
         reach = view.awareness_range
         for task, (tx, ty, _r, _t) in list(self.tasks.items()):
             if task not in named and math.hypot(tx - x, ty - y) < reach:
                 del self.tasks[task]
+                self.needed.pop(task, None)
 
     def _plan(self, agents: dict[int, tuple[float, float]], speed: float) -> dict[int, int]:
         """The leader's assignment: the committed pairs that still stand, and the solver's for the rest."""
         kept = {a: j for a, j in self.plan.items() if a in agents and j in self.tasks} if self.params.commit else {}
-        taken = set(kept.values())
         free = {a: p for a, p in agents.items() if a not in kept}
-        plan = kept | self.solve(free, {j: v[:3] for j, v in self.tasks.items() if j not in taken}, speed)
+        if not self.needed:
+            taken = set(kept.values())
+            plan = kept | self.solve(free, {j: v[:3] for j, v in self.tasks.items() if j not in taken}, speed)
+        else:  # team tasks: the places a kept team leaves open are solved for, as slots
+            on = Counter(kept.values())
+            need = {j: self.needed.get(j, 1) - on[j] for j in self.tasks}
+            open_tasks = {j: v[:3] for j, v in self.tasks.items() if need[j] > 0}
+            plan = kept | by_slots(lambda a, t: self.solve(a, t, speed), free, open_tasks, need)
         self.plan = plan
         return plan
 
@@ -181,6 +208,7 @@ class Centralized(WithFallback):
         for task, (_x, _y, _r, seen) in list(self.tasks.items()):
             if now - seen > self.params.heard_within:
                 del self.tasks[task]
+                self.needed.pop(task, None)
 
     # -- the assignment -------------------------------------------------------------------------
     def solve(
@@ -271,17 +299,22 @@ def nash_stable_partition(
     social_inhibition: float,
     start: dict[int, int] | None = None,
     max_passes: int = 1000,
+    needed: dict[int, int] | None = None,
 ) -> dict[int, int]:
     """GRAPE's game solved in one place: from ``start`` (else every agent on its nearest task), each
     agent in id order joins the coalition of highest utility (SPACE's Eq. 1, :func:`grape.utility`)
     where it beats its own, until a whole pass moves no one: a Nash-stable partition (GRAPE's
-    anonymous hedonic game with SPAO preferences converges, Jang et al. 2018, Theorem 1)."""
+    anonymous hedonic game with SPAO preferences converges, Jang et al. 2018, Theorem 1). ``needed``:
+    the team tasks' k (ST-MR), whose utility peaks at k members (:func:`grape.utility`); the theorem
+    does not cover those, and ``max_passes`` bounds the search where no stable partition is met."""
     if not tasks:
         return {}
     tids = sorted(tasks)
 
     def dist(a: int, j: int) -> float:
         return math.hypot(tasks[j][0] - agents[a][0], tasks[j][1] - agents[a][1])
+
+    k = needed or {}
 
     part = {a: j for a, j in (start or {}).items() if a in agents and j in tasks}
     for a in sorted(agents):
@@ -294,11 +327,13 @@ def nash_stable_partition(
         moved = False
         for a in sorted(agents):
             here = part[a]
-            u_here = grape_utility(tasks[here][2], dist(a, here), size[here], cost_weight, social_inhibition)
+            u_here = grape_utility(
+                tasks[here][2], dist(a, here), size[here], cost_weight, social_inhibition, k.get(here, 1)
+            )
             best, u_best = here, u_here
             for j in tids:
                 if j != here:
-                    u = grape_utility(tasks[j][2], dist(a, j), size[j] + 1, cost_weight, social_inhibition)
+                    u = grape_utility(tasks[j][2], dist(a, j), size[j] + 1, cost_weight, social_inhibition, k.get(j, 1))
                     if u > u_best:
                         best, u_best = j, u
             if best != here:
@@ -322,7 +357,18 @@ class CentralGRAPE(Centralized):
         p = self.params
         tasks = {j: v[:3] for j, v in self.tasks.items()}
         start = self.plan if p.commit else None
-        self.plan = nash_stable_partition(agents, tasks, p.cost_weight, p.social_inhibition, start)
+        fixed: dict[int, int] = {}
+        if start and self.needed:
+            # a full team stays on its task until it is done (commit): the task's workload falls as the
+            # team works, and re-solving would break the team up for fuller tasks, again and again
+            on = Counter(j for a, j in start.items() if a in agents and j in tasks)
+            fixed = {
+                a: j for a, j in start.items() if a in agents and j in tasks and on[j] >= self.needed.get(j, 1) > 1
+            }
+            agents = {a: xy for a, xy in agents.items() if a not in fixed}
+            tasks = {j: v for j, v in tasks.items() if j not in set(fixed.values())}
+        free = nash_stable_partition(agents, tasks, p.cost_weight, p.social_inhibition, start, needed=self.needed)
+        self.plan = fixed | free
         return self.plan
 
 

@@ -11,6 +11,12 @@ task and tries the task selection process again in the next game loop" (``on_ear
 abandon``). SPACE's code (``plugins/greedy/greedy.py``) checks claims only when it chooses, and an
 agent keeps its task until the task is done (``keep``, the default: the Fig. 3 results come from
 that code). Either way the choice itself skips tasks a neighbour claims.
+
+A team task (ST-MR, one that needs k robots at once) takes k claims: it is free while fewer than k
+neighbours claim it, and a claim beaten by k earlier ones is given up (in either mode: the team is
+full without it). A claimant of a team task that sees a fuller team with room joins it (more
+claimants than its own team, itself counted; or as many and an earlier founding claim): without
+this rule, agents that each claimed a different team task at the start would wait alone forever.
 """
 
 from __future__ import annotations
@@ -49,27 +55,52 @@ class FirstClaimedGreedy(Allocator):
     def decide(self, view: LocalView) -> int | None:
         if self.task is not None and self.task not in view.tasks:
             self.task = None  # done, or no longer in sight
-        claims: dict[int, tuple[int, int]] = {}  # task -> earliest (claim tick, agent) heard this tick
+        needs = view.coalitions()
+        claims: dict[int, list[tuple[int, int]]] = {}  # task -> the (claim tick, agent) heard this tick
         for msg in view.inbox:
             if msg.kind != CLAIM:
                 continue
             task, tick = msg.data
-            key = (tick, msg.sender)
-            if task not in claims or key < claims[task]:
-                claims[task] = key
-        earlier = self.task is not None and self.task in claims and claims[self.task] < (self.claimed_at, self.agent_id)
+            claims.setdefault(task, []).append((tick, msg.sender))
+
+        def room(task: int | None) -> int:  # robots the task takes: one, or a team task's k (ST-MR)
+            return needs[task][0] if task in needs else 1
+
+        mine = (self.claimed_at, self.agent_id)
+        earlier = self.task is not None and sum(key < mine for key in claims.get(self.task, ())) >= room(self.task)
+        if earlier and room(self.task) > 1:
+            self.task = None  # a team that is full without this agent: it looks for another now
+        elif self.task is not None and room(self.task) > 1:
+            self._join_fuller_team(view, claims, room)
         if earlier and self.params.on_earlier_claim == "abandon":
             self.task = None
             self.abandoned += 1
             return None  # choose again at the next tick, as the paper describes
         if self.task is None:
-            free = [t for t in view.tasks.values() if t.id not in claims]
+            free = [t for t in view.tasks.values() if len(claims.get(t.id, ())) < room(t.id)]
             if not free:
                 return None
             self.task = self._choose(view, free)
             self.claimed_at = view.tick
         view.broadcast(CLAIM, [self.task, self.claimed_at])
         return self.task
+
+    def _join_fuller_team(self, view: LocalView, claims: dict[int, list[tuple[int, int]]], room) -> None:
+        """A team task's claimant moves to a team in view that already has more claimants than its own
+        (itself counted) and room for one more, or as many and an earlier founding claim: teams
+        gather around the earliest claims instead of each agent waiting alone at its own."""
+        assert self.task is not None
+        own = [*claims.get(self.task, ()), (self.claimed_at, self.agent_id)]
+        best_key, best = (len(own), tuple(-v for v in min(own))), None
+        for task in sorted(view.tasks):
+            heard = claims.get(task, ())
+            if task == self.task or room(task) < 2 or not 0 < len(heard) < room(task):
+                continue
+            key = (len(heard), tuple(-v for v in min(heard)))
+            if key > best_key:
+                best_key, best = key, task
+        if best is not None:
+            self.task, self.claimed_at = best, view.tick
 
     def _choose(self, view: LocalView, free: list[TaskInfo]) -> int:
         mode = self.params.mode

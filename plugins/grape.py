@@ -22,7 +22,8 @@ section 7 had one: ``restart_bumps_evolution: true``). One difference stays: SPA
 and runs the mutex on alternate ticks, ours does both in one tick.
 
 Utility (SPACE Eq. 1): ``u_i(t_j, |S_j|) = R_j / |S_j| - cost_weight * d_ij * |S_j| ** social_inhibition``
-with R_j the task's remaining workload and d_ij the distance to it. SPACE's additions: the initial
+with R_j the task's remaining workload and d_ij the distance to it; a task that needs a team of k
+(ST-MR, GRAPE's original setting) peaks at k members instead (:func:`utility`). SPACE's additions: the initial
 partition puts the agent on its nearest task, and it does so again when its task completes;
 convergence is judged locally (satisfied and unchanged by the mutex). As in SPACE's plugin, an
 agent whose task completed is unsatisfied, and one that sees no task to decide on stays so
@@ -84,8 +85,26 @@ def read_pairs(packed: object) -> list[tuple[int, int]]:
     return []
 
 
-def utility(remaining: float, distance: float, size: int, cost_weight: float, social_inhibition: float) -> float:
-    """SPACE's Eq. 1: ``R_j / |S_j| - cost_weight * d_ij * |S_j| ** social_inhibition``."""
+def utility(
+    remaining: float, distance: float, size: int, cost_weight: float, social_inhibition: float, needed: int = 1
+) -> float:
+    """SPACE's Eq. 1: ``R_j / |S_j| - cost_weight * d_ij * |S_j| ** social_inhibition``.
+
+    A task that needs a team of k (ST-MR, ``needed`` > 1): ``R_j / max(|S_j|, k) * min(|S_j|, k) / k -
+    cost_weight * d_ij * max(1, |S_j| - k + 1) ** social_inhibition``: the reward is shared among at
+    least k (more dilute it, as in GRAPE's own form), a coalition short of k is worth the part of the
+    team it has filled (nothing gets done until it is full), and the inhibition falls only on members
+    beyond k. At k = 1 this is Eq. 1. The preference peaks at |S_j| = k rather than at one, so GRAPE's
+    convergence theorem (SPAO preferences) does not cover it; tests/test_teams.py checks that the
+    partitions our runs end in leave no agent better off moving alone."""
+    if needed > 1:
+        excess = size - needed + 1
+        try:
+            inhibition = float(max(1, excess)) ** social_inhibition
+        except OverflowError:
+            inhibition = math.inf
+        cost = cost_weight * distance
+        return remaining / max(size, needed) * min(size, needed) / needed - (cost * inhibition if cost else 0.0)
     try:
         inhibition = float(size) ** social_inhibition
     except OverflowError:
@@ -151,6 +170,7 @@ class GRAPE(Allocator):
         self.told: dict[int, int] = {}  # the partition as the last message had it (full_every > 1)
         self.told_version: tuple[int, float] = (-1, 0.0)
         self.heard: dict[int, tuple[int, dict[int, int]]] = {}  # sender -> (message number, its partition)
+        self.needs: dict[int, tuple[int, int]] = {}  # team tasks in view: task -> (needed, on it)
 
     # -- utility ----------------------------------------------------------------------------------
     def utility(self, view: LocalView, task: int, size: int) -> float:
@@ -158,7 +178,8 @@ class GRAPE(Allocator):
             return 0.0
         t = view.tasks[task]
         p = self.params
-        return utility(t.remaining, view.distance_to(t), size, p.cost_weight, p.social_inhibition)
+        needed = self.needs.get(task, (1, 0))[0]
+        return utility(t.remaining, view.distance_to(t), size, p.cost_weight, p.social_inhibition, needed)
 
     def coalition_size(self, task: int, with_me: bool) -> int:
         others = sum(1 for a, t in self.partition.items() if t == task and a != self.agent_id)
@@ -167,6 +188,7 @@ class GRAPE(Allocator):
     # -- the tick -------------------------------------------------------------------------------
     def decide(self, view: LocalView) -> int | None:
         me = self.agent_id
+        self.needs = view.coalitions()
         finished = set(self.book.update(view))
         mine_done = self.partition.get(me, VOID) in finished
         if finished:
