@@ -1,9 +1,10 @@
 """Conformance kit for allocators, like PettingZoo's ``api_test`` / ``seed_test``.
 
 It runs allocators in-process on static instances: agents stand still, every round each agent
-decides with what it sees and what reached it, and its messages go through the real radio model
-(:class:`netem.Radio`), so loss, rate caps and queue limits behave exactly as in a run. Check any
-allocator, a user's own included:
+decides with what it sees and what reached it, and its messages go through the radio exactly as a
+run's do (:class:`~swarmbed.netem.exchange.Exchange`, the proxy's and the in-process engine's
+step, with its ledger and its seed stream), so loss, rate caps and queue limits behave as in a run.
+Check any allocator, a user's own included:
 
     swarmbed check-allocator fcg
     swarmbed check-allocator my_algo.py:MyAllocator --set alpha=0.3
@@ -17,18 +18,21 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from swarmbed.extension import HALT, HOLD, Allocator, LocalView, Message, TaskInfo
 from swarmbed.netem import Radio
+from swarmbed.netem.exchange import Exchange
 from swarmbed.plugins.registry import make, resolve, resolve_scenario
-from swarmbed.wire.codec import TASK_DTYPE, unpack
+from swarmbed.wire.codec import TASK_DTYPE, AgentOut, WorldSample, delivered_in, unpack
 from swarmbed.wire.observation import Observation
-from swarmbed.wire.schema import NetworkSection
+from swarmbed.wire.schema import NetemSpec, NetworkSection
 from swarmbed.wire.state import pack_state, unpack_state
 
 DEFAULT_MAX_BYTES = 64 * 1024
@@ -46,11 +50,14 @@ class Instance:
     max_speed: float = 1.0
     work_rate: float = 1.0
     awareness_range: float = math.inf
-    agent_colors: list[int] | None = None  # search and rescue: robots' colours
-    task_colors: dict[int, int] | None = None  # and victims' colours, shown as when bidding
+    task_colors: dict[int, int] | None = None  # a task's colour where it has one (the table's color column)
     #: what else a standing agent's observation says, for scenarios whose observation has more
-    #: fields than the generic ones (search and rescue: its reach, nothing inspected or rescued)
+    #: fields than the generic ones: at every round (search and rescue: its reach, nothing inspected
+    #: or rescued; MT-SR team tasks: ``coalitions``), per agent (search and rescue: its colour) and
+    #: at the first round only (search and rescue: every robot's start, ``team``)
     observed: dict[str, Any] = field(default_factory=dict)
+    observed_by_agent: list[dict[str, Any]] | None = None
+    observed_first: dict[str, Any] = field(default_factory=dict)
 
 
 def random_instance(
@@ -74,9 +81,10 @@ def random_instance(
     return Instance(
         agents,
         tasks,
-        agent_colors=[i % 3 for i in range(n_agents)],
         task_colors={j: int(rng.integers(3)) for j in tasks},
         observed={"reach": 5.0, "robots": [], "inspected": [], "rescued": [], "busy": 0},
+        observed_by_agent=[{"color": i % 3} for i in range(n_agents)],
+        observed_first={"team": [(i, x, y) for i, (x, y) in enumerate(agents)]},
     )
 
 
@@ -85,7 +93,7 @@ class Trace:
     allocators: list[Allocator]
     decisions: list[dict[int, int | None]] = field(default_factory=list)  # per round
     messages: list[list[tuple[int, str, bytes]]] = field(default_factory=list)  # per round
-    radio: Radio | None = None
+    radio: Radio | None = None  # the radio the rounds went through (its ledger: every copy's fate)
 
 
 def _observation(
@@ -118,85 +126,79 @@ def simulate(
     move_at: Sequence[int] = (),
 ) -> Trace:
     """Run ``rounds`` rounds. ``remove_at[k]``: tasks that disappear (are done) before round k.
-    Each round every agent is shown its view (``observe``, then ``decide``), as in a run; the first
-    view lists the team's starting positions (``obs.team``, where the scenario's observation has
-    that field), as the SAR scenario does."""
+    Each round every agent is shown its view (``observe``, then ``decide``), as in a run, and what
+    it sent goes through the radio's :class:`~swarmbed.netem.exchange.Exchange` (seeded from
+    ``seed`` as a run's radio is, its ledger balanced at the end)."""
     n = len(inst.agents)
-    seeds = np.random.SeedSequence(seed).spawn(n + 1)
+    seeds = np.random.SeedSequence(seed).spawn(n)
     trace = Trace([make(name, params, i, np.random.default_rng(seeds[i]), seed, scenario) for i in range(n)])
-    team = [(i, x, y) for i, (x, y) in enumerate(inst.agents)]
-    radio = Radio(network, n, 1.0, np.random.default_rng(seeds[n]))
-    trace.radio = radio
     ids = list(range(n))
     xs, ys = [a[0] for a in inst.agents], [a[1] for a in inst.agents]
     tasks = dict(inst.tasks)
-    inboxes: dict[int, list[list]] = {}
+    inboxes: dict[int, bytes] = {}
     kinds = set(type(trace.allocators[0]).message_kinds)
     obs_cls = resolve_scenario(scenario).Observation if scenario else Observation
-    for k in range(rounds):
-        if k in move_at:  # every agent moves to a fresh instance through a snapshot, as a swap does
-            trace.allocators = [_moved(a, name, params, i, seed, scenario) for i, a in enumerate(trace.allocators)]
-        for t in (remove_at or {}).get(k, ()):
-            tasks.pop(t, None)
-        radio.confirm()
-        outs, decisions, sent = {}, {}, []
-        for i, (x, y) in enumerate(inst.agents):
-            colors = inst.task_colors or {}
-            visible = {
-                t: TaskInfo(t, tx, ty, w, colors.get(t, -1))
-                for t, (tx, ty, w) in tasks.items()
-                if math.hypot(tx - x, ty - y) <= inst.awareness_range
-            }
-            inbox = [Message(s, kind, unpack(payload)) for s, kind, payload in inboxes.get(i, [])]
-            color = inst.agent_colors[i] if inst.agent_colors else -1
-            obs = _observation(
-                obs_cls,
-                k,
-                x,
-                y,
-                visible,
-                {**inst.observed, "color": color, "team": team if k == 0 else None},
-            )
-            view = LocalView(
-                i,
-                n,
-                k,
-                float(k),
-                x,
-                y,
-                0.0,
-                0.0,
-                inst.work_rate,
-                visible,
-                inbox,
-                inst.max_speed,
-                inst.awareness_range,
-                obs=obs,
-            )
-            trace.allocators[i].observe(view)
-            decision = trace.allocators[i].decide(view)
-            if decision is not None and decision not in (HOLD, HALT) and decision not in tasks:
-                raise ConformanceError(f"{name}: agent {i} chose task {decision!r} at round {k}, which does not exist")
-            decisions[i] = decision
-            encoded = [o.encode() for o in view.outbox]
-            for m in encoded:
-                if len(m.payload) > max_bytes:
+    with tempfile.TemporaryDirectory(prefix="swarmbed-kit-") as ledger_dir:
+        exchange = Exchange(NetemSpec(seed=seed, dt=1.0, agents=n, network=network), Path(ledger_dir))
+        trace.radio = exchange.radio
+        for k in range(rounds):
+            if k in move_at:  # every agent moves to a fresh instance through a snapshot, as a swap does
+                trace.allocators = [_moved(a, name, params, i, seed, scenario) for i, a in enumerate(trace.allocators)]
+            for t in (remove_at or {}).get(k, ()):
+                tasks.pop(t, None)
+            exchange.radio.confirm()  # the inboxes made for this round arrived
+            outs, decisions, sent = {}, {}, []
+            for i in ids:
+                inbox = [Message(d.sender, d.kind, unpack(d.payload)) for d in delivered_in(inboxes.get(i))]
+                view = _view(inst, obs_cls, tasks, i, k, inbox)
+                trace.allocators[i].observe(view)
+                decision = trace.allocators[i].decide(view)
+                if decision is not None and decision not in (HOLD, HALT) and decision not in tasks:
                     raise ConformanceError(
-                        f"{name}: agent {i} sent a {len(m.payload)}-byte {m.kind!r} message "
-                        f"at round {k} (limit {max_bytes})"
+                        f"{name}: agent {i} chose task {decision!r} at round {k}, which does not exist"
                     )
-                if kinds and m.kind not in kinds:
-                    raise ConformanceError(f"{name}: message kind {m.kind!r} not in message_kinds {sorted(kinds)}")
-                unpack(m.payload)  # serializable both ways
-                sent.append((i, m.kind, m.payload))
-            outs[i] = encoded
-        radio.route(k, ids, xs, ys, outs)
-        inboxes = radio.deliver(k + 1, ids)
-        trace.decisions.append(decisions)
-        trace.messages.append(sent)
-    radio.finish(rounds - 1)
-    radio.ledger.check()
+                decisions[i] = decision
+                encoded = [o.encode() for o in view.outbox]
+                for m in encoded:
+                    if len(m.payload) > max_bytes:
+                        raise ConformanceError(
+                            f"{name}: agent {i} sent a {len(m.payload)}-byte {m.kind!r} message "
+                            f"at round {k} (limit {max_bytes})"
+                        )
+                    if kinds and m.kind not in kinds:
+                        raise ConformanceError(f"{name}: message kind {m.kind!r} not in message_kinds {sorted(kinds)}")
+                    unpack(m.payload)  # serializable both ways
+                    sent.append((i, m.kind, m.payload))
+                outs[i] = AgentOut(k, i, [], encoded, {})
+            inboxes = exchange.route(WorldSample(k, ids, xs, ys, ids, {}), outs).inboxes
+            trace.decisions.append(decisions)
+            trace.messages.append(sent)
+        exchange.finish(rounds - 1, malformed=0)
     return trace
+
+
+def _view(
+    inst: Instance, obs_cls: type[Observation], tasks: dict[int, tuple[float, float, float]], i: int, k: int, inbox
+) -> LocalView:
+    """What standing agent ``i`` sees at round ``k``: the tasks in its range and the instance's
+    observed fields (every round's, its own, the first round's)."""
+    x, y = inst.agents[i]
+    colors = inst.task_colors or {}
+    visible = {
+        t: TaskInfo(t, tx, ty, w, colors.get(t, -1))
+        for t, (tx, ty, w) in tasks.items()
+        if math.hypot(tx - x, ty - y) <= inst.awareness_range
+    }
+    known = dict(inst.observed)
+    if inst.observed_by_agent is not None:
+        known.update(inst.observed_by_agent[i])
+    if k == 0:
+        known.update(inst.observed_first)
+    obs = _observation(obs_cls, k, x, y, visible, known)
+    n = len(inst.agents)
+    return LocalView(
+        i, n, k, float(k), x, y, 0.0, 0.0, inst.work_rate, visible, inbox, inst.max_speed, inst.awareness_range, obs=obs
+    )
 
 
 def _moved(
