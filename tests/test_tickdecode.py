@@ -29,13 +29,15 @@ from swarmbed.wire.tickdecode import TickDecoder
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = {
-    "mtsr": ROOT / "experiments" / "space_mtsr.yaml",
-    "sar": ROOT / "experiments" / "sar" / "_base.yaml",
+    "mtsr": (ROOT / "experiments" / "space_mtsr.yaml", []),
+    "mtsr-teams": (ROOT / "experiments" / "space_mtsr.yaml", ["scenario.robots_needed=[1,3]"]),
+    "sar": (ROOT / "experiments" / "sar" / "_base.yaml", []),
 }
 
 
 def _observations(name: str) -> list[Observation]:
-    scenario = cfg.resolve_experiment(cfg.load(SCENARIOS[name], ["agents.count=6"])).scenario()
+    path, sets = SCENARIOS[name]
+    scenario = cfg.resolve_experiment(cfg.load(path, ["agents.count=6", *sets])).scenario()
     return list(scenario.make_world(np.random.default_rng(3)).observations().values())
 
 
@@ -136,6 +138,26 @@ def test_the_typed_decoder_reads_every_sample_as_the_python_checks_do(name):
     obs = observations[0]
     msg = decoder.decode(encode_tick(9, obs.to_wire(), inbox, decision=5))
     assert isinstance(msg, TickIn) and _same(msg.obs, obs) and msg.decision == 5 and msg.inbox == inbox
+
+
+@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def test_the_in_process_engines_observation_reads_as_the_python_checks_do(name):
+    """``TickDecoder.observation`` (how the in-process engine hands each agent its observation) gives
+    what ``from_wire`` gives, types included, and the same error on a crafted one."""
+    observations = _observations(name)
+    obs_cls = type(observations[0])
+    decoder = TickDecoder(obs_cls)
+    for obs in observations:
+        for wire in _variants(obs.to_wire()):
+            try:
+                old: object = obs_cls.from_wire(wire)
+            except WireError as exc:
+                old = str(exc)
+            try:
+                new: object = decoder.observation(wire)
+            except WireError as exc:
+                new = str(exc)
+            assert _same(old, new), (wire, old, new)
 
 
 def test_an_observation_with_a_field_type_the_decoder_does_not_read_goes_the_old_way():

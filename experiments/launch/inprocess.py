@@ -30,6 +30,7 @@ from swarmbed.wire.observation import Observation
 from swarmbed.wire.reports import Final, NetemFinal
 from swarmbed.wire.rundir import DEPLOYMENT
 from swarmbed.wire.schema import Experiment, Targets, agent_spec, netem_spec
+from swarmbed.wire.tickdecode import TickDecoder
 
 __all__ = ["ENGINES", "InProcess", "InProcessRun", "refusals", "run_in_process"]
 
@@ -43,6 +44,7 @@ class InProcess:
             raise ValueError("the in-process engine steps lock-step runs only (run.clock: lockstep)")
         spec = agent_spec(exp, targets)
         self.runtimes = {i: AgentRuntime(spec, i) for i in range(exp.agents.count)}
+        self.decoder = TickDecoder(next(iter(self.runtimes.values())).scenario.Observation) if self.runtimes else None
         self.radio_exchange = Exchange(netem_spec(exp), out_dir)
 
     def exchange(
@@ -57,8 +59,9 @@ class InProcess:
         outs = {}
         for i, obs in observed.items():
             runtime = self.runtimes[i]
+            assert self.decoder is not None
             action, messages, events = runtime.step(
-                k, runtime.decode_observation(obs.to_wire()), inboxes.get(i, EMPTY_INBOX), decisions.get(i)
+                k, self.decoder.observation(obs.to_wire()), inboxes.get(i, EMPTY_INBOX), decisions.get(i)
             )
             outs[i] = decode_agent_out(encode_agent_out(k, i, action, messages, events))
         return self.radio_exchange.route(sample, outs)
