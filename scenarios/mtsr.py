@@ -133,6 +133,7 @@ class MTSR(Scenario):
         "distance_per_agent_gini": "Gini coefficient of distance per agent",
         "work_per_agent_gini": "Gini coefficient of work per agent",
         "tasks_completed": "tasks completed",
+        "team_wait_total": "robot-seconds waiting for a team (team tasks)",
         # one value per agent, pooled over a scenario's runs (SPACE's per-agent panels): a run's mean
         # work per agent is its total work over N, the same for every allocator that completes the
         # mission; how the work is shared out is what tells allocators apart
@@ -245,6 +246,7 @@ class MTSRWorld(World):
         self.distance = np.zeros(self.n)
         self.work = np.zeros(self.n)
         self.invalid_actions = np.zeros(self.n, dtype=np.int64)
+        self.team_wait = np.zeros(self.n)  # seconds each agent stood at a team task short of its team
         # tasks (grown by generations)
         self.tx = np.zeros(0)
         self.ty = np.zeros(0)
@@ -432,7 +434,8 @@ class MTSRWorld(World):
             agents = working[task]
             self.present[task] = len(agents)
             if len(agents) < self.needed[task]:
-                continue  # a team task waits for its team: no work
+                self.team_wait[agents] += dt  # a team task waits for its team: no work
+                continue
             capacity = self.work_rate * dt * len(agents)
             done = min(capacity, float(self.remaining[task]))
             for i in agents:
@@ -482,7 +485,15 @@ class MTSRWorld(World):
             "work_total": float(self.work.sum()),
             "work_per_agent": [float(x) for x in self.work],
             "invalid_actions": int(self.invalid_actions.sum()),
+            **self._team_summary(),
         }
+
+    def _team_summary(self) -> dict:
+        """With team tasks: the robot-seconds spent at a team task waiting for the rest of its team
+        (in all, and per agent); nothing otherwise, so that a run without teams writes what it did."""
+        if not self.sc.teamwork:
+            return {}
+        return {"team_wait_total": float(self.team_wait.sum()), "team_wait_per_agent": self.team_wait.tolist()}
 
     def per_agent(self) -> dict[str, list]:
         return {

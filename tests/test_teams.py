@@ -42,6 +42,7 @@ def test_a_team_task_waits_for_its_team_and_every_robot_in_view_sees_who_is_on_i
     world.needed[1] = 1  # the second task needs one robot: it is worked alone
     world.apply({0: ["goto_task", 0], 2: ["goto_task", 1]})
     assert world.remaining[0] == 20.0 and world.present[0] == 1  # alone: waits
+    assert world.summary()["team_wait_per_agent"] == [1.0, 0.0, 0.0]
     assert world.remaining[1] == 19.0  # one robot's task is worked by one
     obs = world.observations()
     assert obs[0].coalitions == [(0, 2, 1)] and obs[2].coalitions == [(0, 2, 1)]
@@ -56,6 +57,7 @@ def test_tasks_that_need_one_robot_leave_the_observation_and_its_bytes_as_they_w
     world = _world()
     for obs in world.observations().values():
         assert obs.coalitions is None and "coalitions" not in obs.to_wire()
+    assert "team_wait_total" not in world.summary()
 
 
 def test_a_range_of_team_sizes_draws_each_tasks_k_apart_from_the_world_and_leaves_the_rest_in_place():
