@@ -359,12 +359,12 @@ class CentralGRAPE(Centralized):
         start = self.plan if p.commit else None
         fixed: dict[int, int] = {}
         if start and self.needed:
-            # a full team stays on its task until it is done (commit): the task's workload falls as the
-            # team works, and re-solving would break the team up for fuller tasks, again and again
+            # a full coalition stays on its task until it is done (commit): the task's workload falls as
+            # it is worked, and re-solving would pull the robots off it for fuller tasks, again and
+            # again (GRAPE's own agents re-decide only when the partition they hold changes); in worlds
+            # without team tasks the warm start alone is kept, as published (docs/baselines.md)
             on = Counter(j for a, j in start.items() if a in agents and j in tasks)
-            fixed = {
-                a: j for a, j in start.items() if a in agents and j in tasks and on[j] >= self.needed.get(j, 1) > 1
-            }
+            fixed = {a: j for a, j in start.items() if a in agents and j in tasks and on[j] >= self.needed.get(j, 1)}
             agents = {a: xy for a, xy in agents.items() if a not in fixed}
             tasks = {j: v for j, v in tasks.items() if j not in set(fixed.values())}
         free = nash_stable_partition(agents, tasks, p.cost_weight, p.social_inhibition, start, needed=self.needed)
