@@ -23,7 +23,8 @@ Spaces, per agent (``max_tasks`` = K, N agents):
   K + j chooses row j *and* broadcasts a claim of its task over the radio (a ``claim`` message,
   counted, ranged and lost like any other), and the observation gains ``claimed`` (K counts: the
   claims heard this tick for each row's task). With a ``fallback`` allocator, one more action, the
-  last, lets it decide.
+  last, lets it decide. Where tasks may need a team (MT-SR's ``robots_needed``), the observation
+  gains ``teams``: K rows of (robots the row's task needs, robots on it at the last tick).
 
 Rewards: the team's progress over the tick, the increase of the scenario's ``reward_key``
 (``tasks_completed`` in MT-SR, ``rescued`` in search and rescue), to every live agent.
@@ -70,10 +71,11 @@ class EnvError(RuntimeError):
 
 
 def agent_view(
-    obs: Any, inbox: bytes | None, max_tasks: int, n: int, claims: bool = False
+    obs: Any, inbox: bytes | None, max_tasks: int, n: int, claims: bool = False, teams: bool = False
 ) -> tuple[dict[str, np.ndarray], list[int]]:
     """One agent's observation (the spaces of the module docstring) and the task ids of its rows;
-    ``claims``: with ``claimed``, the claims its inbox holds for each row's task."""
+    ``claims``: with ``claimed``, the claims its inbox holds for each row's task; ``teams``: with
+    ``teams``, each row's task's (robots needed, robots on it)."""
     tasks = obs.tasks
     x, y = obs.x, obs.y
     rows = np.zeros((max_tasks, 3), dtype=np.float32)
@@ -102,7 +104,19 @@ def agent_view(
             if c.kind == CLAIM and (j := row_of.get(_claimed_task(c.payload))) is not None:
                 claimed[j] += 1
         view["claimed"] = claimed
+    if teams:
+        team = np.zeros((max_tasks, 2), dtype=np.float32)
+        team[: len(chosen), 0] = 1.0
+        for task, (needed, on) in _coalitions(obs).items():
+            if task in chosen:
+                team[chosen.index(task)] = (needed, on)
+        view["teams"] = team
     return view, chosen
+
+
+def _coalitions(obs: Any) -> dict[int, tuple[int, int]]:
+    rows = getattr(obs, "coalitions", None)
+    return {t: (k, on) for t, k, on in rows} if rows else {}
 
 
 def _claimed_task(payload: bytes) -> int | None:
@@ -136,8 +150,8 @@ class _Bridge:
     """The coordinator's side: it hands each tick's observations to the environment and waits for
     the decisions (the coordinator calls :meth:`decide` from the run's thread before each tick)."""
 
-    def __init__(self, max_tasks: int, n: int, reward_key: str, claims: bool = False) -> None:
-        self.max_tasks, self.n, self.reward_key, self.claims = max_tasks, n, reward_key, claims
+    def __init__(self, max_tasks: int, n: int, reward_key: str, claims: bool = False, teams: bool = False) -> None:
+        self.max_tasks, self.n, self.reward_key, self.claims, self.teams = max_tasks, n, reward_key, claims, teams
         self.counters: list[str] = []  # the world's numeric counters, as of the first tick
         self.to_env: queue.Queue = queue.Queue()
         self.to_run: queue.Queue = queue.Queue()
@@ -173,7 +187,7 @@ class _Bridge:
         return decisions
 
     def _view(self, obs: Any, inbox: bytes | None) -> tuple[dict[str, np.ndarray], list[int]]:
-        return agent_view(obs, inbox, self.max_tasks, self.n, self.claims)
+        return agent_view(obs, inbox, self.max_tasks, self.n, self.claims, self.teams)
 
 
 class SwarmbedParallelEnv(ParallelEnv):
@@ -235,6 +249,9 @@ class SwarmbedParallelEnv(ParallelEnv):
         }
         if self.broadcast:
             space["claimed"] = spaces.Box(np.float32(0), np.float32(n), (max_tasks,), np.float32)
+        self.teams = bool(getattr(cfg.resolve_experiment(self.exp).scenario().params, "teamwork", False))
+        if self.teams:
+            space["teams"] = spaces.Box(np.float32(0), np.float32(n), (max_tasks, 2), np.float32)
         self._observation_space = spaces.Dict(space)
         #: the action that lets the fallback allocator decide (only with ``fallback``): the last
         self.defer: int | None = actions - 1 if fallback is not None else None
@@ -283,7 +300,7 @@ class SwarmbedParallelEnv(ParallelEnv):
             self._inprocess = InProcessRun(exp, out, env=True)
             counters = _counters(self._inprocess.world)
             return self._first(self._inprocess_item(), counters)
-        self._bridge = bridge = _Bridge(self.max_tasks, exp.agents.count, self.reward_key, self.broadcast)
+        self._bridge = bridge = _Bridge(self.max_tasks, exp.agents.count, self.reward_key, self.broadcast, self.teams)
         self._failure = None
 
         def run() -> None:
@@ -404,7 +421,7 @@ class SwarmbedParallelEnv(ParallelEnv):
             return ("end", progress, bool(run.world.finished))
         hand, n = run.observe(), self.exp.agents.count
         views = {
-            i: agent_view(obs, run.inboxes.get(i), self.max_tasks, n, self.broadcast)
+            i: agent_view(obs, run.inboxes.get(i), self.max_tasks, n, self.broadcast, self.teams)
             for i, obs in hand.observed.items()
         }
         return ("tick", hand.k, views, progress)

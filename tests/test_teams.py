@@ -247,3 +247,33 @@ def test_the_central_grape_leader_keeps_a_full_team_on_its_task_as_its_workload_
     fresh = make("central-grape", {"cost_weight": 0.01}, 0, np.random.default_rng(0), 0, "mtsr")
     fresh.needed, fresh.tasks = leader.needed, leader.tasks
     assert fresh._plan(agents, 1.0) == {0: 1, 1: 1}  # what a leader with no team to keep would do
+
+
+def test_a_learner_sees_each_rows_team_where_tasks_need_one():
+    """The environment's observation gains ``teams`` (needed, on it) per row in a world of team tasks,
+    and stays as it was in one without."""
+    from swarmbed.envs import SwarmbedParallelEnv
+    from swarmbed.envs.parallel import agent_view
+
+    env = SwarmbedParallelEnv(sets=["scenario.robots_needed=[1,3]"], engine="inprocess")
+    assert env.observation_space("agent_0")["teams"].shape == (8, 2)
+    assert "teams" not in SwarmbedParallelEnv(engine="inprocess").observation_space("agent_0").spaces
+    world = _world("scenario.robots_needed=[1,3]", "agents.awareness_range=1000")
+    obs = world.observations()[0]
+    view, chosen = agent_view(obs, None, 8, 5, teams=True)
+    needs = {t: k for t, k, _ in obs.coalitions}
+    assert [int(k) for k in view["teams"][: len(chosen), 0]] == [needs.get(t, 1) for t in chosen]
+    assert env.observation_space("agent_0")["teams"].contains(view["teams"])
+
+
+@pytest.mark.slow
+def test_the_environment_of_team_tasks_passes_pettingzoos_api_test():
+    from pettingzoo.test import parallel_api_test
+
+    from swarmbed.envs import SwarmbedParallelEnv
+
+    env = SwarmbedParallelEnv(sets=["scenario.robots_needed=[1,3]", "run.duration=60"], engine="inprocess")
+    try:
+        parallel_api_test(env, num_cycles=40)
+    finally:
+        env.close()
