@@ -21,7 +21,8 @@ this rule, agents that each claimed a different team task at the start would wai
 
 from __future__ import annotations
 
-from typing import Literal
+from collections.abc import Callable
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -58,8 +59,8 @@ class FirstClaimedGreedy(Allocator):
         needs = view.coalitions()
         claims: dict[int, list[tuple[int, int]]] = {}  # task -> the (claim tick, agent) heard this tick
         for msg in view.inbox:
-            if msg.kind != CLAIM:
-                continue
+            if msg.kind != CLAIM or not _is_claim(msg.data):
+                continue  # not a claim (crafted, torn): nothing in it
             task, tick = msg.data
             claims.setdefault(task, []).append((tick, msg.sender))
 
@@ -85,7 +86,9 @@ class FirstClaimedGreedy(Allocator):
         view.broadcast(CLAIM, [self.task, self.claimed_at])
         return self.task
 
-    def _join_fuller_team(self, view: LocalView, claims: dict[int, list[tuple[int, int]]], room) -> None:
+    def _join_fuller_team(
+        self, view: LocalView, claims: dict[int, list[tuple[int, int]]], room: Callable[[int | None], int]
+    ) -> None:
         """A team task's claimant moves to a team in view that already has more claimants than its own
         (itself counted) and room for one more, or as many and an earlier founding claim: teams
         gather around the earliest claims instead of each agent waiting alone at its own."""
@@ -110,3 +113,8 @@ class FirstClaimedGreedy(Allocator):
             w = self.params.cost_weight
             return max(free, key=lambda t: (t.remaining - w * view.distance_to(t), -t.id)).id
         return min(free, key=lambda t: (view.distance_to(t), t.id)).id
+
+
+def _is_claim(data: Any) -> bool:
+    """Whether a message has a claim's shape: [task, claim tick], two whole numbers."""
+    return isinstance(data, list) and len(data) == 2 and all(type(v) is int for v in data)

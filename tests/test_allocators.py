@@ -438,6 +438,16 @@ def test_a_crafted_grape_message_is_ignored_and_changes_nothing():
         assert (b.evolution, b.stamp, b.partition) == before, every
 
 
+def test_a_crafted_claim_is_ignored_and_changes_nothing():
+    """FCG reads a claim only where it is [task, claim tick]: anything else names no task (it raised
+    on a message that did not unpack into two values)."""
+    tasks = {0: TaskInfo(0, 10.0, 0.0, 30.0), 1: TaskInfo(1, 20.0, 0.0, 30.0)}
+    crafted = [None, 7, [], [0], [0, 1, 2], ["x", 1], [[0], 1], [0, 1.5], [True, 0], {"a": 1}]
+    a = make("fcg", {}, 1, np.random.default_rng(1), 0)
+    inbox = [Message(0, "claim", data) for data in crafted]
+    assert a.decide(LocalView(1, 2, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, tasks, inbox, 1.0, 300.0)) == 0
+
+
 # -- centralized allocators through a leader (issue 60) ------------------------------------------------
 
 
