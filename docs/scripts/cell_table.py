@@ -41,7 +41,8 @@ def table(sweep: Path, metrics: tuple[str, ...] = DEFAULT) -> str:
     runs = pd.read_csv(sweep / "sweep.csv")
     runs = runs[runs["status"] == "ok"]
     heads = " | ".join(LABELS.get(m, m) for m in metrics)
-    lines = [f"| cell | allocator | runs | {heads} |", "| --- | --- | ---: | " + " | ".join("---:" for _ in metrics) + " |"]
+    rule = "| --- | --- | ---: | " + " | ".join("---:" for _ in metrics) + " |"
+    lines = [f"| cell | allocator | runs | {heads} |", rule]
     for scenario, rows in runs.groupby("scenario", sort=False):
         cell, allocator = str(scenario).split("_allocator-", 1)
         cells = [_cell(rows[m], SCALE.get(m, 1.0)) if m in rows else "-" for m in metrics]
