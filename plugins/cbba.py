@@ -42,27 +42,32 @@ bid on as k slots (:func:`slot_id`), each won by one agent through the same cons
 1/k of the task's workload and its work time; an agent holds at most one slot of a task, and a
 slot of a team task goes last in its path and closes its bundle, so that agents waiting for their
 teams never wait on each other (the slot expansion of coupled-constraint CBBA without its timing
-constraints: a team forms where its slots' winners meet).
+constraints: a team forms where its slots' winners meet). A team may never form (a slot nobody
+wins, a winner that never comes): after ``team_patience`` seconds with its team slot first and the
+team not all on the task, a robot gives the slot up.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import ConfigDict, Field
 
 from swarmbed.extension import Allocator, LocalView, TaskInfo
 from swarmbed.plugins.consensus import ConsensusState
 from swarmbed.plugins.taskbook import TaskBook
 from swarmbed.plugins.teams import slot_id, task_of
+from swarmbed.wire.schema import QuietDefaults
 
 KIND = "cbba"
 
 
-class CBBAParams(BaseModel):
+class CBBAParams(QuietDefaults):
     model_config = ConfigDict(extra="forbid")
+    #: a key for team tasks only: at its default, runs without them write the config.yaml they did
+    QUIET: ClassVar[dict[str, Any]] = {"team_patience": 600.0}
     max_tasks: int = Field(5, ge=1, description="L_t: tasks per bundle")
     discount: float = Field(0.999, gt=0, le=1, description="lambda of the time-discounted reward")
     score: Literal["time_discounted", "distance_discounted"] = "time_discounted"
@@ -83,6 +88,13 @@ class CBBAParams(BaseModel):
         description="None: information timestamps in simulated seconds, new every tick (the CBBA paper); a "
         "number: stamps of that many simulated seconds each, as SPACE's code's whole wall-clock seconds "
         "last a few hundred simulated seconds (docs/reproduction.md section 7)",
+    )
+    team_patience: float | None = Field(
+        600.0,
+        gt=0,
+        description="team tasks: simulated seconds a robot keeps a team task first in its path while fewer robots "
+        "than it needs are on it, before it gives its slot up and leaves the task alone as long again "
+        "(None: for ever); no effect where every task needs one robot",
     )
     full_every: int = Field(
         10,
@@ -105,6 +117,8 @@ class CBBA(Allocator):
         self.empty_since: float | None = None
         self.team_k: dict[int, int] = {}  # team tasks seen: task -> robots it needs
         self.done_slots: set[int] = set()  # the slot ids (s >= 1) of team tasks done
+        self.waiting: tuple[int, float] | None = None  # (team slot first in the path, since when)
+        self.shunned: dict[int, float] = {}  # team task -> until when this robot leaves it alone
 
     # the consensus state, under CBBA's own names
     bundle = property(lambda self: self.state.bundle)
@@ -133,6 +147,8 @@ class CBBA(Allocator):
             if msg.kind == KIND:
                 st.receive(msg.sender, msg.data, ignore=ignore, within=within)
         st.release()
+        if self.team_k:
+            self._give_up_waiting(view)
         settled = bool(before) and st.bundle == before
         self.build_bundle(view)
         self._reset_if_idle(view.time)
@@ -140,6 +156,25 @@ class CBBA(Allocator):
         if not st.path or (self.params.execute == "settled" and not settled):
             return None
         return task_of(st.path[0])
+
+    def _give_up_waiting(self, view: LocalView) -> None:
+        """A team slot first in the path for ``team_patience`` seconds while its team is not all on
+        the task (its other slots unwon, or their winners busy elsewhere) is given up: a team may
+        never form, and a robot that waited for it for ever would do nothing else (its bundle is
+        closed by the slot). It leaves the task alone as long again; its dropped bid reaches the
+        others through the consensus (a sender that names no winner where the receiver had it)."""
+        st, patience = self.state, self.params.team_patience
+        head = st.path[0] if st.path else None
+        k = 1 if head is None else self.team_k.get(task_of(head), 1)
+        if patience is None or head is None or k == 1 or view.coalitions().get(task_of(head), (k, 0))[1] >= k:
+            self.waiting = None
+            return
+        if self.waiting is None or self.waiting[0] != head:
+            self.waiting = (head, view.time)
+        elif view.time - self.waiting[1] >= patience:
+            st.forget(head)
+            self.shunned[task_of(head)] = view.time + patience
+            self.waiting = None
 
     # -- bundle building (Algorithm 3) -----------------------------------------------------------
     def _task(self, view: LocalView, item: int) -> TaskInfo:
@@ -154,7 +189,8 @@ class CBBA(Allocator):
         """The bid items this agent may add: tasks in view not in its bundle and, for a team task
         (ST-MR), one of its k slots while the bundle holds no team task. A team slot closes the
         bundle (it goes last): an agent waits for a team only at the end of its path, so no two
-        agents can each wait at a task the other has still to reach."""
+        agents can each wait at a task the other has still to reach. A team task it gave up on
+        (:meth:`_give_up_waiting`) is left alone for a while."""
         st = self.state
         if not self.team_k:
             return sorted(t for t in view.tasks if t not in st.bundle)
@@ -163,7 +199,7 @@ class CBBA(Allocator):
             return []
         cands = []
         for t in view.tasks:
-            if t in held:
+            if t in held or self.shunned.get(t, -math.inf) > view.time:
                 continue
             k = self.team_k.get(t, 1)
             cands.extend([t] if k == 1 else [slot_id(t, s) for s in range(k)])

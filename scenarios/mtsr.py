@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
@@ -36,7 +36,7 @@ from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_pla
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
-from swarmbed.wire.schema import Experiment
+from swarmbed.wire.schema import Experiment, QuietDefaults
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -54,8 +54,11 @@ class Generations(BaseModel):
     tasks: int = Field(50, ge=0, description="tasks per generation")
 
 
-class MTSRParams(BaseModel):
+class MTSRParams(QuietDefaults):
     """The ``scenario:`` section of an MT-SR experiment."""
+
+    #: tasks that need one robot write the config.yaml (and the sweep digests) they did before teams
+    QUIET: ClassVar[dict[str, Any]] = {"robots_needed": 1}
 
     model_config = ConfigDict(extra="forbid")
     width: float = Field(1400.0, gt=0, description="area width")
@@ -95,14 +98,6 @@ class MTSRParams(BaseModel):
         if self.task_positions is not None and len(self.task_positions) != self.initial_tasks:
             raise ValueError("task_positions needs one [x, y] per initial task")
         return self
-
-    @model_serializer(mode="wrap")
-    def _one_robot_stays_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
-        """Tasks that need one robot write the config.yaml (and the sweep digests) they did before teams."""
-        data = handler(self)
-        if data.get("robots_needed") == 1:
-            data.pop("robots_needed")
-        return data
 
     @property
     def needed_range(self) -> tuple[int, int]:

@@ -277,3 +277,24 @@ def test_the_environment_of_team_tasks_passes_pettingzoos_api_test():
         parallel_api_test(env, num_cycles=40)
     finally:
         env.close()
+
+
+def test_a_cbba_robot_gives_up_a_team_that_does_not_form_and_leaves_it_alone_as_long():
+    """Alone at a task that needs two, a robot keeps its slot first for ``team_patience`` seconds, then
+    drops it (its bundle was closed by the slot: waiting for ever it would do nothing else) and bids
+    on that task again only once as long has passed."""
+    from swarmbed.extension import LocalView, TaskInfo
+    from swarmbed.plugins.registry import make
+    from swarmbed.wire.observation import empty_tasks
+
+    robot = make("cbba", {"team_patience": 5.0, "execute": "first"}, 0, np.random.default_rng(0), 0, "mtsr")
+    tasks = {0: TaskInfo(0, 1.0, 0.0, 30.0)}
+
+    def decide(t: float):
+        obs = MTSRObservation(t, 0.0, 0.0, 0.0, 0.0, empty_tasks(), [(0, 2, 1)])
+        return robot.decide(LocalView(0, 2, int(t), t, 0.0, 0.0, 0.0, 0.0, 1.0, dict(tasks), [], 1.0, 300.0, obs=obs))
+
+    assert [decide(float(t)) for t in range(6)] == [0] * 6  # first in its path from t = 1
+    assert decide(6.0) is None and not robot.bundle  # given up 5 s later
+    assert [decide(float(t)) for t in range(7, 11)] == [None] * 4  # left alone
+    assert decide(11.0) == 0  # and taken again

@@ -14,7 +14,7 @@ JSON from the coordinator's queryables and are validated again on arrival.
 from __future__ import annotations
 
 import re
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 from pydantic import (
     BaseModel,
@@ -42,6 +42,22 @@ class Strict(BaseModel):
     """A section whose unknown keys, infinite and NaN numbers are refused."""
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class QuietDefaults(BaseModel):
+    """A model whose keys in ``QUIET`` are left out of its dump (config.yaml, a sweep's digests) at
+    the value given there: keys added after runs were made that, at that value, change nothing, so
+    that those runs' files and a sweep resumed over them stay as they were. Loading fills them in."""
+
+    QUIET: ClassVar[dict[str, Any]] = {}
+
+    @model_serializer(mode="wrap")
+    def _quiet_defaults_stay_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        data = handler(self)
+        for key, value in self.QUIET.items():
+            if key in data and data[key] == value:
+                del data[key]
+        return data
 
 
 class RunSection(Strict):
@@ -233,7 +249,10 @@ class Ros2Section(Strict):
     )
 
 
-class Experiment(Strict):
+class Experiment(Strict, QuietDefaults):
+    #: a world without obstacles writes the config.yaml it wrote before they existed
+    QUIET: ClassVar[dict[str, Any]] = {"obstacles": None}
+
     name: str = Field(
         "experiment",
         pattern=SAFE_NAME,
@@ -273,14 +292,6 @@ class Experiment(Strict):
     @property
     def ticks(self) -> int:
         return int(round(self.run.duration / self.run.dt))
-
-    @model_serializer(mode="wrap")
-    def _no_obstacles_stay_out(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
-        """A world without obstacles writes the config.yaml it wrote before they existed."""
-        data = handler(self)
-        if data.get("obstacles", 0) is None:
-            data.pop("obstacles")
-        return data
 
     @model_validator(mode="after")
     def _materials_known(self) -> Experiment:
