@@ -24,6 +24,7 @@ LABELS = {
     "network.messages_sent": "messages sent",
     "network.bytes_sent": "bytes sent (MB)",
     "team_wait_total": "robot-s waiting for a team",
+    "distance_total": "distance, all robots (m)",
 }
 SCALE = {"network.bytes_sent": 1e-6}
 
