@@ -84,7 +84,7 @@ def test_palette_of_an_allocator_has_the_nodes_its_trees_use(capsys):
 
 def test_check_allocator_command(capsys, tmp_path):
     assert main(["check-allocator", "fcg", "--set", "mode=Random"]) == 0
-    assert capsys.readouterr().out.count("PASS") == 5  # check_snapshot among them
+    assert capsys.readouterr().out.count("PASS") == 6  # check_snapshot and check_team_tasks among them
     bad = tmp_path / "bad.py"
     bad.write_text(
         "from swarmbed.extension import Allocator\n"

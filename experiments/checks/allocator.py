@@ -10,8 +10,8 @@ Check any allocator, a user's own included:
     swarmbed check-allocator my_algo.py:MyAllocator --set alpha=0.3
 
 Generic checks: determinism (same seed, same decisions and message bytes), messages serializable
-and bounded, keeps working under 30 % loss and under a tight rate cap, and never keeps an agent on
-a task that no longer exists.
+and bounded, keeps working under 30 % loss and under a tight rate cap, never keeps an agent on
+a task that no longer exists, and runs (as deterministically) where every task needs a team.
 """
 
 from __future__ import annotations
@@ -281,7 +281,28 @@ def check_snapshot(name: str, params: Mapping[str, Any], scenario: str = "mtsr",
     return {"moves": 3, "snapshot_bytes_max": size}
 
 
-GENERIC_CHECKS = (check_determinism, check_messages, check_degraded_network, check_vanishing_tasks, check_snapshot)
+def check_team_tasks(name: str, params: Mapping[str, Any], scenario: str = "mtsr") -> dict:
+    """Where every task needs two robots (MT-SR's ``robots_needed``: the observation's
+    ``coalitions``, which an allocator may read or ignore), it still runs, decides only on tasks
+    that exist and decides the same on the same seed. A scenario whose observation has no such
+    field shows none, and this is the plain check again."""
+    inst = random_instance(17, 6, 9, scenario=scenario)
+    inst.observed = {**inst.observed, "coalitions": [(j, 2, 0) for j in inst.tasks]}
+    a = simulate(name, params, inst, 40, seed=3, scenario=scenario)
+    b = simulate(name, params, inst, 40, seed=3, scenario=scenario)
+    if a.decisions != b.decisions or a.messages != b.messages:
+        raise ConformanceError(f"{name}: two runs of team tasks with seed 3 differ")
+    return {"deciding_at_end": _assigned(a)}
+
+
+GENERIC_CHECKS = (
+    check_determinism,
+    check_messages,
+    check_degraded_network,
+    check_vanishing_tasks,
+    check_snapshot,
+    check_team_tasks,
+)
 
 
 def run_all(name: str, params: Mapping[str, Any] | None = None, scenario: str = "mtsr") -> dict[str, dict]:
