@@ -382,8 +382,9 @@ class SwarmbedParallelEnv(ParallelEnv):
         """Each agent's task id (-1: none) from its action; one line naming the agent and the value
         for anything outside the action space, before the tick is sent."""
         decisions = {}
+        live = set(self.agents)
         for agent, action in actions.items():
-            if agent not in self._index or agent not in self.agents:
+            if agent not in self._index or agent not in live:
                 raise ValueError(f"{agent!r}: not an agent of this step ({', '.join(self.agents[:5])} ...)")
             top = self._action_space.n - 1
             if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
