@@ -58,6 +58,7 @@ from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.access import claim_folder, remove_orphaned_folders
 from swarmbed.experiments.launch.inprocess import ENGINES, InProcessRun
 from swarmbed.experiments.launch.runner import RunResult, run_experiment
+from swarmbed.extension.view import coalitions_of
 from swarmbed.plugins.external import ANNOUNCE, CLAIM, DEFER
 from swarmbed.wire.codec import delivered_in, unpack
 from swarmbed.wire.errors import WireError
@@ -107,16 +108,11 @@ def agent_view(
     if teams:
         team = np.zeros((max_tasks, 2), dtype=np.float32)
         team[: len(chosen), 0] = 1.0
-        for task, (needed, on) in _coalitions(obs).items():
+        for task, (needed, on) in coalitions_of(obs).items():
             if task in chosen:
                 team[chosen.index(task)] = (needed, on)
         view["teams"] = team
     return view, chosen
-
-
-def _coalitions(obs: Any) -> dict[int, tuple[int, int]]:
-    rows = getattr(obs, "coalitions", None)
-    return {t: (k, on) for t, k, on in rows} if rows else {}
 
 
 def _claimed_task(payload: bytes) -> int | None:

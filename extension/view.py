@@ -21,6 +21,13 @@ from swarmbed.wire.state import state_type
 ObsT = TypeVar("ObsT", bound=Observation)
 
 
+def coalitions_of(obs: Any) -> dict[int, tuple[int, int]]:
+    """An observation's team tasks, task -> (robots it needs, robots on it at the last tick): its
+    ``coalitions`` field where it has one (MT-SR with ``robots_needed``), else none."""
+    rows = getattr(obs, "coalitions", None)
+    return {t: (k, on) for t, k, on in rows} if rows else {}
+
+
 @state_type
 class TaskInfo(NamedTuple):
     """A task as an agent sees it. A named tuple, not a frozen dataclass: an agent builds one per
@@ -91,8 +98,7 @@ class LocalView(Generic[ObsT]):
     def coalitions(self) -> dict[int, tuple[int, int]]:
         """Task -> (robots it needs at once, robots on it at the last tick) for the tasks in view that
         need a team (an ST-MR observation's ``coalitions``); empty where every task needs one robot."""
-        rows = getattr(self.obs, "coalitions", None)
-        return {t: (k, on) for t, k, on in rows} if rows else {}
+        return coalitions_of(self.obs)
 
     def distance_to(self, task: TaskInfo) -> float:
         return math.hypot(task.x - self.x, task.y - self.y)
