@@ -22,8 +22,10 @@ victim): it fails at its start and leaves the robot stuck for ``move_penalty`` s
 it tries again (``move_failure: per_move``, which converges as dt shrinks); ``per_tick`` draws on
 every tick of moving, as before 2026-11-26. In steady state a rescued or expired victim is
 replaced at once; in finite mode it is not. After ``agent_loss_grace`` seconds each robot is lost
-for good with probability ``agent_loss`` per step: per tick, or per simulated second
-(``agent_loss_per: second``, one draw a tick at 1 - (1 - p)^dt).
+for good with probability ``agent_loss`` per step: per tick, per simulated second
+(``agent_loss_per: second``, one draw a tick at 1 - (1 - p)^dt), or per decision of the robot
+(``decision``: one draw for each robot that chose, at the tick before, an action other than the one it
+was doing, or chose anew once a timed action, a move penalty or an abandon ended).
 
 For the consensus strategies colours are known when bidding ("bid-then-verify"): their
 observations carry the victims' colours, but a rescue still needs the robot's own inspection.
@@ -127,11 +129,13 @@ class SARParams(BaseModel):
     )
     agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
     agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
-    agent_loss_per: Literal["tick", "second"] = Field(
+    agent_loss_per: Literal["tick", "second", "decision"] = Field(
         "tick",
         description="the 'step' agent_loss is a probability per (the text: 'per step'; its SimPy world's steps "
         "are read as seconds by one caption, 'a specific time step (233 seconds)'): tick (runs before "
-        "2026-11-28) or second (per tick 1 - (1 - p)^dt: the same loss per simulated second at any run.dt)",
+        "2026-11-28), second (per tick 1 - (1 - p)^dt: the same loss per simulated second at any run.dt) or "
+        "decision (a step of the robot's own process in a process-based simulation: each time its tree or "
+        "state machine chooses a new action, or chooses again after a timed action)",
     )
     colors_for_bidding: Literal["auto", "always", "never"] = Field(
         "auto", description="show victims' colours to bidders (auto: when the allocator bids with colours)"
@@ -294,6 +298,10 @@ class SARWorld(VictimRows, World):
         # robot -> (inspect|rescue, victim, tick it ends in, tick it began in)
         self.pending: dict[int, tuple[str, int, int, int]] = {}
         self.goal: dict[int, tuple] = {}  # robot -> the goal of the move it is making (move_failure: per_move)
+        # agent_loss_per: decision: robot -> the action it chose at its last free tick (none after a timed one),
+        # and the robots that made a decision at the last tick applied (each draws once at the next draw)
+        self.chosen: dict[int, list] = {}
+        self.decided: list[int] = []
         self.tick = 0
         self._spawn(sc.victims, first=True)
 
@@ -352,6 +360,7 @@ class SARWorld(VictimRows, World):
         self.alive[agent_id] = False
         self.pending.pop(agent_id, None)  # what it was doing dies with it
         self.goal.pop(agent_id, None)
+        self.chosen.pop(agent_id, None)
         if self.navigator is not None:
             self.navigator.forget(agent_id)
 
@@ -360,6 +369,8 @@ class SARWorld(VictimRows, World):
         p = self.sc.agent_loss
         if p <= 0 or self.time < self.sc.agent_loss_grace:
             return []
+        if self.sc.agent_loss_per == "decision":  # one draw per decision, in id order (apply went in id order)
+            return [i for i in self.decided if self.alive[i] and self.loss_rng.random() < p]
         if self.sc.agent_loss_per == "second":  # the same draws, each at the chance of a tick's share of a second
             p = -math.expm1(self.dt * math.log1p(-p)) if p < 1 else 1.0
         return [int(i) for i in np.flatnonzero(self.alive) if self.loss_rng.random() < p]
@@ -423,8 +434,10 @@ class SARWorld(VictimRows, World):
         return max(1, math.ceil(seconds / self.dt - 1e-9))
 
     def _busy(self, i: int, seconds: float) -> None:
-        """The robot is occupied from this tick for ``seconds`` (whole ticks, rounded up)."""
+        """The robot is occupied from this tick for ``seconds`` (whole ticks, rounded up); what it
+        chooses once free is a decision, whatever it was doing before."""
         self.busy_until[i] = self.tick + self._ticks(seconds)
+        self.chosen.pop(i, None)
 
     def _begin(self, i: int, name: str, v: int, seconds: float) -> None:
         """Start a timed action; it ends (and takes effect) in the last tick it occupies. With
@@ -520,6 +533,8 @@ class SARWorld(VictimRows, World):
         """Advance one tick; robots act in id order on the state of this tick."""
         live = np.flatnonzero(self.alive)
         before = (self.ax[live].copy(), self.ay[live].copy(), self.distance[live].copy())
+        by_decision = self.sc.agent_loss_per == "decision"
+        self.decided = []
         for i in map(int, live):
             action = actions.get(i, ["stop"])
             if self.busy_until[i] > self.tick and self._interrupted(i, action):
@@ -530,6 +545,9 @@ class SARWorld(VictimRows, World):
                     self._finish(i)
                 continue
             self.budget.doing(i, IDLE)  # unless what it does now says otherwise
+            if by_decision and self.chosen.get(i) != action:
+                self.decided.append(i)
+                self.chosen[i] = action
             self._act(i, action)
             self.budget.book(i)
         if self.walls is not None:  # a move that would cross a wall does not happen: the robot stays

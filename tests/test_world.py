@@ -458,6 +458,37 @@ def test_agent_loss_per_second_loses_robots_at_the_same_rate_per_simulated_secon
     assert abs(survived - expected) <= 4.5 * math.sqrt(expected * (1 - expected) / robots), (survived, expected)
 
 
+def test_agent_loss_per_decision_draws_once_for_each_new_choice_of_a_robot():
+    """``agent_loss_per: decision``: a robot that keeps doing one thing draws once, one that changes
+    its action every tick draws every tick, and a timed action (an inspection) ends in a new draw:
+    survival is (1 - p)^decisions (the formula), whatever the number of ticks."""
+    p, robots, ticks = 0.02, 600, 40
+    exp = experiment(
+        f"agents.count={robots}",
+        "scenario.kind=sar",
+        "run.dt=0.25",
+        f"scenario.agent_loss={p}",
+        "scenario.agent_loss_grace=0",
+        "scenario.agent_loss_per=decision",
+        "scenario.victims=1",
+        "allocator.name=tree",
+        base=ROOT_EXPERIMENTS / "sar" / "_base.yaml",
+    )
+    world = resolve_experiment(exp).scenario().make_world(np.random.default_rng(3))
+    steady, restless = range(0, robots, 2), range(1, robots, 2)
+    for k in range(ticks):
+        for lost in world.draw_losses():
+            world.kill(lost)
+        acts = {i: ["stop"] for i in steady} | {i: ["goto", float(k % 2), 0.0] for i in restless}
+        world.apply({i: a for i, a in acts.items() if world.alive[i]})
+    for group, decisions in ((steady, 1), (restless, ticks - 1)):  # the last tick's choices draw at the next
+        survived, expected = world.alive[list(group)].mean(), (1 - p) ** decisions
+        assert abs(survived - expected) <= 4.5 * math.sqrt(expected * (1 - expected) / len(group)), (survived, expected)
+    world.chosen, world.decided = {0: ["stop"]}, []
+    world._busy(0, 1.0)  # a timed action: the robot's next choice is a decision even if it is "stop" again
+    assert 0 not in world.chosen
+
+
 @pytest.mark.parametrize("abandon_time", [0.0, 5.0])
 def test_abandoning_takes_abandon_time_during_which_the_robot_stays_put(abandon_time):
     """``scenario.abandon_time``: the robot that abandons a victim is busy that long (whole ticks),
