@@ -144,3 +144,30 @@ def test_tost_agrees_with_the_ninety_percent_interval_and_calls_only_close_group
     ).set_index("strategy")
     assert table.loc["s", "tost_p"] < 0.05 and table.loc["far", "tost_p"] > 0.5
     assert table.loc["s", "tost_margin"] == pytest.approx(0.05 * same.mean())
+
+
+def test_paired_signed_rank_p_is_the_exact_share_of_sign_flips_at_least_as_extreme():
+    """paired_p's Wilcoxon p against its definition: with no ties, every assignment of signs to the
+    ranks of |d| is equally likely under the null; p is the share of the 2^n whose statistic is at
+    least as far from its mean as the observed one (enumerated here). Its t p is scipy's paired t."""
+    import itertools
+
+    from scipy import stats
+
+    from swarmbed.experiments.views.stats import paired_p
+
+    rng = np.random.default_rng(11)
+    for n in (3, 6, 9, 12):
+        for _ in range(10):
+            x, y = rng.normal(0.4, 1, n), rng.normal(0, 1, n)
+            d = x - y
+            ranks = stats.rankdata(np.abs(d))
+            observed = ranks[d > 0].sum()
+            middle = n * (n + 1) / 4
+            flips = [sum(r for r, s in zip(ranks, signs) if s) for signs in itertools.product((0, 1), repeat=n)]
+            exact = np.mean([abs(w - middle) >= abs(observed - middle) - 1e-9 for w in flips])
+            t_p, w_p = paired_p(x, y)
+            assert w_p == pytest.approx(exact, rel=1e-9), (n, w_p, exact)
+            assert t_p == pytest.approx(stats.ttest_rel(x, y).pvalue, rel=1e-12)
+    assert all(np.isnan(paired_p(np.ones(5), np.ones(5))))
+    assert all(np.isnan(paired_p(np.ones(1), np.zeros(1))))

@@ -10,8 +10,9 @@ over runs with its 95 % t-interval (SPACE plots one value per run; so do these t
 never finished count at the run's cap for mission time and are flagged. ``--orderings`` (and the
 effect of range per allocator, paired the same way): for every cell, each pair of allocators
 compared over the seeds both ran (run i of every scenario has the same seed): the mean paired
-difference, its 95 % t-interval and the paired t-test's p, so that a reader sees which orderings
-the runs settle and which they do not.
+difference, its 95 % t-interval, the paired t-test's p and beside it the Wilcoxon signed-rank test's
+(which does not assume normal differences), so that a reader sees which orderings the runs settle
+and which they do not.
 """
 
 from __future__ import annotations
@@ -22,10 +23,10 @@ import json
 from pathlib import Path
 
 import pandas as pd
-from scipy import stats
 
 from swarmbed.experiments.campaigns.sweep import collect, read_spec
 from swarmbed.experiments.views.analyze import ci95
+from swarmbed.experiments.views.stats import paired_p
 
 ALLOCATORS = ["cbba", "grape", "fcg"]
 METRICS = {
@@ -105,22 +106,25 @@ def tables(df: pd.DataFrame) -> None:
 
 
 def _paired(first: pd.Series, second: pd.Series) -> str | None:
-    """``| seeds | mean difference (95 % CI) | p |`` of first minus second over the seeds both ran;
-    None with fewer than two."""
+    """``| seeds | mean difference (95 % CI) | t p | signed-rank p |`` of first minus second over the
+    seeds both ran; None with fewer than two."""
+    if not (first.index.is_unique and second.index.is_unique):
+        raise SystemExit("fig3.py: a seed appears twice in one cell (the sweep has other factors than agents x range)")
     both = first.index.intersection(second.index)
-    diff = (first.loc[both] - second.loc[both]).dropna()
-    if len(diff) < 2:
+    pairs = pd.concat([first.loc[both], second.loc[both]], axis=1).dropna()
+    if len(pairs) < 2:
         return None
+    diff = pairs.iloc[:, 0] - pairs.iloc[:, 1]
     low, high = ci95(diff)
-    p = stats.ttest_1samp(diff, 0.0).pvalue if diff.std() > 0 else float("nan")
-    return f"| {len(diff)} | {diff.mean():+,.0f} ({low:+,.0f} to {high:+,.0f}) | {p:.3f} |"
+    t_p, w_p = paired_p(pairs.iloc[:, 0].to_numpy(), pairs.iloc[:, 1].to_numpy())
+    return f"| {len(diff)} | {diff.mean():+,.0f} ({low:+,.0f} to {high:+,.0f}) | {t_p:.3f} | {w_p:.3f} |"
 
 
 def orderings(df: pd.DataFrame, metric: str) -> None:
     allocators = _allocators(df)
-    print(f"\n{METRICS[metric]}: paired by seed, first minus second (mean, 95 % t-interval, p):\n")
-    print("| agents | range | pair | seeds | difference (95 % CI) | p |")
-    print("| ---: | ---: | --- | ---: | --- | ---: |")
+    print(f"\n{METRICS[metric]}: paired by seed, first minus second (mean, 95 % t-interval, t and signed-rank p):\n")
+    print("| agents | range | pair | seeds | difference (95 % CI) | t p | signed-rank p |")
+    print("| ---: | ---: | --- | ---: | --- | ---: | ---: |")
     for agents, rng in cells(df):
         cell = df[(df["agents.count"] == agents) & (df["network.range"] == rng)]
         by = {a: cell[cell["allocator"] == a].set_index("seed")[metric] for a in allocators}
@@ -134,9 +138,10 @@ def range_effect(df: pd.DataFrame, metric: str) -> None:
     """Per agent count and allocator: each range against the shortest, paired by seed (the issue's
     question whether range slows GRAPE, as SPACE's code does)."""
     allocators = _allocators(df)
-    print(f"\n{METRICS[metric]}: each range minus the shortest, paired by seed (mean, 95 % t-interval, p):\n")
-    print("| agents | allocator | ranges | seeds | difference (95 % CI) | p |")
-    print("| ---: | --- | --- | ---: | --- | ---: |")
+    what = "each range minus the shortest, paired by seed (mean, 95 % t-interval, t and signed-rank p)"
+    print(f"\n{METRICS[metric]}: {what}:\n")
+    print("| agents | allocator | ranges | seeds | difference (95 % CI) | t p | signed-rank p |")
+    print("| ---: | --- | --- | ---: | --- | ---: | ---: |")
     for agents in sorted({a for a, _ in cells(df)}):
         sub = df[df["agents.count"] == agents]
         ranges = sorted(set(sub["network.range"]))

@@ -18,6 +18,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from swarmbed.experiments.views.stats import paired_p
+
 MTSR = {
     "mission_time": "mission time (s)",
     "time_95": "time to 95 % (s)",
@@ -59,7 +61,7 @@ def table(sweep: Path, walled: str, open_: str) -> str:
             x, y = a.loc[both, key].astype(float).fillna(0), b.loc[both, key].astype(float).fillna(0)
             d = x - y
             half = stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
-            p = stats.wilcoxon(x, y).pvalue if len(d) > 1 and d.abs().sum() > 0 else float("nan")
+            p = paired_p(x.to_numpy(), y.to_numpy())[1]
             cells.append(f"{x.mean():,.0f} / {y.mean():,.0f} ({d.mean():+,.0f} ± {half:,.0f}; p {p:.3f})")
         finished = (
             f" ({int(a.loc[both, 'all_tasks_completed'].sum())} / {int(b.loc[both, 'all_tasks_completed'].sum())} done)"

@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import yaml
-from scipy import stats
 
 from swarmbed.experiments.folders import read_table
 from swarmbed.experiments.views.analyze import ci95
+from swarmbed.experiments.views.stats import paired_p
 
 ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
 
@@ -94,9 +94,9 @@ def against(reference: pd.DataFrame, sweeps: list[tuple[str, pd.DataFrame]]) -> 
                 continue
             r, v = ref.loc[seeds, "rescued"], d.loc[seeds, "rescued"]
             change = v.sum() / r.sum() - 1
-            p = stats.ttest_rel(v, r).pvalue if len(seeds) > 1 else np.nan
+            t_p, w_p = paired_p(v.to_numpy(), r.to_numpy())
             sign = f"{change:+.0%}".replace("-", "−")
-            cells.append(f"{v.mean():.1f} ({sign}, p = {p:.2g})")
+            cells.append(f"{v.mean():.1f} ({sign}, p = {t_p:.2g}; signed-rank {w_p:.2g})")
             messages.append(f"{d['network.messages_sent'].mean():,.0f}")
         print(f"| {s} | {ref['rescued'].mean():.1f} | " + " | ".join(cells) + " | " + " / ".join(messages) + " |")
 

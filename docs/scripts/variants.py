@@ -13,10 +13,10 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 from swarmbed.experiments.folders import read_table
 from swarmbed.experiments.views.analyze import ci95
+from swarmbed.experiments.views.stats import paired_p
 
 ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
 
@@ -43,7 +43,7 @@ def main() -> None:
         variant = _runs(variant_dir)
         print(f"\n**{variant_dir.name}** against {args.baseline.name} (same seeds):\n")
         print(
-            "| strategy | trials | rescued, baseline | rescued, variant | paired change (p) "
+            "| strategy | trials | rescued, baseline | rescued, variant | paired change (t p; signed-rank p) "
             "| negotiations, baseline / variant | messages, baseline / variant |"
         )
         print("| --- | ---: | --- | --- | --- | --- | --- |")
@@ -55,10 +55,10 @@ def main() -> None:
                 continue
             b, v = b.loc[seeds], v.loc[seeds]
             diff = v["rescued"].to_numpy() - b["rescued"].to_numpy()
-            p = stats.ttest_rel(v["rescued"], b["rescued"]).pvalue if len(seeds) > 1 else np.nan
+            t_p, w_p = paired_p(v["rescued"].to_numpy(), b["rescued"].to_numpy())
             print(
                 f"| {s} | {len(seeds)} | {_cell(b['rescued'])} | {_cell(v['rescued'])} "
-                f"| {diff.mean():+.1f} ({p:.3f}) "
+                f"| {diff.mean():+.1f} ({t_p:.3f}; {w_p:.3f}) "
                 f"| {b['negotiations'].mean():.0f} / {v['negotiations'].mean():.0f} "
                 f"| {b['network.messages_sent'].mean():.0f} / {v['network.messages_sent'].mean():.0f} |"
             )

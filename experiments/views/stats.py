@@ -33,6 +33,18 @@ def tost_p(a: np.ndarray, b: np.ndarray, margin: float) -> float:
     return float(max(above, below))
 
 
+def paired_p(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Two-sided p-values that paired samples ``x`` and ``y`` (run r of one against run r of the
+    other, the same seed) differ: the paired t-test's and, beside it, the Wilcoxon signed-rank
+    test's, which does not lean on the differences being normal (exact below 50 pairs without ties;
+    zero differences dropped). NaN where a test has nothing to go on (under two pairs, all equal)."""
+    d = np.asarray(x, dtype=float) - np.asarray(y, dtype=float)
+    if len(d) < 2 or not np.any(d):
+        return float("nan"), float("nan")
+    t = float(stats.ttest_1samp(d, 0.0).pvalue) if d.std() > 0 else float("nan")
+    return t, float(stats.wilcoxon(d).pvalue)
+
+
 def cohens_d(a: np.ndarray, b: np.ndarray) -> float:
     """Effect size of ``a`` against ``b`` with the pooled standard deviation."""
     na, nb = len(a), len(b)
