@@ -41,6 +41,7 @@ def table(sweep: Path, walled: str, open_: str) -> str:
     runs = pd.read_csv(sweep / "sweep.csv")
     runs = runs[runs["status"] == "ok"]
     metrics = SAR if (runs["scenario_kind"] == "sar").all() else MTSR
+    metrics = {key: label for key, label in metrics.items() if key in runs}  # no wall column without walls
     heads = " | ".join(f"{label}: {walled} / {open_}" for label in metrics.values())
     lines = [
         f"| allocator | n | {heads} |",
@@ -55,9 +56,6 @@ def table(sweep: Path, walled: str, open_: str) -> str:
         both = a.index.intersection(b.index)
         cells = []
         for key in metrics:
-            if key not in runs:
-                cells.append("-")
-                continue
             x, y = a.loc[both, key].astype(float).fillna(0), b.loc[both, key].astype(float).fillna(0)
             d = x - y
             half = stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
