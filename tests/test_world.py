@@ -431,50 +431,46 @@ def test_within_agrees_with_hypot_to_the_last_bit():
             assert np.array_equal(within(dx, dy, reach), np.hypot(dx, dy) <= reach), reach
 
 
+def _losing_world(per: str, robots: int, p: float, dt: float, seed: int):
+    """A search-and-rescue world of ``robots`` robots lost with probability ``p`` per ``per`` from the start."""
+    exp = experiment(
+        f"agents.count={robots}",
+        "scenario.kind=sar",
+        f"run.dt={dt}",
+        f"scenario.agent_loss={p}",
+        "scenario.agent_loss_grace=0",
+        f"scenario.agent_loss_per={per}",
+        "scenario.victims=1",
+        "allocator.name=tree",
+        base=ROOT_EXPERIMENTS / "sar" / "_base.yaml",
+    )
+    return resolve_experiment(exp).scenario().make_world(np.random.default_rng(seed))
+
+
+def _assert_survival(survived: float, expected: float, robots: int) -> None:
+    """A binomial share within 4.5 standard deviations of its expectation."""
+    assert abs(survived - expected) <= 4.5 * math.sqrt(expected * (1 - expected) / robots), (survived, expected)
+
+
 @pytest.mark.parametrize("dt", [0.25, 1.0])
 def test_agent_loss_per_second_loses_robots_at_the_same_rate_per_simulated_second_at_any_tick(dt):
     """``agent_loss_per: second``: a robot survives a simulated second with probability 1 - p whatever
     run.dt is (the formula); per tick (the default) it would at dt = 0.25 lose four times as often."""
     p, robots, seconds = 0.02, 400, 60
-    exp = experiment(
-        f"agents.count={robots}",
-        "scenario.kind=sar",
-        f"run.dt={dt}",
-        f"run.duration={seconds}",
-        f"scenario.agent_loss={p}",
-        "scenario.agent_loss_grace=0",
-        "scenario.agent_loss_per=second",
-        "scenario.victims=1",
-        "allocator.name=tree",
-        base=ROOT_EXPERIMENTS / "sar" / "_base.yaml",
-    )
-    world = resolve_experiment(exp).scenario().make_world(np.random.default_rng(1))
+    world = _losing_world("second", robots, p, dt, seed=1)
     for _ in range(int(round(seconds / dt))):
         for lost in world.draw_losses():
             world.kill(lost)
         world.tick += 1
-    survived = world.alive.sum() / robots
-    expected = (1 - p) ** seconds
-    assert abs(survived - expected) <= 4.5 * math.sqrt(expected * (1 - expected) / robots), (survived, expected)
+    _assert_survival(world.alive.sum() / robots, (1 - p) ** seconds, robots)
 
 
 def test_agent_loss_per_decision_draws_once_for_each_new_choice_of_a_robot():
     """``agent_loss_per: decision``: a robot that keeps doing one thing draws once, one that changes
-    its action every tick draws every tick, and a timed action (an inspection) ends in a new draw:
-    survival is (1 - p)^decisions (the formula), whatever the number of ticks."""
+    its action every tick draws every tick: survival is (1 - p)^decisions (the formula), whatever the
+    number of ticks. A timed action forgets the last choice, so the next one is a decision."""
     p, robots, ticks = 0.02, 600, 40
-    exp = experiment(
-        f"agents.count={robots}",
-        "scenario.kind=sar",
-        "run.dt=0.25",
-        f"scenario.agent_loss={p}",
-        "scenario.agent_loss_grace=0",
-        "scenario.agent_loss_per=decision",
-        "scenario.victims=1",
-        "allocator.name=tree",
-        base=ROOT_EXPERIMENTS / "sar" / "_base.yaml",
-    )
-    world = resolve_experiment(exp).scenario().make_world(np.random.default_rng(3))
+    world = _losing_world("decision", robots, p, 0.25, seed=3)
     steady, restless = range(0, robots, 2), range(1, robots, 2)
     for k in range(ticks):
         for lost in world.draw_losses():
@@ -482,8 +478,7 @@ def test_agent_loss_per_decision_draws_once_for_each_new_choice_of_a_robot():
         acts = {i: ["stop"] for i in steady} | {i: ["goto", float(k % 2), 0.0] for i in restless}
         world.apply({i: a for i, a in acts.items() if world.alive[i]})
     for group, decisions in ((steady, 1), (restless, ticks - 1)):  # the last tick's choices draw at the next
-        survived, expected = world.alive[list(group)].mean(), (1 - p) ** decisions
-        assert abs(survived - expected) <= 4.5 * math.sqrt(expected * (1 - expected) / len(group)), (survived, expected)
+        _assert_survival(world.alive[list(group)].mean(), (1 - p) ** decisions, len(group))
     world.chosen, world.decided = {0: ["stop"]}, []
     world._busy(0, 1.0)  # a timed action: the robot's next choice is a decision even if it is "stop" again
     assert 0 not in world.chosen
