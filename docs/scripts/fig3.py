@@ -23,6 +23,7 @@ import json
 from pathlib import Path
 
 import pandas as pd
+import yaml
 
 from swarmbed.experiments.campaigns.sweep import collect, read_spec
 from swarmbed.experiments.views.analyze import ci95
@@ -68,6 +69,22 @@ def runs(sweep: Path) -> pd.DataFrame:
     df["allocator"] = (df["allocator.name"] if "allocator.name" in df else df["allocator"]).map(_allocator)
     for key in sorted(k for k in df.columns if k.startswith("allocator.") and k != "allocator.name"):
         df["allocator"] = df["allocator"] + f" {key.split('.', 1)[1]}=" + df[key].astype(str)  # a grid's parameter
+    return _with_varying_parameters(df, sweep)
+
+
+def _with_varying_parameters(df: pd.DataFrame, sweep: Path) -> pd.DataFrame:
+    """Allocator parameters that a sweep's named scenarios set (not a grid column) and that differ
+    between its runs, read from each run's config.yaml, join the allocator's label
+    (``cbba stamp_every=100``); keys some runs lack are left out (an older install's runs)."""
+    configs = []
+    for scenario, run in zip(df["scenario"], df["run"]):
+        path = sweep / str(scenario) / f"run_{int(run):03d}" / "config.yaml"
+        configs.append((yaml.safe_load(path.read_text()) or {}).get("allocator", {}) if path.exists() else {})
+    shared = set.intersection(*(set(c) for c in configs)) if configs else set()
+    varying = sorted(k for k in shared - {"name"} if len({json.dumps(c[k], sort_keys=True) for c in configs}) > 1)
+    labelled = [k for k in varying if f"allocator.{k}" not in df.columns]
+    for key in labelled:
+        df["allocator"] = df["allocator"] + [f" {key}={c[key]}" for c in configs]
     return df
 
 
