@@ -252,6 +252,24 @@ def _budget_text(budget: dict) -> str:
     return ", ".join(parts)
 
 
+class Decisions:
+    """The robots' decisions, for ``agent_loss_per: decision``: a decision is a free tick whose action
+    differs from the robot's last choice; a timed action forgets the last choice, so the choice after
+    it is one too. ``last_tick`` lists, in id order, the robots that decided at the last tick applied."""
+
+    def __init__(self) -> None:
+        self.chosen: dict[int, list] = {}  # robot -> the action it chose at its last free tick
+        self.last_tick: list[int] = []
+
+    def note(self, robot: int, action: list) -> None:
+        if self.chosen.get(robot) != action:
+            self.last_tick.append(robot)
+            self.chosen[robot] = action
+
+    def forget(self, robot: int) -> None:
+        self.chosen.pop(robot, None)
+
+
 class SARWorld(VictimRows, World):
     def __init__(self, scenario: SAR, rng: np.random.Generator, bids_with_colors: bool) -> None:
         sc = scenario.params
@@ -298,10 +316,7 @@ class SARWorld(VictimRows, World):
         # robot -> (inspect|rescue, victim, tick it ends in, tick it began in)
         self.pending: dict[int, tuple[str, int, int, int]] = {}
         self.goal: dict[int, tuple] = {}  # robot -> the goal of the move it is making (move_failure: per_move)
-        # agent_loss_per: decision: robot -> the action it chose at its last free tick (none after a timed one),
-        # and the robots that made a decision at the last tick applied (each draws once at the next draw)
-        self.chosen: dict[int, list] = {}
-        self.decided: list[int] = []
+        self.decisions = Decisions()  # agent_loss_per: decision
         self.tick = 0
         self._spawn(sc.victims, first=True)
 
@@ -360,7 +375,7 @@ class SARWorld(VictimRows, World):
         self.alive[agent_id] = False
         self.pending.pop(agent_id, None)  # what it was doing dies with it
         self.goal.pop(agent_id, None)
-        self.chosen.pop(agent_id, None)
+        self.decisions.forget(agent_id)
         if self.navigator is not None:
             self.navigator.forget(agent_id)
 
@@ -370,7 +385,7 @@ class SARWorld(VictimRows, World):
         if p <= 0 or self.time < self.sc.agent_loss_grace:
             return []
         if self.sc.agent_loss_per == "decision":  # one draw per decision, in id order (apply went in id order)
-            return [i for i in self.decided if self.alive[i] and self.loss_rng.random() < p]
+            return [i for i in self.decisions.last_tick if self.alive[i] and self.loss_rng.random() < p]
         if self.sc.agent_loss_per == "second":  # the same draws, each at the chance of a tick's share of a second
             p = -math.expm1(self.dt * math.log1p(-p)) if p < 1 else 1.0
         return [int(i) for i in np.flatnonzero(self.alive) if self.loss_rng.random() < p]
@@ -437,7 +452,7 @@ class SARWorld(VictimRows, World):
         """The robot is occupied from this tick for ``seconds`` (whole ticks, rounded up); what it
         chooses once free is a decision, whatever it was doing before."""
         self.busy_until[i] = self.tick + self._ticks(seconds)
-        self.chosen.pop(i, None)
+        self.decisions.forget(i)
 
     def _begin(self, i: int, name: str, v: int, seconds: float) -> None:
         """Start a timed action; it ends (and takes effect) in the last tick it occupies. With
@@ -534,7 +549,7 @@ class SARWorld(VictimRows, World):
         live = np.flatnonzero(self.alive)
         before = (self.ax[live].copy(), self.ay[live].copy(), self.distance[live].copy())
         by_decision = self.sc.agent_loss_per == "decision"
-        self.decided = []
+        self.decisions.last_tick = []
         for i in map(int, live):
             action = actions.get(i, ["stop"])
             if self.busy_until[i] > self.tick and self._interrupted(i, action):
@@ -545,9 +560,8 @@ class SARWorld(VictimRows, World):
                     self._finish(i)
                 continue
             self.budget.doing(i, IDLE)  # unless what it does now says otherwise
-            if by_decision and self.chosen.get(i) != action:
-                self.decided.append(i)
-                self.chosen[i] = action
+            if by_decision:
+                self.decisions.note(i, action)
             self._act(i, action)
             self.budget.book(i)
         if self.walls is not None:  # a move that would cross a wall does not happen: the robot stays

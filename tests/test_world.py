@@ -479,9 +479,11 @@ def test_agent_loss_per_decision_draws_once_for_each_new_choice_of_a_robot():
         world.apply({i: a for i, a in acts.items() if world.alive[i]})
     for group, decisions in ((steady, 1), (restless, ticks - 1)):  # the last tick's choices draw at the next
         _assert_survival(world.alive[list(group)].mean(), (1 - p) ** decisions, len(group))
-    world.chosen, world.decided = {0: ["stop"]}, []
+    world.decisions.chosen[0] = ["stop"]
     world._busy(0, 1.0)  # a timed action: the robot's next choice is a decision even if it is "stop" again
-    assert 0 not in world.chosen
+    world.decisions.last_tick = []
+    world.decisions.note(0, ["stop"])
+    assert world.decisions.last_tick == [0]
 
 
 @pytest.mark.parametrize("abandon_time", [0.0, 5.0])
