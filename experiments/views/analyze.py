@@ -4,7 +4,8 @@
   confidence interval of the mean (Student t).
 - ``statistics.csv`` / ``.md``, where the scenario names a control allocator
   (``Scenario.control_allocator``, cbba-etc for search and rescue) or ``--control`` does: one-way
-  ANOVA across allocators, Dunnett's test and Cohen's d against the control.
+  ANOVA across allocators; Dunnett's test, Welch's t (Holm-adjusted), Cohen's d and TOST against the
+  control (``experiments.views.stats``).
 - Figures: the ones each scenario names in ``Scenario.figures`` (``swarmbed.extension.figures``).
   MT-SR: SPACE Fig. 3 panels, one PNG per metric, one value per run as SPACE's Monte Carlo
   analysis plots them (mission time, times to 95 % and 99 % of tasks, mean travel distance per
