@@ -270,7 +270,11 @@ class ConsensusState:
         return bid > known or (bid == known and self.agent_id < self.z.get(task, self.agent_id + 1))
 
     def drop_stale_winners(self, older_than: float) -> None:
-        """Forget wins by agents not heard from since ``older_than`` (lost agents stop mattering)."""
-        for task, winner in list(self.z.items()):
-            if winner != self.agent_id and self.s.get(winner, _NEVER) < older_than:
+        """Forget wins by agents not heard from since ``older_than`` (lost agents stop mattering).
+        Called every tick over every known win: the few distinct winners are checked first, and the
+        wins are walked only when one of them has gone quiet."""
+        heard = self.s.get
+        stale = {w for w in set(self.z.values()) if w != self.agent_id and heard(w, _NEVER) < older_than}
+        if stale:
+            for task in [t for t, w in self.z.items() if w in stale]:
                 self.reset(task)

@@ -390,14 +390,19 @@ class SARWorld(VictimRows, World):
             p = -math.expm1(self.dt * math.log1p(-p)) if p < 1 else 1.0
         return [int(i) for i in np.flatnonzero(self.alive) if self.loss_rng.random() < p]
 
-    def _in_cone(self, i: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        dx, dy = x - self.ax[i], y - self.ay[i]
+    def _cones(self, robots: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Which of the points (x, y) each of ``robots`` sees, one row per robot: within the vision
+        range, inside its cone (a point where the robot stands counts as seen) and, in a walled
+        arena, with no wall between. One array operation for the whole team: elementwise the same
+        arithmetic as robot by robot, so the same bits."""
+        dx, dy = x[None, :] - self.ax[robots, None], y[None, :] - self.ay[robots, None]
         near = np.hypot(dx, dy) <= self.sc.vision_range
-        off = (np.arctan2(dy, dx) - self.heading[i] + math.pi) % (2 * math.pi) - math.pi
+        off = (np.arctan2(dy, dx) - self.heading[robots, None] + math.pi) % (2 * math.pi) - math.pi
         seen = near & ((np.abs(off) <= self.sc.vision_angle / 2) | ((dx == 0) & (dy == 0)))
         if self.walls is not None and seen.any():  # and no wall between
-            at = np.flatnonzero(seen)
-            seen[at] = self.walls.clear(np.full(len(at), self.ax[i]), np.full(len(at), self.ay[i]), x[at], y[at])
+            row, col = np.nonzero(seen)
+            crossed = self.walls.crossings_between(self.ax[robots], self.ay[robots], x, y, row, col)
+            seen[row, col] = ~crossed.any(axis=1)
         return seen
 
     def observations(self) -> dict[int, SARObservation]:
@@ -405,9 +410,12 @@ class SARWorld(VictimRows, World):
         lx, ly = self.vx[live], self.vy[live]
         left = self.vspawn[live] + self.sc.lifetime - self.time
         robots = np.flatnonzero(self.alive)
+        sees_victims = self._cones(robots, lx, ly)
+        sees_robots = self._cones(robots, self.ax[robots], self.ay[robots])
+        team = [(int(j), float(self.ax[j]), float(self.ay[j])) for j in robots]
         out = {}
-        for i in map(int, robots):
-            seen = np.flatnonzero(self._in_cone(i, lx, ly))
+        for k, i in enumerate(map(int, robots)):
+            seen = np.flatnonzero(sees_victims[k])
             table = np.empty(len(seen), dtype=TASK_DTYPE)
             rows = live[seen]
             ids = rows + self.base
@@ -417,18 +425,16 @@ class SARWorld(VictimRows, World):
                 for r, v in zip(rows, ids)
             ]
             table["color"] = known
-            others = [int(j) for j in robots if j != i]
-            visible = self._in_cone(i, self.ax[others], self.ay[others]) if others else np.zeros(0, dtype=bool)
             out[i] = SARObservation(
                 self.time,
-                float(self.ax[i]),
-                float(self.ay[i]),
+                team[k][1],
+                team[k][2],
                 float(self.heading[i]),
                 float(self.speed),
                 table,
                 color=int(self.color[i]),
                 reach=self.sc.inspect_range,
-                robots=[(j, float(self.ax[j]), float(self.ay[j])) for j, v in zip(others, visible) if v],
+                robots=[team[m] for m in np.flatnonzero(sees_robots[k]) if m != k],
                 inspected=[(v, c) for v, c in self.results.pop(i, [])],
                 rescued=self.rescued_by.pop(i, []),
                 busy=int(max(0, self.busy_until[i] - self.tick)),
