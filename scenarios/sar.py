@@ -396,9 +396,12 @@ class SARWorld(VictimRows, World):
         arena, with no wall between. One array operation for the whole team: elementwise the same
         arithmetic as robot by robot, so the same bits."""
         dx, dy = x[None, :] - self.ax[robots, None], y[None, :] - self.ay[robots, None]
-        near = np.hypot(dx, dy) <= self.sc.vision_range
-        off = (np.arctan2(dy, dx) - self.heading[robots, None] + math.pi) % (2 * math.pi) - math.pi
-        seen = near & ((np.abs(off) <= self.sc.vision_angle / 2) | ((dx == 0) & (dy == 0)))
+        row, col = np.nonzero(np.hypot(dx, dy) <= self.sc.vision_range)  # the angle only where near
+        dx, dy = dx[row, col], dy[row, col]
+        off = (np.arctan2(dy, dx) - self.heading[robots[row]] + math.pi) % (2 * math.pi) - math.pi
+        inside = (np.abs(off) <= self.sc.vision_angle / 2) | ((dx == 0) & (dy == 0))
+        seen = np.zeros((len(robots), len(x)), dtype=bool)
+        seen[row[inside], col[inside]] = True
         if self.walls is not None and seen.any():  # and no wall between
             row, col = np.nonzero(seen)
             crossed = self.walls.crossings_between(self.ax[robots], self.ay[robots], x, y, row, col)
@@ -410,31 +413,35 @@ class SARWorld(VictimRows, World):
         lx, ly = self.vx[live], self.vy[live]
         left = self.vspawn[live] + self.sc.lifetime - self.time
         robots = np.flatnonzero(self.alive)
-        sees_victims = self._cones(robots, lx, ly)
+        ids = robots.tolist()
+        # every (robot, victim) pair in view, robot by robot, each robot's victims in index order
+        by, seen = np.nonzero(self._cones(robots, lx, ly))
+        rows = live[seen]
+        tables = np.empty(len(seen), dtype=TASK_DTYPE)
+        tables["id"], tables["x"], tables["y"], tables["remaining"] = rows + self.base, lx[seen], ly[seen], left[seen]
+        if self.show_colors:
+            tables["color"] = self.vcolor[rows]
+        else:  # a colour is known to the robots that inspected the victim
+            tables["color"] = [
+                c if ids[k] in self.inspected.get(v, ()) else -1
+                for k, v, c in zip(by.tolist(), (rows + self.base).tolist(), self.vcolor[rows].tolist())
+            ]
+        cut = np.searchsorted(by, np.arange(len(robots) + 1)).tolist()
         sees_robots = self._cones(robots, self.ax[robots], self.ay[robots])
+        np.fill_diagonal(sees_robots, False)  # a robot is not among the others it sees
         team = [(int(j), float(self.ax[j]), float(self.ay[j])) for j in robots]
         out = {}
-        for k, i in enumerate(map(int, robots)):
-            seen = np.flatnonzero(sees_victims[k])
-            table = np.empty(len(seen), dtype=TASK_DTYPE)
-            rows = live[seen]
-            ids = rows + self.base
-            table["id"], table["x"], table["y"], table["remaining"] = ids, lx[seen], ly[seen], left[seen]
-            known = [
-                int(self.vcolor[r]) if (self.show_colors or i in self.inspected.get(int(v), ())) else -1
-                for r, v in zip(rows, ids)
-            ]
-            table["color"] = known
+        for k, i in enumerate(ids):
             out[i] = SARObservation(
                 self.time,
                 team[k][1],
                 team[k][2],
                 float(self.heading[i]),
                 float(self.speed),
-                table,
+                tables[cut[k] : cut[k + 1]].copy(),
                 color=int(self.color[i]),
                 reach=self.sc.inspect_range,
-                robots=[team[m] for m in np.flatnonzero(sees_robots[k]) if m != k],
+                robots=[team[m] for m in np.flatnonzero(sees_robots[k]).tolist()],
                 inspected=[(v, c) for v, c in self.results.pop(i, [])],
                 rescued=self.rescued_by.pop(i, []),
                 busy=int(max(0, self.busy_until[i] - self.tick)),
