@@ -14,10 +14,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
-from scipy import stats
 
+from swarmbed.experiments.views.analyze import ci95
 from swarmbed.experiments.views.stats import paired_p
 
 MTSR = {
@@ -58,7 +57,7 @@ def table(sweep: Path, walled: str, open_: str) -> str:
         for key in metrics:
             x, y = a.loc[both, key].astype(float).fillna(0), b.loc[both, key].astype(float).fillna(0)
             d = x - y
-            half = stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / np.sqrt(len(d)) if len(d) > 1 else float("nan")
+            half = d.mean() - ci95(d)[0]
             p = paired_p(x.to_numpy(), y.to_numpy())[1]
             cells.append(f"{x.mean():,.0f} / {y.mean():,.0f} ({d.mean():+,.0f} ± {half:,.0f}; p {p:.3f})")
         finished = (
