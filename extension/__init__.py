@@ -11,7 +11,7 @@ from swarmbed.extension.actions import INVALID, MOVE_ACTIONS, ActionSpec, admit,
 from swarmbed.extension.allocator import HALT, HOLD, Allocator, NoParams
 from swarmbed.extension.context import NodeContext
 from swarmbed.extension.figures import Figure
-from swarmbed.extension.scenario import Scenario, Sensing, World, within
+from swarmbed.extension.scenario import Scenario, Sensing, World, sight, within
 from swarmbed.extension.view import LocalView, Message, Outgoing, TaskInfo
 
 __all__ = [
@@ -33,5 +33,6 @@ __all__ = [
     "World",
     "admit",
     "conforms",
+    "sight",
     "within",
 ]

@@ -27,7 +27,7 @@ from swarmbed.extension.actions import MOVE_ACTIONS, ActionSpec
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.wire.observation import Observation as BaseObservation
-from swarmbed.wire.obstacles import ObstaclesSection
+from swarmbed.wire.obstacles import ObstaclesSection, Walls
 from swarmbed.wire.schema import AgentsSection, Experiment
 
 if TYPE_CHECKING:
@@ -56,6 +56,37 @@ def within(dx: np.ndarray, dy: np.ndarray, reach: float) -> np.ndarray:
     if edge.any():
         near[edge] = np.hypot(dx[edge], dy[edge]) <= reach
     return near
+
+
+def sight(
+    ox: np.ndarray,
+    oy: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    reach: float,
+    heading: np.ndarray | None = None,
+    angle: float = 2 * math.pi,
+    walls: Walls | None = None,
+) -> np.ndarray:
+    """What a team sees, one row per observer at (ox, oy), one column per point (x, y): the point
+    is within ``reach`` (:func:`within`), inside the observer's cone of full ``angle`` about its
+    ``heading`` (a point where the observer stands counts as inside; the angle is taken only for
+    pairs within reach) and, given ``walls``, no wall lies between them. One array operation for
+    the whole team, element for element the arithmetic of one observer at a time."""
+    dx, dy = x[None, :] - ox[:, None], y[None, :] - oy[:, None]
+    seen = within(dx, dy, reach)
+    if angle < 2 * math.pi:
+        if heading is None:
+            raise ValueError("sight: a cone narrower than a full turn needs the observers' headings")
+        row, col = np.nonzero(seen)
+        ddx, ddy = dx[row, col], dy[row, col]
+        off = (np.arctan2(ddy, ddx) - heading[row] + math.pi) % (2 * math.pi) - math.pi
+        outside = (np.abs(off) > angle / 2) & ((ddx != 0) | (ddy != 0))
+        seen[row[outside], col[outside]] = False
+    if walls is not None and seen.any():
+        row, col = np.nonzero(seen)
+        seen[row, col] = ~walls.crossings_between(ox, oy, x, y, row, col).any(axis=1)
+    return seen
 
 
 def obstacles_outside(exp: Experiment, inside: Callable[[float, float], bool], arena: str) -> list[str]:

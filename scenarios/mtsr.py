@@ -30,7 +30,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
-from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, within
+from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, sight
 from swarmbed.scenarios.kinematics import Limits, step
 from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places
 from swarmbed.wire.codec import TASK_DTYPE
@@ -334,16 +334,9 @@ class MTSRWorld(World):
         table["remaining"] = self.remaining[open_idx]
         table["color"] = -1
         alive = np.flatnonzero(self.alive)
-        near = within(
-            self.tx[open_idx][None, :] - self.ax[alive, None],
-            self.ty[open_idx][None, :] - self.ay[alive, None],
-            self.awareness,
-        )
-        if self.walls is not None:  # a wall between them hides a task
-            r, c = np.nonzero(near)
-            ax, ay, tx, ty = self.ax[alive], self.ay[alive], self.tx[open_idx], self.ty[open_idx]
-            hidden = self.walls.crossings_between(ax, ay, tx, ty, r, c).any(axis=1)
-            near[r[hidden], c[hidden]] = False
+        # within awareness range, and no wall between (a full circle: no cone)
+        ax, ay, tx, ty = self.ax[alive], self.ay[alive], self.tx[open_idx], self.ty[open_idx]
+        near = sight(ax, ay, tx, ty, self.awareness, walls=self.walls)
         # every agent's visible tasks in one gather (of raw records: a structured gather is ~3x slower);
         # each agent's table is a slice of it
         rows, cols = np.nonzero(near)

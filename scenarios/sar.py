@@ -44,7 +44,7 @@ from swarmbed.extension.actions import MOVE_ACTIONS
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
-from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside
+from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, sight
 from swarmbed.scenarios.budget import ACTIVITIES, IDLE, INSPECTING, MOVING, PENALTY, RESCUING, TimeBudget
 from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places
 from swarmbed.scenarios.victims import ALIVE, EXPIRED, RESCUED, VictimRows
@@ -391,22 +391,9 @@ class SARWorld(VictimRows, World):
         return [int(i) for i in np.flatnonzero(self.alive) if self.loss_rng.random() < p]
 
     def _cones(self, robots: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Which of the points (x, y) each of ``robots`` sees, one row per robot: within the vision
-        range, inside its cone (a point where the robot stands counts as seen) and, in a walled
-        arena, with no wall between. One array operation for the whole team: elementwise the same
-        arithmetic as robot by robot, so the same bits."""
-        dx, dy = x[None, :] - self.ax[robots, None], y[None, :] - self.ay[robots, None]
-        row, col = np.nonzero(np.hypot(dx, dy) <= self.sc.vision_range)  # the angle only where near
-        dx, dy = dx[row, col], dy[row, col]
-        off = (np.arctan2(dy, dx) - self.heading[robots[row]] + math.pi) % (2 * math.pi) - math.pi
-        inside = (np.abs(off) <= self.sc.vision_angle / 2) | ((dx == 0) & (dy == 0))
-        seen = np.zeros((len(robots), len(x)), dtype=bool)
-        seen[row[inside], col[inside]] = True
-        if self.walls is not None and seen.any():  # and no wall between
-            row, col = np.nonzero(seen)
-            crossed = self.walls.crossings_between(self.ax[robots], self.ay[robots], x, y, row, col)
-            seen[row, col] = ~crossed.any(axis=1)
-        return seen
+        """Which of the points (x, y) each of ``robots`` sees (range, cone, walls), a row a robot."""
+        ax, ay, heading = self.ax[robots], self.ay[robots], self.heading[robots]
+        return sight(ax, ay, x, y, self.sc.vision_range, heading, self.sc.vision_angle, self.walls)
 
     def observations(self) -> dict[int, SARObservation]:
         live = np.flatnonzero(self.vstatus == ALIVE)

@@ -102,6 +102,35 @@ def grid_shortest(walls, start, goal, lo, hi, step):
     return shortest_path(g.tocsr(), indices=n - 2)[n - 1]
 
 
+def test_a_teams_sight_is_every_observers_own_one_pair_at_a_time():
+    """``sight`` (both worlds' sensing, one array operation for the team) against the definition
+    taken one observer and one point at a time with the standard library: within reach, inside the
+    cone about the heading (a point where the observer stands is inside), no wall in between (the
+    segment test itself is checked against brute force above). Random placements: no pair falls
+    within rounding of an edge."""
+    from swarmbed.extension.scenario import sight
+
+    walls = ObstaclesSection(
+        walls=[{"start": [20, 0], "end": [20, 70]}], polygons=[{"points": [[55, 40], [75, 40], [75, 60], [55, 60]]}]
+    ).compile()
+    rng = np.random.default_rng(5)
+    ox, oy, heading = rng.uniform(0, 100, 12), rng.uniform(0, 100, 12), rng.uniform(-math.pi, math.pi, 12)
+    x, y = np.append(rng.uniform(0, 100, 400), ox[3]), np.append(rng.uniform(0, 100, 400), oy[3])
+    for angle, hidden_by in ((math.pi / 2, walls), (2 * math.pi, walls), (math.pi / 3, None)):
+        got = sight(ox, oy, x, y, 30.0, heading, angle, hidden_by)
+        for i in range(len(ox)):
+            for j in range(len(x)):
+                dx, dy = x[j] - ox[i], y[j] - oy[i]
+                off = (math.atan2(dy, dx) - heading[i] + math.pi) % (2 * math.pi) - math.pi
+                cone = angle >= 2 * math.pi or (dx == 0 and dy == 0) or abs(off) <= angle / 2
+                clear = hidden_by is None or bool(hidden_by.clear([ox[i]], [oy[i]], [x[j]], [y[j]])[0])
+                assert got[i, j] == (math.hypot(dx, dy) <= 30.0 and cone and clear), (angle, i, j)
+        assert got[3, -1], "a point where the observer stands is seen"
+        assert 0 < got.sum() < got.size
+    with pytest.raises(ValueError, match="headings"):
+        sight(ox, oy, x, y, 30.0, None, math.pi)
+
+
 def test_the_planner_finds_the_way_round_no_longer_than_a_fine_grid_and_crossing_no_wall():
     obstacles = ObstaclesSection(
         walls=[{"start": [20, 0], "end": [20, 70]}, {"start": [40, 30], "end": [40, 100]}],
