@@ -43,19 +43,28 @@ class Sensing:
 
 
 def within(dx: np.ndarray, dy: np.ndarray, reach: float) -> np.ndarray:
-    """``np.hypot(dx, dy) <= reach``, element for element, at a fraction of its cost: squared
-    distances settle every pair but those within a relative 1e-9 of ``reach``, for which hypot
-    decides (so a world's sensing agrees to the last bit with an agent's ``math.hypot``)."""
+    """``math.hypot(dx, dy) <= reach``, element for element, at a fraction of its cost: squared
+    distances settle every pair but those within a relative 1e-9 of ``reach``, for which the
+    standard library's hypot decides, as an agent's :meth:`LocalView.sees` does (numpy's hypot
+    differs from it in the last bit now and then, which on the edge would make the world show a
+    point the agent believes it cannot see, or the other way round)."""
     if not 1e-100 < reach < 1e100:  # squares would underflow or overflow
-        return np.hypot(dx, dy) <= reach
+        return _elementwise(lambda a, b: math.hypot(a, b) <= reach, dx, dy)
     d2 = dx * dx
     d2 += dy * dy
     r2 = reach * reach
     near = d2 < r2 * (1 - 1e-9)
     edge = (d2 <= r2 * (1 + 1e-9)) & ~near
     if edge.any():
-        near[edge] = np.hypot(dx[edge], dy[edge]) <= reach
+        near[edge] = _elementwise(lambda a, b: math.hypot(a, b) <= reach, dx[edge], dy[edge])
     return near
+
+
+def _elementwise(test: Callable[[float, float], bool], a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``test`` of each pair of elements, in Python floats (what an agent computes), as a bool array."""
+    a, b = np.broadcast_arrays(a, b)
+    flat = [test(x, y) for x, y in zip(a.ravel().tolist(), b.ravel().tolist())]
+    return np.array(flat, dtype=bool).reshape(a.shape)
 
 
 def sight(
@@ -72,16 +81,23 @@ def sight(
     is within ``reach`` (:func:`within`), inside the observer's cone of full ``angle`` about its
     ``heading`` (a point where the observer stands counts as inside; the angle is taken only for
     pairs within reach) and, given ``walls``, no wall lies between them. One array operation for
-    the whole team, element for element the arithmetic of one observer at a time."""
+    the whole team; on the edge of the range or of the cone (within 1e-9) the standard library
+    decides, as an agent's :meth:`LocalView.sees` does, so world and agent agree on every pair."""
     dx, dy = x[None, :] - ox[:, None], y[None, :] - oy[:, None]
     seen = within(dx, dy, reach)
     if angle < 2 * math.pi:
         if heading is None:
             raise ValueError("sight: a cone narrower than a full turn needs the observers' headings")
         row, col = np.nonzero(seen)
-        ddx, ddy = dx[row, col], dy[row, col]
-        off = (np.arctan2(ddy, ddx) - heading[row] + math.pi) % (2 * math.pi) - math.pi
-        outside = (np.abs(off) > angle / 2) & ((ddx != 0) | (ddy != 0))
+        ddx, ddy, h = dx[row, col], dy[row, col], heading[row]
+        off = np.abs((np.arctan2(ddy, ddx) - h + math.pi) % (2 * math.pi) - math.pi)
+        edge = np.flatnonzero(np.abs(off - angle / 2) <= 1e-9)  # the standard library decides, as agents do
+        if len(edge):
+            off[edge] = [
+                abs((math.atan2(b, a) - g + math.pi) % (2 * math.pi) - math.pi)
+                for a, b, g in zip(ddx[edge].tolist(), ddy[edge].tolist(), h[edge].tolist())
+            ]
+        outside = (off > angle / 2) & ((ddx != 0) | (ddy != 0))
         seen[row[outside], col[outside]] = False
     if walls is not None and seen.any():
         row, col = np.nonzero(seen)

@@ -415,8 +415,9 @@ def test_a_failed_move_stalls_the_robot_once_per_move_for_the_penalty():
     assert float(w.ax[0]) - start == pytest.approx(w.speed * 0.25 * (12 - 2))  # 2 ticks stuck
 
 
-def test_within_agrees_with_hypot_to_the_last_bit():
-    """The worlds' fast range test settles points near the edge with hypot, as agents do."""
+def test_within_agrees_with_the_agents_hypot_to_the_last_bit():
+    """The worlds' fast range test settles points near the edge with the standard library's hypot,
+    as agents do (numpy's differs from it in the last bit now and then)."""
     rng = np.random.default_rng(1)
     for reach in (300.0, 5.0, 1e-5, 0.0, math.inf):
         angle, scale = rng.uniform(0, 2 * math.pi, 5000), reach if math.isfinite(reach) else 1.0
@@ -428,7 +429,36 @@ def test_within_agrees_with_hypot_to_the_last_bit():
             (np.nextafter(on_x, -math.inf), np.nextafter(on_y, -math.inf)),
         ]
         for dx, dy in cases:
-            assert np.array_equal(within(dx, dy, reach), np.hypot(dx, dy) <= reach), reach
+            agent = [math.hypot(a, b) <= reach for a, b in zip(dx.ravel().tolist(), dy.ravel().tolist())]
+            assert np.array_equal(within(dx, dy, reach).ravel(), agent), reach
+
+
+def test_the_world_shows_a_robot_what_its_own_view_says_it_sees_even_on_the_edges():
+    """A robot concludes a victim is gone when its view says it should see it and the world does not
+    show it; so the world's sight must agree with the agent's ``LocalView.sees`` on every pair,
+    points exactly on the edge of the range and of the cone included (where numpy's and the standard
+    library's hypot and atan2 differ in the last bit now and then)."""
+    from swarmbed.extension import LocalView, sight
+
+    rng = np.random.default_rng(3)
+    reach, angle = 12.0, math.pi / 2
+    ox, oy, heading = rng.uniform(-30, 30, 40), rng.uniform(-30, 30, 40), rng.uniform(-math.pi, math.pi, 40)
+    xs, ys = [], []
+    for i in range(len(ox)):  # per observer: points on its range's edge and on its cone's two edges
+        edges = [np.full(30, heading[i] + angle / 2), np.full(30, heading[i] - angle / 2)]
+        turn = np.concatenate([rng.uniform(-math.pi, math.pi, 60), *edges])
+        r = np.concatenate([np.full(60, reach), rng.uniform(0.5, reach, 60)])
+        px, py = ox[i] + r * np.cos(turn), oy[i] + r * np.sin(turn)
+        xs += [px, np.nextafter(px, math.inf), np.nextafter(px, -math.inf)]
+        ys += [py, py, np.nextafter(py, math.inf)]
+    x, y = np.concatenate(xs), np.concatenate(ys)
+    got = sight(ox, oy, x, y, reach, heading, angle)
+    for i in range(len(ox)):
+        view = LocalView(i, len(ox), 0, 0.0, float(ox[i]), float(oy[i]), float(heading[i]), 0.0, 1.0, {}, [])
+        view.awareness_range, view.vision_angle = reach, angle
+        agent = [view.sees(a, b) for a, b in zip(x.tolist(), y.tolist())]
+        assert got[i].tolist() == agent, i
+    assert 0 < got.sum() < got.size
 
 
 def _losing_world(per: str, robots: int, p: float, dt: float, seed: int):
