@@ -48,8 +48,12 @@ def within(dx: np.ndarray, dy: np.ndarray, reach: float) -> np.ndarray:
     standard library's hypot decides, as an agent's :meth:`LocalView.sees` does (numpy's hypot
     differs from it in the last bit now and then, which on the edge would make the world show a
     point the agent believes it cannot see, or the other way round)."""
-    if not 1e-100 < reach < 1e100:  # squares would underflow or overflow
-        return _elementwise(lambda a, b: math.hypot(a, b) <= reach, dx, dy)
+    if not 1e-100 < reach < 1e100:  # squares would underflow or overflow: numpy's hypot, math's on the edge
+        h = np.hypot(dx, dy)
+        near, edge = h <= reach, (h == reach) if math.isinf(reach) else np.abs(h - reach) <= 1e-9 * reach
+        if edge.any():
+            near[edge] = _elementwise(lambda a, b: math.hypot(a, b) <= reach, dx[edge], dy[edge])
+        return near
     d2 = dx * dx
     d2 += dy * dy
     r2 = reach * reach
