@@ -411,7 +411,7 @@ class SARWorld(VictimRows, World):
         else:  # a colour is known to the robots that inspected the victim
             tables["color"] = [
                 c if ids[k] in self.inspected.get(v, ()) else -1
-                for k, v, c in zip(by.tolist(), (rows + self.base).tolist(), self.vcolor[rows].tolist())
+                for k, v, c in zip(by.tolist(), tables["id"].tolist(), self.vcolor[rows].tolist())
             ]
         cut = np.searchsorted(by, np.arange(len(robots) + 1)).tolist()
         sees_robots = self._cones(robots, self.ax[robots], self.ay[robots])
