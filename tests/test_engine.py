@@ -232,3 +232,67 @@ def test_a_caller_that_owns_the_loop_hands_its_decisions_to_the_transport_and_a_
     session.step({0: 7})
     assert ("exchange", 0, [0, 1], {0: 7}) in calls.log
     assert calls.log[-1] == ("run_ends",) and session.over  # a hook asked to stop after tick 0
+
+
+# numpy picks its SIMD code per CPU at import; with AVX-512 its exp and arctan2 differ from the
+# standard library's (and from its own AVX2 and baseline paths) in the last bit for some inputs.
+# Results must not depend on which CPU the coordinator or an agent ran on.
+_PLAIN_SIMD = (
+    "X86_V4 AVX512_ICL AVX512_SPR AVX512F AVX512CD AVX512VL AVX512BW AVX512DQ AVX512_SKX AVX512_CLX AVX512_CNL"
+)
+_PROBE = (
+    "import hashlib, numpy as np; x = np.random.default_rng(0).uniform(-5, 5, (2, 4096)); "
+    "print(hashlib.sha256(np.exp(x[0]).tobytes() + np.arctan2(*x).tobytes()).hexdigest())"
+)
+SIMD_CASES = {
+    "sar c-cbba, cones and bids": (SAR, ["allocator.name=c-cbba", "run.duration=300", "run.record_trajectories=true"]),
+    "mtsr cbba, log-distance radio": (
+        ROOT / "experiments" / "space_mtsr.yaml",
+        [
+            "allocator.name=cbba",
+            "agents.count=12",
+            "run.duration=300",
+            "run.record_trajectories=true",
+            "network.range=null",
+            "network.propagation={shadowing_db: 6.0, tx_power_dbm: 19.6}",
+        ],
+    ),
+}
+
+
+def _plain_simd_env() -> dict[str, str]:
+    import os
+
+    return {**os.environ, "NPY_DISABLE_CPU_FEATURES": _PLAIN_SIMD}
+
+
+def _simd_changes_numpy() -> bool:
+    """Whether switching AVX-512 off changes numpy's exp or arctan2 on this CPU (else nothing to test)."""
+    import subprocess
+    import sys
+
+    ours, plain = (
+        subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, env=env, check=True).stdout
+        for env in (None, _plain_simd_env())
+    )
+    return ours != plain
+
+
+@pytest.mark.slow  # two runs per case, one in a subprocess
+@pytest.mark.parametrize("case", list(SIMD_CASES))
+def test_results_do_not_depend_on_the_cpus_simd_level(case, tmp_path):
+    import subprocess
+    import sys
+
+    if not _simd_changes_numpy():
+        pytest.skip("numpy's exp and arctan2 give the same bits with and without AVX-512 on this CPU")
+    base, overrides = SIMD_CASES[case]
+    alone = run_in_process(experiment(*overrides, base=base), tmp_path / "here")
+    sets = [arg for value in overrides for arg in ("--set", value)]
+    cmd = [sys.executable, "-m", "swarmbed", "run", str(base), "--engine", "inprocess", "--no-progress", *sets]
+    done = subprocess.run(
+        [*cmd, "--out", str(tmp_path / "plain")], capture_output=True, text=True, env=_plain_simd_env()
+    )
+    assert done.returncode == 0, done.stderr
+    same_results(alone.out_dir, tmp_path / "plain")
+    assert (alone.out_dir / "trajectories.csv").read_bytes() == (tmp_path / "plain" / "trajectories.csv").read_bytes()
