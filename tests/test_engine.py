@@ -6,6 +6,8 @@ between runs must be the same bytes: the same world, the same agents' decisions,
 draws, the same ledger.
 """
 
+import functools
+
 import pytest
 
 from swarmbed.experiments.launch.inprocess import run_in_process
@@ -266,6 +268,7 @@ def _plain_simd_env() -> dict[str, str]:
     return {**os.environ, "NPY_DISABLE_CPU_FEATURES": _PLAIN_SIMD}
 
 
+@functools.cache  # the same answer for every case: probe once
 def _simd_changes_numpy() -> bool:
     """Whether switching AVX-512 off changes numpy's exp or arctan2 on this CPU (else nothing to test)."""
     import subprocess
