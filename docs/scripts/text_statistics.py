@@ -7,7 +7,11 @@ p; Cohen's d; TOST p", the control's row its mean alone.
     python docs/scripts/text_statistics.py runs/timesink_m3 rescued network.messages_sent
 
 With metric names after the folder, those metrics (as named in statistics.csv); else rescued,
-expired, failed rescues and messages sent.
+expired, failed rescues and messages sent. ``--series METRIC`` before several analysed folders puts
+one metric of each in a column of one table (a series such as the density sweeps): each entry
+"mean (Dunnett's p against the control)", the control's its mean alone.
+
+    python docs/scripts/text_statistics.py --series rescued runs/base_R20_V25 runs/base_R20_V50
 """
 
 from __future__ import annotations
@@ -62,13 +66,41 @@ def tables(folder: Path, metrics: tuple[str, ...] = DEFAULT) -> str:
     return "\n".join(out)
 
 
-def main() -> None:
-    if len(sys.argv) < 2:
-        sys.exit(__doc__)
-    folder = Path(sys.argv[1])
+def series(folders: list[Path], metric: str) -> str:
+    """One table, one column per folder's sweep, of ``metric``'s mean and Dunnett's p."""
+    columns: dict[str, dict[str, str]] = {}
+    control = ""
+    for folder in folders:
+        stats = pd.read_csv(folder / "statistics.csv")
+        for sweep, rows in stats[stats["metric"] == metric].groupby("sweep", sort=False):
+            control = str(rows["control"].iloc[0])
+            cells = {str(r["strategy"]): f"{r['mean']:,.1f} ({_p(r['dunnett_p'])})" for _, r in rows.iterrows()}
+            cells[control] = f"{rows['control_mean'].iloc[0]:,.1f}"
+            columns[f"{sweep} (n {int(rows['n'].max())})"] = cells
+    if not columns:
+        sys.exit(f"no sweep in {', '.join(map(str, folders))} has the metric {metric!r}")
+    strategies = [control] + sorted({s for cells in columns.values() for s in cells} - {control})
+    out = ["| strategy | " + " | ".join(columns) + " |", "| --- |" + " ---: |" * len(columns)]
+    for strategy in strategies:
+        label = f"{strategy} (control)" if strategy == control else strategy
+        out.append(f"| {label} | " + " | ".join(c.get(strategy, "-") for c in columns.values()) + " |")
+    return "\n".join(out)
+
+
+def _analysed(folder: Path) -> Path:
     if not (folder / "statistics.csv").is_file():
         sys.exit(f"{folder}: no statistics.csv (run swarmbed analyze {folder} first)")
-    print(tables(folder, tuple(sys.argv[2:]) or DEFAULT))
+    return folder
+
+
+def main() -> None:
+    args = sys.argv[1:]
+    if args[:1] == ["--series"] and len(args) >= 3:
+        print(series([_analysed(Path(a)) for a in args[2:]], args[1]))
+    elif args and not args[0].startswith("-"):
+        print(tables(_analysed(Path(args[0])), tuple(args[1:]) or DEFAULT))
+    else:
+        sys.exit(__doc__)
 
 
 if __name__ == "__main__":
