@@ -200,18 +200,23 @@ def test_space_fig3_has_27_scenarios():
         load_sweep(QUICKSTART, grid=["agents.count"])
 
 
-def test_the_50_agent_sweep_plans_the_figure_sweeps_50_agent_runs(tmp_path):
-    """space_fig3_code_a50.yaml adds runs to space_fig3_code.yaml's a50 cells: same folders, same
-    seeds, same settings, so the two can share one output folder."""
+@pytest.mark.parametrize(
+    ("subset", "prefixes"),
+    [("space_fig3_code_a50.yaml", ("a50_",)), ("space_fig3_code_a10_a30.yaml", ("a10_", "a30_"))],
+)
+def test_a_cell_subset_sweep_plans_the_figure_sweeps_runs(tmp_path, subset, prefixes):
+    """space_fig3_code_a50.yaml and space_fig3_code_a10_a30.yaml add runs to some of
+    space_fig3_code.yaml's cells: same folders, same seeds, same settings, so they can share one
+    output folder."""
     from swarmbed.experiments.campaigns.sweep import plan
 
     def key(spec):
         return (Path(spec.out_dir).relative_to(tmp_path), spec.seed, spec.base, spec.scenario.overrides, spec.extra)
 
     whole = plan(load_sweep(QUICKSTART.parent / "space_fig3_code.yaml", runs=3), tmp_path)
-    fifty = plan(load_sweep(QUICKSTART.parent / "space_fig3_code_a50.yaml", runs=3), tmp_path)
-    assert len(fifty) == 9 * 3
-    assert sorted(map(key, fifty)) == sorted(key(s) for s in whole if s.scenario.name.startswith("a50_"))
+    part = plan(load_sweep(QUICKSTART.parent / subset, runs=3), tmp_path)
+    assert len(part) == 9 * 3 * len(prefixes)
+    assert sorted(map(key, part)) == sorted(key(s) for s in whole if s.scenario.name.startswith(prefixes))
 
 
 def _runs(out):
