@@ -7,7 +7,8 @@
 Per cell (agent count, range) and allocator: runs, and for mission time, time to 95 % and 99 % of
 the tasks, the mean travel distance per agent and the Gini coefficient of work per agent, the mean
 over runs with its 95 % t-interval (SPACE plots one value per run; so do these tables). Runs that
-never finished count at the run's cap for mission time and are flagged. ``--orderings`` (and the
+never finished count at the run's cap for mission time and are flagged, and a table of the tasks
+completed by the run's end says how far they got. ``--orderings`` (and the
 effect of range per allocator, paired the same way): for every cell, each pair of allocators
 compared over the seeds both ran (run i of every scenario has the same seed): the mean paired
 difference, its 95 % t-interval, the paired t-test's p and beside it the Wilcoxon signed-rank test's
@@ -36,6 +37,7 @@ METRICS = {
     "time_99": "time to 99 % of tasks, s",
     "distance_per_agent_mean": "distance per agent",
     "work_per_agent_gini": "Gini coefficient of work per agent",
+    "tasks_completed": "tasks completed by the run's end",
 }
 
 
@@ -124,7 +126,8 @@ def tables(df: pd.DataFrame) -> None:
 
 def _paired(first: pd.Series, second: pd.Series) -> str | None:
     """``| seeds | mean difference (95 % CI) | t p | signed-rank p |`` of first minus second over the
-    seeds both ran; None with fewer than two."""
+    seeds both ran; None with fewer than two, or where every pair is level (runs that all stopped at
+    the cap, or all completed every task: nothing to compare)."""
     if not (first.index.is_unique and second.index.is_unique):
         raise SystemExit("fig3.py: a seed appears twice in one cell (the sweep has other factors than agents x range)")
     both = first.index.intersection(second.index)
@@ -132,6 +135,8 @@ def _paired(first: pd.Series, second: pd.Series) -> str | None:
     if len(pairs) < 2:
         return None
     diff = pairs.iloc[:, 0] - pairs.iloc[:, 1]
+    if not diff.any():
+        return None
     low, high = ci95(diff)
     t_p, w_p = paired_p(pairs.iloc[:, 0].to_numpy(), pairs.iloc[:, 1].to_numpy())
     return f"| {len(diff)} | {diff.mean():+,.0f} ({low:+,.0f} to {high:+,.0f}) | {t_p:.3f} | {w_p:.3f} |"
@@ -183,10 +188,10 @@ def main() -> None:
         df = df[df["agents.count"].isin(args.agents)]
     tables(df)
     if args.orderings:
-        for metric in ("mission_time", "time_95", "time_99"):
+        for metric in ("mission_time", "time_95", "time_99", "tasks_completed"):
             if metric in df.columns:
                 orderings(df, metric)
-        for metric in ("mission_time", "time_95", "distance_per_agent_mean"):
+        for metric in ("mission_time", "time_95", "distance_per_agent_mean", "tasks_completed"):
             if metric in df.columns:
                 range_effect(df, metric)
     print(f"\n{len(df)} runs, {df['seed'].nunique()} seeds")
