@@ -12,6 +12,14 @@ abandon``). SPACE's code (``plugins/greedy/greedy.py``) checks claims only when 
 agent keeps its task until the task is done (``keep``, the default: the Fig. 3 results come from
 that code). Either way the choice itself skips tasks a neighbour claims.
 
+Which claims a choice skips is a second such reading (``heard_claims``). By default those heard
+this tick (``tick``). SPACE's code empties an agent's received messages only when it chooses, and
+its sensing node appends the neighbours' claims every tick, so a choice there skips every claim
+heard since the agent's previous choice (``since_choice``): an agent that worked on a task for a
+thousand ticks remembers every claim it heard meanwhile, which matters where few neighbours are in
+range at the moment it chooses. (When nothing is in sight SPACE's agent does not choose and keeps
+what it heard; so does ours.)
+
 A team task (ST-MR, one that needs k robots at once) takes k claims: it is free while fewer than k
 neighbours claim it, and a claim beaten by k earlier ones is given up (in either mode: the team is
 full without it). A claimant of a team task that sees a fuller team with room joins it (more
@@ -40,6 +48,11 @@ class FCGParams(BaseModel):
         description="on hearing an earlier claim on its task: keep it until done (SPACE's code) or abandon "
         "it and choose again at the next tick (SPACE's Section IV-D, as written)",
     )
+    heard_claims: Literal["tick", "since_choice"] = Field(
+        "tick",
+        description="the claims a choice skips: those heard this tick, or every claim heard since the agent's "
+        "previous choice (SPACE's code: plugins/greedy/greedy.py empties its received messages only when it chooses)",
+    )
 
 
 class FirstClaimedGreedy(Allocator):
@@ -52,6 +65,7 @@ class FirstClaimedGreedy(Allocator):
         self.task: int | None = None
         self.claimed_at = 0
         self.abandoned = 0
+        self.heard: dict[int, set[int]] = {}  # heard_claims since_choice: task -> agents heard claiming it
 
     def decide(self, view: LocalView) -> int | None:
         if self.task is not None and self.task not in view.tasks:
@@ -67,6 +81,14 @@ class FirstClaimedGreedy(Allocator):
         def room(task: int | None) -> int:  # robots the task takes: one, or a team task's k (ST-MR)
             return needs[task][0] if task in needs else 1
 
+        remember = self.params.heard_claims == "since_choice"
+        if remember:
+            for task, heard in claims.items():
+                self.heard.setdefault(task, set()).update(sender for _, sender in heard)
+
+        def claimants(task: int) -> int:
+            return len(self.heard.get(task, ())) if remember else len(claims.get(task, ()))
+
         mine = (self.claimed_at, self.agent_id)
         earlier = self.task is not None and sum(key < mine for key in claims.get(self.task, ())) >= room(self.task)
         if earlier and room(self.task) > 1:
@@ -78,7 +100,9 @@ class FirstClaimedGreedy(Allocator):
             self.abandoned += 1
             return None  # choose again at the next tick, as the paper describes
         if self.task is None:
-            free = [t for t in view.tasks.values() if len(claims.get(t.id, ())) < room(t.id)]
+            free = [t for t in view.tasks.values() if claimants(t.id) < room(t.id)]
+            if view.tasks:
+                self.heard = {}  # SPACE's agent forgets what it heard each time it chooses
             if not free:
                 return None
             self.task = self._choose(view, free)

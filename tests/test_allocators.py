@@ -320,6 +320,28 @@ def test_fcg_keeps_its_task_on_an_earlier_claim_as_spaces_code_does_or_abandons_
         assert decide(7, [earlier]) == 1
 
 
+@pytest.mark.parametrize("heard_claims", ["tick", "since_choice"])
+def test_fcg_skips_the_claims_of_this_tick_or_every_claim_since_its_last_choice_as_spaces_code_does(
+    heard_claims,
+):
+    """SPACE's plugins/greedy/greedy.py empties the agent's received messages only when it chooses:
+    a claim heard while the agent worked on another task still keeps it off that task at its next
+    choice (``since_choice``); by default only this tick's claims do (``tick``)."""
+    fcg = make("fcg", {"heard_claims": heard_claims}, 0, np.random.default_rng(0), 0)
+    tasks = {0: TaskInfo(0, 10.0, 0.0, 30.0), 1: TaskInfo(1, 50.0, 0.0, 30.0), 2: TaskInfo(2, 90.0, 0.0, 30.0)}
+
+    def decide(k, inbox=()):
+        return fcg.decide(LocalView(0, 3, k, float(k), 0.0, 0.0, 0.0, 0.0, 1.0, tasks, list(inbox), 1.0, 300.0))
+
+    assert decide(5) == 0  # claims the nearest
+    assert decide(6, [Message(1, "claim", [1, 6])]) == 0  # agent 1 claims task 1 while 0 works on task 0
+    del tasks[0]  # task 0 done; agent 1 is out of range now
+    assert decide(7) == (1 if heard_claims == "tick" else 2)
+    if heard_claims == "since_choice":
+        del tasks[2]  # done too; the choice of tick 7 emptied what the agent heard: task 1 is free again
+        assert decide(8) == 1
+
+
 @pytest.mark.parametrize("execute", ["settled", "first"])
 def test_cbba_works_only_on_a_bundle_a_consensus_round_left_alone_as_spaces_code_does(execute):
     """SPACE's CBBA hands its agent a task only after a consensus round that did not change the
