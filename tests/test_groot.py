@@ -237,8 +237,15 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
     sets = ["agents.count=6", "allocator.name=cbba", "run.stop_when_done=false", "run.duration=6000", "run.seed=5"]
     endpoint, port = free_loopback_endpoint(), free_port()
     hub = HubOptions(listen=[endpoint], admit=[operator.identity])
+    following = threading.Event()  # the first tick waits for the gateway: the run lasts some 13 wall s
+
+    def hold(_keys, _endpoint) -> None:
+        following.wait(timeout=60)
+
     runner = threading.Thread(
-        target=run_experiment, args=(experiment(*sets), tmp_path / "watched"), kwargs={"progress": False, "hub": hub}
+        target=run_experiment,
+        args=(experiment(*sets), tmp_path / "watched"),
+        kwargs={"progress": False, "hub": hub, "on_ready": hold},
     )
     runner.start()
     gateway = subprocess.Popen(
@@ -253,6 +260,7 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
     seen: dict[int, tuple[bytes, str, set[bytes]]] = {}
     try:
         assert "groot: run" in gateway.stdout.readline()
+        following.set()
         for agent in (0, 4):
             if agent:
                 gateway.stdin.write(f"{agent}\n")
@@ -273,6 +281,7 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
         assert board["arrival_radius"] == 5.0 and "assigned_task" in board
     finally:
         groot.close()
+        following.set()
         gateway.stdin.close()  # no terminal: a closed stdin leaves the gateway serving, until interrupted
         time.sleep(1.0)
         still_serving = gateway.poll() is None

@@ -20,17 +20,25 @@ from tests.conftest import experiment
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
 
 
-def _run_in_background(tmp_path, endpoint, results, operator):
+def _run_in_background(tmp_path, endpoint, results, operator, watching: threading.Event | None = None):
+    """The quick start's world for 2,500 ticks, with an operator's hub. ``watching``: the first tick
+    waits (at most a minute) until it is set, so that a watcher sees the run from its start: the
+    run lasts about a wall second, and the proxy counts each agent's traffic only once watched."""
     exp = experiment("agents.count=6", "run.stop_when_done=false", "run.duration=2500", "run.seed=9")
-    results["run"] = run_experiment(
-        exp, tmp_path / "run", progress=False, hub=HubOptions(listen=[endpoint], admit=[operator.identity])
-    )
+
+    def hold(_keys, _endpoint) -> None:
+        if watching is not None:
+            watching.wait(timeout=60)
+
+    hub = HubOptions(listen=[endpoint], admit=[operator.identity])
+    results["run"] = run_experiment(exp, tmp_path / "run", progress=False, on_ready=hold, hub=hub)
 
 
 def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(tmp_path, operator):
     endpoint = free_loopback_endpoint()
     results: dict = {}
-    runner = threading.Thread(target=_run_in_background, args=(tmp_path, endpoint, results, operator))
+    watching = threading.Event()
+    runner = threading.Thread(target=_run_in_background, args=(tmp_path, endpoint, results, operator, watching))
     runner.start()
     main_fd, child_fd = pty.openpty()
     fcntl.ioctl(child_fd, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 140, 0, 0))
@@ -56,6 +64,7 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
     )
     os.close(child_fd)
     screen = b""
+    release: threading.Timer | None = None
     deadline = time.monotonic() + 120
     try:
         while time.monotonic() < deadline:
@@ -68,6 +77,11 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
                 if not chunk:
                     break
                 screen += chunk
+                shown = ANSI.sub("", screen.decode("utf-8", "replace"))
+                if release is None and "waiting for its first progress" in shown:
+                    # its subscriptions are declared: a second for them to reach the proxy, then tick
+                    release = threading.Timer(1.0, watching.set)
+                    release.start()
             elif watcher.poll() is not None:
                 break
         code = watcher.wait(timeout=30)
@@ -76,6 +90,7 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
             watcher.kill()
             watcher.wait()
         os.close(main_fd)
+        watching.set()
         runner.join(timeout=120)
     text = ANSI.sub("", screen.decode("utf-8", "replace"))
     assert code == 0, text[-2000:]
@@ -112,7 +127,8 @@ def test_watch_serves_a_running_run_to_foxglove(tmp_path, operator):
 
     endpoint = free_loopback_endpoint()
     results: dict = {}
-    runner = threading.Thread(target=_run_in_background, args=(tmp_path, endpoint, results, operator))
+    subscribed = threading.Event()
+    runner = threading.Thread(target=_run_in_background, args=(tmp_path, endpoint, results, operator, subscribed))
     runner.start()
     watcher = subprocess.Popen(
         [sys.executable, "-m", "swarmbed", "watch", "--connect", endpoint, "--wait", "30", *operator.args]
@@ -132,6 +148,7 @@ def test_watch_serves_a_running_run_to_foxglove(tmp_path, operator):
                 channels.update({c["topic"]: c for c in message["channels"]})
         poses = channels["/agents/poses"]
         ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 3, "channelId": poses["id"]}]}))
+        subscribed.set()
         frame = ws.recv()
         while not isinstance(frame, bytes):
             frame = ws.recv()
@@ -145,5 +162,6 @@ def test_watch_serves_a_running_run_to_foxglove(tmp_path, operator):
         if watcher.poll() is None:
             watcher.kill()
             watcher.wait()
+        subscribed.set()
         runner.join(timeout=180)
     assert results["run"].summary["ticks"] == 2500
