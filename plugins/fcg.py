@@ -20,6 +20,15 @@ thousand ticks remembers every claim it heard meanwhile, which matters where few
 range at the moment it chooses. (When nothing is in sight SPACE's agent does not choose and keeps
 what it heard; so does ours.)
 
+A third is what an agent sees of its neighbours' choices in the same step (``same_tick_claims``).
+SPACE's main loop runs its agents' trees one after another in id order within a step, each sensing
+its neighbours' messages as they stand, so of two neighbours choosing in one step the later one
+sees the earlier one's claim and chooses another task; two neighbours never claim one task in the
+same step. Ours hear a claim a tick later, through the radio: by default (``unseen``) an agent
+keeps a task a lower id claimed at the same tick (and such a pair, finishing together, tends to
+choose together again); ``id_order`` gives SPACE's order back: the higher id, hearing that claim
+on its task, chooses again at once, skipping it (a tick later than in SPACE).
+
 A team task (ST-MR, one that needs k robots at once) takes k claims: it is free while fewer than k
 neighbours claim it, and a claim beaten by k earlier ones is given up (in either mode: the team is
 full without it). A claimant of a team task that sees a fuller team with room joins it (more
@@ -47,6 +56,12 @@ class FCGParams(BaseModel):
         "keep",
         description="on hearing an earlier claim on its task: keep it until done (SPACE's code) or abandon "
         "it and choose again at the next tick (SPACE's Section IV-D, as written)",
+    )
+    same_tick_claims: Literal["unseen", "id_order"] = Field(
+        "unseen",
+        description="a lower-id neighbour's claim on this agent's task made at the same tick as its own: kept "
+        "beside (unseen), or seen as SPACE's main loop shows it, whose agents choose one after another in id "
+        "order within a step: the agent chooses again, skipping it (id_order)",
     )
     heard_claims: Literal["tick", "since_choice"] = Field(
         "tick",
@@ -99,6 +114,8 @@ class FirstClaimedGreedy(Allocator):
             self.task = None
             self.abandoned += 1
             return None  # choose again at the next tick, as the paper describes
+        if self._beaten_in_id_order(claims, room(self.task)):
+            self.task = None  # SPACE's loop would have shown it this claim before it chose
         if self.task is None:
             free = [t for t in view.tasks.values() if claimants(t.id) < room(t.id)]
             if view.tasks:
@@ -109,6 +126,13 @@ class FirstClaimedGreedy(Allocator):
             self.claimed_at = view.tick
         view.broadcast(CLAIM, [self.task, self.claimed_at])
         return self.task
+
+    def _beaten_in_id_order(self, claims: dict[int, list[tuple[int, int]]], room: int) -> bool:
+        """``same_tick_claims: id_order``: whether a lower id claimed this agent's (one-robot) task at
+        the tick this agent did, a claim SPACE's loop, in id order, would have shown it first."""
+        if self.task is None or room != 1 or self.params.same_tick_claims != "id_order":
+            return False
+        return any(tick == self.claimed_at and sender < self.agent_id for tick, sender in claims.get(self.task, ()))
 
     def _join_fuller_team(
         self, view: LocalView, claims: dict[int, list[tuple[int, int]]], room: Callable[[int | None], int]

@@ -342,6 +342,25 @@ def test_fcg_skips_the_claims_of_this_tick_or_every_claim_since_its_last_choice_
         assert decide(8) == 1
 
 
+@pytest.mark.parametrize("same_tick_claims", ["unseen", "id_order"])
+def test_fcg_sees_a_lower_ids_claim_of_the_same_tick_as_spaces_loop_order_shows_it(same_tick_claims):
+    """SPACE's main loop runs its agents one after another in id order within a step, so an agent
+    sees the claims its lower-id neighbours made in that step before it chooses (``id_order``):
+    hearing one on its own task, made at the tick of its own claim, it chooses again skipping that
+    task; a later claim, or a higher id's, it keeps beside (SPACE's code keeps a task until done)."""
+    fcg = make("fcg", {"same_tick_claims": same_tick_claims}, 2, np.random.default_rng(0), 0)
+    tasks = {0: TaskInfo(0, 10.0, 0.0, 30.0), 1: TaskInfo(1, 50.0, 0.0, 30.0), 2: TaskInfo(2, 90.0, 0.0, 30.0)}
+
+    def decide(k, inbox=()):
+        return fcg.decide(LocalView(2, 4, k, float(k), 0.0, 0.0, 0.0, 0.0, 1.0, tasks, list(inbox), 1.0, 300.0))
+
+    assert decide(5) == 0  # claims the nearest at tick 5
+    assert decide(6, [Message(3, "claim", [0, 5]), Message(1, "claim", [0, 6])]) == 0  # a higher id; a later claim
+    assert decide(7, [Message(1, "claim", [0, 5])]) == (0 if same_tick_claims == "unseen" else 1)
+    if same_tick_claims == "id_order":
+        assert decide(8, [Message(1, "claim", [0, 5])]) == 1  # its new claim is of tick 7: kept
+
+
 @pytest.mark.parametrize("execute", ["settled", "first"])
 def test_cbba_works_only_on_a_bundle_a_consensus_round_left_alone_as_spaces_code_does(execute):
     """SPACE's CBBA hands its agent a task only after a consensus round that did not change the
