@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -58,7 +58,7 @@ class MTSRParams(QuietDefaults):
     """The ``scenario:`` section of an MT-SR experiment."""
 
     #: tasks that need one robot write the config.yaml (and the sweep digests) they did before teams
-    QUIET: ClassVar[dict[str, Any]] = {"robots_needed": 1}
+    QUIET: ClassVar[dict[str, Any]] = {"robots_needed": 1, "work_motion": "brake"}
 
     model_config = ConfigDict(extra="forbid")
     width: float = Field(1400.0, gt=0, description="area width")
@@ -77,6 +77,12 @@ class MTSRParams(QuietDefaults):
         ge=0,
         description="within this distance of its target an agent's speed is at most max_speed x distance / "
         "approach_radius (SPACE's code: target_approaching_radius 50); 0: no such slow-down",
+    )
+    work_motion: Literal["brake", "close_in"] = Field(
+        "brake",
+        description="an agent within a task's work radius, working (or waiting for its team): brakes (brake) or "
+        "keeps heading for the task's centre (close_in: SPACE's TaskExecutingNode calls follow() on every tick "
+        "it works, so its agents drive on, slowing within approach_radius)",
     )
     generations: Generations = Field(Generations(), description="tasks added during the run")
     agent_positions: list[tuple[float, float]] | None = Field(None, description="fixed start positions (else uniform)")
@@ -398,7 +404,8 @@ class MTSRWorld(World):
                 )
             ):
                 working.setdefault(task, []).append(i)
-                target = None  # brake while working
+                if self.sc.work_motion == "brake":
+                    target = None
             if target is not None and self.navigator is not None:
                 target = self.navigator.toward(i, float(self.ax[i]), float(self.ay[i]), target)
             x, y, h, v = step(

@@ -86,6 +86,31 @@ def test_work_radius_grows_with_the_task_workload(per_workload, works):
     assert bool(w.remaining[0] < 30.0) is works
 
 
+@pytest.mark.parametrize("work_motion", ["brake", "close_in"])
+def test_a_working_agent_brakes_or_closes_in_on_the_task_as_spaces_code_does(work_motion):
+    """SPACE's TaskExecutingNode calls follow() on every tick it works, so its agent drives on toward
+    the task's centre (close_in); ours brakes by default. The work done is the same either way."""
+    exp = experiment(
+        "agents.count=1",
+        "scenario.initial_tasks=1",
+        "scenario.workload=[60, 60]",
+        "scenario.task_positions=[[50, 50]]",
+        "scenario.agent_positions=[[75, 50]]",
+        "scenario.work_radius_per_workload=0.3333333333333333",
+        "scenario.approach_radius=50",
+        f"scenario.work_motion={work_motion}",
+    )
+    w = MTSRWorld(exp, np.random.default_rng(0))
+    for _ in range(40):
+        w.apply({0: ["goto_task", 0]})
+    assert w.remaining[0] == pytest.approx(20.0)  # worked from the first tick: within 10 + 60 / 3
+    moved = math.hypot(w.ax[0] - 75.0, w.ay[0] - 50.0)
+    if work_motion == "brake":
+        assert moved == 0.0 and w.distance[0] == 0.0
+    else:
+        assert math.hypot(w.ax[0] - 50.0, w.ay[0] - 50.0) < 24.0 and w.distance[0] >= moved > 0.5
+
+
 def test_collaborative_work_adds_rates_and_never_overcounts():
     exp = experiment(
         "agents.count=3",
