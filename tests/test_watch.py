@@ -20,6 +20,11 @@ from tests.conftest import experiment
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
 
 
+def _shown(screen: bytes) -> str:
+    """What a terminal shows of ``screen``'s bytes, escape sequences left out."""
+    return ANSI.sub("", screen.decode("utf-8", "replace"))
+
+
 def _run_in_background(tmp_path, endpoint, results, operator, watching: threading.Event | None = None):
     """The quick start's world for 2,500 ticks, with an operator's hub. ``watching``: the first tick
     waits (at most a minute) until it is set, so that a watcher sees the run from its start: the
@@ -77,8 +82,7 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
                 if not chunk:
                     break
                 screen += chunk
-                shown = ANSI.sub("", screen.decode("utf-8", "replace"))
-                if release is None and "waiting for its first progress" in shown:
+                if release is None and "waiting for its first progress" in _shown(screen):
                     # its subscriptions are declared: a second for them to reach the proxy, then tick
                     release = threading.Timer(1.0, watching.set)
                     release.start()
@@ -92,7 +96,7 @@ def test_watch_shows_a_running_experiment_in_a_terminal_and_leaves_when_it_ends(
         os.close(main_fd)
         watching.set()
         runner.join(timeout=120)
-    text = ANSI.sub("", screen.decode("utf-8", "replace"))
+    text = _shown(screen)
     assert code == 0, text[-2000:]
     summary = results["run"].summary
     assert "quickstart" in text and "ticks/s" in text and "tasks_completed" in text

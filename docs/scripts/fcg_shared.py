@@ -33,9 +33,9 @@ def shared_line(who: str, held: collections.Counter, same_tick: int | None = Non
     total = sum(held.values())
     shared = sum(v for v in held.values() if v > 1)
     line = f"{who}: agent-steps on a task {total:,}; on a task another agent holds {shared / total:.1%}"
-    return line + (
-        f"; of them claimed at the same tick as another's {same_tick / total:.1%}" if same_tick is not None else ""
-    )
+    if same_tick is not None:
+        line += f"; of them claimed at the same tick as another's {same_tick / total:.1%}"
+    return line
 
 
 def ours(seed: int, radio_range: int, same_tick_claims: str) -> None:

@@ -69,9 +69,8 @@ def runs(sweep: Path) -> pd.DataFrame:
     df = collect(read_spec(sweep), sweep)
     df = df[df["status"] == "ok"].dropna(subset=["agents.count", "network.range"]).copy()
     df["allocator"] = (df["allocator.name"] if "allocator.name" in df else df["allocator"]).map(_allocator)
-    for key in sorted(k for k in df.columns if k.startswith("allocator.") and k != "allocator.name"):
-        df["allocator"] = df["allocator"] + f" {key.split('.', 1)[1]}=" + df[key].astype(str)  # a grid's parameter
-    for key in sorted(k for k in df.columns if k.startswith("scenario.")):  # a world's key on the grid
+    on_grid = [k for k in df.columns if k.startswith(("allocator.", "scenario.")) and k != "allocator.name"]
+    for key in sorted(on_grid):  # a grid's allocator or world parameter
         df["allocator"] = df["allocator"] + f" {key.split('.', 1)[1]}=" + df[key].astype(str)
     return _with_varying_parameters(df, sweep)
 
