@@ -23,6 +23,7 @@ from swarmbed.wire.btlog import decode_tree_changes, file_head, records, tree_si
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import Keys, agent_id_of
 from swarmbed.wire.rundir import BT, PART_SUFFIX, PARTIAL_PREFIX, btlog_name
+from swarmbed.wire.safewrite import make_dirs, open_fresh
 
 log = logging.getLogger("swarmbed.coordinator")
 
@@ -32,7 +33,7 @@ class _AgentLog:
         self.path = path
         self.n_nodes = tree_size(xml)
         self.last_tick = -1
-        self.file: BinaryIO = open(path, "wb")  # noqa: SIM115 - open for the run, closed by the recorder
+        self.file: BinaryIO = open_fresh(path)  # open for the run, closed by the recorder
         self.file.write(file_head(xml))
 
 
@@ -46,7 +47,7 @@ class TreeRecorder:
         self.malformed = malformed
         self.logs: dict[int, _AgentLog] = {}
         self.lock = threading.Lock()
-        self.folder.mkdir(exist_ok=True)  # the launcher emptied it: no earlier run's file passes for ours
+        make_dirs(out_dir, self.folder)  # the launcher emptied it: no earlier run's file passes for ours
 
     def on_sample(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)

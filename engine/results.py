@@ -6,11 +6,11 @@ from __future__ import annotations
 import csv
 import json
 import os
-import threading
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from swarmbed.wire import safewrite
 from swarmbed.wire.rowfile import write_error
 from swarmbed.wire.rundir import (  # noqa: F401 - the run directory's names, read as results.<NAME>
     AGENTS,
@@ -24,23 +24,14 @@ from swarmbed.wire.rundir import (  # noqa: F401 - the run directory's names, re
 )
 
 
-def temp_beside(path: Path) -> Path:
-    """Where to write ``path`` before renaming it into place: a name of this process and thread
-    alone, so that two writers of one file (two sweep commands on one directory) never rename
-    each other's half-written file."""
-    return path.with_name(f"{path.name}.{os.getpid()}-{threading.get_ident()}.part")
-
-
 def write_atomic(path: Path, text: str) -> None:
-    tmp = temp_beside(path)
+    """``text`` as the whole of ``path``, complete or not at all; a link standing at ``path`` is
+    replaced, never written through (``wire.safewrite``)."""
     try:
-        with open(tmp, "w", newline="") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+        safewrite.write_text(path, text, fsync=True)
+    except safewrite.LinkRefused:
+        raise
     except OSError as exc:  # a full disk: no half-written temporary left behind, one line of why
-        tmp.unlink(missing_ok=True)
         raise write_error(exc, path.parent) from None
 
 
@@ -49,15 +40,14 @@ def write_json(path: Path, data: Any) -> None:
 
 
 def write_csv(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
-    tmp = temp_beside(path)
     try:
-        with open(tmp, "w", newline="") as f:
+        with safewrite.replacing(path) as tmp, open(tmp, "w", newline="") as f:
             w = csv.writer(f, lineterminator="\n")
             w.writerow(columns)
             w.writerows(rows)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+    except safewrite.LinkRefused:
+        raise
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise write_error(exc, path.parent) from None

@@ -584,6 +584,7 @@ def _sweep_executor(args: argparse.Namespace, out: Path) -> Executor:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from swarmbed.experiments.campaigns.executors import ExecutorError
     from swarmbed.experiments.campaigns.sweep import experiment_for, load_sweep, plan, run_sweep, status
+    from swarmbed.experiments.campaigns.tracking import TrackingError
 
     if args.status:
         try:
@@ -640,7 +641,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             in_process=args.engine == "inprocess",
             on_complete=on_complete,
         )
-    except ExecutorError as exc:
+    except (ExecutorError, TrackingError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.detach:

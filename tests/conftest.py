@@ -206,6 +206,7 @@ SLOW_MODULES = frozenset(
         "test_realtime",
         "test_recording",
         "test_report",
+        "test_safe_writes",
         "test_sar_e2e",
         "test_soak",
         "test_swaps",

@@ -8,6 +8,7 @@ puts it on a command line, where ``ps`` would show it, and never writes it to a 
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
@@ -17,6 +18,8 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import IO
+
+from swarmbed.wire.safewrite import LinkRefused
 
 # roles a credentials file made by ``swarmbed credentials`` may have; the processes a run spawns
 # itself get their own identities (netem, agent-<id>) from the launcher
@@ -96,10 +99,15 @@ def check_host_name(name: str) -> str:
 
 def open_private(path: str | Path, mode: str = "w", replace: bool = True) -> IO:
     """``path`` opened for writing (``"w"`` or ``"wb"``), emptied and readable by its owner only
-    (mode 600, also when it existed before). ``replace=False``: a FileExistsError if ``path`` exists
-    (checked and created in one step)."""
-    flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if replace else os.O_EXCL)
-    fd = os.open(path, flags, 0o600)
+    (mode 600, also when it existed before); a link at ``path`` is refused. ``replace=False``: a
+    FileExistsError if ``path`` exists (checked and created in one step)."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | (os.O_TRUNC if replace else os.O_EXCL)
+    try:
+        fd = os.open(path, flags, 0o600)
+    except OSError as exc:  # a link standing there is never written through: the secret stays here
+        if exc.errno == errno.ELOOP:
+            raise LinkRefused(path) from None
+        raise
     f = os.fdopen(fd, mode)
     os.fchmod(fd, 0o600)  # an existing file keeps its mode through O_CREAT
     return f

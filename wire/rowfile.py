@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from swarmbed.wire.rundir import PART_SUFFIX, PARTIAL_PREFIX
+from swarmbed.wire.safewrite import create_fresh
 
 
 class TableWriteError(OSError):
@@ -59,7 +60,7 @@ class RowFile:
         self._writer = csv.writer(self._buffer, lineterminator="\n")
         self._waiting = 0
         self._flushed_at = time.monotonic()
-        self._fd: int | None = os.open(self.part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._fd: int | None = create_fresh(self.part)
         self._size = 0  # bytes of whole rows in the file
         self.failed = False
         self._writer.writerow(columns)

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import psutil
 
+from swarmbed.wire import safewrite
 from swarmbed.wire.process import process_alive
 
 CLAIM = "claim.json"
@@ -66,7 +67,9 @@ def holder(run_dir: Path) -> Holder | None:
 
 @contextmanager
 def _locked(run_dir: Path) -> Iterator[None]:
-    fd = os.open(run_dir / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    if (run_dir / LOCK).is_symlink():  # planted in a received folder: replaced, never followed
+        (run_dir / LOCK).unlink()
+    fd = os.open(run_dir / LOCK, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
         yield
@@ -89,7 +92,7 @@ class Claim:
     def _touch(self, every: float) -> None:
         while not self._stop.wait(every):
             try:
-                os.utime(self.run_dir / CLAIM)
+                os.utime(self.run_dir / CLAIM, follow_symlinks=False)
             except OSError:
                 return
 
@@ -126,7 +129,5 @@ def take(run_dir: Path, stale_after: float = STALE_AFTER_S) -> Claim | Holder:
             "taken": time.time(),
             "took_over": current.describe() if current else None,
         }
-        tmp = run_dir / f"{CLAIM}.{token}"
-        tmp.write_text(json.dumps(record))
-        os.replace(tmp, run_dir / CLAIM)
+        safewrite.write_text(run_dir / CLAIM, json.dumps(record))
     return Claim(run_dir, token, stale_after)

@@ -26,6 +26,7 @@ from pathlib import Path
 from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
+from swarmbed.wire.safewrite import open_fresh
 
 
 def _ip(*args: str, ns: str | None = None, check: bool = True) -> subprocess.CompletedProcess:
@@ -98,7 +99,7 @@ class Lab:
         return ns
 
     def start_daemon(self, name: str, ns: str) -> None:
-        log = open(self.logs / f"host_{name}.log", "wb")
+        log = open_fresh(self.logs / f"host_{name}.log")
         identity = self.identities.setdefault(name, Identity.new(f"host-{name}", "host", host=name))
         credentials = write_credentials(self.logs / f"host_{name}.credentials", identity)
         cmd = [

@@ -33,6 +33,7 @@ from swarmbed.experiments.launch.forkmessages import (
     decode_request,
     encode,
 )
+from swarmbed.wire.safewrite import create_fresh
 
 # agents do no linear algebra: one BLAS thread, and no thread pool alive when the server forks
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -61,7 +62,7 @@ def _child(argv: list[str], log_path: str) -> None:
     code = 1
     try:
         os.setsid()
-        fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        fd = create_fresh(log_path)
         null = os.open(os.devnull, os.O_RDONLY)
         os.dup2(null, 0)
         os.dup2(fd, 1)

@@ -34,6 +34,7 @@ from swarmbed.experiments.launch.forkmessages import (
     decode_event,
     encode,
 )
+from swarmbed.wire.safewrite import open_fresh
 from swarmbed.wire.session import RUNTIMES
 
 log = logging.getLogger("swarmbed.launcher")
@@ -159,7 +160,7 @@ class ForkServer:
     """The launcher's end of :mod:`.forkserver`: start it, ask it for agents, learn their ends."""
 
     def __init__(self, log_path: Path, timeout: float = 60.0, env: Mapping[str, str] | None = None) -> None:
-        self.log = open(log_path, "wb")
+        self.log = open_fresh(log_path)
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "swarmbed.experiments.launch.forkserver", str(os.getpid())],
             stdin=subprocess.PIPE,
@@ -262,7 +263,7 @@ class Children:
         if module == AGENT_MODULE and self.server is not None:
             proc = self.server.spawn(name, args, log_path)
         else:
-            with open(log_path, "wb") as log:
+            with open_fresh(log_path) as log:
                 proc = subprocess.Popen(
                     [sys.executable, "-m", module, *args, "--parent-pid", str(os.getpid())],
                     stdin=subprocess.DEVNULL,

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from pathlib import Path
 from typing import Any
@@ -36,6 +35,7 @@ import pandas as pd
 
 from swarmbed.experiments.rundir import RunDir
 from swarmbed.experiments.views.colours import DROP_COLORS, WALL_COLOUR
+from swarmbed.wire import safewrite
 from swarmbed.wire.btlog import EPOCH_US, BtLogError, read_btlog
 from swarmbed.wire.rundir import (
     BT,
@@ -106,14 +106,8 @@ def write_mcap(run: Path, out: Path) -> dict:
     """Write ``run`` as an MCAP file at ``out``; returns what was written (messages per topic, bytes,
     seconds). The file is written under a temporary name and renamed when complete: an interrupted
     or failed recording never stands under ``out``."""
-    tmp = out.with_name(out.name + ".part")
-    try:
-        written = _write_mcap(run, tmp)
-        os.replace(tmp, out)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return written
+    with safewrite.replacing(out) as tmp:
+        return _write_mcap(run, tmp)
 
 
 def _write_mcap(run: Path, out: Path) -> dict:

@@ -18,6 +18,7 @@ import pandas as pd
 
 from swarmbed.experiments.rundir import RunDir
 from swarmbed.experiments.views.colours import DROP_COLORS, LABEL_COLORS, WALL_COLOUR
+from swarmbed.wire import safewrite
 from swarmbed.wire.rundir import MARKERS, RECEIVER_LEDGER, SUMMARY, TRAJECTORIES, RunFileError
 
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
@@ -183,14 +184,10 @@ def replay(
 
     fig.tight_layout()
     movie = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
-    tmp = out.with_name(out.stem + ".part" + out.suffix)
     writer = animation.PillowWriter(fps=fps) if out.suffix == ".gif" else animation.FFMpegWriter(fps=fps)
     try:
-        movie.save(tmp, writer=writer)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+        with safewrite.replacing(out) as tmp:
+            movie.save(tmp, writer=writer)
     finally:
         plt.close(fig)
-    tmp.replace(out)
     return out, len(frames)

@@ -14,7 +14,6 @@ colour per scenario).
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -31,6 +30,7 @@ from swarmbed.experiments.views.pooling import mixed_configurations
 from swarmbed.experiments.views.radio_pages import radio_pages
 from swarmbed.experiments.views.soak_page import soak_report
 from swarmbed.plugins.registry import registered_scenario
+from swarmbed.wire import safewrite
 from swarmbed.wire.rundir import RECEIVER_LEDGER, TIMESERIES, TRAJECTORIES, TRANSPORT, RunFileError
 from swarmbed.wire.summary import NetworkSummary, RunSummary
 
@@ -494,11 +494,7 @@ def report(folder: Path, out: Path | None = None) -> Path:
     out = out or folder / "report.html"
     if out.is_dir():
         out = out / "report.html"
-    tmp = out.with_name(f"{out.name}.{os.getpid()}.part")
-    try:
-        tmp.write_text(text)
-        tmp.replace(out)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    if not out.parent.is_dir():
+        raise ReportError(f"-o {out}: the folder {out.parent} does not exist")
+    safewrite.write_text(out, text)
     return out

@@ -1,0 +1,206 @@
+"""Nothing a user receives makes a command write outside where the user asked (issue 74, items 1,
+2 and 10): links planted in a sweep or run folder are replaced, never written through; MLflow logs
+only the regular files inside a run folder; a bad tracking URI is one line, fast, without its
+password. Every folder here is built from a real run and then made hostile."""
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from swarmbed.wire import safewrite
+from tests.conftest import QUICKSTART, sweep_in_process
+
+VICTIM = "a file the user owns\n"
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("swept")
+    (folder / "s.yaml").write_text(f"name: s\nbase: {QUICKSTART}\nruns: 2\n")
+    sweep_in_process(folder / "s.yaml", folder / "out", "run.duration=40")
+    return folder
+
+
+def _swarmbed(*args, **kwargs) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "swarmbed", *map(str, args)], capture_output=True, text=True, timeout=300, **kwargs
+    )
+
+
+def _victims(tmp_path: Path, n: int) -> list[Path]:
+    folder = tmp_path / "home"
+    folder.mkdir(exist_ok=True)
+    files = [folder / f"victim_{i}" for i in range(n)]
+    for f in files:
+        f.write_text(VICTIM)
+    return files
+
+
+def _plant(folder: Path, names: list[str], victims: list[Path]) -> None:
+    for name, victim in zip(names, victims, strict=True):
+        (folder / name).unlink(missing_ok=True)
+        (folder / name).symlink_to(victim)
+
+
+def test_analyze_and_report_replace_planted_links_and_never_write_through_them(swept, tmp_path):
+    clean = tmp_path / "clean"
+    shutil.copytree(swept / "out", clean, symlinks=True)
+    assert _swarmbed("analyze", clean).returncode == 0
+    written = sorted(p.name for p in clean.iterdir() if p.is_file() and p.name.startswith(("fig_", "scenario_")))
+    assert "scenario_summary.csv" in written and any(n.endswith(".png") for n in written), written
+    written.append("report.html")
+    received = tmp_path / "received"
+    shutil.copytree(swept / "out", received, symlinks=True)
+    victims = _victims(tmp_path, len(written))
+    _plant(received, written, victims)
+    assert _swarmbed("analyze", received).returncode == 0
+    assert _swarmbed("report", received).returncode == 0
+    assert all(v.read_text() == VICTIM for v in victims)
+    assert all((received / n).is_file() and not (received / n).is_symlink() for n in written)
+    assert not [p for p in received.iterdir() if p.name.endswith(".part")]
+
+
+def test_a_resumed_sweep_refuses_a_run_folder_that_is_a_link_and_writes_through_no_table_link(swept, tmp_path):
+    received = tmp_path / "received"
+    shutil.copytree(swept / "out", received, symlinks=True)
+    victims = _victims(tmp_path, 3)
+    _plant(received, ["sweep.csv", "sweep.parquet", "sweep.json"], victims)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    shutil.copy(swept / "s.yaml", tmp_path / "s.yaml")
+    again = ("--engine", "inprocess", "--no-progress", "--set", "run.duration=40")
+    done = _swarmbed("sweep", tmp_path / "s.yaml", "--out", received, *again)
+    assert done.returncode == 0, done.stderr
+    assert all(v.read_text() == VICTIM for v in victims)
+    assert not (received / "sweep.csv").is_symlink() and (received / "sweep.csv").stat().st_size > len(VICTIM)
+    (received / "base" / "run_002").symlink_to(elsewhere, target_is_directory=True)
+    done = _swarmbed("sweep", tmp_path / "s.yaml", "--out", received, "--runs", "3", *again)
+    err = done.stderr.strip()
+    assert done.returncode != 0 and len(err.splitlines()) == 1 and "run_002" in err and "link" in err, err
+    assert list(elsewhere.iterdir()) == []
+
+
+def test_a_resumed_run_whose_folder_holds_planted_links_writes_no_file_through_them(swept, tmp_path):
+    received = tmp_path / "received"
+    shutil.copytree(swept / "out", received, symlinks=True)
+    run = received / "base" / "run_001"
+    (run / "summary.json").unlink()  # an unfinished run: the resumed sweep runs it again, in processes
+    names = ["config.yaml", "timeseries.csv.part", "network_ledger.csv.part", "attempts.jsonl", "claim.lock"]
+    victims = _victims(tmp_path, len(names))
+    _plant(run, names, victims)
+    shutil.rmtree(run / "logs")
+    (run / "logs").symlink_to(victims[0].parent, target_is_directory=True)
+    shutil.copy(swept / "s.yaml", tmp_path / "s.yaml")
+    done = _swarmbed("sweep", tmp_path / "s.yaml", "--out", received, "--no-progress", "--set", "run.duration=40")
+    assert all(v.read_text() == VICTIM for v in victims)
+    assert sorted(p.name for p in victims[0].parent.iterdir()) == sorted(v.name for v in victims)
+    assert done.returncode == 1 and "run_001" in done.stderr and "link" in done.stderr, done.stderr
+    (run / "logs").unlink()  # the link the run refused is gone: the same command completes it
+    done = _swarmbed("sweep", tmp_path / "s.yaml", "--out", received, "--no-progress", "--set", "run.duration=40")
+    assert done.returncode == 0, done.stderr
+    assert all(v.read_text() == VICTIM for v in victims)
+    assert json.loads((run / "summary.json").read_text())["ticks"] == 40
+
+
+def test_the_helper_replaces_links_refuses_link_folders_and_lists_only_regular_files(tmp_path):
+    victim = _victims(tmp_path, 1)[0]
+    (tmp_path / "f.txt").symlink_to(victim)
+    safewrite.write_text(tmp_path / "f.txt", "new")
+    assert victim.read_text() == VICTIM and (tmp_path / "f.txt").read_text() == "new"
+    (tmp_path / "g.log").symlink_to(victim)
+    with safewrite.open_fresh(tmp_path / "g.log") as f:
+        f.write(b"log")
+    assert victim.read_text() == VICTIM and not (tmp_path / "g.log").is_symlink()
+    (tmp_path / "a.jsonl").symlink_to(victim)
+    with safewrite.open_append(tmp_path / "a.jsonl") as f:
+        f.write(b"line")
+    assert victim.read_text() == VICTIM and (tmp_path / "a.jsonl").read_bytes() == b"line"
+    root = tmp_path / "root"
+    root.mkdir()
+    (root / "sub").symlink_to(victim.parent, target_is_directory=True)
+    with pytest.raises(safewrite.LinkRefused):
+        safewrite.make_dirs(root, root / "sub" / "deeper")
+    assert not (victim.parent / "deeper").exists()
+    with pytest.raises(safewrite.LinkRefused):
+        safewrite.inside(root, root / ".." / "x")
+    (root / "real.txt").write_text("x")
+    (root / "link.txt").symlink_to(victim)
+    os.mkfifo(root / "fifo")
+    assert safewrite.regular_files(root) == [root / "real.txt"]
+    with pytest.raises(ZeroDivisionError), safewrite.replacing(root / "out.txt") as tmp:
+        tmp.write_text("half")
+        raise ZeroDivisionError
+    assert not (root / "out.txt").exists() and sorted(p.name for p in root.iterdir()) == [
+        "fifo",
+        "link.txt",
+        "real.txt",
+        "sub",
+    ]
+
+
+# -- MLflow (items 2 and 10) ---------------------------------------------------------------------
+
+
+def test_mlflow_logs_only_regular_files_inside_the_run_and_takes_hostile_keys(tmp_path):
+    pytest.importorskip("mlflow")
+    from mlflow.tracking import MlflowClient
+
+    from swarmbed.experiments.campaigns.tracking import TAG, MlflowLog, default_uri
+
+    secret = tmp_path / "shadow"
+    secret.write_text("root:$6$secret\n")
+    (tmp_path / "s.yaml").write_text(f"name: tracked\nbase: {QUICKSTART}\nruns: 1\n")
+    out = tmp_path / "out"
+    sweep_in_process(tmp_path / "s.yaml", out, "run.duration=20")
+    run = out / "base" / "run_000"
+    (run / "shadow").symlink_to(secret)
+    (run / "logs" / "shadow_too").symlink_to(secret)
+    (run / "logs" / "note.txt").write_text("a regular file")
+    (run / "linked_dir").symlink_to(tmp_path, target_is_directory=True)
+    summary = json.loads((run / "summary.json").read_text())
+    summary["../../x"] = 1.5
+    (run / "summary.json").write_text(json.dumps(summary))
+    log = MlflowLog(default_uri(out), "tracked")
+    assert log.log(run, "base/run_000")
+    client = MlflowClient(tracking_uri=default_uri(out))
+    experiment = client.get_experiment_by_name("tracked")
+    (logged,) = client.search_runs([experiment.experiment_id], filter_string=f"tags.`{TAG}` = 'base/run_000'")
+    assert logged.data.metrics["_/_/x"] == 1.5
+    names = {f.path for f in client.list_artifacts(logged.info.run_id, "run")}
+    assert "run/summary.json" in names and "run/shadow" not in names and "run/linked_dir" not in names
+    inner = {f.path for f in client.list_artifacts(logged.info.run_id, "run/logs")}
+    assert inner and "run/logs/shadow_too" not in inner
+    store = out / "mlruns"
+    assert not any("secret" in p.read_text(errors="replace") for p in store.rglob("*") if p.is_file())
+
+
+def test_mlflow_an_unreachable_server_fails_fast_in_one_line_without_its_password(tmp_path):
+    pytest.importorskip("mlflow")
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    (tmp_path / "s.yaml").write_text(f"name: t\nbase: {QUICKSTART}\nruns: 1\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MLFLOW_")}
+    started = time.monotonic()
+    done = _swarmbed(
+        "sweep", tmp_path / "s.yaml", "--out", tmp_path / "out", "--engine", "inprocess", "--no-progress",
+        "--mlflow", f"http://user:hunter2@127.0.0.1:{port}/", env=env,
+    )  # fmt: skip
+    took = time.monotonic() - started
+    err = done.stderr.strip()
+    assert done.returncode != 0 and "hunter2" not in done.stderr + done.stdout, err
+    assert len(err.splitlines()) == 1 and "127.0.0.1" in err and "***" in err, err
+    assert took < 60, took
+    done = _swarmbed(
+        "sweep", tmp_path / "s.yaml", "--out", tmp_path / "out2", "--engine", "inprocess", "--no-progress",
+        "--mlflow", f"sqlite:///{tmp_path}/m.db", env=env,
+    )  # fmt: skip
+    err = done.stderr.strip()
+    assert done.returncode != 0 and len(err.splitlines()) == 1 and "pip install mlflow" in err, err
