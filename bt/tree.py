@@ -26,6 +26,10 @@ from swarmbed.bt.node import (
 )
 from swarmbed.bt.registry import NodeRegistry
 from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
+from swarmbed.wire.safefiles import UnreadableFile, read_regular
+
+#: the most a behavior tree file may hold (Groot2's largest example trees are a few kB)
+MAX_TREE_BYTES = 4 << 20
 
 GENERIC_TAGS = ("Action", "Condition", "Control", "Decorator")
 SPECIAL_ATTRS = ("name", "ID")
@@ -225,9 +229,11 @@ def load_tree(
     where = str(source)
     if text is None:
         try:
-            text = Path(source).read_text()
-        except OSError as exc:
-            raise BTError(f"{where}: cannot read behavior tree: {exc.strerror}") from None
+            text = read_regular(source, MAX_TREE_BYTES).decode("utf-8")
+        except UnreadableFile as exc:
+            raise BTError(f"{exc}") from None
+        except UnicodeDecodeError as exc:
+            raise BTError(f"{where}: not UTF-8 text (byte {exc.start})") from None
     root = _parse(text, where)
     if root.tag != "root":
         raise BTError(f"{where}:{root.line}: the top element must be <root>, not <{root.tag}>")

@@ -10,7 +10,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.rowfile import write_error
 from swarmbed.wire.rundir import (  # noqa: F401 - the run directory's names, read as results.<NAME>
     AGENTS,
@@ -26,10 +26,10 @@ from swarmbed.wire.rundir import (  # noqa: F401 - the run directory's names, re
 
 def write_atomic(path: Path, text: str) -> None:
     """``text`` as the whole of ``path``, complete or not at all; a link standing at ``path`` is
-    replaced, never written through (``wire.safewrite``)."""
+    replaced, never written through (``wire.safefiles``)."""
     try:
-        safewrite.write_text(path, text, fsync=True)
-    except safewrite.LinkRefused:
+        safefiles.write_text(path, text, fsync=True)
+    except safefiles.LinkRefused:
         raise
     except OSError as exc:  # a full disk: no half-written temporary left behind, one line of why
         raise write_error(exc, path.parent) from None
@@ -41,13 +41,13 @@ def write_json(path: Path, data: Any) -> None:
 
 def write_csv(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
     try:
-        with safewrite.replacing(path) as tmp, open(tmp, "w", newline="") as f:
+        with safefiles.replacing(path) as tmp, open(tmp, "w", newline="") as f:
             w = csv.writer(f, lineterminator="\n")
             w.writerow(columns)
             w.writerows(rows)
             f.flush()
             os.fsync(f.fileno())
-    except safewrite.LinkRefused:
+    except safefiles.LinkRefused:
         raise
     except OSError as exc:
         raise write_error(exc, path.parent) from None

@@ -109,16 +109,58 @@ def sight(
     return seen
 
 
-def obstacles_outside(exp: Experiment, inside: Callable[[float, float], bool], arena: str) -> list[str]:
+#: the least share of the arena (on a grid) that must be free for spawns: below it a spawn could
+#: miss in the 10,000 draws a placement gets (at 1 % free, (0.99)^10000 is about 2e-44)
+MIN_FREE_SHARE = 0.01
+#: the grid's points per side on which the free share is measured
+FREE_GRID = 100
+
+
+def obstacles_outside(
+    exp: Experiment,
+    inside: Callable[[float, float], bool],
+    arena: str,
+    box: tuple[float, float, float, float] | None = None,
+) -> list[str]:
     """Problems of an experiment's obstacles with a scenario's arena: every vertex must lie in it
-    (``inside(x, y)``; ``arena`` says what the arena is, for the message)."""
+    (``inside(x, y)``; ``arena`` says what the arena is, for the message), and with ``box`` (the
+    arena's bounding box x0, y0, x1, y1) at least :data:`MIN_FREE_SHARE` of the arena must be free
+    for spawns (outside every polygon, ``clearance`` from every wall), so that no run dies placing
+    a robot or a task."""
     if exp.obstacles is None:
         return []
-    return [
+    problems = [
         f"obstacles.{where}: [{x:g}, {y:g}] lies outside the arena ({arena})"
         for where, (x, y) in exp.obstacles.points()
         if not inside(x, y)
-    ][:1]
+    ]
+    if len(problems) > 10:
+        problems = [*problems[:10], f"obstacles: {len(problems) - 10} more vertices lie outside the arena ({arena})"]
+    if box is not None and not problems:
+        share = free_share(exp.obstacles.compile(), inside, box)
+        if share < MIN_FREE_SHARE:
+            problems.append(
+                f"obstacles: {share:.1%} of the arena is free for spawns (outside every polygon and "
+                f"obstacles.clearance = {exp.obstacles.clearance:g} from every wall); at least "
+                f"{MIN_FREE_SHARE:.0%} is needed to place robots and tasks"
+            )
+    return problems
+
+
+def free_share(walls: Walls, inside: Callable[[float, float], bool], box: tuple[float, float, float, float]) -> float:
+    """The share of a :data:`FREE_GRID` x :data:`FREE_GRID` grid over ``box`` inside the arena that
+    ``walls`` leave free (cell centres; measured in chunks so memory stays a few MB)."""
+    x0, y0, x1, y1 = box
+    gx = x0 + (np.arange(FREE_GRID) + 0.5) * (x1 - x0) / FREE_GRID
+    gy = y0 + (np.arange(FREE_GRID) + 0.5) * (y1 - y0) / FREE_GRID
+    xs, ys = (a.ravel() for a in np.meshgrid(gx, gy))
+    keep = np.fromiter((inside(float(x), float(y)) for x, y in zip(xs, ys, strict=True)), bool, len(xs))
+    xs, ys = xs[keep], ys[keep]
+    if not len(xs):
+        return 0.0
+    chunk = max(1, 1_000_000 // max(1, len(walls.xy)))
+    free = sum(int(walls.free(xs[k : k + chunk], ys[k : k + chunk]).sum()) for k in range(0, len(xs), chunk))
+    return free / len(xs)
 
 
 class World(abc.ABC):

@@ -187,6 +187,7 @@ class MTSR(Scenario):
             exp,
             lambda x, y: 0 <= x <= params.width and 0 <= y <= params.height,
             f"[0, {params.width:g}] x [0, {params.height:g}]",
+            (0.0, 0.0, params.width, params.height),
         )
 
     def make_world(self, rng: np.random.Generator, allocator: type[Allocator] | None = None) -> MTSRWorld:

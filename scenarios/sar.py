@@ -209,7 +209,9 @@ class SAR(Scenario):
     def check(cls, exp: Experiment, params: BaseModel) -> list[str]:
         assert isinstance(params, SARParams)
         r = params.arena_radius
-        return obstacles_outside(exp, lambda x, y: math.hypot(x, y) <= r, f"a disc of radius {r:g} about [0, 0]")
+        return obstacles_outside(
+            exp, lambda x, y: math.hypot(x, y) <= r, f"a disc of radius {r:g} about [0, 0]", (-r, -r, r, r)
+        )
 
     def make_world(self, rng: np.random.Generator, allocator: type[Allocator] | None = None) -> SARWorld:
         return SARWorld(self, rng, bids_with_colors=allocator is not None and allocator.bids_with_colors)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from tests.conftest import QUICKSTART, sweep_in_process
 
 VICTIM = "a file the user owns\n"
@@ -112,29 +112,29 @@ def test_a_resumed_run_whose_folder_holds_planted_links_writes_no_file_through_t
 def test_the_helper_replaces_links_refuses_link_folders_and_lists_only_regular_files(tmp_path):
     victim = _victims(tmp_path, 1)[0]
     (tmp_path / "f.txt").symlink_to(victim)
-    safewrite.write_text(tmp_path / "f.txt", "new")
+    safefiles.write_text(tmp_path / "f.txt", "new")
     assert victim.read_text() == VICTIM and (tmp_path / "f.txt").read_text() == "new"
     (tmp_path / "g.log").symlink_to(victim)
-    with safewrite.open_fresh(tmp_path / "g.log") as f:
+    with safefiles.open_fresh(tmp_path / "g.log") as f:
         f.write(b"log")
     assert victim.read_text() == VICTIM and not (tmp_path / "g.log").is_symlink()
     (tmp_path / "a.jsonl").symlink_to(victim)
-    with safewrite.open_append(tmp_path / "a.jsonl") as f:
+    with safefiles.open_append(tmp_path / "a.jsonl") as f:
         f.write(b"line")
     assert victim.read_text() == VICTIM and (tmp_path / "a.jsonl").read_bytes() == b"line"
     root = tmp_path / "root"
     root.mkdir()
     (root / "sub").symlink_to(victim.parent, target_is_directory=True)
-    with pytest.raises(safewrite.LinkRefused):
-        safewrite.make_dirs(root, root / "sub" / "deeper")
+    with pytest.raises(safefiles.LinkRefused):
+        safefiles.make_dirs(root, root / "sub" / "deeper")
     assert not (victim.parent / "deeper").exists()
-    with pytest.raises(safewrite.LinkRefused):
-        safewrite.inside(root, root / ".." / "x")
+    with pytest.raises(safefiles.LinkRefused):
+        safefiles.inside(root, root / ".." / "x")
     (root / "real.txt").write_text("x")
     (root / "link.txt").symlink_to(victim)
     os.mkfifo(root / "fifo")
-    assert safewrite.regular_files(root) == [root / "real.txt"]
-    with pytest.raises(ZeroDivisionError), safewrite.replacing(root / "out.txt") as tmp:
+    assert safefiles.regular_files(root) == [root / "real.txt"]
+    with pytest.raises(ZeroDivisionError), safefiles.replacing(root / "out.txt") as tmp:
         tmp.write_text("half")
         raise ZeroDivisionError
     assert not (root / "out.txt").exists() and sorted(p.name for p in root.iterdir()) == [

@@ -59,7 +59,8 @@ class PolygonEntry(_Strict):
         if not 3 <= n <= MAX_VERTICES:
             raise ValueError(f"a polygon needs 3 to {MAX_VERTICES} vertices, not {n}")
         p = np.asarray(self.points, dtype=float)
-        if abs(_signed_area(p)) <= 1e-9:
+        d = p - p[0]
+        if np.all(np.abs(d[:, 0] * d[:, None, 1] - d[:, 1] * d[:, None, 0]) <= 1e-9):  # every pair in line
             raise ValueError("a polygon must enclose an area (its vertices are on one line)")
         q = np.roll(p, -1, axis=0)
         if np.any(np.hypot(*(q - p).T) <= 1e-9):
@@ -72,6 +73,8 @@ class PolygonEntry(_Strict):
         neighbours = (j == i + 1) | ((i == 0) & (j == n - 1))
         if np.any(~neighbours):
             raise ValueError(f"a polygon's edges {int(i[~neighbours][0])} and {int(j[~neighbours][0])} cross")
+        if abs(_signed_area(p)) <= 1e-9:
+            raise ValueError("a polygon must enclose an area")
         return self
 
 

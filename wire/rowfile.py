@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from swarmbed.wire.rundir import PART_SUFFIX, PARTIAL_PREFIX
-from swarmbed.wire.safewrite import create_fresh
+from swarmbed.wire.safefiles import create_fresh
 
 
 class TableWriteError(OSError):

@@ -16,7 +16,8 @@ def _message(error: Any, model: type[BaseModel] | None = None) -> str:
         near = _closest_key(model, tuple(error["loc"])) if model is not None else None
         return "unknown key" + (f" (did you mean {near!r}?)" if near else "")
     if error["type"] in ("model_type", "dict_type", "model_attributes_type"):
-        return f"must be a section (a mapping of keys), not {error['input']!r}"
+        given = error["input"]  # text is not quoted back: it may be any file's content (a map file)
+        return "must be a section (a mapping of keys), not " + ("text" if isinstance(given, str) else repr(given))
     if error["type"] == "value_error" and "error" in error.get("ctx", {}):
         return str(error["ctx"]["error"])  # a validator's own words, without "Value error, "
     return str(error["msg"])

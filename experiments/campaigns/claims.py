@@ -26,7 +26,7 @@ from pathlib import Path
 
 import psutil
 
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.process import process_alive
 
 CLAIM = "claim.json"
@@ -129,5 +129,5 @@ def take(run_dir: Path, stale_after: float = STALE_AFTER_S) -> Claim | Holder:
             "taken": time.time(),
             "took_over": current.describe() if current else None,
         }
-        safewrite.write_text(run_dir / CLAIM, json.dumps(record))
+        safefiles.write_text(run_dir / CLAIM, json.dumps(record))
     return Claim(run_dir, token, stale_after)

@@ -58,7 +58,7 @@ from swarmbed.experiments.folders import ATTEMPTS, DERIVED, ERROR, PARQUET, SPEC
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.yamlfile import YamlFileError, parse_yaml, read_yaml
 from swarmbed.experiments.rundir import RunDir
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.rundir import MAX_CONFIG_BYTES, PROVENANCE, RunFileError, read_json_member, read_member
 from swarmbed.wire.schema import SAFE_NAME
@@ -237,7 +237,7 @@ def _record_attempt(run_dir: Path, **fields: Any) -> None:
     """One line of ``attempts.jsonl``: where and when a run was tried and how it ended (which node
     ran it, on a cluster; not a result file, so it never takes part in byte comparisons)."""
     line = json.dumps({"host": socket.gethostname(), "pid": os.getpid(), "ppid": os.getppid(), **fields})
-    with safewrite.open_append(run_dir / ATTEMPTS) as f:
+    with safefiles.open_append(run_dir / ATTEMPTS) as f:
         f.write(line.encode() + b"\n")
 
 
@@ -394,9 +394,9 @@ def write_tables(table: pd.DataFrame, out: Path) -> None:
     for pattern in DERIVED:
         for stale in out.glob(pattern):
             stale.unlink(missing_ok=True)
-    with safewrite.replacing(out / TABLE) as tmp:
+    with safefiles.replacing(out / TABLE) as tmp:
         table.to_csv(tmp, index=False)
-    with safewrite.replacing(out / PARQUET) as tmp:
+    with safefiles.replacing(out / PARQUET) as tmp:
         _parquet_ready(table).to_parquet(tmp, index=False)
 
 
@@ -555,7 +555,7 @@ def run_sweep(
     executor = executor or executors.get("local", jobs=jobs)
     todo = [s for s in specs if run_status(Path(s.out_dir), stale_after) != "ok"]
     for spec in todo:  # a received sweep folder's run folder that is a link is refused, not run into
-        safewrite.make_dirs(out, Path(spec.out_dir))
+        safefiles.inside(out, Path(spec.out_dir) / results.SUMMARY)
     done_before = len(specs) - len(todo)
     if on_complete is not None:
         for spec in specs:

@@ -28,7 +28,7 @@ from typing import Any
 from urllib.parse import urlsplit, urlunsplit
 
 from swarmbed.experiments.rundir import RunDir, RunFileError
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 
 #: the tag that names a run by its folder in the sweep, how a resumed sweep knows it was logged
 TAG = "swarmbed.run"
@@ -132,7 +132,7 @@ class MlflowLog:
             self.client.log_batch(run_id, params=params[start : start + 100])
         for start in range(0, len(metrics), 1000):
             self.client.log_batch(run_id, metrics=metrics[start : start + 1000])
-        for path in safewrite.regular_files(Path(run_dir)):  # never what a link in the folder names
+        for path in safefiles.regular_files(Path(run_dir)):  # never what a link in the folder names
             where = path.parent.relative_to(run_dir).as_posix()
             self.client.log_artifact(run_id, str(path), artifact_path="run" if where == "." else f"run/{where}")
         self.client.set_terminated(run_id)

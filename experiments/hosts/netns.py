@@ -26,7 +26,7 @@ from pathlib import Path
 from swarmbed.experiments.launch.hub import HubOptions
 from swarmbed.experiments.launch.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
-from swarmbed.wire.safewrite import open_fresh
+from swarmbed.wire.safefiles import open_fresh
 
 
 def _ip(*args: str, ns: str | None = None, check: bool = True) -> subprocess.CompletedProcess:

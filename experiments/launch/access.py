@@ -39,7 +39,7 @@ from pathlib import Path
 
 import psutil
 
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.credentials import Identity, check_admitted, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, PREFIX, Keys
 from swarmbed.wire.process import process_alive
@@ -259,7 +259,7 @@ class RunAccess:
 def claim_folder(folder: Path) -> None:
     """Record this process as the owner of the temporary ``folder`` (``swarmbed-<what>-...``), so that
     :func:`remove_orphaned_folders` removes it once this process is gone, however it ended."""
-    safewrite.write_text(folder / OWNER, json.dumps({"pid": os.getpid(), "started": psutil.Process().create_time()}))
+    safefiles.write_text(folder / OWNER, json.dumps({"pid": os.getpid(), "started": psutil.Process().create_time()}))
 
 
 def remove_orphaned_folders(tmp: Path | None = None) -> list[Path]:

@@ -13,7 +13,7 @@ import datetime
 import ipaddress
 from pathlib import Path
 
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.credentials import open_private
 
 CA = "ca"
@@ -104,7 +104,7 @@ def make_certs(folder: Path, machines: list[str], days: int = 365) -> list[Path]
             .sign(ca_key, hashes.SHA256())
         )
         _write_key(ca_key_path, ca_key)
-        safewrite.write_bytes(ca_pem, ca_cert.public_bytes(serialization.Encoding.PEM))
+        safefiles.write_bytes(ca_pem, ca_cert.public_bytes(serialization.Encoding.PEM))
         written = [ca_pem, ca_key_path]
     for spec in machines:
         name, addresses = parse_machine(spec)
@@ -125,6 +125,6 @@ def make_certs(folder: Path, machines: list[str], days: int = 365) -> list[Path]
             .sign(ca_key, hashes.SHA256())
         )
         _write_key(folder / f"{name}.key", key)
-        safewrite.write_bytes(folder / f"{name}.pem", cert.public_bytes(serialization.Encoding.PEM))
+        safefiles.write_bytes(folder / f"{name}.pem", cert.public_bytes(serialization.Encoding.PEM))
         written += [folder / f"{name}.pem", folder / f"{name}.key"]
     return written

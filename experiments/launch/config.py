@@ -12,6 +12,7 @@ and the dotted key.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, get_args, get_origin
@@ -33,6 +34,7 @@ from swarmbed.plugins.registry import (
     resolve_scenario,
     scenario_target,
 )
+from swarmbed.wire.obstacles import PolygonEntry, WallEntry
 from swarmbed.wire.schema import (
     AgentsSection,
     AllocatorSection,
@@ -160,7 +162,13 @@ def _as_written(value: Any) -> str:
     return value if isinstance(value, str) else json.dumps(value)
 
 
-def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, origin: str = "--set") -> Experiment:
+def validate(
+    data: dict,
+    where: str,
+    overridden: dict[str, Any] | None = None,
+    origin: str = "--set",
+    every_map_problem: bool = True,
+) -> Experiment:
     """Check ``data`` in full (sections, plugin parameters, the behavior tree) and return the
     experiment with its scenario and allocator sections fully resolved. ``overridden``: the keys
     that ``--set`` gave, so that an error about one of them names ``--set``, not the file."""
@@ -177,7 +185,9 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
         # parameters are checked by its Params model below, which may convert YAML lists to tuples)
         exp = Experiment.model_validate(data, strict=True)
     except ValidationError as exc:
-        raise fail(validation_lines(exc, Experiment)) from None
+        first = fail(validation_lines(exc, Experiment))
+        more = _more_map_problems(data, where, overridden, origin, str(first).splitlines()) if every_map_problem else []
+        raise ConfigError("\n".join([str(first), *more])) from None
     try:
         kind = exp.scenario.kind  # each name resolved once here, its class used for every check below
         scenario_cls = resolve_scenario(kind)
@@ -230,6 +240,47 @@ def validate(data: dict, where: str, overridden: dict[str, Any] | None = None, o
     return exp
 
 
+def _more_map_problems(data: dict, where: str, overridden: dict[str, Any], origin: str, known: list[str]) -> list[str]:
+    """The problems of the ``obstacles:`` section that a first check could not reach: with a wall or
+    polygon refused on its own, the arena and free-room checks never ran. They run here on the
+    entries that passed, so a map's every problem is reported at once (indices as written)."""
+    obstacles = data.get("obstacles")
+    if not isinstance(obstacles, dict) or not any(
+        line.split(": ", 2)[-2:][0].startswith("obstacles") for line in known
+    ):
+        return []
+    kept, plain, index = dict(obstacles), dict(obstacles), {}
+    for key, model in (("walls", WallEntry), ("polygons", PolygonEntry)):
+        entries = obstacles.get(key) or []
+        if not isinstance(entries, list):
+            return []
+        good = []
+        for i, entry in enumerate(entries):
+            try:
+                model.model_validate(entry, strict=True)
+            except ValidationError:
+                continue
+            good.append(i)
+        index[key], kept[key] = good, [entries[i] for i in good]
+        plain[key] = [{k: v for k, v in entries[i].items() if k != "material"} for i in good]
+
+    def as_written(match: re.Match) -> str:
+        return f"obstacles.{match[1]}[{index[match[1]][int(match[2])]}]"
+
+    more: list[str] = []
+    # the entries that passed, with their materials (a material's problem), then without them (the
+    # arena and free-room checks, which a material's problem would stop)
+    for trial in (kept, plain):
+        try:
+            validate({**data, "obstacles": trial}, where, overridden, origin, every_map_problem=False)
+        except ConfigError as exc:
+            for line in str(exc).splitlines():
+                line = re.sub(r"obstacles\.(walls|polygons)\[(\d+)\]", as_written, line)
+                if "obstacles" in line and line not in known and line not in more:
+                    more.append(line)
+    return more
+
+
 def _check_tree(exp: Experiment, scenario_cls: type[Scenario], allocator_cls: type[Allocator]) -> str | None:
     """Load the agents' behavior tree with the node set they will have, so that a bad tree stops
     the run here, before any process starts. The problem, or None."""
@@ -270,7 +321,10 @@ def _absolute(key: str, value: Any, base: Path) -> Any:
     ref, sep, cls = value.rpartition(":") if ".py:" in value else (value, "", "")
     if sep or key in ("agents.behavior_tree", "obstacles"):
         path = Path(ref)
-        return str(path if path.is_absolute() else (base / path).resolve()) + (sep + cls)
+        try:
+            return str(path if path.is_absolute() else (base / path).resolve()) + (sep + cls)
+        except (OSError, RuntimeError):  # a loop of links: left as written, its reader says so in one line
+            return str(base / path) + (sep + cls)
     return value
 
 
@@ -311,8 +365,9 @@ def load(
     pairs = [parse_override(text) for text in overrides]
     pairs = [(k, _absolute(k, v, Path.cwd()) if k in PATH_KEYS else v) for k, v in pairs]  # from the shell: from here
     apply_overrides(data, pairs, str(path))
-    if isinstance(data.get("obstacles"), str):
-        data["obstacles"] = _map_file(data["obstacles"], str(path))
+    if isinstance(data.get("obstacles"), str):  # one the user typed may be anywhere; a file's stays by it
+        typed = origin == "--set" and any(k == "obstacles" for k, _ in pairs)
+        data["obstacles"] = _map_file(data["obstacles"], str(path), None if typed else path.parent)
     overridden: dict[str, Any] = dict(pairs)
     if seed is not None:
         _set_dotted(data, "run.seed", seed, str(path))
@@ -320,9 +375,22 @@ def load(
     return validate(data, str(path), overridden, origin)
 
 
-def _map_file(name: str, where: str) -> Any:
+def _map_file(name: str, where: str, folder: Path | None) -> Any:
     """The obstacles of a map file (``obstacles: rooms.yaml``): a YAML file whose top level is the
-    ``obstacles:`` section, or a mapping with that key; written into the resolved config in full."""
+    ``obstacles:`` section, or a mapping with that key; written into the resolved config in full.
+    ``folder``: where a map named in a file must be (the experiment's folder or below), so that a
+    received experiment cannot make a command read, and quote, any file of the user's; None for
+    one typed with ``--set``."""
+    if folder is not None:
+        try:
+            real, inside = Path(name).resolve(strict=True), folder.resolve(strict=True)
+        except (OSError, RuntimeError):
+            real = inside = None  # missing or a loop of links: the reader below says so
+        if real is not None and inside is not None and inside not in real.parents:
+            raise ConfigError(
+                f"{where}: obstacles: {name} is outside the experiment's folder {folder.resolve()}; a map file named "
+                "in an experiment must be in its folder (give another with --set obstacles=PATH)"
+            )
     try:
         data = read_yaml(Path(name))
     except YamlFileError as exc:

@@ -33,7 +33,7 @@ from swarmbed.experiments.launch.forkmessages import (
     decode_request,
     encode,
 )
-from swarmbed.wire.safewrite import create_fresh
+from swarmbed.wire.safefiles import create_fresh
 
 # agents do no linear algebra: one BLAS thread, and no thread pool alive when the server forks
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")

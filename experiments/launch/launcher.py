@@ -34,7 +34,7 @@ from swarmbed.experiments.launch.forkmessages import (
     decode_event,
     encode,
 )
-from swarmbed.wire.safewrite import open_fresh
+from swarmbed.wire.safefiles import open_fresh
 from swarmbed.wire.session import RUNTIMES
 
 log = logging.getLogger("swarmbed.launcher")

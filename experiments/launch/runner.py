@@ -40,7 +40,7 @@ from swarmbed.experiments.launch.launcher import (
 from swarmbed.experiments.launch.placement import AgentPlacement
 from swarmbed.experiments.launch.provenance import FILE as PROVENANCE
 from swarmbed.experiments.launch.provenance import provenance
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.reports import HostInfo
 from swarmbed.wire.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
@@ -124,7 +124,7 @@ def start_result_dir(plan: RunPlan) -> None:
     if (out_dir / BT).is_symlink():  # a link planted in a received folder is removed, never followed
         (out_dir / BT).unlink()
     shutil.rmtree(out_dir / BT, ignore_errors=True)
-    safewrite.make_dirs(out_dir, out_dir / "logs")
+    safefiles.make_dirs(out_dir, out_dir / "logs")
     results.write_atomic(out_dir / results.CONFIG, to_yaml(plan.exp))
     results.write_json(
         out_dir / PROVENANCE,

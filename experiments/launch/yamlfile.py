@@ -19,6 +19,8 @@ from typing import Any
 
 import yaml
 
+from swarmbed.wire.safefiles import UnreadableFile, read_regular
+
 #: larger than any experiment, sweep or chaos file we know of by two orders of magnitude
 MAX_YAML_BYTES = 1 << 20
 MAX_DEPTH = 32
@@ -119,12 +121,9 @@ def read_yaml(path: str | Path, max_bytes: int = MAX_YAML_BYTES) -> Any:
     """The YAML document in ``path``; a :class:`YamlFileError` says what is wrong in one line."""
     path = Path(path)
     try:
-        size = path.stat().st_size
-        if size > max_bytes:
-            raise YamlFileError(f"{path}: {size:,} bytes, larger than the {max_bytes:,} a YAML file may have")
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise YamlFileError(f"{path}: cannot read: {exc.strerror}") from None
+        raw = read_regular(path, max_bytes)
+    except UnreadableFile as exc:
+        raise YamlFileError(str(exc)) from None
     if b"\0" in raw:
         raise YamlFileError(f"{path}: a binary file, not YAML text")
     try:

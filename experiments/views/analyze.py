@@ -45,7 +45,7 @@ from swarmbed.experiments.views.pooling import mixed_configurations, mixed_versi
 from swarmbed.experiments.views.stats import compare  # noqa: E402
 from swarmbed.extension import Figure, Scenario  # noqa: E402
 from swarmbed.plugins.registry import registered_scenario  # noqa: E402
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.rundir import RunFileError, read_json_member  # noqa: E402
 
 AGENTS, RANGE, ALLOCATOR = "agents.count", "network.range", "allocator"
@@ -244,7 +244,7 @@ def _ordered(strategies) -> list[str]:
 def _save(fig, out: Path, stem: str) -> Path:
     """PNG for the page, PDF and SVG for the paper; returns the PNG."""
     for ext in ("pdf", "svg", "png"):  # each under a fresh name, renamed over a link, never through it
-        with safewrite.replacing(out / f"{stem}.{ext}") as tmp:
+        with safefiles.replacing(out / f"{stem}.{ext}") as tmp:
             fig.savefig(tmp, **({"dpi": 200} if ext == "png" else {}))
     plt.close(fig)
     return out / f"{stem}.png"
@@ -645,12 +645,12 @@ def analyze(
         for figure in figures:
             written += DRAW[figure.kind](rows, figure, canvas)
     summary = pd.concat(summaries, ignore_index=True)
-    safewrite.write_text(out / "scenario_summary.csv", summary.to_csv(index=False))
-    safewrite.write_text(out / "scenario_summary.md", to_markdown(summary))
+    safefiles.write_text(out / "scenario_summary.csv", summary.to_csv(index=False))
+    safefiles.write_text(out / "scenario_summary.md", to_markdown(summary))
     head = [out / "scenario_summary.csv", out / "scenario_summary.md"]
     if tables:
         table = pd.concat(tables, ignore_index=True)
-        safewrite.write_text(out / "statistics.csv", table.to_csv(index=False))
-        safewrite.write_text(out / "statistics.md", to_markdown(table))
+        safefiles.write_text(out / "statistics.csv", table.to_csv(index=False))
+        safefiles.write_text(out / "statistics.md", to_markdown(table))
         head += [out / "statistics.csv", out / "statistics.md"]
     return head + written

@@ -35,7 +35,7 @@ import pandas as pd
 
 from swarmbed.experiments.rundir import RunDir
 from swarmbed.experiments.views.colours import DROP_COLORS, WALL_COLOUR
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.btlog import EPOCH_US, BtLogError, read_btlog
 from swarmbed.wire.rundir import (
     BT,
@@ -106,7 +106,7 @@ def write_mcap(run: Path, out: Path) -> dict:
     """Write ``run`` as an MCAP file at ``out``; returns what was written (messages per topic, bytes,
     seconds). The file is written under a temporary name and renamed when complete: an interrupted
     or failed recording never stands under ``out``."""
-    with safewrite.replacing(out) as tmp:
+    with safefiles.replacing(out) as tmp:
         return _write_mcap(run, tmp)
 
 

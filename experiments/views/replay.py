@@ -18,7 +18,7 @@ import pandas as pd
 
 from swarmbed.experiments.rundir import RunDir
 from swarmbed.experiments.views.colours import DROP_COLORS, LABEL_COLORS, WALL_COLOUR
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.rundir import MARKERS, RECEIVER_LEDGER, SUMMARY, TRAJECTORIES, RunFileError
 
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
@@ -186,7 +186,7 @@ def replay(
     movie = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
     writer = animation.PillowWriter(fps=fps) if out.suffix == ".gif" else animation.FFMpegWriter(fps=fps)
     try:
-        with safewrite.replacing(out) as tmp:
+        with safefiles.replacing(out) as tmp:
             movie.save(tmp, writer=writer)
     finally:
         plt.close(fig)

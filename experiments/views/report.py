@@ -30,7 +30,7 @@ from swarmbed.experiments.views.pooling import mixed_configurations
 from swarmbed.experiments.views.radio_pages import radio_pages
 from swarmbed.experiments.views.soak_page import soak_report
 from swarmbed.plugins.registry import registered_scenario
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.rundir import RECEIVER_LEDGER, TIMESERIES, TRAJECTORIES, TRANSPORT, RunFileError
 from swarmbed.wire.summary import NetworkSummary, RunSummary
 
@@ -496,5 +496,5 @@ def report(folder: Path, out: Path | None = None) -> Path:
         out = out / "report.html"
     if not out.parent.is_dir():
         raise ReportError(f"-o {out}: the folder {out.parent} does not exist")
-    safewrite.write_text(out, text)
+    safefiles.write_text(out, text)
     return out

@@ -27,7 +27,7 @@ from rich.table import Table
 from rich.text import Text
 
 from swarmbed.experiments.views.colours import LABEL_COLORS
-from swarmbed.wire import safewrite
+from swarmbed.wire import safefiles
 from swarmbed.wire.codec import WireError, decode_traffic
 from swarmbed.wire.keys import PREFIX, Keys, agent_id_of
 from swarmbed.wire.status import RunStatus, decode_status
@@ -216,7 +216,7 @@ def write_map(status: RunStatus, path: Path, bounds: list[float]) -> None:
         f"<svg viewBox='{x0 - pad:.2f} {y0 - pad:.2f} {w:.2f} {h:.2f}' style='width:90vmin;height:90vmin;"
         f"border:1px solid #ccc'>{''.join(shapes)}</svg></body></html>"
     )
-    safewrite.write_text(path, page)
+    safefiles.write_text(path, page)
 
 
 def watch(

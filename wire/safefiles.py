@@ -1,4 +1,4 @@
-"""Writing into a folder a user may have received: no write ever follows a link.
+"""Files of folders a user may have received: no write ever follows a link, no read is unbounded.
 
 A results folder, a sweep folder or an ``--out`` folder can hold links someone planted
 (``scenario_summary.csv -> ~/.bashrc``). Every command writes through this module alone:
@@ -11,6 +11,10 @@ A results folder, a sweep folder or an ``--out`` folder can hold links someone p
 * a sub-folder is made (or reused) only when no part of it below the folder the user named is a link.
 
 The folder the user named is theirs: a link *there* is what they asked for and is followed.
+
+Reading a file a user names (an experiment, a map, a sweep, a tree) goes through
+:func:`read_regular`: it must be a regular file (not ``/dev/zero``, a FIFO or a link loop) and is
+read with a bounded read, never trusting ``st_size``.
 """
 
 from __future__ import annotations
@@ -141,6 +145,28 @@ def open_append(path: Path | str, mode: int = 0o644) -> BinaryIO:
         path.unlink()
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, mode)
     return os.fdopen(fd, "ab")
+
+
+class UnreadableFile(ValueError):
+    """A file a command will not read; the message is one line naming it and why (never its content)."""
+
+
+def read_regular(path: Path | str, max_bytes: int) -> bytes:
+    """The bytes of ``path``, a regular file of at most ``max_bytes``; opened without blocking (a
+    FIFO never hangs the reader), checked on the open descriptor, read with a bounded read."""
+    path = Path(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as exc:
+        why = "a loop of symbolic links" if exc.errno == errno.ELOOP else (exc.strerror or str(exc))
+        raise UnreadableFile(f"{path}: cannot read: {why}") from None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise UnreadableFile(f"{path}: not a regular file (a device, a FIFO or a folder): not read")
+        data = f.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise UnreadableFile(f"{path}: larger than the {max_bytes:,} bytes read here")
+    return data
 
 
 def regular_files(folder: Path) -> list[Path]:
