@@ -215,6 +215,8 @@ class SwarmbedParallelEnv(ParallelEnv):
     ) -> None:
         if engine not in ENGINES:
             raise ValueError(f"engine {engine!r}: one of {', '.join(ENGINES)}")
+        if not isinstance(broadcast, (bool, np.bool_)):  # "false" is a non-empty string: bool() reads True
+            raise ValueError(f"broadcast {broadcast!r}: True or False")
         self.engine = engine
         if isinstance(max_tasks, (bool, np.bool_)) or not isinstance(max_tasks, (int, np.integer)) or max_tasks < 1:
             raise ValueError(f"max_tasks {max_tasks!r}: the rows of tasks an agent sees, a whole number of at least 1")

@@ -162,10 +162,39 @@ def registered_scenario(kind: object, trusted: bool = False) -> type[Scenario]:
 
 
 def check_params(model: type[BaseModel], params: Mapping[str, Any], section: str) -> BaseModel:
+    """``params`` validated by a plugin's ``Params``. Validated laxly (YAML lists become tuples where
+    a field is a tuple), then refused where lax validation changed a value's kind: ``true`` read as
+    1, ``'3'`` as 3, ``'false'`` as False are errors here as they are in every other section."""
     try:
-        return model.model_validate(dict(params))
+        checked = model.model_validate(dict(params))
     except ValidationError as exc:
         raise PluginError("\n".join(validation_lines(exc, model, prefix=section))) from None
+    loose = _loose(dict(params), checked, section)
+    if loose:
+        raise PluginError("\n".join(loose))
+    return checked
+
+
+def _loose(given: Any, made: Any, where: str) -> list[str]:
+    """Where validation turned ``given`` into a value of another kind (bool to number, text to
+    number or bool): one line each."""
+    if isinstance(given, bool):
+        return [] if isinstance(made, bool) else [f"{where}: {given!r} is a boolean; write a number"]
+    if isinstance(given, str):
+        if isinstance(made, (bool, int, float)):
+            return [f"{where}: {given!r} is text; write a {'boolean' if isinstance(made, bool) else 'number'}"]
+        return []
+    if isinstance(given, Mapping):
+        out = []
+        for key, value in given.items():
+            inner = made.get(key) if isinstance(made, Mapping) else getattr(made, str(key), None)
+            out += _loose(value, inner, f"{where}.{key}")
+        return out
+    if isinstance(given, (list, tuple)) and isinstance(made, (list, tuple)) and len(given) == len(made):
+        return [
+            line for i, (g, m) in enumerate(zip(given, made, strict=True)) for line in _loose(g, m, f"{where}[{i}]")
+        ]
+    return []
 
 
 def validate_params(name: str, params: Mapping[str, Any], scenario: str | None = None) -> BaseModel:

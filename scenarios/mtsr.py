@@ -36,7 +36,7 @@ from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_pla
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
-from swarmbed.wire.schema import Experiment, QuietDefaults
+from swarmbed.wire.schema import MAX_TASKS, Experiment, QuietDefaults
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -50,8 +50,8 @@ class MTSRObservation(Observation):
 class Generations(BaseModel):
     model_config = ConfigDict(extra="forbid")
     interval: float = Field(1000.0, gt=0, description="simulated seconds between task generations")
-    count: int = Field(3, ge=0, description="how many generations")
-    tasks: int = Field(50, ge=0, description="tasks per generation")
+    count: int = Field(3, ge=0, le=MAX_TASKS, description="how many generations")
+    tasks: int = Field(50, ge=0, le=MAX_TASKS, description="tasks per generation")
 
 
 class MTSRParams(QuietDefaults):
@@ -63,7 +63,7 @@ class MTSRParams(QuietDefaults):
     model_config = ConfigDict(extra="forbid")
     width: float = Field(1400.0, gt=0, description="area width")
     height: float = Field(1000.0, gt=0, description="area height")
-    initial_tasks: int = Field(250, ge=0, description="tasks at time 0")
+    initial_tasks: int = Field(250, ge=0, le=MAX_TASKS, description="tasks at time 0")
     workload: tuple[float, float] = Field((6.0, 60.0), description="task workload range [min, max]")
     arrival_radius: float = Field(10.0, gt=0, description="distance within which an agent works on a task")
     work_radius_per_workload: float = Field(
@@ -103,6 +103,12 @@ class MTSRParams(QuietDefaults):
             raise ValueError("robots_needed must be a number >= 1 or [min, max] with 1 <= min <= max")
         if self.task_positions is not None and len(self.task_positions) != self.initial_tasks:
             raise ValueError("task_positions needs one [x, y] per initial task")
+        total = self.initial_tasks + self.generations.count * self.generations.tasks
+        if total > MAX_TASKS:
+            raise ValueError(
+                f"initial_tasks + generations.count x generations.tasks = {total:,} tasks, more than the "
+                f"{MAX_TASKS:,} a run may have"
+            )
         return self
 
     @property

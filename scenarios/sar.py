@@ -51,7 +51,7 @@ from swarmbed.scenarios.victims import ALIVE, EXPIRED, RESCUED, VictimRows
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
-from swarmbed.wire.schema import Experiment
+from swarmbed.wire.schema import MAX_TASKS, Experiment
 
 FORGET_AFTER = 2.0  # lifetimes after its spawn a victim's row may leave the world's arrays
 COLOR_NAMES = ("red", "green", "blue")
@@ -69,7 +69,7 @@ class SARParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     arena_radius: float = Field(32.0, gt=0, description="radius of the circular arena (m)")
-    victims: int = Field(100, ge=0, description="victims at any time (steady state) or in all (finite)")
+    victims: int = Field(100, ge=0, le=MAX_TASKS, description="victims at any time (steady state) or in all (finite)")
     lifetime: float = Field(100.0, gt=0, description="seconds a victim lives before it expires")
     replace: bool = Field(True, description="steady state: a rescued or expired victim is replaced")
     first_ages: Literal["new", "spread"] = Field(

@@ -216,3 +216,102 @@ def test_swap_requests_are_bounded_before_they_are_queued():
     ):
         with pytest.raises(WireError, match=why):
             decode_swap(crafted)
+
+
+# -- issue 74: files that are not files, maps, task counts, loose types ---------------------------
+
+
+def _map_experiment(tmp_path, obstacles: str) -> object:
+    return _file(tmp_path / "e.yaml", QUICKSTART.read_text() + f"\nobstacles: {obstacles}\n")
+
+
+@pytest.mark.timeout(30)
+def test_a_map_that_is_a_device_a_fifo_or_a_link_loop_is_one_line_without_blocking(tmp_path, capsys):
+    import os
+
+    os.mkfifo(tmp_path / "fifo.yaml")
+    (tmp_path / "zero.yaml").symlink_to("/dev/zero")
+    (tmp_path / "a.yaml").symlink_to(tmp_path / "b.yaml")
+    (tmp_path / "b.yaml").symlink_to(tmp_path / "a.yaml")
+    for name, why in (("fifo.yaml", "not a regular file"), ("zero.yaml", "not a regular file"), ("a.yaml", "loop")):
+        rc, _, err = _main(capsys, "run", _map_experiment(tmp_path, name), "--check")
+        assert rc == 2 and len(err.strip().splitlines()) == 1, err
+        typed = ("--set", f"obstacles={tmp_path / name}")  # typed, it may be anywhere: read, bounded
+        rc, _, err = _main(capsys, "run", _map_experiment(tmp_path, "none.yaml"), "--check", *typed)
+        assert rc == 2 and len(err.strip().splitlines()) == 1 and name in err and why in err, err
+    rc, _, err = _main(capsys, "run", _file(tmp_path / "fifo_exp.yaml", "x: 1\n").with_name("fifo.yaml"), "--check")
+    assert rc == 2 and "not a regular file" in err, err
+    with pytest.raises(BTError, match="not a regular file"):
+        load_tree(tmp_path / "fifo.yaml", space_registry())
+
+
+def test_every_problem_of_a_map_is_listed_at_once_with_the_right_reasons(tmp_path):
+    walls = (
+        "\n  walls:\n    - {start: [0, 0], end: [0, 0]}\n    - {start: [1, 1], end: [1000, 1]}\n"
+        "    - {start: [1, 1], end: [5, 1], material: glass}\n"
+        "  polygons:\n    - {points: [[0, 0], [10, 10], [10, 0], [0, 10]]}\n"
+        "    - {points: [[0, 0], [500, 10], [10, 0]]}\n"
+    )
+    with pytest.raises(cfg.ConfigError) as caught:
+        cfg.load(_map_experiment(tmp_path, walls))
+    lines = str(caught.value).splitlines()
+    assert any("walls.0" in line and "must differ" in line for line in lines), lines
+    assert any("polygons.0" in line and "edges 0 and 2 cross" in line for line in lines), lines
+    assert any("material 'glass'" in line for line in lines), lines
+    assert any("walls[1].end: [1000, 1] lies outside" in line for line in lines), lines
+    assert any("polygons[1].points[1]: [500, 10] lies outside" in line for line in lines), lines
+    assert len(lines) == 5, lines
+
+
+def test_a_map_that_leaves_no_room_to_spawn_is_refused_by_check(tmp_path, capsys):
+    full = "\n  polygons:\n    - {points: [[0, 0], [200, 0], [200, 150], [0, 150]]}\n"
+    far = "\n  walls:\n    - {start: [0, 0], end: [10, 10]}\n  clearance: 1000000\n"
+    for name, text in (("full", full), ("far", far)):
+        rc, _, err = _main(
+            capsys, "run", _file(tmp_path / f"{name}.yaml", QUICKSTART.read_text() + f"\nobstacles:{text}"), "--check"
+        )
+        assert rc == 2 and "free for spawns" in err and len(err.strip().splitlines()) == 1, err
+    rc, out, err = _main(capsys, "run", QUICKSTART.parent / "walls" / "office.yaml", "--check")
+    assert rc == 0, err
+
+
+def test_a_map_named_in_an_experiment_stays_in_its_folder_and_its_content_is_not_quoted(tmp_path, capsys):
+    secret = tmp_path / "secret.txt"
+    secret.write_text("hunter2-password-line\n")
+    inner = tmp_path / "exp"
+    inner.mkdir()
+    rc, _, err = _main(capsys, "run", _map_experiment(inner, str(secret)), "--check")
+    assert rc == 2 and "outside the experiment's folder" in err and "hunter2" not in err, err
+    rc, _, err = _main(capsys, "run", _map_experiment(inner, "x.yaml"), "--check", "--set", f"obstacles={secret}")
+    assert rc == 2 and "must hold a mapping" in err and "hunter2" not in err, err
+    _file(inner / "text.yaml", "walls: hunter2-password-line\n")
+    rc, _, err = _main(capsys, "run", _map_experiment(inner, "text.yaml"), "--check")
+    assert rc == 2 and "hunter2" not in err, err
+
+
+@pytest.mark.parametrize(
+    "setting",
+    [
+        "scenario.initial_tasks=1e9",
+        "scenario.generations={count: 1000000000, tasks: 1000000000}",
+        "scenario.generations={count: 1000, tasks: 1000}",
+    ],
+)
+def test_task_counts_are_bounded_before_anything_is_built(setting, capsys):
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--check", "--set", setting)
+    assert rc == 2 and ("100,000" in err or "100000" in err), err
+
+
+@pytest.mark.parametrize("value", ["true", "'3'", "'2.5'"])
+def test_plugin_parameters_of_the_wrong_kind_are_refused_not_converted(value):
+    with pytest.raises(cfg.ConfigError, match="robots_needed"):
+        experiment(f"scenario.robots_needed={value}")
+    with pytest.raises(cfg.ConfigError, match="allocator"):
+        experiment("allocator.name=cbba", f"allocator.max_tasks={value}")
+
+
+def test_the_environment_refuses_a_broadcast_flag_that_is_not_a_boolean():
+    from swarmbed.envs import parallel_env
+
+    with pytest.raises(ValueError, match="broadcast"):
+        parallel_env(broadcast="false")

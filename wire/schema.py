@@ -36,6 +36,9 @@ SAFE_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.+=-]{0,99}$"
 MAX_TICKS = 100_000_000
 #: the most agents a run has (each is an OS process); views bound what they draw by it
 MAX_AGENT_COUNT = 1000
+#: the most tasks (MT-SR tasks in all, initial and generated; search-and-rescue victims) a run may
+#: have: every agent's allocator keeps a row per task, so memory grows with agents x tasks
+MAX_TASKS = 100_000
 
 
 class Strict(BaseModel):
