@@ -98,10 +98,26 @@ def _taken(out: Path, force: bool) -> str | None:
     if not force:
         from swarmbed.experiments.rundir import RunDir
 
-        what = "a finished run" if RunDir(out).complete else "files"
+        if RunDir(out).complete:
+            what = "a finished run"
+        elif (out / "config.yaml").exists() or any(out.glob("partial_*")) or any(out.glob("*.part")):
+            what = "an interrupted run (no summary.json: it did not finish)"
+        else:
+            what = "files"
         return f"--out {out}: holds {what} already; give another --out, or --force to clear it first"
     shutil.rmtree(out)
     return None
+
+
+def port_number(text: str) -> int:
+    """A TCP port for argparse: 0 (a free one) to 65535; anything else is argparse's one-line error."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port}: a port is 0 (any free one) to 65535")
+    return port
 
 
 #: what Ctrl-C left, per command that starts a run (the others say only "interrupted")
@@ -137,11 +153,17 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         print(describe_plan(exp, out, admitted, args.engine))
         return 0
+    from swarmbed.experiments.views.recording import RecordingError
+
+    try:  # the port is taken before the output folder is touched: a port in use leaves nothing behind
+        views = _live_views(exp, args.foxglove)
+    except RecordingError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     problem = _taken(out, args.force)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
-    views = _live_views(exp, args.foxglove)
     if args.engine == "inprocess":
         from swarmbed.experiments.launch.inprocess import InProcessRun
         from swarmbed.experiments.launch.runner import progress_bar
@@ -161,13 +183,15 @@ def _live_views(exp, port: int | None) -> list:
     """The live views ``swarmbed run`` was asked for (``--foxglove``), each made from the run's session."""
     if port is None:
         return []
+    from swarmbed.experiments.views.live import FoxgloveLive, serve
+
+    served = serve("127.0.0.1", port)
 
     def foxglove(session):
-        from swarmbed.experiments.views.live import FoxgloveLive
         from swarmbed.wire.obstacles import wall_lines
 
         walls = wall_lines(exp.obstacles)
-        view = FoxgloveLive(session.world, exp.run.dt, port, walls=walls)
+        view = FoxgloveLive(session.world, exp.run.dt, walls=walls, served=served)
         print(f"Foxglove: open connection ws://127.0.0.1:{view.port}", file=sys.stderr, flush=True)
         return view
 
@@ -232,7 +256,7 @@ def register_run(sub: Subparsers) -> None:
         "--foxglove",
         nargs="?",
         const=8765,
-        type=int,
+        type=port_number,
         metavar="PORT",
         help="serve the run live to Foxglove over its WebSocket protocol on 127.0.0.1:PORT (default 8765; "
         "the channels of replay --mcap; the viewers extra)",
@@ -1090,7 +1114,7 @@ def register_watch(sub: Subparsers) -> None:
         "--foxglove",
         nargs="?",
         const=8765,
-        type=int,
+        type=port_number,
         metavar="PORT",
         help="also serve the run to Foxglove on 127.0.0.1:PORT (default 8765; 0: a free port): agents, poses "
         "and markers from the run's progress samples (the viewers extra)",
@@ -1124,7 +1148,9 @@ def register_groot(sub: Subparsers) -> None:
     gr = sub.add_parser("groot", help="watch an agent's behavior tree of a running run in Groot2, live")
     gr.add_argument("--run", help="the run id (default: the one run visible from the endpoint)")
     gr.add_argument("--agent", type=int, default=0, help="the agent to show first (type another id to switch)")
-    gr.add_argument("--port", type=int, default=1667, help="Groot2's port (and the next one), as BehaviorTree.CPP")
+    gr.add_argument(
+        "--port", type=port_number, default=1667, help="Groot2's port (and the next one), as BehaviorTree.CPP"
+    )
     gr.add_argument("--bind", default="127.0.0.1", help="the address Groot2 connects to (default: this machine only)")
     gr.add_argument(
         "--wait", type=float, default=10.0, help="seconds to wait for the hub to listen and the run to answer"

@@ -315,3 +315,34 @@ def test_the_environment_refuses_a_broadcast_flag_that_is_not_a_boolean():
 
     with pytest.raises(ValueError, match="broadcast"):
         parallel_env(broadcast="false")
+
+
+def test_a_foxglove_port_out_of_range_or_in_use_is_one_line_and_leaves_no_folder(tmp_path, capsys):
+    import socket
+
+    for port in ("70000", "-1", "http"):
+        with pytest.raises(SystemExit) as code:
+            cli.main(["run", str(QUICKSTART), "--check", "--foxglove", port])
+        assert code.value.code == 2 and "--foxglove" in capsys.readouterr().err
+    pytest.importorskip("foxglove")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        rc, _, err = _main(capsys, "run", QUICKSTART, "--out", tmp_path / "out", "--foxglove", port)
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and f"--foxglove {port}" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_interrupted_run_and_a_missing_report_folder_are_named_as_such(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "config.yaml").write_text("name: x\n")
+    (out / "partial_timeseries.csv").write_text("tick\n")
+    rc, _, err = _main(capsys, "run", QUICKSTART, "--out", out)
+    assert rc == 2 and "an interrupted run" in err, err
+    from swarmbed.experiments.views.report import ReportError, report
+
+    with pytest.raises(ReportError, match=r"the folder .*missing.* does not exist") as caught:
+        report(tmp_path, tmp_path / "missing" / "x.html")
+    assert ".part" not in str(caught.value)

@@ -50,7 +50,7 @@ TOPICS = ("/agents", "/agents/poses", "/markers", "/radio")
 WALLS_EVERY = 50
 
 
-def _serve(host: str, port: int) -> tuple[Any, Any, dict[str, Any]]:
+def serve(host: str, port: int) -> tuple[Any, Any, dict[str, Any]]:
     """Foxglove's server on host:port (0: a free one) with the live view's scene channels."""
     try:
         import foxglove
@@ -58,7 +58,10 @@ def _serve(host: str, port: int) -> tuple[Any, Any, dict[str, Any]]:
     except ImportError:
         raise RecordingError("a live view needs Foxglove's SDK: pip install 'swarmbed[viewers]'") from None
     context = foxglove.Context()
-    server = foxglove.start_server(name="swarmbed", host=host, port=port, context=context)
+    try:
+        server = foxglove.start_server(name="swarmbed", host=host, port=port, context=context)
+    except (RuntimeError, OSError, OverflowError, ValueError) as exc:  # a port in use: one line, not a traceback
+        raise RecordingError(f"--foxglove {port}: cannot serve on {host}:{port}: {str(exc).splitlines()[0]}") from None
     made = {
         "/agents": channels.SceneUpdateChannel("/agents", context=context),
         "/agents/poses": channels.PosesInFrameChannel("/agents/poses", context=context),
@@ -77,11 +80,14 @@ class FoxgloveLive(TickHook):
         port: int = DEFAULT_PORT,
         host: str = "127.0.0.1",
         walls: list[tuple[tuple[float, float], tuple[float, float]]] | None = None,
+        served: tuple[Any, Any, dict[str, Any]] | None = None,
     ) -> None:
+        """``served``: a server :func:`serve` started already (the command binds its port before it
+        makes the output folder); else one is started on ``host:port``."""
         from foxglove import channels
 
         self.world, self.dt = world, dt
-        self.context, self.server, made = _serve(host, port)
+        self.context, self.server, made = served or serve(host, port)
         self.port = self.server.port
         self.agents, self.poses, self.markers = made["/agents"], made["/agents/poses"], made["/markers"]
         self.radio = channels.SceneUpdateChannel("/radio", context=self.context)
@@ -141,7 +147,7 @@ class StatusFoxglove:
     """``swarmbed watch --foxglove``: a running run's progress samples, served to Foxglove."""
 
     def __init__(self, port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> None:
-        self.context, self.server, made = _serve(host, port)
+        self.context, self.server, made = serve(host, port)
         self.port = self.server.port
         self.agents, self.poses, self.markers = made["/agents"], made["/agents/poses"], made["/markers"]
         self.last_tick = -2

@@ -481,6 +481,11 @@ def _report_text(folder: Path) -> str:
 def report(folder: Path, out: Path | None = None) -> Path:
     """Write the report of a soak, a run or a sweep folder; returns the file (``out`` a folder: the
     report goes into it). Written under a temporary name, renamed when complete."""
+    out = out or folder / "report.html"
+    if out.is_dir():
+        out = out / "report.html"
+    if not out.parent.is_dir():  # said before the folder is read: the user's typo, not our temporary file
+        raise ReportError(f"-o {out}: the folder {out.parent} does not exist")
     try:
         text = _report_text(folder)
     except ReportError:
@@ -491,10 +496,5 @@ def report(folder: Path, out: Path | None = None) -> Path:
         raise ReportError(
             f"{folder}: a file of it holds what a report cannot draw ({type(exc).__name__}: {exc})"
         ) from None
-    out = out or folder / "report.html"
-    if out.is_dir():
-        out = out / "report.html"
-    if not out.parent.is_dir():
-        raise ReportError(f"-o {out}: the folder {out.parent} does not exist")
     safefiles.write_text(out, text)
     return out
