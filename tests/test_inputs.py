@@ -147,7 +147,7 @@ def test_errors_blame_the_flag_that_gave_the_value(tmp_path, capsys):
 def test_check_validates_and_plans_without_starting_anything(tmp_path, capsys):
     out = tmp_path / "never"
     rc, text, _ = _main(capsys, "run", QUICKSTART, "--check", "--out", out)
-    assert rc == 0 and "nothing was started" in text and "estimated wall time: about" in text, text
+    assert rc == 0 and "nothing was started" in text and "estimated wall time: up to about" in text, text
     assert "5 agents" in text and "fcg" in text and not out.exists()
     sweep = _file(tmp_path / "big.yaml", f"name: big\nbase: {QUICKSTART}\nruns: 400\n")
     rc, _, err = _main(capsys, "sweep", sweep, "--grid", "allocator.name=fcg,cbba,grape", "--out", tmp_path / "s")
@@ -346,3 +346,25 @@ def test_an_interrupted_run_and_a_missing_report_folder_are_named_as_such(tmp_pa
     with pytest.raises(ReportError, match=r"the folder .*missing.* does not exist") as caught:
         report(tmp_path, tmp_path / "missing" / "x.html")
     assert ".part" not in str(caught.value)
+
+
+def test_a_grid_key_the_file_already_varies_replaces_that_axis_with_a_line(tmp_path, capsys):
+    from swarmbed.experiments.campaigns.sweep import load_sweep
+
+    spec = _file(
+        tmp_path / "s.yaml",
+        f"name: s\nbase: {QUICKSTART}\nruns: 1\ngrid:\n  network.range: [100, 200, 300]\n"
+        "  allocator: [{name: cbba}, {name: grape}, {name: fcg}]\n",
+    )
+    sweep = load_sweep(spec, grid=["allocator.name=sga,cbba"])
+    names = sorted(s.name for s in sweep.scenarios)
+    assert len(names) == 6 and all(n.count("allocator") == 1 for n in names), names
+    assert "--grid allocator.name replaces the grid's allocator axis" in capsys.readouterr().err
+    assert len(load_sweep(spec, grid=["network.range=50"]).scenarios) == 3
+
+
+def test_the_sweep_estimate_is_never_below_one_run_and_says_it_is_a_ceiling(capsys):
+    rc, out, _ = _main(capsys, "sweep", QUICKSTART, "--runs", "1", "--jobs", "2", "--check")
+    one = next(line for line in out.splitlines() if "a run" in line).split("about ")[1].split(" a run")[0]
+    total = next(line for line in out.splitlines() if "estimated wall time" in line)
+    assert rc == 0 and f"up to about {one} with --jobs 2" in total and "1 at a time" in total, out

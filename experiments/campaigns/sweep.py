@@ -139,6 +139,11 @@ def _parse_grid(text: str) -> tuple[str, list[Any]]:
         raise cfg.ConfigError(str(exc)) from None
 
 
+def _overlap(a: str, b: str) -> bool:
+    """Whether dotted keys ``a`` and ``b`` set the same value or one sets a part of the other."""
+    return a == b or a.startswith(b + ".") or b.startswith(a + ".")
+
+
 def load_sweep(
     path: str | Path,
     runs: int | None = None,
@@ -161,7 +166,13 @@ def load_sweep(
         raise cfg.ConfigError("\n".join(f"{path}: {line}" for line in validation_lines(exc, SweepFile))) from None
     common = tuple(spec.set.items())
     grid_spec = dict(spec.grid)
-    grid_spec.update(_parse_grid(g) for g in grid)
+    for key, values in (_parse_grid(g) for g in grid):
+        # a --grid key the file's grid names (or names a part or the whole of) replaces that axis:
+        # two axes over one key would multiply the cells and the later value would silently win
+        for named in [k for k in grid_spec if _overlap(k, key)]:
+            print(f"sweep: --grid {key} replaces the grid's {named} axis of {path}", file=sys.stderr)
+            del grid_spec[named]
+        grid_spec[key] = values
     entries = [SweepScenario(e.name, tuple(e.set.items())) for e in spec.scenarios] or [SweepScenario("", ())]
     keys = list(grid_spec)
     runs_each = spec.runs if runs is None else runs

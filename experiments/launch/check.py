@@ -57,6 +57,11 @@ def estimate_wall_s(exp: Experiment, cores: int | None = None, engine: str = "pr
     return STARTUP_S + STARTUP_PER_AGENT_S * exp.agents.count + ticking
 
 
+def _upto(exps: Sequence[Experiment]) -> str:
+    """ "about", or "up to" where a run stops once its tasks are done (its ticks are a ceiling)."""
+    return "up to about" if any(e.run.stop_when_done for e in exps) else "about"
+
+
 def _duration(seconds: float) -> str:
     if seconds < 120:
         return f"{seconds:.0f} s"
@@ -86,9 +91,13 @@ def describe_plan(exp: Experiment, out: Path, admitted: Sequence[Identity] = (),
             lines.append(f"  host {host}: NOT admitted (give --admit with its credentials file)")
     if engine == "inprocess":
         lines.append("  engine: in-process (every agent and the radio in this process; the same result files)")
-        lines.append(f"  estimated wall time: about {_duration(estimate_wall_s(exp, engine=engine))} on one core")
+        lines.append(
+            f"  estimated wall time: {_upto([exp])} {_duration(estimate_wall_s(exp, engine=engine))} on one core"
+        )
     else:
-        lines.append(f"  estimated wall time: about {_duration(estimate_wall_s(exp))} on {os.cpu_count()} cores")
+        lines.append(
+            f"  estimated wall time: {_upto([exp])} {_duration(estimate_wall_s(exp))} on {os.cpu_count()} cores"
+        )
     if exp.allocator.name == "ros2" and exp.run.clock == "lockstep" and exp.ros2 is not None:
         timeout = exp.ros2.command_timeout
         lines.append(
@@ -101,14 +110,20 @@ def describe_plan(exp: Experiment, out: Path, admitted: Sequence[Identity] = (),
 def describe_sweep(
     n_runs: int, runs_left: int, per_run: dict[str, Experiment], jobs: int, engine: str = "processes"
 ) -> str:
-    """What ``swarmbed sweep`` would do: runs planned and left, and a wall-time estimate."""
+    """What ``swarmbed sweep`` would do: runs planned and left, and a wall-time estimate. The runs
+    go ``min(jobs, runs_left)`` at a time, the cores shared among them; the whole takes at least
+    its longest run."""
     lines = [f"check: the sweep is valid; nothing was started ({n_runs} runs planned, {runs_left} still to run)"]
-    total = 0.0
+    at_once = max(1, min(jobs, runs_left))
+    each = []
     for name, exp in per_run.items():
-        one = estimate_wall_s(exp, cores=max(1, (os.cpu_count() or 1) // max(1, jobs)), engine=engine)
+        one = estimate_wall_s(exp, cores=max(1, (os.cpu_count() or 1) // at_once), engine=engine)
         lines.append(f"  {name}: {exp.agents.count} agents, {exp.ticks:,} ticks, about {_duration(one)} a run")
-        total += one
-    if per_run:
-        mean = total / len(per_run)
-        lines.append(f"  estimated wall time: about {_duration(mean * runs_left / max(1, jobs))} with --jobs {jobs}")
+        each.append(one)
+    if per_run and runs_left:
+        whole = max(max(each), sum(each) / len(each) * runs_left / at_once)
+        lines.append(
+            f"  estimated wall time: {_upto(list(per_run.values()))} {_duration(whole)} with --jobs {jobs}"
+            f" ({runs_left} run{'s' if runs_left != 1 else ''}, {at_once} at a time)"
+        )
     return "\n".join(lines)
