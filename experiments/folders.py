@@ -9,6 +9,7 @@ its verdict.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +38,14 @@ DERIVED = ("fig_*", "scenario_summary.*", "statistics.*", "report.html")
 
 #: the columns every sweep table has; a file without them is not one
 TABLE_COLUMNS = ("scenario", "run", "status")
+#: the most bytes of a sweep's table analyze and report read (a row is 1.5-4 kB: 15,000-40,000 runs;
+#: a 200 MB table took minutes and 600 MB); ``SWARMBED_MAX_SWEEP_TABLE_BYTES`` raises it
+MAX_SWEEP_TABLE_BYTES = 64 << 20
+
+
+def max_sweep_table_bytes() -> int:
+    given = os.environ.get("SWARMBED_MAX_SWEEP_TABLE_BYTES", "")
+    return int(given) if given.isdigit() else MAX_SWEEP_TABLE_BYTES
 
 
 def read_table(sweep_dir: Path) -> pd.DataFrame:
@@ -52,7 +61,7 @@ def read_table(sweep_dir: Path) -> pd.DataFrame:
         if not (sweep_dir / name).exists():
             continue
         try:
-            table = read_table_member(sweep_dir, name)
+            table = read_table_member(sweep_dir, name, max_sweep_table_bytes())
         except RunFileError as exc:
             problems.append(str(exc))
             continue

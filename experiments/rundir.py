@@ -60,7 +60,7 @@ def max_table_rows() -> int:
     return int(given) if given.isdigit() else MAX_TABLE_ROWS
 
 
-def read_table_member(folder: Path, name: str, **read: Any) -> pd.DataFrame:
+def read_table_member(folder: Path, name: str, max_bytes: int = MAX_TABLE_BYTES, **read: Any) -> pd.DataFrame:
     """The CSV or Parquet table ``folder/name`` (a regular file inside ``folder``, see
     :func:`~swarmbed.wire.rundir.member`), read as what its name says and nothing else: no
     decompression a name inside it or the target of a link would pick, at most
@@ -68,8 +68,8 @@ def read_table_member(folder: Path, name: str, **read: Any) -> pd.DataFrame:
     allocated. A RunFileError names the file for anything else."""
     path, shown = member(folder, name), Path(folder) / name
     size, rows = path.stat().st_size, max_table_rows()
-    if size > MAX_TABLE_BYTES:
-        raise RunFileError(f"{shown}: {size:,} bytes, more than a table read here ({MAX_TABLE_BYTES:,})")
+    if size > max_bytes:
+        raise RunFileError(f"{shown}: {size:,} bytes, more than a table read here ({max_bytes:,})")
     too_many = f"{shown}: more than {rows:,} rows, more than a table read here (SWARMBED_MAX_TABLE_ROWS raises it)"
     try:
         if name.endswith(".parquet"):

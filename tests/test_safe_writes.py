@@ -204,3 +204,20 @@ def test_mlflow_an_unreachable_server_fails_fast_in_one_line_without_its_passwor
     )  # fmt: skip
     err = done.stderr.strip()
     assert done.returncode != 0 and len(err.splitlines()) == 1 and "pip install mlflow" in err, err
+
+
+def test_analyze_and_report_refuse_a_sweep_table_larger_than_they_read_in_one_line(swept, tmp_path):
+    received = tmp_path / "received"
+    shutil.copytree(swept / "out", received, symlinks=True)
+    (received / "sweep.parquet").unlink()
+    text = (received / "sweep.csv").read_text()
+    head, rows = text.split("\n", 1)
+    (received / "sweep.csv").write_text(head + "\n" + rows * 200)  # a table far larger than its sweep
+    small = {**os.environ, "SWARMBED_MAX_SWEEP_TABLE_BYTES": str(len(text) * 50)}
+    for command in ("analyze", "report"):
+        started = time.monotonic()
+        done = _swarmbed(command, received, env=small)
+        err = done.stderr.strip()
+        assert done.returncode != 0 and len(err.splitlines()) == 1 and "sweep.csv" in err and "bytes" in err, err
+        assert time.monotonic() - started < 60
+    assert _swarmbed("analyze", received).returncode == 0  # within the default bound
