@@ -59,6 +59,13 @@ TASK_ROW = np.dtype([("task", "<i4"), ("x", "<f4"), ("y", "<f4"), ("remaining", 
 #: the rows of a report that names a team task (ST-MR): also the robots each task needs; such a
 #: report is ``[x, y, rows, 1]``, so that runs without team tasks send the bytes they did
 TEAM_TASK_ROW = np.dtype([("task", "<i4"), ("x", "<f4"), ("y", "<f4"), ("remaining", "<f4"), ("needed", "u1")])
+#: the same rows where a task needs more than 255 robots (``[x, y, rows, 2]``): a run of small teams
+#: keeps its one-byte rows and its bytes
+WIDE_TEAM_TASK_ROW = np.dtype([("task", "<i4"), ("x", "<f4"), ("y", "<f4"), ("remaining", "<f4"), ("needed", "<u2")])
+TEAM_ROWS = {1: TEAM_TASK_ROW, 2: WIDE_TEAM_TASK_ROW}
+#: how far from the follower a task it never saw may be, for its assignment to be taken (farther:
+#: a leader naming a place no run has, e.g. (1e30, 1e30), is not followed)
+MAX_GOAL_DISTANCE = 1e6
 #: an assignment's rows: the agent, its task and where the task is (a goal, as a leader would send it)
 ASSIGN_ROW = np.dtype([("agent", "<i2"), ("task", "<i4"), ("x", "<f4"), ("y", "<f4")])
 
@@ -139,7 +146,11 @@ class Centralized(WithFallback):
             mine = plan.get(self.agent_id)
             self.assigned = None if mine is None else (mine, *self.tasks[mine][:2], now)
             return mine
-        report = [view.x, view.y, _pack(seen, TEAM_TASK_ROW), 1] if teams else [view.x, view.y, _pack(seen, TASK_ROW)]
+        if teams:
+            wide = 2 if any(row[4] > 255 for row in seen) else 1
+            report = [view.x, view.y, _pack(seen, TEAM_ROWS[wide]), wide]
+        else:
+            report = [view.x, view.y, _pack(seen, TASK_ROW)]
         view.send(leader, REPORT, report)
         self.count("reports_sent")
         if self.assigned is None or now - self.assigned[3] > self.params.hold_for:
@@ -158,18 +169,28 @@ class Centralized(WithFallback):
                 continue
             self.heard[msg.sender] = now
             data = msg.data
-            if msg.kind == REPORT and isinstance(data, list) and (len(data) == 3 or data[3:] == [1]):
+            if msg.kind == REPORT and isinstance(data, list) and (len(data) == 3 or data[3:] in ([1], [2])):
                 x, y, packed = data[:3]
                 if isinstance(x, (int, float)) and isinstance(y, (int, float)) and math.isfinite(x + y):
-                    rows = read_tuples(packed, TASK_ROW if len(data) == 3 else TEAM_TASK_ROW)
+                    rows = read_tuples(packed, TASK_ROW if len(data) == 3 else TEAM_ROWS[data[3]])
                     self._learn(msg.sender, float(x), float(y), rows, view)
             elif msg.kind == ASSIGN and msg.sender == self.leader(now):
                 for agent, task, x, y in read_tuples(data, ASSIGN_ROW):
-                    if agent == self.agent_id and math.isfinite(x + y):
+                    if agent == self.agent_id and self._plausible(int(task), float(x), float(y), view):
                         self.assigned = (int(task), float(x), float(y), now)
                         break
                 else:
                     self.assigned = None  # the leader left this agent out
+
+    def _plausible(self, task: int, x: float, y: float, view: LocalView) -> bool:
+        """Whether a follower takes the leader's goal: a finite place within :data:`MAX_GOAL_DISTANCE`,
+        and, for a task it sees, where it sees it (float32 rounding apart). A leader can still send
+        it to a real task, or to a place within that distance: the followers trust their leader, as
+        the centralized solvers the baselines stand for do."""
+        if not math.isfinite(x + y) or math.hypot(x - view.x, y - view.y) > MAX_GOAL_DISTANCE:
+            return False
+        seen = view.tasks.get(task)
+        return seen is None or math.hypot(seen.x - x, seen.y - y) <= 1e-3 * (1 + abs(seen.x) + abs(seen.y))
 
     def _learn(self, reporter: int, x: float, y: float, rows: list[tuple], view: LocalView) -> None:
         """A report (or the leader's own view): where ``reporter`` is, the tasks it sees, and the

@@ -298,3 +298,38 @@ def test_a_cbba_robot_gives_up_a_team_that_does_not_form_and_leaves_it_alone_as_
     assert decide(6.0) is None and not robot.bundle  # given up 5 s later
     assert [decide(float(t)) for t in range(7, 11)] == [None] * 4  # left alone
     assert decide(11.0) == 0  # and taken again
+
+
+def test_a_leader_hears_teams_of_more_than_255_robots_and_a_follower_refuses_a_goal_no_run_has():
+    """Issue 74 item 11: a report packs a team of 300 (two-byte rows, flagged 2; teams of up to 255
+    keep their one-byte rows and bytes); a follower does not follow its leader to (1e30, 1e30), nor to
+    a task it sees somewhere else than the leader says."""
+    from types import SimpleNamespace
+
+    from swarmbed.extension.view import LocalView, Message, TaskInfo
+    from swarmbed.plugins.central import ASSIGN, ASSIGN_ROW, REPORT, _pack
+    from swarmbed.plugins.registry import make
+
+    def view(agent, inbox, tasks, teams=None):
+        obs = SimpleNamespace(coalitions=[(t, k, 0) for t, k in (teams or {}).items()])
+        return LocalView(agent, 400, 1, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, tasks, inbox, awareness_range=1.0, obs=obs)
+
+    task = TaskInfo(7, 5.0, 5.0, 30.0)
+    follower = make("sga", {"leader": 0}, 1, np.random.default_rng(0), 0, "mtsr")
+    mine = view(1, [], {7: task}, teams={7: 300})
+    follower.decide(mine)
+    (sent,) = [o for o in mine.outbox if o.kind == REPORT]
+    assert sent.data[3] == 2
+    leader = make("sga", {"leader": 0}, 0, np.random.default_rng(0), 0, "mtsr")
+    leader.decide(view(0, [Message(1, REPORT, sent.data)], {}, teams={}))
+    assert leader.needed == {7: 300}
+    small = view(1, [], {7: task}, teams={7: 3})
+    make("sga", {"leader": 0}, 1, np.random.default_rng(0), 0, "mtsr").decide(small)
+    assert [o.data[3] for o in small.outbox if o.kind == REPORT] == [1]
+    for goal in ((1e30, 1e30), (50.0, 50.0)):  # nowhere, and not where the follower sees task 7
+        lied = _pack([(1, 7, *goal)], ASSIGN_ROW)
+        follower = make("sga", {"leader": 0}, 1, np.random.default_rng(0), 0, "mtsr")
+        assert follower.decide(view(1, [Message(0, ASSIGN, lied)], {7: task})) is None
+    honest = _pack([(1, 7, 5.0, 5.0)], ASSIGN_ROW)
+    follower = make("sga", {"leader": 0}, 1, np.random.default_rng(0), 0, "mtsr")
+    assert follower.decide(view(1, [Message(0, ASSIGN, honest)], {7: task})) == 7
