@@ -1,6 +1,10 @@
 """Sweeps (parallel, resumable, failures recorded) and their analysis, on small real runs."""
 
+import os
+import subprocess
+import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pandas as pd
@@ -364,3 +368,37 @@ def test_a_sweep_logs_each_completed_run_to_mlflow_once(tmp_path):
     assert main(args) == 0 and len(client.search_runs([experiment.experiment_id])) == 2  # resumed: none twice
     assert main([*args, "--runs", "2"]) == 0
     assert set(logged()) == {"a/run_000", "b/run_000", "a/run_001", "b/run_001"}
+
+
+def test_a_claim_whose_holder_was_killed_a_moment_ago_is_taken_over_not_reported_held(tmp_path):
+    """Issue 74 item 14: a sweep resumed right after its predecessor's process group was killed found
+    runs "held by" dying processes. A holder that is killed but not yet reaped (a zombie) holds
+    nothing; a live one of this machine is still reported, after a short wait."""
+    import signal
+
+    from swarmbed.experiments.campaigns import claims
+
+    hold = (
+        "import sys, time\nfrom pathlib import Path\nfrom swarmbed.experiments.campaigns import claims\n"
+        "c = claims.take(Path(sys.argv[1]))\nprint('held', flush=True)\ntime.sleep(60)\n"
+    )
+    holders = []
+    for name in ("killed", "alive"):
+        proc = subprocess.Popen([sys.executable, "-c", hold, str(tmp_path / name)], stdout=subprocess.PIPE, text=True)
+        assert proc.stdout.readline().strip() == "held"
+        holders.append(proc)
+    killed, alive = holders
+    try:
+        os.kill(killed.pid, signal.SIGKILL)  # not waited for: a zombie until it is reaped
+        time.sleep(0.3)
+        taken = claims.take(tmp_path / "killed")
+        assert isinstance(taken, claims.Claim), taken
+        taken.release()
+        started = time.monotonic()
+        held = claims.take(tmp_path / "alive")
+        assert isinstance(held, claims.Holder) and held.pid == alive.pid
+        assert time.monotonic() - started >= claims.GOING_WAIT_S - 0.2
+    finally:
+        for proc in holders:
+            proc.kill()
+            proc.wait()

@@ -83,11 +83,14 @@ def pin_thread_state() -> None:
 
 def process_alive(pid: int, started: float) -> bool:
     """Whether process ``pid`` on this machine is still the one that started at ``started``
-    (psutil's create time): a pid the kernel gave to another process since reads as gone."""
+    (psutil's create time): a pid the kernel gave to another process since reads as gone, and so
+    does a zombie (killed, not yet reaped)."""
     import psutil  # here: agents import this module and never call this
 
     try:
-        return abs(psutil.Process(pid).create_time() - started) <= 1.0
+        proc = psutil.Process(pid)
+        # a killed process that its parent has not reaped yet (a zombie) is gone: it holds nothing
+        return abs(proc.create_time() - started) <= 1.0 and proc.status() != psutil.STATUS_ZOMBIE
     except psutil.Error:
         return False
 
