@@ -383,10 +383,10 @@ def _map_file(name: str, where: str, folder: Path | None) -> Any:
     one typed with ``--set``."""
     if folder is not None:
         try:
-            real, inside = Path(name).resolve(strict=True), folder.resolve(strict=True)
+            outside = folder.resolve(strict=True) not in Path(name).resolve(strict=True).parents
         except (OSError, RuntimeError):
-            real = inside = None  # missing or a loop of links: the reader below says so
-        if real is not None and inside is not None and inside not in real.parents:
+            outside = False  # missing or a loop of links: the reader below says so
+        if outside:
             raise ConfigError(
                 f"{where}: obstacles: {name} is outside the experiment's folder {folder.resolve()}; a map file named "
                 "in an experiment must be in its folder (give another with --set obstacles=PATH)"
