@@ -373,7 +373,7 @@ def test_a_sweep_logs_each_completed_run_to_mlflow_once(tmp_path):
 def test_a_claim_whose_holder_was_killed_a_moment_ago_is_taken_over_not_reported_held(tmp_path):
     """Issue 74 item 14: a sweep resumed right after its predecessor's process group was killed found
     runs "held by" dying processes. A holder that is killed but not yet reaped (a zombie) holds
-    nothing; a live one of this machine is still reported, after a short wait."""
+    nothing; a live one is still reported."""
     import signal
 
     from swarmbed.experiments.campaigns import claims
@@ -394,10 +394,8 @@ def test_a_claim_whose_holder_was_killed_a_moment_ago_is_taken_over_not_reported
         taken = claims.take(tmp_path / "killed")
         assert isinstance(taken, claims.Claim), taken
         taken.release()
-        started = time.monotonic()
         held = claims.take(tmp_path / "alive")
         assert isinstance(held, claims.Holder) and held.pid == alive.pid
-        assert time.monotonic() - started >= claims.GOING_WAIT_S - 0.2
     finally:
         for proc in holders:
             proc.kill()

@@ -32,9 +32,6 @@ from swarmbed.wire.process import process_alive
 CLAIM = "claim.json"
 LOCK = "claim.lock"
 STALE_AFTER_S = 120.0  # a claim not touched for this long is abandoned (its holder's node died)
-#: how long a claim held by a live process of this machine is watched for its holder to go before
-#: the run is reported held (a sweep resumed right after its predecessor was killed)
-GOING_WAIT_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -118,17 +115,11 @@ def take(run_dir: Path, stale_after: float = STALE_AFTER_S) -> Claim | Holder:
     """Claim ``run_dir`` for this process: the :class:`Claim`, or the live :class:`Holder` that
     has it already."""
     run_dir.mkdir(parents=True, exist_ok=True)
-    deadline = time.monotonic() + GOING_WAIT_S
-    while True:
-        with _locked(run_dir):
-            current = holder(run_dir)
-            if current is None or not current.alive(stale_after):
-                return _claim(run_dir, current, stale_after)
-        # held by a process of this machine: one killed a moment ago (a sweep's process group) is
-        # given a short while to be gone before the run is reported held
-        if current.host != socket.gethostname() or time.monotonic() >= deadline:
+    with _locked(run_dir):
+        current = holder(run_dir)
+        if current is not None and current.alive(stale_after):
             return current
-        time.sleep(0.1)
+        return _claim(run_dir, current, stale_after)
 
 
 def _claim(run_dir: Path, current: Holder | None, stale_after: float) -> Claim:
