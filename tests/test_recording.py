@@ -10,7 +10,7 @@ import pytest
 
 from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.btlog import EPOCH_US, read_btlog
-from tests.conftest import experiment
+from tests.conftest import QUICKSTART, experiment
 
 pytest.importorskip("foxglove", reason="recordings need Foxglove's SDK (swarmbed[viewers])")
 reader = pytest.importorskip("mcap.reader", reason="reading recordings back needs mcap")
@@ -168,3 +168,50 @@ def test_a_run_is_served_live_to_a_foxglove_client_over_its_websocket_protocol(t
     assert result and result[0].summary["ticks"] == 60
     with pytest.raises(OSError):
         websocket.create_connection(url, subprotocols=[PROTOCOL], timeout=2)
+
+
+def test_clients_that_never_read_and_idle_connections_never_stall_a_run_or_its_results(tmp_path):
+    """Issue 74 item 6: one Foxglove client that subscribed to every channel and then never reads
+    (a 4 kB receive buffer), and 50 idle TCP connections beside it: the run ends, writes its results
+    and exits in bounded time (it stalled for good: the SDK's stop() waits for every client's close)."""
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    import websocket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "run"
+    sets = ["run.stop_when_done=false", "run.duration=1500", "agents.count=20"]
+    cmd = [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(out), "--foxglove", str(port)]
+    cmd += ["--no-progress", "--engine", "inprocess", *[a for k in sets for a in ("--set", k)]]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    held: list = []
+    try:
+        ws = websocket.WebSocket(sockopt=((socket.SOL_SOCKET, socket.SO_RCVBUF, 4096),))
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                ws.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], timeout=10)
+                break
+            except OSError:
+                assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read()
+                time.sleep(0.05)
+        channels: dict = {}
+        while len(channels) < 4:
+            message = ws.recv()
+            if isinstance(message, str) and json.loads(message)["op"] == "advertise":
+                channels.update({c["topic"]: c for c in json.loads(message)["channels"]})
+        subscribe = [{"id": i, "channelId": c["id"]} for i, c in enumerate(channels.values())]
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": subscribe}))
+        held = [ws, *(socket.create_connection(("127.0.0.1", port), timeout=5) for _ in range(50))]
+        assert proc.wait(timeout=90) == 0, proc.stderr.read()
+    finally:
+        proc.kill()
+        proc.wait()
+        for h in held:
+            h.close()
+    assert json.loads((out / "summary.json").read_text())["ticks"] == 1500

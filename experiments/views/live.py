@@ -46,6 +46,10 @@ from swarmbed.wire.status import RunStatus
 #: Foxglove's default WebSocket port
 DEFAULT_PORT = 8765
 TOPICS = ("/agents", "/agents/poses", "/markers", "/radio")
+#: messages the server keeps for a client that reads slower than the run logs (the oldest are
+#: dropped past it): a scene of 1,000 agents is about 100 kB, so a client costs at most a few MB
+#: (the SDK's default, 1,024, let 40 stalled clients hold gigabytes)
+BACKLOG_MESSAGES = 32
 #: ticks between two copies of /walls
 WALLS_EVERY = 50
 
@@ -59,7 +63,9 @@ def serve(host: str, port: int) -> tuple[Any, Any, dict[str, Any]]:
         raise RecordingError("a live view needs Foxglove's SDK: pip install 'swarmbed[viewers]'") from None
     context = foxglove.Context()
     try:
-        server = foxglove.start_server(name="swarmbed", host=host, port=port, context=context)
+        server = foxglove.start_server(
+            name="swarmbed", host=host, port=port, context=context, message_backlog_size=BACKLOG_MESSAGES
+        )
     except (RuntimeError, OSError, OverflowError, ValueError) as exc:  # a port in use: one line, not a traceback
         raise RecordingError(f"--foxglove {port}: cannot serve on {host}:{port}: {str(exc).splitlines()[0]}") from None
     made = {
@@ -68,6 +74,22 @@ def serve(host: str, port: int) -> tuple[Any, Any, dict[str, Any]]:
         "/markers": channels.SceneUpdateChannel("/markers", context=context),
     }
     return context, server, made
+
+
+#: how long closing the live view waits for its server to stop: the SDK's stop() waits for every
+#: client's close handshake, which a client that never reads never completes (the run's results
+#: are written after the views close, so a stalled stop() would keep them from being written)
+STOP_WAIT_S = 2.0
+
+
+def stop(server: Any, wait: float = STOP_WAIT_S) -> None:
+    """Stop ``server`` and wait at most ``wait`` seconds; past that it goes on stopping in a daemon
+    thread while the run ends."""
+    import threading
+
+    stopper = threading.Thread(target=server.stop, name="foxglove-stop", daemon=True)
+    stopper.start()
+    stopper.join(wait)
 
 
 class FoxgloveLive(TickHook):
@@ -140,7 +162,7 @@ class FoxgloveLive(TickHook):
         self.close()
 
     def close(self) -> None:
-        self.server.stop()
+        stop(self.server)
 
 
 class StatusFoxglove:
@@ -205,4 +227,4 @@ class StatusFoxglove:
         self.markers.log(SceneUpdate(entities=[entity]), log_time=log_time)
 
     def close(self) -> None:
-        self.server.stop()
+        stop(self.server)
