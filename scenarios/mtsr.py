@@ -32,7 +32,7 @@ from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, sight
 from swarmbed.scenarios.kinematics import Limits, step
-from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places
+from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places, planner_problems
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
@@ -194,7 +194,7 @@ class MTSR(Scenario):
             lambda x, y: 0 <= x <= params.width and 0 <= y <= params.height,
             f"[0, {params.width:g}] x [0, {params.height:g}]",
             (0.0, 0.0, params.width, params.height),
-        )
+        ) + (planner_problems(exp.obstacles.compile()) if exp.obstacles is not None else [])
 
     def make_world(self, rng: np.random.Generator, allocator: type[Allocator] | None = None) -> MTSRWorld:
         return MTSRWorld(self, rng)

@@ -21,6 +21,14 @@ from swarmbed.wire.obstacles import Point, Walls
 
 #: tries per point before a spawn gives up (the map leaves almost no free room)
 MAX_TRIES = 10_000
+#: the most sight tests (node pairs x walls) the planner's graph may take: each costs about
+#: :data:`SECONDS_PER_SIGHT_TEST` (3e9: about a minute and a half); a map past it is refused by --check
+MAX_SIGHT_TESTS = 3_000_000_000
+#: measured on a 2-core machine, built a slice at a time (400 random one-unit walls, 1.3e8 tests:
+#: 3.9 s; all at once it took 17 s and 7.4 GB)
+SECONDS_PER_SIGHT_TEST = 3.5e-8
+#: sight tests per slice of the graph's build: its memory stays about 200 MB whatever the map
+SIGHT_TESTS_PER_SLICE = 2_000_000
 
 
 def corner_nodes(walls: Walls) -> np.ndarray:
@@ -40,6 +48,48 @@ def corner_nodes(walls: Walls) -> np.ndarray:
     return np.array(nodes, dtype=float).reshape(-1, 2)
 
 
+def sight_tests(walls: Walls) -> int:
+    """The sight tests (node pairs x walls) the planner's graph of ``walls`` takes, at most (nodes
+    outside the arena or inside a polygon are dropped before it is built)."""
+    v = len(corner_nodes(walls))
+    return v * (v - 1) // 2 * len(walls.xy)
+
+
+def _visible_pairs(walls: Walls, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i < j) of ``nodes`` that see each other, tested a slice of rows at a time so that
+    memory stays bounded by :data:`SIGHT_TESTS_PER_SLICE` (in order: the same pairs as all at once)."""
+    v = len(nodes)
+    per_slice = max(1, SIGHT_TESTS_PER_SLICE // max(1, len(walls.xy)))
+    found_i, found_j = [], []
+    row = 0
+    while row < v - 1:
+        rows, pairs = [], 0
+        while row < v - 1 and (not rows or pairs + (v - 1 - row) <= per_slice):
+            rows.append(row)
+            pairs += v - 1 - row
+            row += 1
+        i = np.concatenate([np.full(v - 1 - r, r) for r in rows])
+        j = np.concatenate([np.arange(r + 1, v) for r in rows])
+        seen = walls.clear(nodes[i, 0], nodes[i, 1], nodes[j, 0], nodes[j, 1])
+        found_i.append(i[seen])
+        found_j.append(j[seen])
+    if not found_i:
+        return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+    return np.concatenate(found_i), np.concatenate(found_j)
+
+
+def planner_problems(walls: Walls) -> list[str]:
+    """Why the planner's graph of ``walls`` is too large to build (none: it is not)."""
+    tests = sight_tests(walls)
+    if tests <= MAX_SIGHT_TESTS:
+        return []
+    return [
+        f"obstacles: the path planner's graph would take {tests:,} sight tests (corner nodes x pairs x walls; "
+        f"about {tests * SECONDS_PER_SIGHT_TEST / 60:,.0f} min), more than the {MAX_SIGHT_TESTS:,} a world may "
+        "have: fewer walls, or polygons instead of many short walls"
+    ]
+
+
 class Planner:
     """Shortest paths around a world's walls for a point robot, within an arena."""
 
@@ -54,9 +104,7 @@ class Planner:
             nodes = nodes[in_arena(nodes[:, 0], nodes[:, 1]) & ~walls.inside(nodes[:, 0], nodes[:, 1])]
         self.nodes = nodes
         v = len(nodes)
-        i, j = np.triu_indices(v, 1)
-        seen = walls.clear(nodes[i, 0], nodes[i, 1], nodes[j, 0], nodes[j, 1]) if v else np.zeros(0, dtype=bool)
-        i, j = i[seen], j[seen]
+        i, j = _visible_pairs(walls, nodes)
         length = np.hypot(nodes[i, 0] - nodes[j, 0], nodes[i, 1] - nodes[j, 1])
         graph = coo_matrix((length, (i, j)), shape=(v, v)).tocsr()
         self.dist, self.pred = shortest_path(graph, directed=False, return_predecessors=True)

@@ -46,7 +46,7 @@ from swarmbed.extension.figures import Figure
 from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, sight
 from swarmbed.scenarios.budget import ACTIVITIES, IDLE, INSPECTING, MOVING, PENALTY, RESCUING, TimeBudget
-from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places
+from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places, planner_problems
 from swarmbed.scenarios.victims import ALIVE, EXPIRED, RESCUED, VictimRows
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
@@ -211,7 +211,7 @@ class SAR(Scenario):
         r = params.arena_radius
         return obstacles_outside(
             exp, lambda x, y: math.hypot(x, y) <= r, f"a disc of radius {r:g} about [0, 0]", (-r, -r, r, r)
-        )
+        ) + (planner_problems(exp.obstacles.compile()) if exp.obstacles is not None else [])
 
     def make_world(self, rng: np.random.Generator, allocator: type[Allocator] | None = None) -> SARWorld:
         return SARWorld(self, rng, bids_with_colors=allocator is not None and allocator.bids_with_colors)

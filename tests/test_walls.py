@@ -15,7 +15,7 @@ from swarmbed.experiments.launch.config import ConfigError, resolve_experiment, 
 from swarmbed.experiments.launch.inprocess import run_in_process
 from swarmbed.scenarios.paths import Planner
 from swarmbed.wire.obstacles import ObstaclesSection, segments_cross
-from tests.conftest import experiment
+from tests.conftest import QUICKSTART, experiment
 
 ROOT = Path(__file__).resolve().parents[1]
 OFFICE = ROOT / "experiments" / "walls" / "office.yaml"
@@ -281,3 +281,55 @@ def test_views_draw_a_runs_walls_and_refuse_crafted_ones_in_one_line(tmp_path):
     with pytest.raises(RecordingError) as exc:
         write_mcap(run, tmp_path / "s.mcap")
     assert "config.yaml: obstacles" in str(exc.value) and len(str(exc.value).splitlines()) == 1
+
+
+# -- issue 74 item 4: the planner's graph, bounded before it is built ----------------------------
+
+
+def test_the_graph_built_a_slice_at_a_time_joins_the_same_pairs_as_all_at_once(monkeypatch):
+    from swarmbed.scenarios import paths
+    from swarmbed.wire.obstacles import ObstaclesSection
+
+    rng = np.random.default_rng(3)
+    walls = [
+        {"start": [float(x), float(y)], "end": [float(x) + 5, float(y) + 2]} for x, y in rng.uniform(0, 300, (60, 2))
+    ]
+    w = ObstaclesSection.model_validate({"walls": walls}).compile()
+    nodes = paths.corner_nodes(w)
+    i, j = np.triu_indices(len(nodes), 1)
+    seen = w.clear(nodes[i, 0], nodes[i, 1], nodes[j, 0], nodes[j, 1])
+    monkeypatch.setattr(paths, "SIGHT_TESTS_PER_SLICE", 600)  # ten node pairs a slice
+    a, b = paths._visible_pairs(w, nodes)
+    assert np.array_equal(a, i[seen]) and np.array_equal(b, j[seen]) and len(a) > 100
+    assert paths.sight_tests(w) == len(i) * len(w.xy)
+
+
+def test_a_map_whose_graph_is_too_large_is_refused_by_check_and_a_large_one_is_in_the_estimate(tmp_path, capsys):
+    import math
+
+    from swarmbed.experiments import cli
+
+    many = "".join(
+        f"    - {{start: [{1 + (k % 190)}, {1 + (k // 190) * 10}], end: [{1.5 + (k % 190)}, {1 + (k // 190) * 10}]}}\n"
+        for k in range(2000)
+    )
+    path = tmp_path / "many.yaml"
+    path.write_text(QUICKSTART.read_text() + f"\nobstacles:\n  clearance: 0.1\n  walls:\n{many}")
+    assert cli.main(["run", str(path), "--check"]) == 2
+    err = capsys.readouterr().err
+    assert "sight tests" in err and len(err.strip().splitlines()) == 1, err
+    rings = "".join(
+        "    - {points: ["
+        + ", ".join(
+            f"[{25 + 25 * k + 8 * math.cos(2 * math.pi * i / 256):.4f}, {75 + 8 * math.sin(2 * math.pi * i / 256):.4f}]"
+            for i in range(256)
+        )
+        + "]}\n"
+        for k in range(7)
+    )
+    path = tmp_path / "rings.yaml"
+    path.write_text(QUICKSTART.read_text() + f"\nobstacles:\n  polygons:\n{rings}")
+    assert cli.main(["run", str(path), "--check", "--engine", "inprocess"]) == 0
+    out = capsys.readouterr().out
+    seconds = int(out.split("estimated wall time: up to about ")[1].split(" s ")[0])
+    assert 60 <= seconds < 120, out  # the graph's build (about 73 s measured), with the run's few seconds

@@ -50,11 +50,18 @@ def estimate_wall_s(exp: Experiment, cores: int | None = None, engine: str = "pr
         allocator = allocator_seconds_per_agent_tick(exp)
     except Exception:  # an allocator the kit cannot drive (a scenario of its own): the engine's cost alone
         allocator = 0.0
+    if exp.obstacles is not None:  # the planner's graph, built once per world (where the world is)
+        from swarmbed.scenarios.paths import SECONDS_PER_SIGHT_TEST, sight_tests
+
+        planning = sight_tests(exp.obstacles.compile()) * SECONDS_PER_SIGHT_TEST
+    else:
+        planning = 0.0
     if engine == "inprocess":
-        return INPROCESS_STARTUP_S + exp.ticks * exp.agents.count * (INPROCESS_CPU_PER_AGENT_TICK + allocator)
+        ticking = exp.ticks * exp.agents.count * (INPROCESS_CPU_PER_AGENT_TICK + allocator)
+        return planning + INPROCESS_STARTUP_S + ticking
     cores = max(1, min(cores or os.cpu_count() or 1, exp.agents.count + 2))
     ticking = exp.ticks * exp.agents.count * (PROCESS_CPU_PER_AGENT_TICK + allocator) / cores
-    return STARTUP_S + STARTUP_PER_AGENT_S * exp.agents.count + ticking
+    return planning + STARTUP_S + STARTUP_PER_AGENT_S * exp.agents.count + ticking
 
 
 def _upto(exps: Sequence[Experiment]) -> str:
