@@ -33,3 +33,14 @@ def test_the_guides_allocator_passes_the_kit_and_its_experiment_checks(tmp_path,
     broken = files["claim_nearest.py"].replace("return task.id", "return task.id + 10_000")
     (tmp_path / "broken.py").write_text(broken)
     assert cli.main(["check-allocator", "broken.py:ClaimNearest"]) == 1
+
+
+def test_the_kit_checks_an_allocator_on_a_scenario_whose_observation_fields_have_no_defaults(capsys):
+    """Issue 74 item 17: the example scenario's observation declares ``carrying`` and ``depot``
+    without defaults; the kit fills them as the scenario's own world does (carrying -1, the depot),
+    so every check runs, and assigns, instead of failing on fields it could not fill."""
+    example = ROOT / "tests" / "example_scenario.py"
+    rc = cli.main(["check-allocator", f"{example}:NearestItem", "--scenario", f"{example}:PickupDelivery"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "FAIL" not in out and "cannot fill" not in out, out
+    assert "'assigned_clean': 0" not in out, out  # the allocator was shown items it could take

@@ -19,6 +19,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import tempfile
+import types
+import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -96,6 +98,25 @@ class Trace:
     radio: Radio | None = None  # the radio the rounds went through (its ledger: every copy's fate)
 
 
+def empty_value(hint: Any) -> Any:
+    """The empty value of a declared observation field's type (0, 0.0, False, "", [], (), {}, None
+    for an optional one, a zero-length array, a fixed-length tuple of empties); a TypeError for a
+    type the kit cannot make."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is type(None) or (origin in (typing.Union, types.UnionType) and type(None) in args):
+        return None
+    if origin is tuple:
+        return () if not args or args[-1] is Ellipsis else tuple(empty_value(a) for a in args)
+    for kind, value in ((list, list), (dict, dict), (set, set), (frozenset, frozenset)):
+        if origin is kind or hint is kind:
+            return value()
+    if hint is np.ndarray or origin is np.ndarray:
+        return np.zeros(0)
+    if hint in (bool, int, float, str, bytes):
+        return hint()
+    raise TypeError(f"no empty value of {hint}")
+
+
 def _observation(
     cls: type[Observation], k: int, x: float, y: float, visible: dict[int, TaskInfo], known: dict[str, Any]
 ) -> Observation:
@@ -103,13 +124,20 @@ def _observation(
     scenario leaves optional as None."""
     table = np.array([(t.id, t.x, t.y, t.remaining, t.color) for t in visible.values()], dtype=TASK_DTYPE)
     extras, missing = {}, []
-    for field_name, _ in cls.extra_fields():
+    defaulted = {f.name for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
+    defaulted |= {f.name for f in dataclasses.fields(cls) if f.default_factory is not dataclasses.MISSING}
+    for field_name, hint in cls.extra_fields():
         if field_name in known:
             extras[field_name] = known[field_name]
-        elif field_name not in {f.name for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}:
-            missing.append(field_name)
+        elif field_name not in defaulted:
+            try:  # what the scenario declares, empty: an agent that has seen nothing of that kind yet
+                extras[field_name] = empty_value(hint)
+            except TypeError:
+                missing.append(f"{field_name}: {hint}")
     if missing:
-        raise ConformanceError(f"the kit cannot fill the observation fields {missing} of {cls.__name__}")
+        raise ConformanceError(
+            f"the kit cannot fill the observation fields {missing} of {cls.__name__}: give them defaults"
+        )
     return cls(float(k), x, y, 0.0, 0.0, table, **extras)
 
 
@@ -138,6 +166,7 @@ def simulate(
     inboxes: dict[int, bytes] = {}
     kinds = set(type(trace.allocators[0]).message_kinds)
     obs_cls = resolve_scenario(scenario).Observation if scenario else Observation
+    declared = _declared_fields(scenario, n, seed) if scenario else [{} for _ in ids]
     with tempfile.TemporaryDirectory(prefix="swarmbed-kit-") as ledger_dir:
         exchange = Exchange(NetemSpec(seed=seed, dt=1.0, agents=n, network=network), Path(ledger_dir))
         trace.radio = exchange.radio
@@ -150,7 +179,7 @@ def simulate(
             outs, decisions, sent = {}, {}, []
             for i in ids:
                 inbox = [Message(d.sender, d.kind, unpack(d.payload)) for d in delivered_in(inboxes.get(i))]
-                view = _view(inst, obs_cls, tasks, i, k, inbox)
+                view = _view(inst, obs_cls, tasks, i, k, inbox, declared[i])
                 trace.allocators[i].observe(view)
                 decision = trace.allocators[i].decide(view)
                 if decision is not None and decision not in (HOLD, HALT) and decision not in tasks:
@@ -177,11 +206,37 @@ def simulate(
     return trace
 
 
+def _declared_fields(scenario: str, n: int, seed: int) -> list[dict[str, Any]]:
+    """Each agent's extra observation fields as the scenario itself fills them at its first tick
+    (its default parameters, ``n`` agents), for the fields the kit's instance does not set: a
+    scenario of one's own is checked with the values its world gives (an item carried: -1), not
+    with made-up ones. Empty where the scenario's world cannot be built here."""
+    from swarmbed.wire.schema import AgentsSection
+
+    try:
+        cls = resolve_scenario(scenario)
+        world = cls(cls.Params(), AgentsSection(count=n), 1.0).make_world(np.random.default_rng(seed))
+        observed = world.observations()
+        return [
+            {name: getattr(observed[i], name) for name, _ in cls.Observation.extra_fields()} if i in observed else {}
+            for i in range(n)
+        ]
+    except Exception:  # a scenario whose world needs more than its defaults: empty values instead
+        return [{} for _ in range(n)]
+
+
 def _view(
-    inst: Instance, obs_cls: type[Observation], tasks: dict[int, tuple[float, float, float]], i: int, k: int, inbox
+    inst: Instance,
+    obs_cls: type[Observation],
+    tasks: dict[int, tuple[float, float, float]],
+    i: int,
+    k: int,
+    inbox,
+    declared: dict[str, Any] | None = None,
 ) -> LocalView:
     """What standing agent ``i`` sees at round ``k``: the tasks in its range and the instance's
-    observed fields (every round's, its own, the first round's)."""
+    observed fields (every round's, its own, the first round's), then those its scenario's world
+    gave it (``declared``) for the fields the instance leaves out."""
     x, y = inst.agents[i]
     colors = inst.task_colors or {}
     visible = {
@@ -189,7 +244,7 @@ def _view(
         for t, (tx, ty, w) in tasks.items()
         if math.hypot(tx - x, ty - y) <= inst.awareness_range
     }
-    known = dict(inst.observed)
+    known = {**(declared or {}), **inst.observed}
     if inst.observed_by_agent is not None:
         known.update(inst.observed_by_agent[i])
     if k == 0:
