@@ -408,6 +408,32 @@ def test_a_frozen_agent_is_given_up_within_zenohs_lease_on_the_default_thread_la
     assert 8.0 < v["longest_stall_s"] < 20.0, v["longest_stall_s"]  # the lease, not the 24 s freeze
 
 
+def test_on_the_single_worker_layout_a_frozen_agent_stalls_the_ticks_for_its_freeze_and_is_lost_when_it_wakes(
+    tmp_path,
+):
+    """Issue 74 item 19: under ``run.zenoh_threads: single`` the agent's session has a 60 s lease, so
+    the hub waits out a 24 s freeze (the ticks stall about as long, not the default layout's 10 s
+    lease); when the agent runs again, its own side finds the hub's 10 s lease long expired and
+    closes its session, and the hub loses it then: a tick or two after it froze, in ticks, and the
+    freeze's length in wall time (docs/benchmarks.md, the key's description)."""
+    plan = ChaosPlan.model_validate({"events": [{"action": "stop_agent", "at": [2], "for": 24, "agents": [1]}]})
+    exp = experiment(
+        "agents.count=3",
+        "allocator={name: noop, peers: 2}",
+        "run.stop_when_done=false",
+        "run.on_agent_loss=continue",
+        "run.tick_timeout=60",
+        "run.zenoh_threads=single",
+    )
+    limits = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=50.0)
+    v = soak(exp, tmp_path / "soak", 36, plan, interval=0.5, limits=limits)
+    assert v["passed"], v["breaches"]
+    assert list(v["agents_lost"]) == ["1"], v["agents_lost"]
+    assert 22.0 < v["longest_stall_s"] < 40.0, v["longest_stall_s"]  # the freeze, not 10 s, not 60 s
+    froze, lost = v["faults"][0]["tick"], v["agents_lost"]["1"]
+    assert 0 < lost - froze <= 3, (froze, lost)
+
+
 def test_on_the_real_time_clock_a_stopped_agent_misses_ticks_and_the_soak_says_how_many(tmp_path):
     """SIGSTOP for 1.5 s at 10 ticks per second: the agent misses about 15 ticks (booked late), the
     run's clock goes on, and the fault's outcome counts them."""
