@@ -18,7 +18,7 @@ from swarmbed.engine.hooks import TickHook
 from swarmbed.engine.loop import Membership, TickInHand, TickLoop, Transport
 from swarmbed.engine.recorder import Recorder
 from swarmbed.extension.allocator import Allocator
-from swarmbed.extension.scenario import Scenario
+from swarmbed.extension.scenario import Scenario, World
 from swarmbed.wire.reports import Final, NetemFinal
 from swarmbed.wire.schema import Experiment
 from swarmbed.wire.seeds import WORLD, component_rng
@@ -64,13 +64,20 @@ def refusals(
     return why
 
 
+def run_world(exp: Experiment, scenario: Scenario, allocator: type[Allocator] | None = None) -> World:
+    """The world a run of ``exp`` steps: ``scenario``'s, drawn from the run seed's world stream
+    (``wire.seeds.WORLD``); the one way a run's world is made, for a run and for a study that drives
+    the world itself (docs/scripts/sar_fit.py's oracle)."""
+    return scenario.make_world(component_rng(exp.run.seed, WORLD), allocator)
+
+
 class Session:
     """One run: the world (from the run seed's world stream), the recorder of its result files,
     and, once :meth:`connect` gave it a transport, the tick loop."""
 
     def __init__(self, exp: Experiment, scenario: Scenario, allocator: type[Allocator], out_dir: Path) -> None:
         self.exp, self.scenario, self.out_dir = exp, scenario, Path(out_dir)
-        self.world = scenario.make_world(component_rng(exp.run.seed, WORLD), allocator)
+        self.world = run_world(exp, scenario, allocator)
         self.recorder = Recorder(exp, self.world, self.out_dir, list(allocator.event_names))
         self._loop: TickLoop | None = None
         self.k = 0  # the next tick to step, where the caller owns the loop

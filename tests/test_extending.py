@@ -3,6 +3,8 @@ and an experiment naming it checks, both in this process."""
 
 import re
 
+import pytest
+
 from swarmbed.experiments import cli
 from tests.conftest import ROOT
 
@@ -44,3 +46,22 @@ def test_the_kit_checks_an_allocator_on_a_scenario_whose_observation_fields_have
     out = capsys.readouterr().out
     assert rc == 0 and "FAIL" not in out and "cannot fill" not in out, out
     assert "'assigned_clean': 0" not in out, out  # the allocator was shown items it could take
+
+
+@pytest.mark.slow  # a run, in-process, still starts a helper process
+def test_the_guides_scenario_passes_the_checker_and_runs_with_the_guides_allocator(tmp_path, monkeypatch, capsys):
+    """Issue 74 item 18: the scenario written out in the guide is whole: the scenario checker
+    passes it, the guide's experiment runs it to the end, and every point is visited."""
+    import json
+
+    files = _files()
+    assert {"visit_points.py", "visit.yaml", "claim_nearest.py"} <= set(files)
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["check-scenario", "visit_points.py:VisitPoints"]) == 0, capsys.readouterr().out
+    assert "FAIL" not in capsys.readouterr().out
+    rc = cli.main(["run", "visit.yaml", "--engine", "inprocess", "--out", str(tmp_path / "run"), "--no-progress"])
+    assert rc == 0, capsys.readouterr()
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["visited"] == summary["points"] == 12, summary

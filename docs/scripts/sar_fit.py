@@ -25,17 +25,17 @@ from statistics import mean
 import numpy as np
 from tree_world import BASE, trial  # this folder is on sys.path when the script runs
 
+from swarmbed.engine.session import run_world
 from swarmbed.experiments.launch import config as cfg
 from swarmbed.experiments.launch.config import resolve_experiment
 from swarmbed.scenarios.sar import ALIVE
-from swarmbed.wire.seeds import WORLD, component_rng
 
 
 def oracle(overrides: list[str], seed: int) -> dict:
     """One trial of the colour-aware oracle on the world alone (see the module's docstring)."""
     exp = cfg.load(BASE, ["allocator.name=cbba-etc", f"run.seed={seed}", *overrides])
     resolved = resolve_experiment(exp)
-    world = resolved.scenario().make_world(component_rng(seed, WORLD), resolved.allocator_cls)
+    world = run_world(exp, resolved.scenario(), resolved.allocator_cls)  # the world a run of exp steps
     held: dict[int, int] = {}  # robot -> victim
     for _ in range(round(exp.run.duration / exp.run.dt)):
         alive = np.flatnonzero(world.vstatus == ALIVE)
