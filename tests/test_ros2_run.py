@@ -20,7 +20,7 @@ from swarmbed.experiments.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity, write_credentials
 from swarmbed.wire.ros2 import Ros2Types, decode_attachment, gid
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
-from tests.conftest import experiment, read_ledger, reference_run, same_results
+from tests.conftest import QUICKSTART, experiment, read_ledger, reference_run, same_results
 
 DOMAIN = 7
 PATH = 5  # ros2.path: each robot's last 5 poses on /robot_<i>/path
@@ -505,3 +505,53 @@ def test_a_display_that_starts_late_gets_the_last_tasks_markers(tmp_path, operat
     markers = types.deserialize(late[0], "visualization_msgs/msg/MarkerArray").markers
     cubes = [m for m in markers if m.ns == "tasks"]
     assert len(cubes) == result[0].summary["tasks_total"]
+
+
+def test_the_guides_echo_recipe_prints_a_robots_poses_from_a_run_without_ros(tmp_path, operator):
+    """Issue 74 item 18: docs/ros2.md's "echo a topic without ROS" script, as written, prints robot
+    3's poses from a running run reached through its hub with an operator's credentials."""
+    import re
+    import socket
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    text = (ROOT / "docs" / "ros2.md").read_text()
+    script = dict(re.findall(r"```python file=(\S+)\n(.*?)```", text, flags=re.S))["echo_pose.py"]
+    (tmp_path / "echo_pose.py").write_text(script)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    endpoint = f"tcp/127.0.0.1:{port}"
+    run = subprocess.Popen(
+        [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--out", str(tmp_path / "run"), "--no-progress",
+         "--listen", endpoint, "--admit", str(operator.path), "--set", "ros2.domain=0", "--set", "run.clock=realtime",
+         "--set", "run.speed=20", "--set", "run.stop_when_done=false", "--set", "run.duration=600"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    echo = None
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert run.poll() is None, run.stderr.read()
+                time.sleep(0.1)
+        echo = subprocess.Popen(
+            [sys.executable, str(tmp_path / "echo_pose.py"), endpoint, str(operator.path)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        lines = [echo.stdout.readline() for _ in range(3)]
+    finally:
+        for proc in (echo, run):
+            if proc is not None:
+                proc.terminate()
+                proc.wait(timeout=30)
+    poses = [re.fullmatch(r"t=([\d.]+) x=([-\d.]+) y=([-\d.]+)\n", line) for line in lines]
+    assert all(poses), lines
+    stamps = [float(m.group(1)) for m in poses]
+    assert stamps == sorted(stamps) and len(set(stamps)) == 3, lines
+    assert all(0 <= float(m.group(2)) <= 200 and 0 <= float(m.group(3)) <= 150 for m in poses), lines
