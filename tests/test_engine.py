@@ -299,3 +299,17 @@ def test_results_do_not_depend_on_the_cpus_simd_level(case, tmp_path):
     assert done.returncode == 0, done.stderr
     same_results(alone.out_dir, tmp_path / "plain")
     assert (alone.out_dir / "trajectories.csv").read_bytes() == (tmp_path / "plain" / "trajectories.csv").read_bytes()
+
+
+def test_each_agents_seeds_are_its_child_of_the_agents_sequence_made_alone():
+    """Issue 75: an agent's seed sequences are made without spawning every other agent's (O(n) per
+    agent, not O(n^2) for the in-process engine's n agents), and are numpy's own spawn's children."""
+    import numpy as np
+
+    from swarmbed.wire.seeds import AGENTS, agent_seeds
+
+    for seed, n, i in ((0, 1, 0), (7, 5, 3), (2**40, 1000, 999), (123, 50, 17)):
+        agents = np.random.SeedSequence(seed).spawn(3)[AGENTS]
+        reference = agents.spawn(n)[i].spawn(3)
+        made = agent_seeds(seed, i, n, 3)
+        assert [r.generate_state(4).tolist() for r in reference] == [m.generate_state(4).tolist() for m in made]

@@ -285,3 +285,65 @@ def test_batched_routing_books_and_delivers_what_one_copy_at_a_time_would(params
     assert booked == expected
     assert inboxes == {t: v for t, v in expected_inboxes.items() if t <= len(script)}
     r.ledger.check()
+
+
+# -- issue 75 item 2: out-of-range copies counted, not made ---------------------------------------
+
+
+class _Rows(list):
+    """A ledger sink that keeps the rows it is given."""
+
+    def write(self, row):
+        self.append(tuple(row))
+
+    def tick(self):
+        pass
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_broadcasts_out_of_range_copies_are_counted_without_being_made_and_nothing_else_changes(seed, monkeypatch):
+    """The radio finds each broadcaster's neighbours through a KD-tree and books the rest as
+    out_of_range by count: the ledger rows, the inboxes and every later random draw (loss, the
+    rate queue) are those of the radio that makes every copy, on positions that put receivers at
+    exactly the range (the range stage's own tolerance decides them) and directed messages beside."""
+    from swarmbed.netem.ledger import Ledger
+    from swarmbed.netem.radio import drop_reasons
+
+    params = NetemParams.model_validate({"range": 100.0, "loss": 0.3, "rate": 4000.0, "limit": 3})
+    n, place = 60, np.random.default_rng(seed)
+    made: list[int] = []
+
+    def radio(prefilter: bool) -> tuple[Radio, _Rows]:
+        rows = _Rows()
+        r = Radio(params, n, 1.0, np.random.default_rng(seed), Ledger(rows, reasons=drop_reasons(params)))
+        if not prefilter:
+            monkeypatch.setattr(r, "_near", lambda *a: None)
+        return r, rows
+
+    fast, fast_rows = radio(True)
+    full, full_rows = radio(False)
+    for k in range(12):
+        xs = place.uniform(0, 400, n)
+        ys = place.uniform(0, 300, n)
+        xs[:4], ys[:4] = [0.0, 100.0, 0.0, 60.0], [0.0, 0.0, 100.0 + 1e-10, 80.0]  # at the range, on its edge
+        ids = [a for a in range(n) if a % 17 != k % 17]  # one agent dead each tick
+        outs = {
+            a: [RadioMessage(BROADCAST, "b", bytes(int(place.integers(10, 400))))]
+            + ([RadioMessage((a + 1) % n, "d", bytes(30))] if a % 5 == 0 else [])
+            for a in ids
+            if place.random() < 0.7
+        }
+        inboxes = []
+        for r in (fast, full):
+            r.route(k, ids, xs.tolist(), ys.tolist(), outs)
+            inboxes.append(r.deliver(k + 1, ids))
+            r.confirm()
+            r.ledger.close_tick(k)
+        assert inboxes[0] == inboxes[1], k
+        made.append(sum(len(v) for v in inboxes[0].values()))
+    for r in (fast, full):
+        r.finish(11)
+        r.ledger.close_tick(11)
+    assert fast_rows == full_rows and fast.ledger.totals() == full.ledger.totals()
+    assert fast.ledger.dropped["out_of_range"] > 3 * sum(made) > 0  # most copies were never made
+    assert fast.rng.random() == full.rng.random()  # the same draws were taken
