@@ -63,7 +63,8 @@ def _visible_pairs(walls: Walls, nodes: np.ndarray) -> tuple[np.ndarray, np.ndar
     found_i, found_j = [], []
     row = 0
     while row < v - 1:
-        rows, pairs = [], 0
+        rows: list[int] = []
+        pairs = 0
         while row < v - 1 and (not rows or pairs + (v - 1 - row) <= per_slice):
             rows.append(row)
             pairs += v - 1 - row
