@@ -92,7 +92,8 @@ def replacing(path: Path | str) -> Iterator[Path]:
     it). On an error nothing stands under ``path`` that was not there before."""
     path = Path(path)
     _check_parent(path)
-    private = Path(tempfile.mkdtemp(prefix=f".{path.name[:40]}.", suffix=".part", dir=path.parent))
+    # not "*.part": the cleanups that remove a run's torn "<name>.part" files must never meet this folder
+    private = Path(tempfile.mkdtemp(prefix=f".{path.name[:40]}.", suffix=".writing", dir=path.parent))
     try:
         tmp = private / path.name
         yield tmp
