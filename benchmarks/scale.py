@@ -20,7 +20,6 @@ Run from a non-editable install on an otherwise idle machine.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -28,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from space_side_by_side import BENCH, OURS, ROOT  # this folder is on sys.path when the script runs
+from space_side_by_side import OURS, our_command, space_run  # this folder is on sys.path when the script runs
 
 
 def timed(cmd: list[str]) -> tuple[float, float]:
@@ -44,28 +43,6 @@ def timed(cmd: list[str]) -> tuple[float, float]:
             err.seek(0)
             raise RuntimeError(f"{' '.join(cmd[:4])} ... failed: {err.read().decode(errors='replace')[-400:]}")
     return seconds, usage.ru_maxrss / 1024
-
-
-def space_cell(alg: str, agents: int, comm: int, seed: int, horizon: int, out: Path) -> tuple[float, float]:
-    env = {**os.environ, "SPACE_DIR": os.environ.get("SPACE_DIR", "/tmp/space")}
-    env.setdefault("SPACE_PY", "/tmp/spacevenv/bin/python")
-    args = [str(BENCH / "one.sh"), alg, str(agents), str(comm), str(seed), str(horizon), str(out)]
-    subprocess.run(args, env=env, check=True, capture_output=True, text=True)
-    bench = json.loads((out / "bench.json").read_text())
-    return float(bench["total_wall_s"]), float(bench["peak_rss_mb"])
-
-
-def our_cell(alg: str, agents: int, comm: int, seed: int, horizon: int, engine: str, out: Path) -> tuple[float, float]:
-    sets = [
-        f"allocator.name={OURS[alg]}",
-        f"agents.count={agents}",
-        f"network.range={comm}",
-        f"run.seed={seed}",
-        f"run.duration={horizon}",
-    ]
-    cmd = [sys.executable, "-m", "swarmbed", "run", str(ROOT / "experiments" / "space_mtsr_code.yaml")]
-    cmd += [a for s in sets for a in ("--set", s)] + ["--engine", engine, "--out", str(out), "--no-progress"]
-    return timed(cmd)
 
 
 def main() -> None:
@@ -87,10 +64,11 @@ def main() -> None:
             horizon = max(10, round(args.horizon * 50 / n))
             for alg in args.alg:
                 base = Path(tmp) / f"{alg}_{n}"
-                space_s, space_mb = space_cell(alg, n, args.comm, args.seed, horizon, base / "space")
+                bench = space_run(alg, n, args.comm, args.seed, horizon, base / "space")
+                space_s, space_mb = float(bench["total_wall_s"]), float(bench["peak_rss_mb"])
                 line = f"{n:>6} {horizon:>7} {OURS[alg]:>9} {space_s:>8.1f} {space_mb:>6.0f}"
                 for engine in args.engines:
-                    ours_s, ours_mb = our_cell(alg, n, args.comm, args.seed, horizon, engine, base / engine)
+                    ours_s, ours_mb = timed(our_command(alg, n, args.comm, args.seed, horizon, engine, base / engine))
                     line += f" {ours_s:>12.1f} {ours_mb:>6.0f} {space_s / ours_s:>8.2f}"
                 print(line, flush=True)
 

@@ -30,17 +30,22 @@ BENCH = ROOT.parent / "shared" / "tools" / "space-bench"
 OURS = {"cbba": "cbba", "grape": "grape", "greedy": "fcg"}
 
 
-def space_seconds(alg: str, agents: int, comm: int, seed: int, horizon: int, out: Path) -> float:
-    """Wall seconds of SPACE's run (its loop and set-up, as bench.json reports them)."""
+def space_run(alg: str, agents: int, comm: int, seed: int, horizon: int, out: Path) -> dict:
+    """SPACE's run of one cell, headless: its ``bench.json`` (wall seconds, peak RSS)."""
     env = {**os.environ, "SPACE_DIR": os.environ.get("SPACE_DIR", "/tmp/space")}
     env.setdefault("SPACE_PY", "/tmp/spacevenv/bin/python")
     args = [str(BENCH / "one.sh"), alg, str(agents), str(comm), str(seed), str(horizon), str(out)]
     subprocess.run(args, env=env, check=True, capture_output=True, text=True)
-    return float(json.loads((out / "bench.json").read_text())["total_wall_s"])
+    return json.loads((out / "bench.json").read_text())
 
 
-def our_seconds(alg: str, agents: int, comm: int, seed: int, horizon: int, engine: str, out: Path) -> float:
-    """Wall seconds of ``swarmbed run --engine ENGINE`` on the same cell, in a fresh interpreter."""
+def space_seconds(alg: str, agents: int, comm: int, seed: int, horizon: int, out: Path) -> float:
+    """Wall seconds of SPACE's run (its loop and set-up, as bench.json reports them)."""
+    return float(space_run(alg, agents, comm, seed, horizon, out)["total_wall_s"])
+
+
+def our_command(alg: str, agents: int, comm: int, seed: int, horizon: int, engine: str, out: Path) -> list[str]:
+    """``swarmbed run --engine ENGINE`` on the same cell as SPACE's, in a fresh interpreter."""
     sets = [
         f"allocator.name={OURS[alg]}",
         f"agents.count={agents}",
@@ -49,9 +54,13 @@ def our_seconds(alg: str, agents: int, comm: int, seed: int, horizon: int, engin
         f"run.duration={horizon}",
     ]
     cmd = [sys.executable, "-m", "swarmbed", "run", str(ROOT / "experiments" / "space_mtsr_code.yaml")]
-    cmd += [a for s in sets for a in ("--set", s)] + ["--engine", engine, "--out", str(out), "--no-progress"]
+    return cmd + [a for s in sets for a in ("--set", s)] + ["--engine", engine, "--out", str(out), "--no-progress"]
+
+
+def our_seconds(alg: str, agents: int, comm: int, seed: int, horizon: int, engine: str, out: Path) -> float:
+    """Wall seconds of :func:`our_command`."""
     started = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    subprocess.run(our_command(alg, agents, comm, seed, horizon, engine, out), check=True, capture_output=True)
     return time.perf_counter() - started
 
 

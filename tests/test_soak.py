@@ -388,23 +388,30 @@ def test_a_killed_agent_is_lost_or_restarted_and_copies_to_it_are_booked(policy,
         assert alive.loc[2, "alive"] == 1 and alive.loc[2, "messages_sent"] > 0
 
 
-def test_a_frozen_agent_is_given_up_within_zenohs_lease_on_the_default_thread_layout(tmp_path):
-    """Issue 58: the default thread layout keeps Zenoh's 10 s lease, so an agent that stops
-    answering altogether (SIGSTOP for 24 s: no keep-alive either, as a host cut off) is given up
-    by the hub after Zenoh's lease (measured: the ticks stall 14 s), not the single worker's minute,
-    and the run goes on without it."""
+def _frozen_agent_soak(tmp_path, seconds: float, max_stall: float, *sets: str) -> dict:
+    """A soak of 3 agents in which agent 1 is SIGSTOPped for 24 s at 2 s (no keep-alive either, as
+    a host cut off), going on without it once it is lost; its verdict."""
     plan = ChaosPlan.model_validate({"events": [{"action": "stop_agent", "at": [2], "for": 24, "agents": [1]}]})
     exp = experiment(
         "agents.count=3",
         "allocator={name: noop, peers: 2}",
         "run.stop_when_done=false",
         "run.on_agent_loss=continue",
-        "run.tick_timeout=40",
+        *sets,
     )
-    limits = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=30.0)
-    v = soak(exp, tmp_path / "soak", 30, plan, interval=0.5, limits=limits)
+    limits = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=max_stall)
+    v = soak(exp, tmp_path / "soak", seconds, plan, interval=0.5, limits=limits)
     assert v["passed"], v["breaches"]
     assert list(v["agents_lost"]) == ["1"], v["agents_lost"]
+    return v
+
+
+def test_a_frozen_agent_is_given_up_within_zenohs_lease_on_the_default_thread_layout(tmp_path):
+    """Issue 58: the default thread layout keeps Zenoh's 10 s lease, so an agent that stops
+    answering altogether (SIGSTOP for 24 s: no keep-alive either, as a host cut off) is given up
+    by the hub after Zenoh's lease (measured: the ticks stall 14 s), not the single worker's minute,
+    and the run goes on without it."""
+    v = _frozen_agent_soak(tmp_path, 30, 30.0, "run.tick_timeout=40")
     assert 8.0 < v["longest_stall_s"] < 20.0, v["longest_stall_s"]  # the lease, not the 24 s freeze
 
 
@@ -416,19 +423,7 @@ def test_on_the_single_worker_layout_a_frozen_agent_stalls_the_ticks_for_its_fre
     lease); when the agent runs again, its own side finds the hub's 10 s lease long expired and
     closes its session, and the hub loses it then: a tick or two after it froze, in ticks, and the
     freeze's length in wall time (docs/benchmarks.md, the key's description)."""
-    plan = ChaosPlan.model_validate({"events": [{"action": "stop_agent", "at": [2], "for": 24, "agents": [1]}]})
-    exp = experiment(
-        "agents.count=3",
-        "allocator={name: noop, peers: 2}",
-        "run.stop_when_done=false",
-        "run.on_agent_loss=continue",
-        "run.tick_timeout=60",
-        "run.zenoh_threads=single",
-    )
-    limits = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=50.0)
-    v = soak(exp, tmp_path / "soak", 36, plan, interval=0.5, limits=limits)
-    assert v["passed"], v["breaches"]
-    assert list(v["agents_lost"]) == ["1"], v["agents_lost"]
+    v = _frozen_agent_soak(tmp_path, 36, 50.0, "run.tick_timeout=60", "run.zenoh_threads=single")
     assert 22.0 < v["longest_stall_s"] < 40.0, v["longest_stall_s"]  # the freeze, not 10 s, not 60 s
     froze, lost = v["faults"][0]["tick"], v["agents_lost"]["1"]
     assert 0 < lost - froze <= 3, (froze, lost)
