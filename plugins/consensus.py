@@ -22,12 +22,13 @@ naming nothing. :func:`consensus_message` and
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
+import operator
+from collections.abc import Callable, Iterable, Iterator, MutableMapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from swarmbed.plugins.packed import pack_rows, read_tuples
+from swarmbed.plugins.packed import pack_columns, pack_rows, read_tuples
 from swarmbed.wire.state import state_type
 
 NONE = -1
@@ -64,16 +65,26 @@ def _read(data: dict, keys: tuple[tuple[str, np.dtype], ...]) -> list[tuple]:
 
 
 def consensus_message(
-    t: float, winners: Sequence[tuple] = (), stamps: Sequence[tuple] = (), delta: bool = False
+    t: float,
+    winners: Sequence[tuple] = (),
+    stamps: Sequence[tuple] = (),
+    delta: bool = False,
+    stamp_columns: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> dict:
-    """A message as it goes out: ``winners`` as (task, winner, bid), ``stamps`` as (agent, stamp)."""
+    """A message as it goes out: ``winners`` as (task, winner, bid), ``stamps`` as (agent, stamp)
+    rows, or ``stamp_columns`` as (agents, stamps) arrays."""
     out: dict[str, Any] = {"t": _compact(t)}
     if delta:
         out["d"] = 1
-    for rows, keys in ((winners, WINNER_KEYS), (stamps, STAMP_KEYS)):
-        if rows:  # an empty vector is left out
-            key, packed = pack_rows(rows, keys)
-            out[key] = packed
+    if winners:  # an empty vector is left out
+        key, packed = pack_rows(winners, WINNER_KEYS)
+        out[key] = packed
+    if stamp_columns is not None and len(stamp_columns[0]):
+        key, packed = pack_columns(stamp_columns, STAMP_KEYS)
+        out[key] = packed
+    elif stamps:
+        key, packed = pack_rows(stamps, STAMP_KEYS)
+        out[key] = packed
     return out
 
 
@@ -133,23 +144,135 @@ def table(i: int, k: int, zk: int, yk: float, zi: int, yi: float, compare: Calla
     return "leave"
 
 
+def better_masks(y1: np.ndarray, z1: Any, y2: np.ndarray, z2: Any) -> np.ndarray:
+    """:func:`better` over arrays."""
+    return (y1 > y2) | ((y1 == y2) & (z1 < z2))
+
+
+def table_masks(
+    i: int,
+    k: int,
+    zk: np.ndarray,
+    yk: np.ndarray,
+    zi: np.ndarray,
+    yi: np.ndarray,
+    newer_m: np.ndarray,
+    older_m: np.ndarray,
+    newer_n: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`table` over many tasks at once: (update, reset) as masks. ``newer_m``/``older_m``:
+    ``compare(zk)`` > 0 / < 0 per task; ``newer_n``: ``compare(zi)`` > 0. The cases are tested in
+    :func:`table`'s order, so that each task takes the action :func:`table` gives it; an update to
+    nobody (``zk`` NONE) comes back as the reset it is."""
+    a = zk == k  # sender thinks it wins
+    b = ~a & (zk == i)  # sender thinks the receiver wins
+    c = ~a & ~b & (zk == NONE)  # sender thinks nobody wins
+    d = ~(a | b | c)  # a third agent m = zk
+    zi_i, zi_k, zi_none = zi == i, zi == k, zi == NONE
+    fourth = ~zi_i & ~zi_none  # zi not in (i, NONE)
+    update = a & np.where(zi_i, better_masks(yk, k, yi, i), zi_k | zi_none | newer_n | better_masks(yk, k, yi, zi))
+    reset = (b | c) & (zi_k | (fourth & newer_n))  # 6, 7; 15, 16 (an update to nobody is a reset)
+    d_i = d & zi_i  # 9
+    d_k = d & ~zi_i & zi_k  # 10
+    d_m = d & ~zi_i & ~zi_k & ((zi == zk) | zi_none)  # 11, 13
+    d_n = d & ~(zi_i | zi_k | (zi == zk) | zi_none)  # 12
+    up_n = newer_m & (newer_n | better_masks(yk, zk, yi, zi))
+    update |= (d_i & newer_m & better_masks(yk, zk, yi, i)) | ((d_k | d_m) & newer_m) | (d_n & up_n)
+    reset |= (d_k & ~newer_m) | (d_n & ~up_n & newer_n & older_m)
+    return update, reset
+
+
+#: below this many tasks to decide, Table 1 runs task by task (numpy's calls cost more than they save)
+FEW_TASKS = 24
+
+
+class Stamps(MutableMapping):
+    """A consensus state's information timestamps as a map agent -> stamp, over its array (for
+    tests and plugins that read or set a few; the state itself works on the array)."""
+
+    def __init__(self, state: ConsensusState) -> None:
+        self._state = state
+
+    def __getitem__(self, agent: int) -> float:
+        s = self._state.stamps
+        if not (isinstance(agent, (int, np.integer)) and 0 <= agent < len(s)) or s[agent] == _NEVER:
+            raise KeyError(agent)
+        return float(s[agent])
+
+    def __setitem__(self, agent: int, stamp: float) -> None:
+        self._state.hear(np.array([agent]), np.array([stamp], dtype=float))
+
+    def __delitem__(self, agent: int) -> None:
+        self[agent]  # noqa: B018 (KeyError where it is unknown)
+        self._state.stamps[agent] = _NEVER
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(np.flatnonzero(self._state.stamps > _NEVER).tolist())
+
+    def __len__(self) -> int:
+        return int(np.count_nonzero(self._state.stamps > _NEVER))
+
+
+def _stamp_array(data: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(agents, stamps) a message names, as arrays; an agent named twice keeps its last stamp (a
+    map of them would), a negative agent id (no agent has one: a crafted message) is no news."""
+    for key, dtype in STAMP_KEYS:
+        if key in data:
+            raw = data[key]
+            if not isinstance(raw, bytes) or len(raw) % dtype.itemsize:
+                break
+            rows = np.frombuffer(raw, dtype)
+            agents, stamps = rows["agent"].astype(np.int64), rows["stamp"].astype(float)
+            if len(agents) > 1 and not (agents[1:] > agents[:-1]).all():  # ours are sorted, each once
+                last = len(agents) - 1 - np.unique(agents[::-1], return_index=True)[1]
+                agents, stamps = agents[last], stamps[last]
+            keep = agents >= 0
+            return (agents, stamps) if keep.all() else (agents[keep], stamps[keep])
+    return np.zeros(0, np.int64), np.zeros(0)
+
+
 @state_type
 class ConsensusState:
-    """One agent's CBBA knowledge and bundle."""
+    """One agent's CBBA knowledge and bundle. Winners and bids are maps over the tasks it knows of;
+    the information timestamps an array over agent ids (``-inf``: never heard of), as every
+    message names every agent heard of and a receiver compares and merges them all."""
 
     def __init__(self, agent_id: int, full_every: int = 1) -> None:
         self.agent_id = agent_id
         self.full_every = full_every
         self.y: dict[int, float] = {}
         self.z: dict[int, int] = {}
-        self.s: dict[int, float] = {}  # agent -> simulated time of the latest information from it
+        #: agent -> simulated time of the latest information from it (never its own: that is ``now``)
+        self.stamps = np.full(agent_id + 1, _NEVER)
         self.bundle: list[int] = []
         self.path: list[int] = []
         self.now = 0.0
         self.sent = 0  # messages made
         self.told: dict[int, tuple[int, float]] = {}  # task -> (winner, bid) as the last message had it
-        self.told_s: dict[int, float] = {}  # agent -> timestamp as the last message had it
+        self.told_s = np.full(0, _NEVER)  # the timestamps as the last message had them
         self.bid_on: set[int] = set()  # tasks this agent bid on since its knowledge was last cleared
+
+    @property
+    def s(self) -> Stamps:
+        """The timestamps as a map agent -> stamp."""
+        return Stamps(self)
+
+    def _cover(self, top: int) -> None:
+        """Grow the timestamps to hold agent ids up to ``top``."""
+        if top >= len(self.stamps):
+            self.stamps = np.concatenate([self.stamps, np.full(top + 1 - len(self.stamps), _NEVER)])
+
+    def hear(self, agents: np.ndarray, stamps: np.ndarray) -> None:
+        """Take each stamp newer than the one known (never one of this agent's own)."""
+        if len(agents):
+            self._cover(int(agents.max()))
+            known = self.stamps[agents]
+            newer = (stamps > known) & (agents != self.agent_id)
+            self.stamps[agents[newer]] = stamps[newer]
+
+    def _known_stamps(self) -> tuple[np.ndarray, np.ndarray]:
+        agents = np.flatnonzero(self.stamps > _NEVER)
+        return agents, self.stamps[agents]
 
     def message(self) -> dict:
         """The state for neighbours: whole, or (``full_every`` > 1) what changed since the last one."""
@@ -160,18 +283,22 @@ class ConsensusState:
         winners = {t: (self.z[t], self.y[t]) for t in self.z}
         delta = None
         if not due_whole:
-            told, told_s = self.told, self.told_s
+            told = self.told
             changed = [(t, w, b) for t, (w, b) in winners.items() if told.get(t) != (w, b)]
             dropped = [(t, NONE, 0.0) for t in told.keys() - winners.keys()]
-            stamps = [(a, ts) for a, ts in sorted(self.s.items()) if told_s.get(a) != ts]
-            if len(changed) + len(dropped) + len(stamps) < len(winners) + len(self.s):  # else whole is smaller
-                delta = consensus_message(self.now, sorted(changed + dropped), stamps, delta=True)
-        self.told, self.told_s = winners, dict(self.s)
+            told_s = np.full(len(self.stamps), _NEVER)
+            told_s[: len(self.told_s)] = self.told_s[: len(self.stamps)]
+            agents = np.flatnonzero((self.stamps > _NEVER) & (self.stamps != told_s))
+            if len(changed) + len(dropped) + len(agents) < len(winners) + len(self._known_stamps()[0]):
+                delta = consensus_message(
+                    self.now, sorted(changed + dropped), delta=True, stamp_columns=(agents, self.stamps[agents])
+                )
+        self.told, self.told_s = winners, self.stamps.copy()
         return delta or self._whole()
 
     def _whole(self) -> dict:
         z, y = self.z, self.y
-        return consensus_message(self.now, [(t, z[t], y[t]) for t in sorted(z)], sorted(self.s.items()))
+        return consensus_message(self.now, [(t, z[t], y[t]) for t in sorted(z)], stamp_columns=self._known_stamps())
 
     def receive(self, sender: int, data: dict, ignore: Iterable[int] = (), within: set[int] | None = None) -> None:
         """Apply Table 1 to every task in a neighbour's message, then merge its timestamps.
@@ -184,11 +311,13 @@ class ConsensusState:
             return  # not a message of ours: nothing in it
         delta = bool(data.get("d"))
         entries = _read(data, WINNER_KEYS)
-        if any(a[0] >= b[0] for a, b in zip(entries, entries[1:])):  # ours are sorted, each task once
+        tasks = [e[0] for e in entries]
+        if not all(map(operator.lt, tasks, tasks[1:])):  # ours are sorted, each task once
             first: dict[int, tuple] = {}
             for entry in entries:
                 first.setdefault(entry[0], entry)  # a task named twice: the first entry counts
             entries = [first[t] for t in sorted(first)]
+            tasks = [e[0] for e in entries]
         z, y = self.z, self.y
         # the tasks whose belief differs from ours (identical entries leave every table case unchanged):
         # a delta names only the tasks it changes (NONE: a winner the sender dropped); a whole message
@@ -197,38 +326,73 @@ class ConsensusState:
         theirs = {t: (wk, bk) for t, wk, bk in entries if zget(t, NONE) != wk or yget(t, 0.0) != bk}
         differing = set(theirs)
         if not delta:
-            named = {e[0] for e in entries}
+            named = set(tasks)
             differing.update(t for t in z if t not in named)
         if within is not None:
             differing = {t for t in differing if t in within and t in theirs}
-        sk: dict[int, float] = dict(_read(data, STAMP_KEYS))
-        sk[k] = data["t"]
         skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
+        order = [j for j in sorted(differing) if j not in skip]
+        # the sender's timestamps over agent ids: every agent it names, itself at the message's time;
+        # an agent a delta leaves out is no news (its stamp as ours), one a whole message leaves out never heard of
+        agents, stamps = _stamp_array(data)
+        self._cover(max(k, int(agents.max()) if len(agents) else 0))
+        mine = np.append(self.stamps, _NEVER)  # the last entry: any id we hold no stamp for
+        mine[i] = self.now
+        their = mine.copy() if delta else np.full(len(mine), _NEVER)
+        their[agents] = stamps
+        their[k] = data["t"]
+        their[-1] = mine[-1] = _NEVER
+        if order:
+            self._decide(order, theirs, mine, their, k)
+        their[i] = _NEVER  # never news of ourselves
+        self.stamps = np.fmax(self.stamps, their[:-1])  # a NaN stamp is no news
 
-        def compare(m: int) -> int:
-            mine = self.now if m == i else self.s.get(m, _NEVER)
-            their = sk.get(m, mine if delta else _NEVER)  # a delta says nothing new of an agent it leaves out
-            return (their > mine) - (their < mine)
+    def _decide(
+        self, order: list[int], theirs: dict[int, tuple[int, float]], mine: np.ndarray, their: np.ndarray, k: int
+    ) -> None:
+        """Table 1 on each task of ``order`` (sorted), with the sender's belief ``theirs`` (a task it
+        does not name: nobody wins) and both sides' timestamps over agent ids (``mine``, ``their``:
+        the last entry stands for any agent either holds none for)."""
+        i, z, y = self.agent_id, self.z, self.y
+        out = len(mine) - 1
+        if len(order) < FEW_TASKS:
+            m_list, t_list = mine.tolist(), their.tolist()
 
-        for j in sorted(differing):
-            if j in skip:
-                continue
-            zk, yk = theirs.get(j, (NONE, 0.0))
-            zi, yi = z.get(j, NONE), y.get(j, 0.0)
-            if zk == zi and yk == yi:
-                continue
-            action = table(i, k, zk, yk, zi, yi, compare)
-            if action == "update":
-                if zk == NONE:
+            def compare(m: int) -> int:
+                at = m if 0 <= m < out else out
+                return (t_list[at] > m_list[at]) - (t_list[at] < m_list[at])
+
+            for j in order:
+                zk, yk = theirs.get(j, (NONE, 0.0))
+                zi, yi = z.get(j, NONE), y.get(j, 0.0)
+                if zk == zi and yk == yi:
+                    continue
+                action = table(i, k, zk, yk, zi, yi, compare)
+                if action == "update" and zk != NONE:
+                    z[j], y[j] = zk, yk
+                elif action != "leave":
                     self.reset(j)
-                else:
-                    self.z[j], self.y[j] = zk, yk
-            elif action == "reset":
+            return
+        zk_list = [theirs.get(j, (NONE, 0.0)) for j in order]
+        zk = np.array([w for w, _ in zk_list], dtype=np.int64)
+        yk = np.array([b for _, b in zk_list], dtype=float)
+        zi = np.array([z.get(j, NONE) for j in order], dtype=np.int64)
+        yi = np.array([y.get(j, 0.0) for j in order], dtype=float)
+        at_m = np.where((zk >= 0) & (zk < out), zk, out)
+        at_n = np.where((zi >= 0) & (zi < out), zi, out)
+        newer_m, older_m = their[at_m] > mine[at_m], their[at_m] < mine[at_m]
+        newer_n = their[at_n] > mine[at_n]
+        update, reset = table_masks(i, k, zk, yk, zi, yi, newer_m, older_m, newer_n)
+        same = (zk == zi) & (yk == yi)
+        update &= ~same
+        reset = (reset | (update & (zk == NONE))) & ~same
+        update &= zk != NONE
+        for n in np.flatnonzero(update | reset).tolist():
+            j = order[n]
+            if update[n]:
+                z[j], y[j] = int(zk[n]), float(yk[n])
+            else:
                 self.reset(j)
-        known = self.s.get
-        newer = {m: ts for m, ts in sk.items() if ts > known(m, _NEVER)}
-        newer.pop(i, None)
-        self.s.update(newer)
 
     def reset(self, task: int) -> None:
         self.z.pop(task, None)
@@ -273,8 +437,12 @@ class ConsensusState:
         """Forget wins by agents not heard from since ``older_than`` (lost agents stop mattering).
         Called every tick over every known win: the few distinct winners are checked first, and the
         wins are walked only when one of them has gone quiet."""
-        heard = self.s.get
-        stale = {w for w in set(self.z.values()) if w != self.agent_id and heard(w, _NEVER) < older_than}
+        heard, out = self.stamps, len(self.stamps)
+        stale = {
+            w
+            for w in set(self.z.values())
+            if w != self.agent_id and (heard[w] if 0 <= w < out else _NEVER) < older_than
+        }
         if stale:
             for task in [t for t, w in self.z.items() if w in stale]:
                 self.reset(task)

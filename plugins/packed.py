@@ -71,6 +71,19 @@ def pack_rows(rows: Sequence[tuple], keys: Sequence[tuple[Key, np.dtype]]) -> tu
     return key, packed.tobytes()
 
 
+def pack_columns(columns: Sequence[np.ndarray], keys: Sequence[tuple[Key, np.dtype]]) -> tuple[Key, bytes]:
+    """:func:`pack_rows` of the rows that ``columns`` (one array per field) hold, without making a
+    Python tuple per row where there are many: the same key and bytes."""
+    n = len(columns[0])
+    if n < FEW_ROWS:
+        return pack_rows(list(zip(*[c.tolist() for c in columns])), keys)
+    wide = np.empty(n, dtype=keys[-1][1])
+    for name, column in zip(wide.dtype.names or (), columns):
+        wide[name] = column
+    key, packed = _narrowest(wide, keys)
+    return key, packed.tobytes()
+
+
 _STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "i8": "q", "f4": "f", "f8": "d"}
 
 

@@ -1,5 +1,6 @@
 """Algorithm properties on random static instances with full connectivity (fixed seeds)."""
 
+import itertools
 import json
 import math
 
@@ -9,8 +10,9 @@ import pytest
 from swarmbed.experiments.checks.allocator import CLEAN_NETWORK as CLEAN
 from swarmbed.experiments.checks.allocator import random_instance, run_all, simulate
 from swarmbed.extension import HALT, HOLD, LocalView, Message, TaskInfo
+from swarmbed.plugins import consensus
 from swarmbed.plugins.cbba import CBBA
-from swarmbed.plugins.consensus import NONE, ConsensusState, consensus_message, read_message, table
+from swarmbed.plugins.consensus import NONE, ConsensusState, consensus_message, read_message, table, table_masks
 from swarmbed.plugins.grape import VOID, pack_pairs, read_pairs
 from swarmbed.plugins.registry import entries, make
 from swarmbed.wire.codec import pack, unpack
@@ -105,7 +107,7 @@ def test_cbba_messages_between_whole_ones_carry_what_changed_and_a_missed_one_is
     a, b = ConsensusState(0, full_every=3), ConsensusState(1, full_every=3)
     a.add(10, 5.0)
     a.add(11, 4.0)
-    a.s = {2: 1.0, 3: 1.0}
+    a.s.update({2: 1.0, 3: 1.0})
     whole = a.message()
     _t, winners, stamps, is_delta = read_message(whole)
     assert not is_delta and len(winners) == 2 and len(stamps) == 2
@@ -144,6 +146,69 @@ def test_cbba_receiver_table_entries():
     assert t(0, 1, 2, 3.0, 3, 9.0, newer_all) == "update"  # 12
     assert t(0, 1, 2, 3.0, 3, 9.0, lambda a: 1 if a == 3 else -1) == "reset"  # 12
     assert t(0, 1, 2, 3.0, 3, 9.0, older_all) == "leave"  # 12
+
+
+def test_table_1_over_arrays_takes_the_scalar_tables_action_in_every_case():
+    """Every combination of sender and receiver belief (agents NONE, 0-3; bids 0-2) and of how the
+    sender's news of the two winners named compares with the receiver's (older, same, newer), for
+    receiver 0 and sender 1: :func:`table_masks` gives :func:`table`'s action in all 3,600 cases."""
+    agents, bids, cmps = (NONE, 0, 1, 2, 3), (0.0, 1.0, 2.0), (-1, 0, 1)
+    cases = list(itertools.product(agents, bids, agents, bids, cmps, cmps))
+    zk, yk, zi, yi, cm, cn = (np.array(col) for col in zip(*cases))
+    # a winner named on both sides is one agent: its comparison is the same
+    cn = np.where(zi == zk, cm, cn)
+    update, reset = table_masks(0, 1, zk, yk, zi, yi, cm > 0, cm < 0, cn > 0)
+    for n, (a, ya, b, yb, _m, _n) in enumerate(cases):
+        compare = {a: int(cm[n]), b: int(cn[n])}.get
+        want = table(0, 1, a, ya, b, yb, lambda m: compare(m, 0))  # noqa: B023 (called at once)
+        want = "reset" if want == "update" and a == NONE else want  # an update to nobody is a reset
+        got = "update" if update[n] else "reset" if reset[n] else "leave"
+        assert got == want, (a, ya, b, yb, int(cm[n]), int(cn[n]))
+        assert not (update[n] and reset[n])
+
+
+def test_a_receive_takes_the_same_decisions_task_by_task_and_over_arrays():
+    """Both paths of a receive (a few tasks decided one by one, many at once over arrays) leave the
+    same winners, bids and timestamps on random beliefs, whole messages and deltas."""
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        tasks = int(rng.integers(1, 3 * consensus.FEW_TASKS))
+        states = []
+        for _ in range(2):
+            st = ConsensusState(0)
+            st.now = float(rng.integers(0, 4))
+            for t in range(tasks):
+                if rng.random() < 0.7:
+                    st.z[t], st.y[t] = int(rng.integers(0, 5)), float(rng.integers(0, 3))
+            for a in range(1, 5):
+                if rng.random() < 0.8:
+                    st.s[a] = float(rng.integers(0, 4))
+            states.append(st)
+        sender = ConsensusState(1)
+        sender.z.update({t: int(w) for t, w in zip(range(tasks), rng.integers(0, 5, tasks)) if rng.random() < 0.7})
+        sender.y.update({t: float(rng.integers(0, 3)) for t in sender.z})
+        sender.s.update({a: float(rng.integers(0, 4)) for a in (0, 2, 3, 4) if rng.random() < 0.8})
+        sender.now = float(rng.integers(0, 4))
+        msg = sender.message()
+        if trial % 2:
+            msg["d"] = 1
+        ref, fast = (_copy_state(states[0]) for _ in range(2))
+        few = consensus.FEW_TASKS
+        try:
+            consensus.FEW_TASKS = 10**9  # task by task
+            ref.receive(1, msg)
+            consensus.FEW_TASKS = 0  # over arrays
+            fast.receive(1, msg)
+        finally:
+            consensus.FEW_TASKS = few
+        assert (ref.z, ref.y, dict(ref.s)) == (fast.z, fast.y, dict(fast.s)), trial
+
+
+def _copy_state(st: ConsensusState) -> ConsensusState:
+    out = ConsensusState(st.agent_id)
+    out.now, out.z, out.y = st.now, dict(st.z), dict(st.y)
+    out.s.update(st.s)
+    return out
 
 
 def _grape_utility(inst, params, agent, task, size):
