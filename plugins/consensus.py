@@ -355,42 +355,49 @@ class ConsensusState:
         the last entry stands for any agent either holds none for)."""
         i, z, y = self.agent_id, self.z, self.y
         out = len(mine) - 1
-        if len(order) < FEW_TASKS:
-            m_list, t_list = mine.tolist(), their.tolist()
-
-            def compare(m: int) -> int:
-                at = m if 0 <= m < out else out
-                return (t_list[at] > m_list[at]) - (t_list[at] < m_list[at])
-
-            for j in order:
-                zk, yk = theirs.get(j, (NONE, 0.0))
-                zi, yi = z.get(j, NONE), y.get(j, 0.0)
-                if zk == zi and yk == yi:
-                    continue
-                action = table(i, k, zk, yk, zi, yi, compare)
-                if action == "update" and zk != NONE:
-                    z[j], y[j] = zk, yk
-                elif action != "leave":
-                    self.reset(j)
+        if len(order) >= FEW_TASKS:
+            self._decide_over_arrays(order, theirs, mine, their, k)
             return
-        zk_list = [theirs.get(j, (NONE, 0.0)) for j in order]
-        zk = np.array([w for w, _ in zk_list], dtype=np.int64)
-        yk = np.array([b for _, b in zk_list], dtype=float)
-        zi = np.array([z.get(j, NONE) for j in order], dtype=np.int64)
-        yi = np.array([y.get(j, 0.0) for j in order], dtype=float)
-        at_m = np.where((zk >= 0) & (zk < out), zk, out)
-        at_n = np.where((zi >= 0) & (zi < out), zi, out)
+        m_list, t_list = mine.tolist(), their.tolist()
+
+        def compare(m: int) -> int:
+            at = m if 0 <= m < out else out
+            return (t_list[at] > m_list[at]) - (t_list[at] < m_list[at])
+
+        for j in order:
+            zk, yk = theirs.get(j, (NONE, 0.0))
+            zi, yi = z.get(j, NONE), y.get(j, 0.0)
+            if zk == zi and yk == yi:
+                continue
+            action = table(i, k, zk, yk, zi, yi, compare)
+            if action == "update" and zk != NONE:
+                z[j], y[j] = zk, yk
+            elif action != "leave":
+                self.reset(j)
+
+    def _decide_over_arrays(
+        self, order: list[int], theirs: dict[int, tuple[int, float]], mine: np.ndarray, their: np.ndarray, k: int
+    ) -> None:
+        """:meth:`_decide` for many tasks: Table 1 as masks (:func:`table_masks`)."""
+        i, z, y, out = self.agent_id, self.z, self.y, len(mine) - 1
+        beliefs = [theirs.get(j, (NONE, 0.0)) for j in order]
+        wk = np.array([w for w, _ in beliefs], dtype=np.int64)
+        bk = np.array([b for _, b in beliefs], dtype=float)
+        wi = np.array([z.get(j, NONE) for j in order], dtype=np.int64)
+        bi = np.array([y.get(j, 0.0) for j in order], dtype=float)
+        at_m = np.where((wk >= 0) & (wk < out), wk, out)
+        at_n = np.where((wi >= 0) & (wi < out), wi, out)
         newer_m, older_m = their[at_m] > mine[at_m], their[at_m] < mine[at_m]
         newer_n = their[at_n] > mine[at_n]
-        update, reset = table_masks(i, k, zk, yk, zi, yi, newer_m, older_m, newer_n)
-        same = (zk == zi) & (yk == yi)
+        update, reset = table_masks(i, k, wk, bk, wi, bi, newer_m, older_m, newer_n)
+        same = (wk == wi) & (bk == bi)
         update &= ~same
-        reset = (reset | (update & (zk == NONE))) & ~same
-        update &= zk != NONE
+        reset = (reset | (update & (wk == NONE))) & ~same
+        update &= wk != NONE
         for n in np.flatnonzero(update | reset).tolist():
             j = order[n]
             if update[n]:
-                z[j], y[j] = int(zk[n]), float(yk[n])
+                z[j], y[j] = int(wk[n]), float(bk[n])
             else:
                 self.reset(j)
 
