@@ -21,8 +21,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.config import resolve_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.config import resolve_experiment
 from swarmbed.wire.codec import EMPTY_INBOX, encode_agent_out, encode_inbox, encode_tick
 from swarmbed.wire.observation import empty_tasks
 from swarmbed.wire.schema import agent_spec

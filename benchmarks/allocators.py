@@ -26,8 +26,8 @@ from pathlib import Path
 
 from lockstep import floor as barrier
 
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -18,9 +18,9 @@ import time
 from pathlib import Path
 
 from swarmbed.envs import SwarmbedParallelEnv
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.inprocess import run_in_process
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.inprocess import run_in_process
+from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -22,9 +22,9 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-from swarmbed.experiments.campaigns import executors
-from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
-from swarmbed.experiments.folders import ATTEMPTS
+from swarmbed.campaigns import executors
+from swarmbed.campaigns.sweep import load_sweep, run_sweep
+from swarmbed.results.folders import ATTEMPTS
 
 SAR = Path(__file__).resolve().parent.parent / "experiments" / "sar" / "base_R20_V100.yaml"
 

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmbed.experiments.hosts.netns import Lab, LabError, make_lab
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.hosts.netns import Lab, LabError, make_lab
+from swarmbed.launch import config as cfg
+from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv")

@@ -16,15 +16,15 @@ import statistics
 import subprocess
 import sys
 
-#: verb -> the modules its command imports (experiments/cli.py's cmd_* functions)
+#: verb -> the modules its command imports (cli/main.py's cmd_* functions)
 VERBS = {
     "--help": [],
-    "run": ["swarmbed.experiments.launch.runner", "swarmbed.experiments.launch.hub"],
-    "sweep": ["swarmbed.experiments.campaigns.sweep"],
-    "report": ["swarmbed.experiments.views.report"],
-    "replay": ["swarmbed.experiments.views.replay"],
-    "analyze": ["swarmbed.experiments.views.analyze"],
-    "watch": ["swarmbed.experiments.views.watch"],
+    "run": ["swarmbed.launch.runner", "swarmbed.launch.hub"],
+    "sweep": ["swarmbed.campaigns.sweep"],
+    "report": ["swarmbed.results.report"],
+    "replay": ["swarmbed.results.replay"],
+    "analyze": ["swarmbed.results.analyze"],
+    "watch": ["swarmbed.results.watch"],
     "params": [],
     "credentials": ["swarmbed.wire.credentials"],
 }
@@ -50,7 +50,7 @@ def main() -> None:
     print(f"floor (numpy alone): {floor / 1000:.0f} ms")
     print(f"{'verb':<12} {'import ms':>10} {'x floor':>8}")
     for verb, modules in VERBS.items():
-        us = statistics.median(import_us(["swarmbed.experiments.cli", *modules]) for _ in range(args.repeat))
+        us = statistics.median(import_us(["swarmbed.cli.main", *modules]) for _ in range(args.repeat))
         print(f"{verb:<12} {us / 1000:>10.0f} {us / floor:>8.1f}")
 
 

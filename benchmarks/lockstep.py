@@ -38,10 +38,10 @@ import psutil
 import zenoh
 
 import swarmbed
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.hub import HubOptions, open_hub
-from swarmbed.experiments.launch.launcher import wakeups
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.hub import HubOptions, open_hub
+from swarmbed.launch.launcher import wakeups
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.session import SINGLE_WORKER
 
 ROOT = Path(__file__).resolve().parent.parent

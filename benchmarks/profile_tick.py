@@ -23,9 +23,9 @@ import statistics
 import tempfile
 from pathlib import Path
 
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.hub import HubOptions
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.hub import HubOptions
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire import stages
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,8 +15,8 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -24,11 +24,11 @@ import threading
 import time
 from pathlib import Path
 
-from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.hub import HubOptions
-from swarmbed.experiments.launch.runner import run_experiment
-from swarmbed.experiments.views.report import report
+from swarmbed.campaigns.sweep import load_sweep, run_sweep
+from swarmbed.launch import config as cfg
+from swarmbed.launch.hub import HubOptions
+from swarmbed.launch.runner import run_experiment
+from swarmbed.results.report import report
 from swarmbed.wire.session import free_loopback_endpoint
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -6,7 +6,7 @@ thread of this process; ``step(actions)`` hands every agent's decision for the t
 coordinator, which puts it in that agent's tick sample; the agent's allocator answers with it, its
 tree runs it, the world and the radio move on one tick, and the next tick's observations come back.
 ``engine="inprocess"``: the learner owns the loop; every agent's runtime and the radio step in this
-process (:class:`~swarmbed.experiments.launch.inprocess.InProcessRun`), one tick a ``step``, with no
+process (:class:`~swarmbed.launch.inprocess.InProcessRun`), one tick a ``step``, with no
 thread and no queue. Either way the bytes, the ledger and the result files are those of a normal
 run, and the same seed and actions give the same observations and files on both engines
 (``docs/learning.md``).
@@ -54,11 +54,11 @@ try:
 except ImportError as exc:  # an optional extra
     raise ImportError("swarmbed.envs needs the envs extra: pip install 'swarmbed[envs]'") from exc
 
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.access import claim_folder, remove_orphaned_folders
-from swarmbed.experiments.launch.inprocess import ENGINES, InProcessRun
-from swarmbed.experiments.launch.runner import RunResult, run_experiment
 from swarmbed.extension.view import coalitions_of
+from swarmbed.launch import config as cfg
+from swarmbed.launch.access import claim_folder, remove_orphaned_folders
+from swarmbed.launch.inprocess import ENGINES, InProcessRun
+from swarmbed.launch.runner import RunResult, run_experiment
 from swarmbed.plugins.external import ANNOUNCE, CLAIM, DEFER
 from swarmbed.wire.codec import delivered_in, unpack
 from swarmbed.wire.errors import WireError

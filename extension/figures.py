@@ -1,7 +1,7 @@
 """The figures ``swarmbed analyze`` draws for a scenario's sweeps, named by the scenario.
 
 A scenario chooses *what* to plot (which summary metrics, in which kind of figure) and
-``swarmbed.experiments.views.analyze`` owns *how* (style, colours, confidence intervals, files), so
+``swarmbed.results.analyze`` owns *how* (style, colours, confidence intervals, files), so
 a new scenario gets its paper's figures with no edit to the analysis: it lists them in
 ``Scenario.figures`` and labels its metrics in ``Scenario.metric_labels``. Every figure draws one
 value per run from the sweep's table, except metrics the summary holds as one value per agent

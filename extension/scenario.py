@@ -5,7 +5,7 @@ observation (part of the wire contract), the behavior-tree nodes and default tre
 the metrics that measure its outcome, and it builds the :class:`World` that the coordinator drives.
 The coordinator, the agent runtime and the CLI know nothing else about scenarios, so a new one is
 one module plus one registry line (``swarmbed.plugins.registry``) or a ``swarmbed.scenarios``
-entry point in another package; ``swarmbed.experiments.checks.check_scenario`` checks it.
+entry point in another package; ``swarmbed.checks.check_scenario`` checks it.
 
 Agents build a scenario too (from the same resolved parameters) for its sensing range and its
 helpers (``random_point``); they never build its world.

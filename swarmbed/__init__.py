@@ -1,8 +1,8 @@
 """swarmbed: a Zenoh-networked emulation testbed for decentralized multi-robot task allocation.
 
-The project's folders (``wire/``, ``coordinator/``, ``agent_runtime/``, ``netem/``, ``plugins/``,
-``experiments/``) stay at the top of the repository and install as subpackages of this one
-namespace (``swarmbed.wire``, ``swarmbed.coordinator``, ...): see ``pyproject.toml``.
+The project's folders stay at the top of the repository and install as subpackages of this one
+namespace (``wire/`` is ``swarmbed.wire``, ``cli/`` is ``swarmbed.cli``, ...): pyproject.toml lists
+them, docs/ARCHITECTURE.md says what each holds and what it may import.
 """
 
 import os as _os
@@ -19,7 +19,3 @@ except PackageNotFoundError:  # running from a checkout that was never installed
 _checkout = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__)))
 if all(_os.path.isfile(_os.path.join(_checkout, name, "__init__.py")) for name in ("wire", "netem", "coordinator")):
     __path__.append(_checkout)
-
-from swarmbed import _renamed as _renamed  # noqa: E402 - old module names import, with a DeprecationWarning
-
-_renamed.install()

@@ -2,6 +2,6 @@
 
 import sys
 
-from swarmbed.experiments.cli import main
+from swarmbed.cli.main import main
 
 sys.exit(main())

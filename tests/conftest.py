@@ -11,7 +11,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from swarmbed.experiments.launch import config as cfg
+from swarmbed.launch import config as cfg
 from swarmbed.wire.credentials import Identity, write_credentials
 
 pytest_plugins = ("tests.netns",)  # the `lab` fixture: stand-in hosts in network namespaces
@@ -39,7 +39,7 @@ def reference_run(exp: cfg.Experiment, out_dir: Path):
     """The run a test holds a real one against ("watching, swapping, attacking, spreading over hosts
     changes no result"), stepped by the in-process engine: byte for byte the files of a real run of
     the same configuration (tests/test_engine.py), in a fraction of its time."""
-    from swarmbed.experiments.launch.inprocess import run_in_process
+    from swarmbed.launch.inprocess import run_in_process
 
     return run_in_process(exp, out_dir)
 
@@ -47,7 +47,7 @@ def reference_run(exp: cfg.Experiment, out_dir: Path):
 def sweep_in_process(spec: Path, out: Path, *extra: str):
     """A sweep file's runs on the in-process engine, two at once, and its table: for tests whose
     point is what is made of a sweep's results (tables, statistics, figures, hostile folders)."""
-    from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
+    from swarmbed.campaigns.sweep import load_sweep, run_sweep
 
     return run_sweep(load_sweep(spec, extra=list(extra)), out, jobs=2, progress=False, in_process=True)
 

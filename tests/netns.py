@@ -2,7 +2,7 @@
 
 import pytest
 
-from swarmbed.experiments.hosts.netns import LabError, make_lab
+from swarmbed.hosts.netns import LabError, make_lab
 
 
 @pytest.fixture

@@ -18,9 +18,9 @@ import psutil
 import pytest
 import zenoh
 
-from swarmbed.experiments.launch.access import RunAccess, access_rules
-from swarmbed.experiments.launch.hub import HubOptions
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.access import RunAccess, access_rules
+from swarmbed.launch.hub import HubOptions
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.codec import decode_traffic, encode_agent_out, pack
 from swarmbed.wire.credentials import CredentialsError, Identity, check_admitted, read_credentials, write_credentials
 from swarmbed.wire.keys import Keys

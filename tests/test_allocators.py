@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.experiments.checks.allocator import CLEAN_NETWORK as CLEAN
-from swarmbed.experiments.checks.allocator import random_instance, run_all, simulate
+from swarmbed.checks.allocator import CLEAN_NETWORK as CLEAN
+from swarmbed.checks.allocator import random_instance, run_all, simulate
 from swarmbed.extension import HALT, HOLD, LocalView, Message, TaskInfo
 from swarmbed.plugins import consensus
 from swarmbed.plugins.cbba import CBBA
@@ -269,7 +269,7 @@ def test_grape_holds_its_agents_still_while_the_partition_converges(hold, stop, 
 def test_a_halted_agent_stops_at_once_where_a_held_one_brakes():
     """The world's side of HALT: ``halt`` zeroes the speed this tick; ``stop`` brakes within the
     acceleration limit (the agent rolls on)."""
-    from swarmbed.experiments.launch.config import resolve_experiment
+    from swarmbed.launch.config import resolve_experiment
     from tests.conftest import experiment
 
     exp = experiment("agents.count=1", "scenario.initial_tasks=1", "run.seed=3")
@@ -612,7 +612,7 @@ def test_a_leader_knows_only_what_reached_it_and_the_lowest_id_in_reach_leads():
     """Agents 0 and 1 stand together, 2 and 3 together, far apart, range 50. With a fixed leader 0,
     agents 2 and 3 never reach it: they are never in its assignment and, hearing nothing, explore.
     With ``lowest_alive`` each group elects its own lowest id."""
-    from swarmbed.experiments.checks.allocator import Instance
+    from swarmbed.checks.allocator import Instance
 
     inst = Instance(
         agents=[(0.0, 0.0), (10.0, 0.0), (500.0, 0.0), (510.0, 0.0)],
@@ -678,7 +678,7 @@ def test_a_follower_that_hears_no_leader_lets_its_fallback_allocator_decide(tmp_
     allocator decide (here FCG), which observes and talks over the radio all along; without one it
     explores. With a 1 m radio no follower hears the fixed leader, so only the fallback gets work
     done; its claims are real messages of the run."""
-    from swarmbed.experiments.launch.inprocess import run_in_process
+    from swarmbed.launch.inprocess import run_in_process
 
     done = {}
     for name, allocator in (
@@ -695,7 +695,7 @@ def test_a_follower_that_hears_no_leader_lets_its_fallback_allocator_decide(tmp_
 
 
 def test_a_fallback_that_is_not_an_allocator_is_refused_where_the_experiment_is_loaded():
-    from swarmbed.experiments.launch.config import ConfigError
+    from swarmbed.launch.config import ConfigError
 
     with pytest.raises(ConfigError) as exc:
         experiment("allocator={name: hungarian, fallback: nosuch}")

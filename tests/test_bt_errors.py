@@ -5,7 +5,7 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from swarmbed.bt import BTError, load_tree
-from swarmbed.experiments.cli import main
+from swarmbed.cli.main import main
 from swarmbed.extension.nodes import SPACE_TREE, space_registry
 
 

@@ -2,8 +2,8 @@
 
 import pytest
 
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.config import resolve_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.config import resolve_experiment
 from tests.conftest import QUICKSTART, ROOT
 
 
@@ -117,7 +117,7 @@ def test_a_tree_named_in_the_file_is_read_from_the_files_folder(tmp_path, monkey
 
 
 def test_run_help_shows_no_python_internals(capsys):
-    from swarmbed.experiments.cli import main
+    from swarmbed.cli.main import main
 
     with pytest.raises(SystemExit):
         main(["run", "--help"])
@@ -183,7 +183,7 @@ def test_a_billion_laughs_sweep_file_is_refused_at_once(tmp_path):
     """A few hundred bytes of nested aliases expand tenfold per level: refused, not expanded."""
     import time
 
-    from swarmbed.experiments.campaigns.sweep import load_sweep
+    from swarmbed.campaigns.sweep import load_sweep
 
     lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x, x]"]
     lines += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]" for i in range(1, 9)]
@@ -205,7 +205,7 @@ def test_a_section_set_as_a_mapping_keeps_its_other_keys(tmp_path):
 
 
 def test_errors_name_what_the_user_wrote_not_our_classes(tmp_path, capsys):
-    from swarmbed.experiments.cli import main
+    from swarmbed.cli.main import main
 
     with pytest.raises(cfg.ConfigError, match=r"^--set run=5: must be a section \(a mapping of keys\), not 5$"):
         cfg.load(QUICKSTART, ["run=5"])
@@ -222,7 +222,7 @@ def test_errors_name_what_the_user_wrote_not_our_classes(tmp_path, capsys):
 
 
 def test_a_sweep_names_the_scenario_whose_value_is_bad(tmp_path):
-    from swarmbed.experiments.campaigns.sweep import experiment_for, load_sweep
+    from swarmbed.campaigns.sweep import experiment_for, load_sweep
 
     sweep = load_sweep(QUICKSTART, grid=["network.loss=0.1,7"])
     bad = sweep.scenarios[1]
@@ -231,7 +231,7 @@ def test_a_sweep_names_the_scenario_whose_value_is_bad(tmp_path):
 
 
 def test_params_describe_every_strategy_parameter_in_whole_sentences(capsys):
-    from swarmbed.experiments.cli import main
+    from swarmbed.cli.main import main
 
     assert main(["params", "cbba-etc"]) == 0
     out = capsys.readouterr().out
@@ -243,7 +243,7 @@ def test_params_describe_every_strategy_parameter_in_whole_sentences(capsys):
 
 
 def test_check_allocator_finds_the_scenario_an_allocator_is_for(capsys):
-    from swarmbed.experiments.cli import main
+    from swarmbed.cli.main import main
 
     assert main(["check-allocator", "comm"]) == 0
     assert "PASS check_snapshot" in capsys.readouterr().out
@@ -275,7 +275,7 @@ def test_what_no_run_can_do_is_refused_by_check_too(capsys):
     """One list of refusals (engine.refusals) for the launcher, config.validate and --check: an
     allocator whose decisions come from a learner cannot be run by ``swarmbed run`` on either engine,
     and one that takes them from ROS 2 needs a ros2: section."""
-    from swarmbed.experiments.cli import main
+    from swarmbed.cli.main import main
 
     for engine in ("processes", "inprocess"):
         assert main(["run", str(QUICKSTART), "--check", "--engine", engine, "--set", "allocator.name=external"]) == 2

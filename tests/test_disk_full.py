@@ -11,7 +11,7 @@ import pytest
 
 from swarmbed.engine import results
 from swarmbed.engine.errors import RunError
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.rowfile import RowFile, TableWriteError
 from tests.conftest import experiment, whole_rows
 

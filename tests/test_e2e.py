@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.runner import run_experiment
 from tests.conftest import experiment, ledger_outcomes, read_ledger
 
 DETERMINISTIC_FILES = ["summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv", "config.yaml"]

@@ -10,8 +10,8 @@ import functools
 
 import pytest
 
-from swarmbed.experiments.launch.inprocess import run_in_process
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.inprocess import run_in_process
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.rundir import RECEIVER_LEDGER
 from tests.conftest import ROOT, SAR_BASE, experiment, same_results
 
@@ -145,7 +145,7 @@ class _Calls:
 
 def _tick_loop_with_fakes(tmp_path, calls: _Calls, lose_at: int | None = None, stop_after: int | None = None):
     from swarmbed.engine import OneProcess, Session, TickHook
-    from swarmbed.experiments.launch.config import resolve_experiment
+    from swarmbed.launch.config import resolve_experiment
     from swarmbed.wire.codec import NetemStep
 
     exp = experiment("run.duration=3", "run.dt=1", "agents.count=2")  # three ticks

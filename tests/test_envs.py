@@ -9,7 +9,7 @@ import pytest
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from swarmbed.envs import SwarmbedParallelEnv
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.runner import run_experiment
 from tests.conftest import ROOT, experiment, same_results
 
 RADIO = ("network.loss=0.2", "network.burst={mean_loss: 0.2, mean_burst: 4}")

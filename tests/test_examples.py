@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 import yaml
 
-from swarmbed.experiments.campaigns.chaos import load_chaos
-from swarmbed.experiments.campaigns.sweep import experiment_for, load_sweep
-from swarmbed.experiments.cli import main
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.campaigns.chaos import load_chaos
+from swarmbed.campaigns.sweep import experiment_for, load_sweep
+from swarmbed.cli.main import main
+from swarmbed.launch import config as cfg
+from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
 TREES = sorted([*(ROOT / "extension" / "trees").glob("*.xml"), *(ROOT / "plugins").rglob("*.xml")])

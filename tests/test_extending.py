@@ -5,7 +5,7 @@ import re
 
 import pytest
 
-from swarmbed.experiments import cli
+from swarmbed.cli import main as cli
 from tests.conftest import ROOT
 
 GUIDE = ROOT / "docs" / "EXTENDING.md"

@@ -12,8 +12,8 @@ import pytest
 import zenoh
 
 from swarmbed.engine.errors import RunError
-from swarmbed.experiments.launch.hub import HubOptions
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.hub import HubOptions
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.codec import EMPTY_INBOX, MAX_AGENT_SAMPLE_BYTES, encode_tick, pack
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
@@ -304,7 +304,7 @@ def test_a_coordinator_that_fails_while_being_built_leaves_no_process_or_credent
     say) stops the fork server it had started and removes the run's private credentials folder."""
     import tempfile
 
-    from swarmbed.experiments.launch import runner
+    from swarmbed.launch import runner
 
     class Broken(runner.ZenohTransport):
         def __init__(self, *args, **kwargs):

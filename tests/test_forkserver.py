@@ -12,8 +12,8 @@ from pathlib import Path
 
 import psutil
 
-from swarmbed.experiments.launch.launcher import own_cpu_s
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.launcher import own_cpu_s
+from swarmbed.launch.runner import run_experiment
 from tests.conftest import QUICKSTART, ROOT, cmdline, experiment, same_results, under_way
 
 
@@ -60,7 +60,7 @@ def test_forked_agents_show_their_command_line_and_die_with_the_launcher(tmp_pat
     everyone = proc.children(recursive=True)
     agents = [p for p in everyone if "-m swarmbed.agent_runtime" in cmdline(p)]
     assert sorted(int(cmdline(p).split("--id ")[1].split()[0]) for p in agents) == [0, 1, 2, 3, 4]
-    server = next(p for p in everyone if "swarmbed.experiments.launch.forkserver" in cmdline(p))
+    server = next(p for p in everyone if "swarmbed.launch.forkserver" in cmdline(p))
     assert all(a.ppid() == server.pid for a in agents)
     runner.send_signal(signal.SIGKILL)  # no clean-up code runs: the kernel's death signals must do it
     runner.communicate(timeout=30)
@@ -74,7 +74,7 @@ def test_forked_agents_show_their_command_line_and_die_with_the_launcher(tmp_pat
 def test_a_dead_fork_server_takes_its_agents_and_the_run_says_so(tmp_path):
     runner, proc = _run_until_under_way(tmp_path)
     everyone = proc.children(recursive=True)
-    server = next(p for p in everyone if "swarmbed.experiments.launch.forkserver" in cmdline(p))
+    server = next(p for p in everyone if "swarmbed.launch.forkserver" in cmdline(p))
     server.send_signal(signal.SIGKILL)
     _, err = runner.communicate(timeout=60)
     assert runner.returncode == 1 and "stopped at tick" in err and "agent" in err

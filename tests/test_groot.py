@@ -15,7 +15,7 @@ import pytest
 
 from swarmbed.bt import NodeRegistry, Status, load_tree
 from swarmbed.bt.btlog import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
-from swarmbed.experiments.views.groot2 import MonitoredTree, serve, tree_identity
+from swarmbed.results.groot2 import MonitoredTree, serve, tree_identity
 from tests.bt_harness import Act, Cond, Script, btcpp_tree
 from tests.test_btlog import CASES, TICKS, shape
 
@@ -131,7 +131,7 @@ def test_groot2_hears_from_us_what_btcpps_publisher_answers(name):
 def test_a_recording_nobody_reads_keeps_what_btcpps_publisher_keeps():
     """A client that starts a recording and never asks for it (``t``): the gateway keeps the newest
     changes only, bounded as BehaviorTree.CPP's publisher bounds them, and answers the same."""
-    from swarmbed.experiments.views.groot2 import CHANGE_BYTES, MAX_RECORDED_CHANGES
+    from swarmbed.results.groot2 import CHANGE_BYTES, MAX_RECORDED_CHANGES
 
     xml, scripts = CASES[next(iter(CASES))]
     their_tree = btcpp_tree(xml, scripts)
@@ -229,8 +229,8 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
     import subprocess
     import sys
 
-    from swarmbed.experiments.launch.hub import HubOptions
-    from swarmbed.experiments.launch.runner import run_experiment
+    from swarmbed.launch.hub import HubOptions
+    from swarmbed.launch.runner import run_experiment
     from swarmbed.wire.session import free_loopback_endpoint
     from tests.conftest import experiment, reference_run, same_results
 

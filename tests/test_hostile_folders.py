@@ -11,10 +11,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.launch.runner import run_experiment
-from swarmbed.experiments.views.analyze import AnalyzeError, analyze
-from swarmbed.experiments.views.replay import ReplayError, replay
-from swarmbed.experiments.views.report import ReportError, report
+from swarmbed.launch.runner import run_experiment
+from swarmbed.results.analyze import AnalyzeError, analyze
+from swarmbed.results.replay import ReplayError, replay
+from swarmbed.results.report import ReportError, report
 from tests.conftest import QUICKSTART, experiment, sweep_in_process
 
 RECORDED = [
@@ -125,7 +125,7 @@ def test_a_tree_log_that_claims_more_than_it_holds_is_one_line(recorded, tmp_pat
 def test_an_interrupted_recording_never_stands_under_its_name(recorded, tmp_path, monkeypatch):
     import foxglove
 
-    from swarmbed.experiments.views.recording import write_mcap
+    from swarmbed.results.recording import write_mcap
 
     calls = {"n": 0}
     log = foxglove.Channel.log

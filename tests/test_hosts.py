@@ -14,7 +14,7 @@ import psutil
 import pytest
 
 from swarmbed.engine.errors import RunError
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity
 from tests.conftest import SAR_BASE, experiment, reference_run, same_results
 
@@ -237,8 +237,8 @@ def test_a_host_daemon_answers_crafted_start_and_stop_requests_with_why_and_star
 
 def _host_says(hub_admits: bool, tmp_path) -> str:
     """What a host daemon prints within 20 s when it connects to a hub that does or does not admit it."""
-    from swarmbed.experiments.launch.access import RunAccess
-    from swarmbed.experiments.launch.hub import open_hub
+    from swarmbed.launch.access import RunAccess
+    from swarmbed.launch.hub import open_hub
     from swarmbed.wire.credentials import write_credentials
     from swarmbed.wire.keys import Keys
 

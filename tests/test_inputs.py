@@ -8,14 +8,14 @@ import pandas as pd
 import pytest
 
 from swarmbed.bt import BTError, load_tree
-from swarmbed.experiments import cli
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.hub import HubOptions
-from swarmbed.experiments.launch.runner import RunError, plan_run
-from swarmbed.experiments.views.analyze import scenario_summary
-from swarmbed.experiments.views.groot import agent_command
+from swarmbed.cli import main as cli
 from swarmbed.extension.nodes import space_registry
+from swarmbed.launch import config as cfg
+from swarmbed.launch.hub import HubOptions
+from swarmbed.launch.runner import RunError, plan_run
 from swarmbed.plugins.registry import PluginError, resolve
+from swarmbed.results.analyze import scenario_summary
+from swarmbed.results.groot import agent_command
 from tests.conftest import QUICKSTART, experiment
 
 
@@ -341,7 +341,7 @@ def test_an_interrupted_run_and_a_missing_report_folder_are_named_as_such(tmp_pa
     (out / "partial_timeseries.csv").write_text("tick\n")
     rc, _, err = _main(capsys, "run", QUICKSTART, "--out", out)
     assert rc == 2 and "an interrupted run" in err, err
-    from swarmbed.experiments.views.report import ReportError, report
+    from swarmbed.results.report import ReportError, report
 
     with pytest.raises(ReportError, match=r"the folder .*missing.* does not exist") as caught:
         report(tmp_path, tmp_path / "missing" / "x.html")
@@ -349,7 +349,7 @@ def test_an_interrupted_run_and_a_missing_report_folder_are_named_as_such(tmp_pa
 
 
 def test_a_grid_key_the_file_already_varies_replaces_that_axis_with_a_line(tmp_path, capsys):
-    from swarmbed.experiments.campaigns.sweep import load_sweep
+    from swarmbed.campaigns.sweep import load_sweep
 
     spec = _file(
         tmp_path / "s.yaml",

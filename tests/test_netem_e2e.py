@@ -6,7 +6,7 @@ from collections import defaultdict
 
 import msgpack
 
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.runner import run_experiment
 from tests.conftest import experiment, read_ledger
 
 

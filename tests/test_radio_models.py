@@ -392,7 +392,7 @@ def test_a_burst_section_with_two_parametrisations_is_one_line_naming_it():
 
 
 def test_params_network_lists_every_key_of_every_model_and_a_bad_one_is_named(capsys, tmp_path):
-    from swarmbed.experiments.cli import main as cli
+    from swarmbed.cli.main import main as cli
     from tests.conftest import QUICKSTART
 
     assert cli(["params", "network"]) == 0
@@ -492,8 +492,8 @@ def test_the_model_curve_is_the_delivery_ratio_the_radio_draws(extra):
 def test_every_reason_a_radio_may_drop_for_has_its_colour_in_every_view():
     """The stages name their reasons and colours; a model whose reason had no colour was left out
     of the replay's legend and drawn in the report's default colour (channel_busy was)."""
-    from swarmbed.experiments.views.colours import DROP_COLORS
     from swarmbed.netem.radio import STAGES
+    from swarmbed.results.colours import DROP_COLORS
 
     every = NetworkSection(
         range=100,

@@ -6,7 +6,7 @@ import textwrap
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.runner import run_experiment
 from tests.conftest import experiment, ledger_outcomes, read_ledger
 
 SLEEPY = textwrap.dedent('''

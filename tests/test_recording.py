@@ -8,7 +8,7 @@ import sys
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.btlog import EPOCH_US, read_btlog
 from tests.conftest import QUICKSTART, experiment
 
@@ -125,7 +125,7 @@ def test_a_run_is_served_live_to_a_foxglove_client_over_its_websocket_protocol(t
     from mcap.records import Schema
     from mcap_protobuf.decoder import DecoderFactory
 
-    from swarmbed.experiments.views.live import TOPICS, FoxgloveLive
+    from swarmbed.results.live import TOPICS, FoxgloveLive
 
     PROTOCOL = "foxglove.sdk.v1"  # Foxglove's WebSocket protocol, as the SDK's server names it
 

@@ -10,10 +10,10 @@ import textwrap
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
-from swarmbed.experiments.cli import main as cli
-from swarmbed.experiments.launch.runner import run_experiment
-from swarmbed.experiments.views.report import report, run_report, sweep_report
+from swarmbed.campaigns.sweep import load_sweep, run_sweep
+from swarmbed.cli.main import main as cli
+from swarmbed.launch.runner import run_experiment
+from swarmbed.results.report import report, run_report, sweep_report
 from tests.conftest import QUICKSTART, experiment
 
 LOSSY = ("network.loss=0.2", "network.ledger=per_receiver")
@@ -210,7 +210,7 @@ def test_recording_for_a_replay_changes_no_result(recorded, runs):
 def test_replay_is_a_movie_with_one_frame_per_chosen_tick(recorded, tmp_path):
     from PIL import Image
 
-    from swarmbed.experiments.views.replay import replay
+    from swarmbed.results.replay import replay
 
     run = recorded[True]
     markers = pd.read_csv(run / "markers.csv")
@@ -271,7 +271,7 @@ def test_charts_order_agents_by_number_and_draw_paired_bars_side_by_side(tmp_pat
 
 
 def test_a_run_with_the_radio_models_gets_the_radio_pages_and_outages_are_counted_between_deliveries(tmp_path):
-    from swarmbed.experiments.views.radio_pages import loss_runs
+    from swarmbed.results.radio_pages import loss_runs
 
     radio = [
         "agents.count=12",

@@ -187,7 +187,7 @@ def test_each_distribution_s_keys_and_cdr_are_rosbags_store_of_it(distro):
 
 
 def test_a_distribution_rosbags_does_not_offer_is_refused_in_one_line():
-    from swarmbed.experiments.launch.config import ConfigError
+    from swarmbed.launch.config import ConfigError
     from tests.conftest import experiment
 
     with pytest.raises(ConfigError) as exc:

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from swarmbed.experiments.launch.hub import HubOptions
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.hub import HubOptions
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity, write_credentials
 from swarmbed.wire.ros2 import Ros2Types, decode_attachment, gid
 from swarmbed.wire.session import free_loopback_endpoint, zenoh_config

@@ -152,7 +152,7 @@ def test_mlflow_logs_only_regular_files_inside_the_run_and_takes_hostile_keys(tm
     pytest.importorskip("mlflow")
     from mlflow.tracking import MlflowClient
 
-    from swarmbed.experiments.campaigns.tracking import TAG, MlflowLog, default_uri
+    from swarmbed.campaigns.tracking import TAG, MlflowLog, default_uri
 
     secret = tmp_path / "shadow"
     secret.write_text("root:$6$secret\n")

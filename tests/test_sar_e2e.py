@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.runner import run_experiment
 from swarmbed.plugins.sar.ccbba import CLUSTER_STREAM, kmeans_pp
 from tests.conftest import experiment, ledger_outcomes, read_ledger
 

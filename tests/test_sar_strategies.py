@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.experiments.checks.allocator import random_instance, simulate
+from swarmbed.checks.allocator import random_instance, simulate
 from swarmbed.extension import LocalView, Message, TaskInfo
 from swarmbed.plugins.consensus import consensus_message
 from swarmbed.plugins.registry import make
@@ -399,7 +399,7 @@ def test_the_trees_runconsensus_node_keeps_the_robot_still_while_its_round_runs(
     stands (``stop``) for the round's two ticks before it moves; with ``free`` it moves a tick
     after it announced."""
     from swarmbed.agent_runtime.runtime import AgentRuntime
-    from swarmbed.experiments.launch.config import resolve_experiment
+    from swarmbed.launch.config import resolve_experiment
     from swarmbed.wire.schema import agent_spec
     from tests.conftest import SAR_BASE, experiment
 

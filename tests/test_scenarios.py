@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmbed.experiments.checks.scenario import ScenarioCheckError, check_scenario
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.checks.scenario import ScenarioCheckError, check_scenario
 from swarmbed.extension.scenario import Scenario
+from swarmbed.launch import config as cfg
+from swarmbed.launch.runner import run_experiment
 from swarmbed.plugins.registry import resolve_scenario, scenario_names
 from swarmbed.wire.codec import WireError
 from swarmbed.wire.targets import load_target
@@ -144,7 +144,7 @@ def test_a_third_scenario_runs_end_to_end_with_no_change_to_swarmbed(tmp_path):
 def test_analyze_draws_the_figures_a_third_scenario_names(tmp_path):
     """``Scenario.figures`` and ``metric_labels``: the analysis tabulates and draws a scenario it
     has never heard of, with no edit of its own."""
-    from swarmbed.experiments.views.analyze import analyze
+    from swarmbed.results.analyze import analyze
 
     _pickup_experiment(tmp_path)
     (tmp_path / "sweep.yaml").write_text("name: pickups\nbase: pickup.yaml\nruns: 2\n")

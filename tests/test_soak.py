@@ -18,10 +18,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from swarmbed.coordinator.live import LiveStatus
-from swarmbed.engine import results
-from swarmbed.experiments.campaigns.chaos import CHAOS_COLUMNS, CUT_SHORT, Chaos, ChaosError, ChaosPlan, load_chaos
-from swarmbed.experiments.campaigns.soak import (
+from swarmbed.campaigns.chaos import CHAOS_COLUMNS, CUT_SHORT, Chaos, ChaosError, ChaosPlan, load_chaos
+from swarmbed.campaigns.soak import (
     PROCESSES,
     RUN,
     VERDICT,
@@ -32,9 +30,11 @@ from swarmbed.experiments.campaigns.soak import (
     soak,
     tick_rates,
 )
-from swarmbed.experiments.launch.access import OWNER, RunAccess, remove_orphaned_folders
-from swarmbed.experiments.launch.runner import run_experiment
-from swarmbed.experiments.views.report import report
+from swarmbed.coordinator.live import LiveStatus
+from swarmbed.engine import results
+from swarmbed.launch.access import OWNER, RunAccess, remove_orphaned_folders
+from swarmbed.launch.runner import run_experiment
+from swarmbed.results.report import report
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.rowfile import RowFile
 from tests.conftest import ROOT, experiment, whole_rows
@@ -340,7 +340,7 @@ def test_a_killed_soak_leaves_files_that_parse(tmp_path):
 def test_a_run_that_stops_keeps_its_rows_as_partial_files(tmp_path):
     """A run that fails after ticks ran keeps the rows it streamed, never under a result's name."""
     from swarmbed.engine.errors import RunError
-    from swarmbed.experiments.launch.runner import run_experiment
+    from swarmbed.launch.runner import run_experiment
 
     plugin = tmp_path / "boom.py"
     plugin.write_text(
@@ -515,7 +515,7 @@ def test_a_restart_that_finds_its_host_away_is_tried_again_once_the_host_is_back
 
 
 def netns_links_up(lab) -> bool:
-    from swarmbed.experiments.hosts.netns import _ip
+    from swarmbed.hosts.netns import _ip
 
     return all("state DOWN" not in _ip("-o", "link", "show", ns=ns).stdout for ns in lab.namespaces)
 
@@ -526,7 +526,7 @@ def test_sessions_map_no_shared_memory_pools():
     when an agent restarts. Our sessions send large payloads as bytes on the link."""
     import zenoh
 
-    from swarmbed.experiments.launch.hub import open_hub
+    from swarmbed.launch.hub import open_hub
     from swarmbed.wire.membership import accept_handovers, hand_over
     from swarmbed.wire.session import zenoh_config
 

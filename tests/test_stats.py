@@ -4,8 +4,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.views.analyze import analyze, load
-from swarmbed.experiments.views.stats import cohens_d, compare
+from swarmbed.results.analyze import analyze, load
+from swarmbed.results.stats import cohens_d, compare
 from tests.conftest import ROOT, sweep_in_process
 
 
@@ -94,7 +94,7 @@ def test_strategies_are_compared_within_each_setting_of_a_sweeps_other_factors(t
 def test_a_run_without_a_disk_has_its_own_group_in_the_range_figures(tmp_path, monkeypatch):
     """``network.range: null`` (a propagation model alone) is a group of its own, after the ranges,
     not a NaN that every comparison drops."""
-    from swarmbed.experiments.views import analyze as views
+    from swarmbed.results import analyze as views
 
     drawn: list[list[int]] = []
     monkeypatch.setattr(views, "_boxes", lambda ax, data, *rest: drawn.append([len(d) for d in data]))
@@ -118,7 +118,7 @@ def test_tost_agrees_with_the_ninety_percent_interval_and_calls_only_close_group
     of the difference (scipy's own) lies inside it: checked on many random pairs of groups."""
     from scipy import stats
 
-    from swarmbed.experiments.views.stats import tost_p
+    from swarmbed.results.stats import tost_p
 
     rng = np.random.default_rng(7)
     agree = 0
@@ -154,7 +154,7 @@ def test_paired_signed_rank_p_is_the_exact_share_of_sign_flips_at_least_as_extre
 
     from scipy import stats
 
-    from swarmbed.experiments.views.stats import paired_p
+    from swarmbed.results.stats import paired_p
 
     rng = np.random.default_rng(11)
     for n in (3, 6, 9, 12):
@@ -179,7 +179,7 @@ def test_holm_is_the_closed_test_of_bonferroni_tests():
     every subset of random families, NaN entries left out of the family."""
     from itertools import combinations
 
-    from swarmbed.experiments.views.stats import holm
+    from swarmbed.results.stats import holm
 
     rng = np.random.default_rng(11)
     for _ in range(200):

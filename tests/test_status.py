@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from swarmbed.experiments.views.watch import RunView, write_map
+from swarmbed.results.watch import RunView, write_map
 from swarmbed.wire.codec import pack
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.status import NetworkCounters, RunStatus, decode_status, encode_status

@@ -8,10 +8,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from swarmbed.experiments.checks.allocator import ConformanceError, check_snapshot
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.hub import HubOptions
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.checks.allocator import ConformanceError, check_snapshot
+from swarmbed.launch import config as cfg
+from swarmbed.launch.hub import HubOptions
+from swarmbed.launch.runner import run_experiment
 from swarmbed.plugins.registry import register
 from tests.conftest import QUICKSTART, SwapAsked, experiment, reference_run, same_results
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from swarmbed.experiments.campaigns.sweep import load_sweep, run_seeds, run_sweep
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.views.analyze import analyze
+from swarmbed.campaigns.sweep import load_sweep, run_seeds, run_sweep
+from swarmbed.launch import config as cfg
+from swarmbed.results.analyze import analyze
 from tests.conftest import QUICKSTART
 
 BOOM = textwrap.dedent("""
@@ -86,8 +86,8 @@ def test_a_rerun_under_another_configuration_never_reuses_completed_runs(sweep_d
     shutil.copytree(sweep_dir / "out", mixed)
     config = mixed / "fast_range-30" / "run_001" / "config.yaml"
     config.write_text(config.read_text().replace("loss: 0.0", "loss: 0.3"))
-    from swarmbed.experiments.views.analyze import AnalyzeError
-    from swarmbed.experiments.views.report import ReportError, report
+    from swarmbed.results.analyze import AnalyzeError
+    from swarmbed.results.report import ReportError, report
 
     with pytest.raises(AnalyzeError, match="run_000 and fast_range-30/run_001 were made under different"):
         analyze([mixed])
@@ -108,8 +108,8 @@ def test_every_run_records_the_code_that_made_it_and_analyze_will_not_pool_two_v
     import json
     import shutil
 
-    from swarmbed.experiments.campaigns.sweep import collect, read_spec, write_tables
-    from swarmbed.experiments.views.analyze import AnalyzeError
+    from swarmbed.campaigns.sweep import collect, read_spec, write_tables
+    from swarmbed.results.analyze import AnalyzeError
 
     runs = sorted((sweep_dir / "out").glob("fast_*/run_*/provenance.json"))
     made = [json.loads(p.read_text()) for p in runs]
@@ -154,7 +154,7 @@ def test_analyze_writes_tables_and_figures(sweep_dir):
 
 def test_per_agent_values_pool_every_agent_of_every_run(sweep_dir):
     """A per-agent metric named as such (``work_per_agent``) draws one value per agent of every run."""
-    from swarmbed.experiments.views.analyze import _values, load
+    from swarmbed.results.analyze import _values, load
 
     df = load([sweep_dir / "out"])
     for _, rows in df.groupby("scenario"):
@@ -170,7 +170,7 @@ def test_gini_matches_the_mean_absolute_difference_definition(sweep_dir):
 
     import numpy as np
 
-    from swarmbed.experiments.campaigns.sweep import gini
+    from swarmbed.campaigns.sweep import gini
 
     def reference(x):
         x = np.asarray(x, dtype=float)
@@ -212,7 +212,7 @@ def test_a_cell_subset_sweep_plans_the_figure_sweeps_runs(tmp_path, subset, pref
     """space_fig3_code_a50.yaml and space_fig3_code_a10_a30.yaml add runs to some of
     space_fig3_code.yaml's cells: same folders, same seeds, same settings, so they can share one
     output folder."""
-    from swarmbed.experiments.campaigns.sweep import plan
+    from swarmbed.campaigns.sweep import plan
 
     def key(spec):
         return (Path(spec.out_dir).relative_to(tmp_path), spec.seed, spec.base, spec.scenario.overrides, spec.extra)
@@ -290,7 +290,7 @@ def test_ctrl_c_stops_a_sweep_at_once_and_the_same_command_resumes(tmp_path):
 
 @pytest.mark.parametrize("flag, value", [("--runs", "-2"), ("--runs", "0"), ("--jobs", "0"), ("--runs", "two")])
 def test_sweep_refuses_counts_below_one(flag, value, capsys):
-    from swarmbed.experiments.cli import main
+    from swarmbed.cli.main import main
 
     with pytest.raises(SystemExit) as info:
         main(["sweep", str(QUICKSTART), flag, value])
@@ -298,7 +298,7 @@ def test_sweep_refuses_counts_below_one(flag, value, capsys):
 
 
 def test_analyze_refuses_a_control_the_sweeps_do_not_have(sweep_dir, capsys):
-    from swarmbed.experiments.cli import main
+    from swarmbed.cli.main import main
 
     out = sweep_dir / "out"
     (out / "statistics.md").write_text("stale")
@@ -310,7 +310,7 @@ def test_analyze_refuses_a_control_the_sweeps_do_not_have(sweep_dir, capsys):
 
 
 def test_ctrl_c_while_a_resumed_sweep_plans_still_leaves_the_table_of_what_completed(tmp_path, monkeypatch):
-    from swarmbed.experiments.campaigns import sweep as sweeps
+    from swarmbed.campaigns import sweep as sweeps
 
     (tmp_path / "s.yaml").write_text(f"name: s\nbase: {QUICKSTART}\nruns: 2\n")
     plan = sweeps.load_sweep(tmp_path / "s.yaml", extra=["run.duration=60"])
@@ -336,8 +336,8 @@ def test_a_sweep_logs_each_completed_run_to_mlflow_once(tmp_path):
 
     from mlflow.tracking import MlflowClient
 
-    from swarmbed.experiments.campaigns.tracking import TAG, default_uri
-    from swarmbed.experiments.cli import main
+    from swarmbed.campaigns.tracking import TAG, default_uri
+    from swarmbed.cli.main import main
 
     (tmp_path / "s.yaml").write_text(
         f"name: tracked\nbase: {QUICKSTART}\nruns: 1\nscenarios:\n"
@@ -376,10 +376,10 @@ def test_a_claim_whose_holder_was_killed_a_moment_ago_is_taken_over_not_reported
     nothing; a live one is still reported."""
     import signal
 
-    from swarmbed.experiments.campaigns import claims
+    from swarmbed.campaigns import claims
 
     hold = (
-        "import sys, time\nfrom pathlib import Path\nfrom swarmbed.experiments.campaigns import claims\n"
+        "import sys, time\nfrom pathlib import Path\nfrom swarmbed.campaigns import claims\n"
         "c = claims.take(Path(sys.argv[1]))\nprint('held', flush=True)\ntime.sleep(60)\n"
     )
     holders = []

@@ -15,9 +15,9 @@ import pandas as pd
 import psutil
 import pytest
 
-from swarmbed.experiments.campaigns import claims, executors
-from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep, status
-from swarmbed.experiments.folders import ATTEMPTS, read_table
+from swarmbed.campaigns import claims, executors
+from swarmbed.campaigns.sweep import load_sweep, run_sweep, status
+from swarmbed.results.folders import ATTEMPTS, read_table
 from tests.conftest import QUICKSTART, cmdline, same_results, under_way
 
 SWEEP = textwrap.dedent(f"""

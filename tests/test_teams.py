@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.experiments.checks.allocator import random_instance, simulate
-from swarmbed.experiments.launch.config import ConfigError, resolve_experiment
+from swarmbed.checks.allocator import random_instance, simulate
+from swarmbed.launch.config import ConfigError, resolve_experiment
 from swarmbed.plugins.central import least_travel, nash_stable_partition, sequential_greedy
 from swarmbed.plugins.grape import utility
 from swarmbed.plugins.teams import by_slots
@@ -195,7 +195,7 @@ def test_first_claimed_greedy_gathers_its_claims_into_full_teams():
     """Four robots, four tasks that need two each, each robot beside its own task, all in reach of each
     other: each first claims the task beside it (and would wait there alone for ever); then the
     claimants gather around the earliest claims until two teams are full."""
-    from swarmbed.experiments.checks.allocator import Instance
+    from swarmbed.checks.allocator import Instance
 
     corners = [(0.0, 0.0), (50.0, 0.0), (0.0, 50.0), (50.0, 50.0)]
     inst = Instance(
@@ -214,7 +214,7 @@ def test_first_claimed_greedy_gathers_its_claims_into_full_teams():
 def test_every_team_aware_allocator_finishes_a_mission_of_team_tasks_in_processes_as_in_process(allocator, tmp_path):
     """A real run (every agent its own process over Zenoh and the proxy) of tasks that need one to three
     robots each: every task done, and the in-process engine's result files byte for byte the same."""
-    from swarmbed.experiments.launch.runner import run_experiment
+    from swarmbed.launch.runner import run_experiment
     from tests.conftest import reference_run, same_results
 
     exp = experiment(

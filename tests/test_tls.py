@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from swarmbed.experiments.launch.hub import HubOptions
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.hub import HubOptions
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.credentials import CredentialsError, Identity, write_credentials
 from swarmbed.wire.session import free_loopback_endpoint, tls_settings, zenoh_config
 from tests.conftest import experiment, reference_run, same_results

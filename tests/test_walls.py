@@ -11,8 +11,8 @@ import pytest
 from scipy.sparse import lil_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from swarmbed.experiments.launch.config import ConfigError, resolve_experiment, to_yaml
-from swarmbed.experiments.launch.inprocess import run_in_process
+from swarmbed.launch.config import ConfigError, resolve_experiment, to_yaml
+from swarmbed.launch.inprocess import run_in_process
 from swarmbed.scenarios.paths import Planner
 from swarmbed.wire.obstacles import ObstaclesSection, segments_cross
 from tests.conftest import QUICKSTART, experiment
@@ -258,9 +258,9 @@ def test_views_draw_a_runs_walls_and_refuse_crafted_ones_in_one_line(tmp_path):
     one line naming the file, never drawn half."""
     import yaml
 
-    from swarmbed.experiments.views.recording import RecordingError, write_mcap
-    from swarmbed.experiments.views.replay import ReplayError, replay
-    from swarmbed.experiments.views.report import ReportError, report
+    from swarmbed.results.recording import RecordingError, write_mcap
+    from swarmbed.results.replay import ReplayError, replay
+    from swarmbed.results.report import ReportError, report
 
     exp = experiment("run.duration=20", "run.record_trajectories=true", "network.ledger=per_receiver", base=RUBBLE)
     run = tmp_path / "run"
@@ -307,7 +307,7 @@ def test_the_graph_built_a_slice_at_a_time_joins_the_same_pairs_as_all_at_once(m
 def test_a_map_whose_graph_is_too_large_is_refused_by_check_and_a_large_one_is_in_the_estimate(tmp_path, capsys):
     import math
 
-    from swarmbed.experiments import cli
+    from swarmbed.cli import main as cli
 
     many = "".join(
         f"    - {{start: [{1 + (k % 190)}, {1 + (k // 190) * 10}], end: [{1.5 + (k % 190)}, {1 + (k // 190) * 10}]}}\n"

@@ -12,8 +12,8 @@ import termios
 import threading
 import time
 
-from swarmbed.experiments.launch.hub import HubOptions
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch.hub import HubOptions
+from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.session import free_loopback_endpoint
 from tests.conftest import experiment
 

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmbed.experiments.launch.config import resolve_experiment
 from swarmbed.extension.scenario import within
+from swarmbed.launch.config import resolve_experiment
 from swarmbed.scenarios import sar
 from swarmbed.scenarios.kinematics import Limits, step
 from swarmbed.scenarios.sar import ALIVE
@@ -351,7 +351,7 @@ def test_a_busy_robot_that_turns_to_something_else_stops_its_inspection_only_if_
 def _strategy_run(out_dir, seconds, *overrides):
     """The SAR world and every robot's runtime and the radio stepped in one process (the
     in-process engine): the summary of the run."""
-    from swarmbed.experiments.launch.inprocess import run_in_process
+    from swarmbed.launch.inprocess import run_in_process
 
     return run_in_process(experiment(f"run.duration={seconds}", *overrides, base=SAR_BASE), out_dir).summary
 

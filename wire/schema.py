@@ -2,7 +2,7 @@
 
 An experiment has five sections. ``run``, ``agents`` and ``network`` are checked here in full.
 ``scenario`` and ``allocator`` are a name (``kind`` / ``name``) plus the parameters of the code
-that name resolves to; only the launcher (``swarmbed.experiments.launch.config``) resolves names and
+that name resolves to; only the launcher (``swarmbed.launch.config``) resolves names and
 checks those parameters against the plugin's own ``Params`` model, and it writes them back fully
 resolved, so that every process reads complete sections.
 
@@ -290,7 +290,7 @@ class Experiment(Strict, QuietDefaults):
         None, description="walls and polygons that block motion, sight and the radio (docs/walls.md); null: open ground"
     )
     #: what the launcher resolved the scenario and allocator names to when it checked this experiment
-    #: (``swarmbed.experiments.launch.config.resolve_experiment`` reads it; never serialised)
+    #: (``swarmbed.launch.config.resolve_experiment`` reads it; never serialised)
     _resolved: Any = PrivateAttr(default=None)
 
     @property

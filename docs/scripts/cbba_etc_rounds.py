@@ -20,7 +20,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from swarmbed.experiments.views.analyze import COLUMN_IN, STYLE  # noqa: E402
+from swarmbed.results.analyze import COLUMN_IN, STYLE  # noqa: E402
 
 LINE = re.compile(
     r"round t=(?P<t>[\d.]+) triggers=(?P<triggers>[\w,]*) Lc=(?P<lc>-?\d+) dLc=(?P<dlc>-?\d+) "

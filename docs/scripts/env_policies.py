@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from swarmbed.envs import SwarmbedParallelEnv
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 POLICIES = {

@@ -18,8 +18,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.inprocess import run_in_process
+from swarmbed.launch import config as cfg
+from swarmbed.launch.inprocess import run_in_process
 from swarmbed.plugins import fcg
 
 BASE = Path(__file__).resolve().parents[2] / "experiments" / "space_mtsr_code.yaml"

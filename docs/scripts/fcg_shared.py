@@ -39,8 +39,8 @@ def shared_line(who: str, held: collections.Counter, same_tick: int | None = Non
 
 
 def ours(seed: int, radio_range: int, same_tick_claims: str) -> None:
-    from swarmbed.experiments.launch import config as cfg
-    from swarmbed.experiments.launch.inprocess import run_in_process
+    from swarmbed.launch import config as cfg
+    from swarmbed.launch.inprocess import run_in_process
     from swarmbed.plugins import fcg
 
     noted: dict[tuple[int, int], list[int]] = collections.defaultdict(list)  # (tick, task) -> claim ticks

@@ -26,9 +26,9 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
-from swarmbed.experiments.campaigns.sweep import collect, read_spec
-from swarmbed.experiments.views.analyze import ci95
-from swarmbed.experiments.views.stats import paired_p
+from swarmbed.campaigns.sweep import collect, read_spec
+from swarmbed.results.analyze import ci95
+from swarmbed.results.stats import paired_p
 
 ALLOCATORS = ["cbba", "grape", "fcg"]
 METRICS = {

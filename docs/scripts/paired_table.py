@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from swarmbed.experiments.views.analyze import ci95
-from swarmbed.experiments.views.stats import paired_p
+from swarmbed.results.analyze import ci95
+from swarmbed.results.stats import paired_p
 
 MTSR = {
     "mission_time": "mission time (s)",

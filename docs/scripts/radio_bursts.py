@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from swarmbed.experiments.folders import read_table
-from swarmbed.experiments.views.analyze import ci95
+from swarmbed.results.analyze import ci95
+from swarmbed.results.folders import read_table
 
 ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
 

@@ -13,8 +13,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.runner import run_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"

@@ -26,8 +26,8 @@ import numpy as np
 from tree_world import BASE, trial  # this folder is on sys.path when the script runs
 
 from swarmbed.engine.session import run_world
-from swarmbed.experiments.launch import config as cfg
-from swarmbed.experiments.launch.config import resolve_experiment
+from swarmbed.launch import config as cfg
+from swarmbed.launch.config import resolve_experiment
 from swarmbed.scenarios.sar import ALIVE
 
 

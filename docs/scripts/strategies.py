@@ -21,9 +21,9 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from swarmbed.experiments.folders import read_table
-from swarmbed.experiments.views.analyze import ci95
-from swarmbed.experiments.views.stats import paired_p
+from swarmbed.results.analyze import ci95
+from swarmbed.results.folders import read_table
+from swarmbed.results.stats import paired_p
 
 ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from swarmbed.experiments.campaigns.sweep import load_sweep, run_sweep
+from swarmbed.campaigns.sweep import load_sweep, run_sweep
 
 
 def main() -> None:

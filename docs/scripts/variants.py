@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmbed.experiments.folders import read_table
-from swarmbed.experiments.views.analyze import ci95
-from swarmbed.experiments.views.stats import paired_p
+from swarmbed.results.analyze import ci95
+from swarmbed.results.folders import read_table
+from swarmbed.results.stats import paired_p
 
 ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
 
