@@ -176,8 +176,10 @@ def test_interrupting_a_view_says_nothing_of_a_summary(capsys, monkeypatch):
     def interrupted(_args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli, "cmd_replay", interrupted)
-    monkeypatch.setattr(cli, "cmd_run", interrupted)
+    from swarmbed.cli import campaigns, run
+
+    monkeypatch.setattr(campaigns, "cmd_replay", interrupted)
+    monkeypatch.setattr(run, "cmd_run", interrupted)
     rc, _, err = _main(capsys, "replay", "somewhere")
     assert rc == 130 and err.strip() == "interrupted"
     rc, _, err = _main(capsys, "run", QUICKSTART)
