@@ -18,6 +18,7 @@ from pydantic import BaseModel
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
 from swarmbed.wire.btlog import encode_tree_changes
+from swarmbed.wire.child_process import child_args, pin_thread_state
 from swarmbed.wire.codec import (
     ControlIn,
     StopIn,
@@ -30,7 +31,6 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_over, is_alive
 from swarmbed.wire.observation import Observation
-from swarmbed.wire.process import child_args, pin_thread_state
 from swarmbed.wire.reports import (
     Checkpoint,
     Fatal,
@@ -41,10 +41,10 @@ from swarmbed.wire.reports import (
     encode_report,
 )
 from swarmbed.wire.schema import AgentSpec
-from swarmbed.wire.session import one_receiving_worker, open_from_args
 from swarmbed.wire.state import StateError
 from swarmbed.wire.tickdecode import TickDecoder
 from swarmbed.wire.transport import tcp_counters
+from swarmbed.wire.zenoh_session import one_receiving_worker, open_from_args
 
 log = logging.getLogger("swarmbed.agent")
 

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from swarmbed.bt import Blackboard, Status, load_tree
-from swarmbed.bt.btlog import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
+from swarmbed.bt.groot_tree import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.context import NodeContext
 from swarmbed.extension.node_sets import node_registry, tree_path

@@ -42,7 +42,7 @@ from swarmbed.launch import config as cfg
 from swarmbed.launch.hub import HubOptions, open_hub
 from swarmbed.launch.launcher import wakeups
 from swarmbed.launch.runner import run_experiment
-from swarmbed.wire.session import SINGLE_WORKER
+from swarmbed.wire.zenoh_session import SINGLE_WORKER
 
 ROOT = Path(__file__).resolve().parent.parent
 

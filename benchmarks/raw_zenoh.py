@@ -17,7 +17,7 @@ import threading
 
 import zenoh
 
-from swarmbed.wire.session import zenoh_config
+from swarmbed.wire.zenoh_session import zenoh_config
 
 BLOCK = zenoh.CongestionControl.BLOCK
 FANOUT = 5

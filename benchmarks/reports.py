@@ -29,7 +29,7 @@ from swarmbed.launch import config as cfg
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.runner import run_experiment
 from swarmbed.results.report import report
-from swarmbed.wire.session import free_loopback_endpoint
+from swarmbed.wire.zenoh_session import free_loopback_endpoint
 
 ROOT = Path(__file__).resolve().parent.parent
 QUICKSTART = ROOT / "experiments" / "quickstart.yaml"

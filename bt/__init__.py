@@ -14,8 +14,8 @@ from swarmbed.bt.node import (
     SyncAction,
     TreeNode,
 )
+from swarmbed.bt.node_types import NodeRegistry
 from swarmbed.bt.palette import palette_xml
-from swarmbed.bt.registry import NodeRegistry
 from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 from swarmbed.bt.tree import Tree, load_tree
 

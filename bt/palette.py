@@ -6,7 +6,7 @@ from collections.abc import Iterable
 from xml.sax.saxutils import escape, quoteattr
 
 from swarmbed.bt.node import TreeNode
-from swarmbed.bt.registry import NodeRegistry
+from swarmbed.bt.node_types import NodeRegistry
 
 _PORT_TAG = {"input": "input_port", "output": "output_port", "inout": "inout_port"}
 _TYPE_NAME = {str: "std::string", int: "int", float: "double", bool: "bool"}

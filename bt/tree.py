@@ -24,7 +24,7 @@ from swarmbed.bt.node import (
     convert_port,
     watch_node,
 )
-from swarmbed.bt.registry import NodeRegistry
+from swarmbed.bt.node_types import NodeRegistry
 from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 from swarmbed.wire.safefiles import UnreadableFile, read_regular
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import psutil
 
 from swarmbed.wire import safefiles
-from swarmbed.wire.process import process_alive
+from swarmbed.wire.child_process import process_alive
 
 CLAIM = "claim.json"
 LOCK = "claim.lock"

@@ -47,7 +47,7 @@ from swarmbed.launch.runner import LiveRun, RunObserver, run_experiment
 from swarmbed.results.folders import SOAK_PROCESSES as PROCESSES
 from swarmbed.results.folders import SOAK_RUN as RUN
 from swarmbed.results.folders import SOAK_VERDICT as VERDICT
-from swarmbed.wire.process import process_name
+from swarmbed.wire.child_process import process_name
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.schema import Experiment
 
@@ -436,7 +436,7 @@ def soak(
 ) -> dict[str, Any]:
     """Run ``exp`` for ``duration_s`` wall seconds under ``chaos``; write and return the verdict.
     ``hub``: where the run's hub listens and whom it admits (a soak across hosts, an operator)."""
-    from swarmbed.engine.errors import RunError
+    from swarmbed.engine.run_errors import RunError
 
     exp = exp.model_copy(update={"run": exp.run.model_copy(update={"duration": UNBOUNDED_S, "stop_when_done": False})})
     monitor = Monitor(duration_s, interval)

@@ -4,7 +4,7 @@ the allocator conformance kit (:func:`run_all`, :func:`check_snapshot`) runs an 
 in-process on static instances with the real radio model. ``swarmbed check-scenario`` and
 ``swarmbed check-allocator`` run them from the command line."""
 
-from swarmbed.checks.allocator import ConformanceError, check_snapshot, run_all
-from swarmbed.checks.scenario import ScenarioCheckError, check_scenario
+from swarmbed.checks.allocator_kit import ConformanceError, check_snapshot, run_all
+from swarmbed.checks.scenario_check import ScenarioCheckError, check_scenario
 
 __all__ = ["ConformanceError", "ScenarioCheckError", "check_scenario", "check_snapshot", "run_all"]

@@ -176,7 +176,7 @@ def register_params(sub: Subparsers) -> None:
 
 
 def cmd_check_allocator(args: argparse.Namespace) -> int:
-    from swarmbed.checks.allocator import GENERIC_CHECKS, ConformanceError
+    from swarmbed.checks.allocator_kit import GENERIC_CHECKS, ConformanceError
     from swarmbed.plugins.registry import PluginError, only_scenario, validate_params
 
     args.scenario = args.scenario or only_scenario(args.allocator) or "mtsr"
@@ -217,7 +217,7 @@ def register_check_allocator(sub: Subparsers) -> None:
 
 
 def cmd_check_scenario(args: argparse.Namespace) -> int:
-    from swarmbed.checks.scenario import ScenarioCheckError, check_scenario
+    from swarmbed.checks.scenario_check import ScenarioCheckError, check_scenario
 
     cls = registry.resolve_scenario(args.scenario)
     try:

@@ -107,7 +107,7 @@ def client_session(args: argparse.Namespace, connect_timeout_s: float | None = N
     import zenoh
 
     from swarmbed.wire.credentials import CredentialsError
-    from swarmbed.wire.session import connect_timeout, tls_from_args, zenoh_config
+    from swarmbed.wire.zenoh_session import connect_timeout, tls_from_args, zenoh_config
 
     try:
         return zenoh.open(

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarmbed.cli.common import client_session, positive
-from swarmbed.wire.session import add_zenoh_args
+from swarmbed.wire.zenoh_session import add_zenoh_args
 
 if TYPE_CHECKING:
     from swarmbed.cli.common import Subparsers
@@ -89,7 +89,7 @@ def cmd_host(args: argparse.Namespace) -> int:
     from swarmbed.launch.host_client import HostError
     from swarmbed.wire.credentials import CredentialsError
     from swarmbed.wire.logs import LOG_FORMAT
-    from swarmbed.wire.session import tls_from_args
+    from swarmbed.wire.zenoh_session import tls_from_args
 
     logging.basicConfig(level=logging.INFO, format=LOG_FORMAT)
     logs = Path(args.logs) if args.logs else Path("runs") / "hosts" / args.name

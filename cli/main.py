@@ -15,7 +15,7 @@ from swarmbed.cli.campaigns import register_analyze, register_replay, register_r
 from swarmbed.cli.hosts import register_certs, register_credentials, register_host, register_hosts, register_swap
 from swarmbed.cli.run import register_run, register_soak
 from swarmbed.cli.views import register_groot, register_watch
-from swarmbed.engine.errors import RunError
+from swarmbed.engine.run_errors import RunError
 from swarmbed.launch import config as cfg
 from swarmbed.plugins import registry
 

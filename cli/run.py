@@ -56,7 +56,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from swarmbed.launch.hub import HubOptions
     from swarmbed.launch.runner import run_experiment
     from swarmbed.wire.credentials import CredentialsError, check_admitted, read_credentials
-    from swarmbed.wire.session import tls_from_args
+    from swarmbed.wire.zenoh_session import tls_from_args
 
     exp = cfg.load(args.experiment, args.set, args.seed)
     try:
@@ -108,7 +108,7 @@ def _live_views(exp, port: int | None) -> list:
     """The live views ``swarmbed run`` was asked for (``--foxglove``), each made from the run's session."""
     if port is None:
         return []
-    from swarmbed.results.live import FoxgloveLive, serve
+    from swarmbed.results.foxglove_live import FoxgloveLive, serve
 
     served = serve("127.0.0.1", port)
 

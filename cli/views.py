@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarmbed.cli.common import client_session, port_number
-from swarmbed.wire.session import add_zenoh_args
+from swarmbed.wire.zenoh_session import add_zenoh_args
 
 if TYPE_CHECKING:
     from swarmbed.cli.common import Subparsers
@@ -23,7 +23,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
         return 2
     live = None
     if args.foxglove is not None:
-        from swarmbed.results.live import StatusFoxglove
+        from swarmbed.results.foxglove_live import StatusFoxglove
         from swarmbed.results.recording import RecordingError
 
         try:

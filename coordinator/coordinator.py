@@ -30,9 +30,9 @@ from swarmbed.coordinator.live import Interval, LiveStatus, Watched
 from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.trees import TreeRecorder, TreeRelay
 from swarmbed.engine import Session, StopWhenAsked, TickHook, refusals
-from swarmbed.engine.errors import RunError
 from swarmbed.engine.hooks import Profile
 from swarmbed.engine.recorder import Recorder
+from swarmbed.engine.run_errors import RunError
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario, World
 from swarmbed.wire.codec import (
@@ -62,10 +62,10 @@ from swarmbed.wire.reports import (
     decode_netem_report,
 )
 from swarmbed.wire.schema import Experiment, Targets, agent_spec, netem_spec
-from swarmbed.wire.session import undeclare_all
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.summary import RunSummary
+from swarmbed.wire.zenoh_session import undeclare_all
 
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")

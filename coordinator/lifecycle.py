@@ -23,9 +23,10 @@ import zenoh
 from swarmbed.coordinator.events import CONSUMED, EventQueue
 from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.tickets import Tickets
-from swarmbed.engine.errors import RunError
 from swarmbed.engine.hooks import TickHook
+from swarmbed.engine.run_errors import RunError
 from swarmbed.extension.scenario import World
+from swarmbed.wire.child_process import process_name
 from swarmbed.wire.codec import (
     TAG_CHECKPOINT,
     TAG_RESUME,
@@ -37,7 +38,6 @@ from swarmbed.wire.codec import (
     encode_stop,
 )
 from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
-from swarmbed.wire.process import process_name
 from swarmbed.wire.reports import (
     AgentReport,
     Checkpoint,

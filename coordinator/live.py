@@ -30,8 +30,8 @@ from swarmbed.engine.hooks import TickHook
 from swarmbed.engine.recorder import Recorder
 from swarmbed.extension.scenario import World
 from swarmbed.wire.reports import RestartRecord
+from swarmbed.wire.run_status import NetworkCounters, RunStatus, encode_status
 from swarmbed.wire.schema import Experiment
-from swarmbed.wire.status import NetworkCounters, RunStatus, encode_status
 
 if TYPE_CHECKING:
     from swarmbed.coordinator.clock import WallClock

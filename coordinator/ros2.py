@@ -23,7 +23,7 @@ received``
 (The proxy's node publishes ``/robot_<i>/radio/sent``: ``netem/ros2.py``.) With the ``ros2``
 allocator, :class:`Ros2Commands` also publishes each robot's observation and gathers its decision.
 
-Keys, payloads, attachments and tokens follow rmw_zenoh (:mod:`swarmbed.wire.ros2`). Samples go out
+Keys, payloads, attachments and tokens follow rmw_zenoh (:mod:`swarmbed.wire.ros2_conventions`). Samples go out
 with congestion control DROP, as every view of a run does: a ROS 2 reader that stops reading loses
 samples and never holds up a tick. Nothing here feeds back into the run: the results are the same
 with publishing on or off (tests/test_ros2_run.py holds them byte-identical).
@@ -45,7 +45,7 @@ import zenoh
 from swarmbed.engine.hooks import TickHook
 from swarmbed.extension.actions import ActionSpec
 from swarmbed.wire.codec import Delivered, WireError, WorldSample, delivered_in
-from swarmbed.wire.ros2 import (
+from swarmbed.wire.ros2_conventions import (
     LATCHED_QOS,
     NODE_PREFIX,
     RADIO_INBOX,

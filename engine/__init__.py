@@ -9,9 +9,9 @@ Zenoh, through the netem proxy) and the in-process one (:mod:`swarmbed.launch.in
 every agent's runtime and the radio stepped in this process).
 """
 
-from swarmbed.engine.errors import RunError
 from swarmbed.engine.hooks import StopWhenAsked, TickHook
 from swarmbed.engine.loop import Membership, OneProcess, TickInHand, TickLoop, Transport
+from swarmbed.engine.run_errors import RunError
 from swarmbed.engine.session import ENGINES, Session, refusals
 
 __all__ = [

@@ -10,7 +10,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from swarmbed.bt import NodeRegistry
-from swarmbed.extension.nodes import SPACE_TREE
+from swarmbed.extension.space_nodes import SPACE_TREE
 
 
 def node_registry(owners: Iterable[type]) -> NodeRegistry:

@@ -236,7 +236,7 @@ class Scenario(abc.ABC):
     #: behavior-tree nodes its agents' trees may use
     bt_nodes: ClassVar[tuple[type[TreeNode], ...]] = ()
     #: the tree used when the allocator has none (None: SPACE's default tree,
-    #: ``swarmbed.extension.nodes.SPACE_TREE``)
+    #: ``swarmbed.extension.space_nodes.SPACE_TREE``)
     default_tree: ClassVar[Path | None] = None
     #: summary keys that measure the outcome, first the headline (sweep tables, printed summaries)
     outcome_metrics: ClassVar[tuple[str, ...]] = ()

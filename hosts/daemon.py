@@ -36,6 +36,7 @@ import zenoh
 from swarmbed.launch.access import EVERY_MESSAGE
 from swarmbed.launch.host_client import HostError
 from swarmbed.launch.launcher import AGENT_MODULE, Children, ForkServerError
+from swarmbed.wire.child_process import process_name, tune_malloc
 from swarmbed.wire.credentials import (
     Identity,
     check_host_name,
@@ -46,9 +47,8 @@ from swarmbed.wire.credentials import (
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import HOSTS, HostKeys, Keys
 from swarmbed.wire.membership import is_alive
-from swarmbed.wire.process import process_name, tune_malloc
 from swarmbed.wire.reports import HostAnswer, HostInfo, StartAgents, StopAgents, decode_start, decode_stop, encode_json
-from swarmbed.wire.session import free_loopback_endpoint, undeclare_all, zenoh_config
+from swarmbed.wire.zenoh_session import free_loopback_endpoint, undeclare_all, zenoh_config
 
 log = logging.getLogger("swarmbed.host")
 
@@ -262,7 +262,7 @@ def serve(
     ``credentials``: a host credentials file the hubs it connects to admit (``swarmbed run --admit``).
     With it, the router also requires credentials of whoever connects to it: the daemon makes one
     identity for the agents it starts (in a private folder, gone when it stops), so that a stray
-    process on this machine cannot reach a hub through it. ``tls``: :func:`~swarmbed.wire.session.tls_settings`
+    process on this machine cannot reach a hub through it. ``tls``: :func:`~swarmbed.wire.zenoh_session.tls_settings`
     for ``tls/`` endpoints. Without credentials it refuses to start unless ``insecure`` and every
     endpoint it listens on or connects to is on loopback: an unauthenticated host daemon runs
     whatever anyone who reaches it names."""

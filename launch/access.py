@@ -40,11 +40,11 @@ from pathlib import Path
 import psutil
 
 from swarmbed.wire import safefiles
+from swarmbed.wire.child_process import process_alive
 from swarmbed.wire.credentials import Identity, check_admitted, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, PREFIX, Keys
-from swarmbed.wire.process import process_alive
-from swarmbed.wire.ros2 import ADMIN_SPACE as ROS2_ADMIN_SPACE
-from swarmbed.wire.ros2 import NODE_PREFIX as ROS2_NODE_PREFIX
+from swarmbed.wire.ros2_conventions import ADMIN_SPACE as ROS2_ADMIN_SPACE
+from swarmbed.wire.ros2_conventions import NODE_PREFIX as ROS2_NODE_PREFIX
 
 log = logging.getLogger("swarmbed.access")
 OWNER = "owner.json"  # in a run's private folder: the launcher that made it (pid, start time)

@@ -17,7 +17,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from swarmbed.checks.allocator import random_instance, simulate
+from swarmbed.checks.allocator_kit import random_instance, simulate
 from swarmbed.launch import config as cfg
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.schema import Experiment, hosts_of

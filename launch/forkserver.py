@@ -114,7 +114,7 @@ def _reap(children: set[int]) -> None:
 
 
 def serve() -> int:
-    from swarmbed.wire.process import die_with_parent
+    from swarmbed.wire.child_process import die_with_parent
 
     parent = int(sys.argv[1]) if len(sys.argv) > 1 else None
     die_with_parent(parent)

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import zenoh
 
-from swarmbed.engine.errors import RunError
+from swarmbed.engine.run_errors import RunError
+from swarmbed.wire.child_process import tune_malloc
 from swarmbed.wire.credentials import Identity
-from swarmbed.wire.process import tune_malloc
-from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
+from swarmbed.wire.zenoh_session import free_loopback_endpoint, zenoh_config
 
 
 @dataclass(frozen=True)
@@ -26,7 +26,7 @@ class HubOptions:
     ``listen``: endpoints where the hub also listens, for the routers of the hosts a placement
     names. ``auth``: without it anyone who reaches the hub may do anything (trusted benches only).
     ``admit``: operators and host daemons let in beside the run's own processes. ``tls``: the hub's
-    certificates (:func:`~swarmbed.wire.session.tls_settings`) for ``tls/`` endpoints in ``listen``.
+    certificates (:func:`~swarmbed.wire.zenoh_session.tls_settings`) for ``tls/`` endpoints in ``listen``.
     """
 
     listen: Sequence[str] = ()

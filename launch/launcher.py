@@ -35,7 +35,7 @@ from swarmbed.launch.forkmessages import (
     encode,
 )
 from swarmbed.wire.safefiles import open_fresh
-from swarmbed.wire.session import RUNTIMES
+from swarmbed.wire.zenoh_session import RUNTIMES
 
 log = logging.getLogger("swarmbed.launcher")
 

@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from swarmbed.coordinator.coordinator import ZenohTransport
 from swarmbed.engine import Session, TickHook, results
-from swarmbed.engine.errors import RunError
+from swarmbed.engine.run_errors import RunError
 from swarmbed.launch.access import RunAccess
 from swarmbed.launch.config import Experiment, Resolved, resolve_experiment, to_yaml
 from swarmbed.launch.host_client import HostError, host_info, wait_for_hosts
@@ -153,7 +153,7 @@ def run_experiment(
     are started once everyone joined and stopped when the ticks are over (:mod:`.soak`). ``decider``:
     for an allocator that takes its decisions from the launching process (``external``), what makes
     them each tick (:mod:`swarmbed.envs`). ``views``: each makes, from the run's session, a hook
-    that shows the run as it goes (a live Foxglove server, :mod:`swarmbed.results.live`)."""
+    that shows the run as it goes (a live Foxglove server, :mod:`swarmbed.results.foxglove_live`)."""
     plan = plan_run(exp, out_dir, hub)
     start_result_dir(plan)
     return _execute(plan, progress, on_ready, fork_agents, observers, decider, views)

@@ -13,7 +13,7 @@ from pathlib import Path
 from swarmbed.netem.ledger import Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio, drop_reasons, measured
 from swarmbed.wire.codec import AgentOut, NetemStep, WorldSample, encode_inbox
-from swarmbed.wire.radio import WallsSection
+from swarmbed.wire.radio_sections import WallsSection
 from swarmbed.wire.reports import NetemFinal, Transport
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.rundir import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER

@@ -20,6 +20,7 @@ import zenoh
 
 from swarmbed.netem.exchange import Exchange
 from swarmbed.netem.ros2 import Ros2Outboxes
+from swarmbed.wire.child_process import child_args, pin_thread_state
 from swarmbed.wire.codec import (
     AgentOut,
     NetemControl,
@@ -35,14 +36,13 @@ from swarmbed.wire.codec import (
 )
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
 from swarmbed.wire.membership import fetch_spec, hand_over
-from swarmbed.wire.process import child_args, pin_thread_state
 from swarmbed.wire.reports import NetemFatal, Transport, encode_report
 from swarmbed.wire.rowfile import TableWriteError
 from swarmbed.wire.schema import NetemSpec
-from swarmbed.wire.session import open_from_args
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.transport import tcp_counters
+from swarmbed.wire.zenoh_session import open_from_args
 
 log = logging.getLogger("swarmbed.netem")
 

@@ -12,7 +12,7 @@ import numpy as np
 import zenoh
 
 from swarmbed.wire.codec import BROADCAST
-from swarmbed.wire.ros2 import NODE_PREFIX, RADIO_OUTBOX, Ros2Types, stamp
+from swarmbed.wire.ros2_conventions import NODE_PREFIX, RADIO_OUTBOX, Ros2Types, stamp
 from swarmbed.wire.ros2_node import Ros2Node
 from swarmbed.wire.schema import NetemSpec
 

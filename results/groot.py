@@ -27,7 +27,7 @@ from swarmbed.results.watch import WatchError, running_runs
 from swarmbed.wire.btlog import decode_tree_changes, tree_size
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import Keys
-from swarmbed.wire.session import undeclare_all
+from swarmbed.wire.zenoh_session import undeclare_all
 
 
 class Gateway:

@@ -73,7 +73,7 @@ def tree_identity(*names: object) -> bytes:
 
 
 def buffer_order(xml: str) -> list[int]:
-    """The uids of a tree's XML (as :func:`~swarmbed.bt.btlog.tree_xml` writes it) in
+    """The uids of a tree's XML (as :func:`~swarmbed.bt.groot_tree.tree_xml` writes it) in
     the order BehaviorTree.CPP's status buffer lists them."""
     try:
         root = ElementTree.fromstring(xml)

@@ -30,7 +30,7 @@ from swarmbed.results.colours import LABEL_COLORS
 from swarmbed.wire import safefiles
 from swarmbed.wire.codec import WireError, decode_traffic
 from swarmbed.wire.keys import PREFIX, Keys, agent_id_of
-from swarmbed.wire.status import RunStatus, decode_status
+from swarmbed.wire.run_status import RunStatus, decode_status
 
 RATE_WINDOW = 2.0  # wall seconds over which per-agent rates are measured
 
@@ -229,7 +229,7 @@ def watch(
     foxglove: Any = None,
 ) -> int:
     """Show one run until it ends (0) or Ctrl-C (130); 1 when no such run answers within ``wait`` s.
-    ``foxglove``: a :class:`~swarmbed.results.live.StatusFoxglove` each sample is shown on."""
+    ``foxglove``: a :class:`~swarmbed.results.foxglove_live.StatusFoxglove` each sample is shown on."""
     console = console or Console()
     if run_id is None:
         deadline = time.monotonic() + wait

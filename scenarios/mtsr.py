@@ -29,8 +29,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
-from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, sight
+from swarmbed.extension.space_nodes import SPACE_NODES
 from swarmbed.scenarios.kinematics import Limits, step
 from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places, planner_problems
 from swarmbed.wire.codec import TASK_DTYPE

@@ -43,8 +43,8 @@ from pydantic import BaseModel, ConfigDict, Field
 from swarmbed.extension.actions import MOVE_ACTIONS
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
-from swarmbed.extension.nodes import SPACE_NODES
 from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, sight
+from swarmbed.extension.space_nodes import SPACE_NODES
 from swarmbed.scenarios.budget import ACTIVITIES, IDLE, INSPECTING, MOVING, PENALTY, RESCUING, TimeBudget
 from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places, planner_problems
 from swarmbed.scenarios.victims import ALIVE, EXPIRED, RESCUED, VictimRows

@@ -19,7 +19,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.extension import Allocator, Figure, LocalView, Scenario, Sensing, World
-from swarmbed.extension.nodes import SPACE_NODES
+from swarmbed.extension.space_nodes import SPACE_NODES
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 

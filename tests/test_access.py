@@ -25,7 +25,7 @@ from swarmbed.wire.codec import decode_traffic, encode_agent_out, pack
 from swarmbed.wire.credentials import CredentialsError, Identity, check_admitted, read_credentials, write_credentials
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
-from swarmbed.wire.session import zenoh_config
+from swarmbed.wire.zenoh_session import zenoh_config
 from tests.conftest import SwapAsked, experiment, reference_run, same_results
 
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -266,7 +266,7 @@ def test_an_operator_watches_and_asks_but_cannot_publish(tmp_path, operator):
 #: an operator's client that subscribes and then never reads (stopped with SIGSTOP by the test)
 STOPPED_CLIENT = """
 import sys, time, zenoh
-from swarmbed.wire.session import zenoh_config
+from swarmbed.wire.zenoh_session import zenoh_config
 s = zenoh.open(zenoh_config("client", [sys.argv[1]], credentials=sys.argv[2]))
 subs = [s.declare_subscriber(k, zenoh.handlers.FifoChannel(4)) for k in sys.argv[3:]]
 print("ready", flush=True)

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.checks.allocator import CLEAN_NETWORK as CLEAN
-from swarmbed.checks.allocator import random_instance, run_all, simulate
+from swarmbed.checks.allocator_kit import CLEAN_NETWORK as CLEAN
+from swarmbed.checks.allocator_kit import random_instance, run_all, simulate
 from swarmbed.extension import HALT, HOLD, LocalView, Message, TaskInfo
 from swarmbed.plugins import consensus
 from swarmbed.plugins.cbba import CBBA
@@ -612,7 +612,7 @@ def test_a_leader_knows_only_what_reached_it_and_the_lowest_id_in_reach_leads():
     """Agents 0 and 1 stand together, 2 and 3 together, far apart, range 50. With a fixed leader 0,
     agents 2 and 3 never reach it: they are never in its assignment and, hearing nothing, explore.
     With ``lowest_alive`` each group elects its own lowest id."""
-    from swarmbed.checks.allocator import Instance
+    from swarmbed.checks.allocator_kit import Instance
 
     inst = Instance(
         agents=[(0.0, 0.0), (10.0, 0.0), (500.0, 0.0), (510.0, 0.0)],

@@ -6,7 +6,7 @@ import pytest
 
 from swarmbed.bt import BTError, load_tree
 from swarmbed.cli.main import main
-from swarmbed.extension.nodes import SPACE_TREE, space_registry
+from swarmbed.extension.space_nodes import SPACE_TREE, space_registry
 
 
 def load(text):

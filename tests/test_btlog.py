@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from swarmbed.bt import NodeRegistry, load_tree
-from swarmbed.bt.btlog import ChangeRecorder, tree_xml
+from swarmbed.bt.groot_tree import ChangeRecorder, tree_xml
 from swarmbed.wire.btlog import EPOCH_US, HEADER, BtLogError, file_head, read_btlog, records
 from tests.bt_harness import Act, Cond, Script, btcpp_tree, random_case
 

@@ -10,7 +10,7 @@ import subprocess
 import pytest
 
 from swarmbed.engine import results
-from swarmbed.engine.errors import RunError
+from swarmbed.engine.run_errors import RunError
 from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.rowfile import RowFile, TableWriteError
 from tests.conftest import experiment, whole_rows

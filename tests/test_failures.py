@@ -11,13 +11,13 @@ import psutil
 import pytest
 import zenoh
 
-from swarmbed.engine.errors import RunError
+from swarmbed.engine.run_errors import RunError
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.codec import EMPTY_INBOX, MAX_AGENT_SAMPLE_BYTES, encode_tick, pack
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import hand_over
-from swarmbed.wire.session import zenoh_config
+from swarmbed.wire.zenoh_session import zenoh_config
 from tests.conftest import QUICKSTART, ROOT, cmdline, experiment, under_way
 
 LONG_NOOP = [

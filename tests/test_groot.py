@@ -14,7 +14,7 @@ import msgpack
 import pytest
 
 from swarmbed.bt import NodeRegistry, Status, load_tree
-from swarmbed.bt.btlog import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
+from swarmbed.bt.groot_tree import STATUS_CODE, BlackboardWatch, ChangeRecorder, tree_xml
 from swarmbed.results.groot2 import MonitoredTree, serve, tree_identity
 from tests.bt_harness import Act, Cond, Script, btcpp_tree
 from tests.test_btlog import CASES, TICKS, shape
@@ -231,7 +231,7 @@ def test_groot2_follows_any_agent_of_a_running_run_and_watching_changes_no_resul
 
     from swarmbed.launch.hub import HubOptions
     from swarmbed.launch.runner import run_experiment
-    from swarmbed.wire.session import free_loopback_endpoint
+    from swarmbed.wire.zenoh_session import free_loopback_endpoint
     from tests.conftest import experiment, reference_run, same_results
 
     sets = ["agents.count=6", "allocator.name=cbba", "run.stop_when_done=false", "run.duration=6000", "run.seed=5"]

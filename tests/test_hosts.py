@@ -13,7 +13,7 @@ import numpy as np
 import psutil
 import pytest
 
-from swarmbed.engine.errors import RunError
+from swarmbed.engine.run_errors import RunError
 from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity
 from tests.conftest import SAR_BASE, experiment, reference_run, same_results
@@ -197,7 +197,7 @@ def test_a_host_daemon_answers_crafted_start_and_stop_requests_with_why_and_star
     answered with one line naming the field, and no process starts."""
     import zenoh
 
-    from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
+    from swarmbed.wire.zenoh_session import free_loopback_endpoint, zenoh_config
 
     endpoint = free_loopback_endpoint()
     daemon = subprocess.Popen(

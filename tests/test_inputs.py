@@ -9,7 +9,7 @@ import pytest
 
 from swarmbed.bt import BTError, load_tree
 from swarmbed.cli import main as cli
-from swarmbed.extension.nodes import space_registry
+from swarmbed.extension.space_nodes import space_registry
 from swarmbed.launch import config as cfg
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.runner import RunError, plan_run

@@ -2,6 +2,7 @@
 folder is listed, and the layers import only downward."""
 
 import ast
+import re
 import subprocess
 import sys
 import tomllib
@@ -117,3 +118,37 @@ def test_experiments_holds_experiment_files_and_no_code():
         tree = ast.parse(marker.read_text())
         assert all(isinstance(node, ast.Expr) for node in tree.body), f"{marker} holds more than a docstring"
     assert list(folder.rglob("*.yaml")), "no experiment files"
+
+
+def test_the_architecture_diagram_is_its_source_and_names_every_package():
+    """docs/ARCHITECTURE.md opens with docs/architecture.mmd as written, and the diagram names every
+    top-level package the install maps (a new package must be drawn)."""
+    source = (ROOT / "docs" / "architecture.mmd").read_text()
+    page = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
+    assert "```mermaid\n" + source + "```" in page, "docs/ARCHITECTURE.md: copy docs/architecture.mmd into it"
+    words = set(re.findall(r"[a-z_]+", source))
+    top = {name.split(".")[1] for name in _setuptools()["packages"] if name.count(".") >= 1}
+    assert top <= words, sorted(top - words)
+
+
+#: file names two packages share because they hold one concept in two roles, the folder saying which
+SHARED_NAMES = {
+    "__main__.py": "each runnable package's entry (python -m swarmbed, swarmbed.agent_runtime, swarmbed.netem)",
+    "placement.py": "where agents run: the Placement the coordinator is handed, the AgentPlacement the launcher makes",
+    "ros2.py": "a process role's own ROS 2 node: the coordinator's /swarmbed, the proxy's /swarmbed_radio",
+}
+
+
+def test_no_two_modules_share_a_file_name_but_one_concept_in_two_roles():
+    """A traceback's file name says where it is: no two installed modules share a name, but those
+    written down above with the concept they share."""
+    by_name: dict[str, list[str]] = {}
+    setuptools = _setuptools()
+    for package in setuptools["packages"]:
+        folder = _folder_of(package, setuptools["package-dir"])
+        for path in folder.glob("*.py"):
+            if path.name != "__init__.py":
+                by_name.setdefault(path.name, []).append(f"{package}.{path.stem}")
+    shared = {name: where for name, where in by_name.items() if len(where) > 1}
+    assert set(shared) <= set(SHARED_NAMES), {n: w for n, w in shared.items() if n not in SHARED_NAMES}
+    assert set(SHARED_NAMES) <= set(shared), f"no longer shared, take them off: {set(SHARED_NAMES) - set(shared)}"

@@ -15,7 +15,7 @@ from swarmbed.netem.normal import erfc
 from swarmbed.netem.radio import drop_reasons
 from swarmbed.wire.codec import BROADCAST, RadioMessage
 from swarmbed.wire.obstacles import ObstaclesSection
-from swarmbed.wire.radio import BurstSection, DelaySection, WallsSection
+from swarmbed.wire.radio_sections import BurstSection, DelaySection, WallsSection
 from swarmbed.wire.schema import NetworkSection
 
 SIGMAS = 4.5  # an empirical figure may stray this many standard errors from its formula

@@ -125,7 +125,7 @@ def test_a_run_is_served_live_to_a_foxglove_client_over_its_websocket_protocol(t
     from mcap.records import Schema
     from mcap_protobuf.decoder import DecoderFactory
 
-    from swarmbed.results.live import TOPICS, FoxgloveLive
+    from swarmbed.results.foxglove_live import TOPICS, FoxgloveLive
 
     PROTOCOL = "foxglove.sdk.v1"  # Foxglove's WebSocket protocol, as the SDK's server names it
 

@@ -6,7 +6,7 @@ import struct
 import pytest
 
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.ros2 import (
+from swarmbed.wire.ros2_conventions import (
     BEST_EFFORT,
     PUBLISHER,
     RADIO_INBOX,
@@ -104,7 +104,7 @@ def test_stamps_carry_a_rounded_up_fraction_into_the_seconds(types):
 def test_the_shipped_ros2_package_defines_the_types_the_run_uses(types):
     from pathlib import Path
 
-    from swarmbed.wire.ros2 import OUR_TYPES
+    from swarmbed.wire.ros2_conventions import OUR_TYPES
 
     folder = Path(__file__).resolve().parent.parent / "docs" / "ros2" / "swarmbed_msgs" / "msg"
     assert {p.stem for p in folder.glob("*.msg")} == {name.rsplit("/", 1)[1] for name in OUR_TYPES}
@@ -172,7 +172,7 @@ def test_each_distribution_s_keys_and_cdr_are_rosbags_store_of_it(distro):
     rmw_zenoh's placeholder; a message serialised for the distribution decodes with its store."""
     from rosbags.typesys import Stores, get_typestore
 
-    from swarmbed.wire.ros2 import DISTRO_STORES, NO_TYPE_HASH
+    from swarmbed.wire.ros2_conventions import DISTRO_STORES, NO_TYPE_HASH
 
     types = Ros2Types(distro)
     reference = get_typestore(getattr(Stores, DISTRO_STORES[distro]))

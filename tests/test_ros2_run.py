@@ -18,8 +18,8 @@ import zenoh
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.credentials import Identity, write_credentials
-from swarmbed.wire.ros2 import Ros2Types, decode_attachment, gid
-from swarmbed.wire.session import free_loopback_endpoint, zenoh_config
+from swarmbed.wire.ros2_conventions import Ros2Types, decode_attachment, gid
+from swarmbed.wire.zenoh_session import free_loopback_endpoint, zenoh_config
 from tests.conftest import QUICKSTART, experiment, read_ledger, reference_run, same_results
 
 DOMAIN = 7

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.checks.allocator import random_instance, simulate
+from swarmbed.checks.allocator_kit import random_instance, simulate
 from swarmbed.extension import LocalView, Message, TaskInfo
 from swarmbed.plugins.consensus import consensus_message
 from swarmbed.plugins.registry import make

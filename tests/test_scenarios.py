@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmbed.checks.scenario import ScenarioCheckError, check_scenario
+from swarmbed.checks.scenario_check import ScenarioCheckError, check_scenario
 from swarmbed.extension.scenario import Scenario
 from swarmbed.launch import config as cfg
 from swarmbed.launch.runner import run_experiment

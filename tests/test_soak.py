@@ -339,7 +339,7 @@ def test_a_killed_soak_leaves_files_that_parse(tmp_path):
 
 def test_a_run_that_stops_keeps_its_rows_as_partial_files(tmp_path):
     """A run that fails after ticks ran keeps the rows it streamed, never under a result's name."""
-    from swarmbed.engine.errors import RunError
+    from swarmbed.engine.run_errors import RunError
     from swarmbed.launch.runner import run_experiment
 
     plugin = tmp_path / "boom.py"
@@ -528,7 +528,7 @@ def test_sessions_map_no_shared_memory_pools():
 
     from swarmbed.launch.hub import open_hub
     from swarmbed.wire.membership import accept_handovers, hand_over
-    from swarmbed.wire.session import zenoh_config
+    from swarmbed.wire.zenoh_session import zenoh_config
 
     def pools() -> list[str]:
         with open("/proc/self/maps") as maps:

@@ -40,7 +40,7 @@ def hostile_payloads(canary) -> dict[str, bytes]:
     return {
         # a function reached through a swarmbed module, called by the enum path with a chosen value
         "enum names os.system via a module": crafted(ext(st.EXT_ENUM, ["os:system", cmd])),
-        "enum walks to os.system": crafted(ext(st.EXT_ENUM, ["swarmbed.wire.process:os.system", cmd])),
+        "enum walks to os.system": crafted(ext(st.EXT_ENUM, ["swarmbed.wire.child_process:os.system", cmd])),
         "enum walks from a prefix module": crafted(ext(st.EXT_ENUM, ["swarmbedx:system", cmd])),
         "enum names subprocess": crafted(ext(st.EXT_ENUM, ["subprocess:getoutput", cmd])),
         "enum names a declared module's import": crafted(

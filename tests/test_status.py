@@ -8,7 +8,7 @@ import pytest
 from swarmbed.results.watch import RunView, write_map
 from swarmbed.wire.codec import pack
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.status import NetworkCounters, RunStatus, decode_status, encode_status
+from swarmbed.wire.run_status import NetworkCounters, RunStatus, decode_status, encode_status
 
 
 def _status(**change) -> RunStatus:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmbed.checks.allocator import random_instance, simulate
+from swarmbed.checks.allocator_kit import random_instance, simulate
 from swarmbed.launch.config import ConfigError, resolve_experiment
 from swarmbed.plugins.central import least_travel, nash_stable_partition, sequential_greedy
 from swarmbed.plugins.grape import utility
@@ -195,7 +195,7 @@ def test_first_claimed_greedy_gathers_its_claims_into_full_teams():
     """Four robots, four tasks that need two each, each robot beside its own task, all in reach of each
     other: each first claims the task beside it (and would wait there alone for ever); then the
     claimants gather around the earliest claims until two teams are full."""
-    from swarmbed.checks.allocator import Instance
+    from swarmbed.checks.allocator_kit import Instance
 
     corners = [(0.0, 0.0), (50.0, 0.0), (0.0, 50.0), (50.0, 50.0)]
     inst = Instance(

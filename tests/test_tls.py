@@ -12,7 +12,7 @@ import zenoh
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.credentials import CredentialsError, Identity, write_credentials
-from swarmbed.wire.session import free_loopback_endpoint, tls_settings, zenoh_config
+from swarmbed.wire.zenoh_session import free_loopback_endpoint, tls_settings, zenoh_config
 from tests.conftest import experiment, reference_run, same_results
 
 x509 = pytest.importorskip("cryptography.x509", reason="swarmbed certs needs the tls extra (cryptography)")

@@ -14,7 +14,7 @@ import time
 
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.runner import run_experiment
-from swarmbed.wire.session import free_loopback_endpoint
+from swarmbed.wire.zenoh_session import free_loopback_endpoint
 from tests.conftest import experiment
 
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")

@@ -6,7 +6,7 @@ The file's layout, little-endian, as BehaviorTree.CPP v4 writes it:
 - the 19-byte header ``BTCPP4-FileLogger2`` and a byte 1;
 - a uint32 N, then N bytes of the tree as XML: every node with its ``_uid``, each SubTree instance
   as a ``<BehaviorTree ID=... _fullpath=...>`` of its own after the main tree, then the node models
-  (:func:`swarmbed.bt.btlog.tree_xml` writes it);
+  (:func:`swarmbed.bt.groot_tree.tree_xml` writes it);
 - an int64: the first timestamp, in microseconds since the Unix epoch;
 - then one 9-byte record per status change: 6 bytes of microseconds since the first timestamp,
   the node's uint16 uid, and its uint8 status (IDLE 0, RUNNING 1, SUCCESS 2, FAILURE 3).

@@ -44,7 +44,7 @@ def pack(obj: Any) -> bytes:
     """msgpack bytes of ``obj``, from a packer kept per thread. ``msgpack.packb`` makes a packer
     with a fresh 256 KB buffer on every call: at every tick and in every process that is a large
     block allocated and freed, which costs 14 times the packing itself where large blocks are
-    mapped on their own (:func:`~swarmbed.wire.process.tune_malloc`)."""
+    mapped on their own (:func:`~swarmbed.wire.child_process.tune_malloc`)."""
     packer = getattr(_packers, "packer", None)
     if packer is None:
         packer = _packers.packer = msgpack.Packer(use_bin_type=True)

@@ -2,7 +2,7 @@
 publishers and subscriptions each with its own token, GID and sequence numbers.
 
 The hub (the coordinator's session) and the netem proxy each hold one when a run publishes ROS 2
-topics (``docs/ros2.md``); the conventions themselves are in :mod:`swarmbed.wire.ros2`.
+topics (``docs/ros2.md``); the conventions themselves are in :mod:`swarmbed.wire.ros2_conventions`.
 
 A publisher whose QoS is TRANSIENT_LOCAL is a Zenoh *advanced* publisher with a cache of ``depth``
 samples and publisher detection, as rmw_zenoh declares one (ros2/rmw_zenoh#368, which replaced the
@@ -18,7 +18,7 @@ from typing import Any
 
 import zenoh
 
-from swarmbed.wire.ros2 import (
+from swarmbed.wire.ros2_conventions import (
     PUBLISHER,
     SUBSCRIPTION,
     TRANSIENT_LOCAL,
@@ -31,7 +31,7 @@ from swarmbed.wire.ros2 import (
     topic_key,
     wall_ns,
 )
-from swarmbed.wire.session import undeclare_all
+from swarmbed.wire.zenoh_session import undeclare_all
 
 
 @dataclass

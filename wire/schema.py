@@ -27,7 +27,7 @@ from pydantic import (
 )
 
 from swarmbed.wire.obstacles import ObstaclesSection
-from swarmbed.wire.radio import NetworkSection, WallsSection
+from swarmbed.wire.radio_sections import NetworkSection, WallsSection
 
 #: a name that becomes a folder (experiments, sweeps, their scenarios): no path separators, no ``..``
 SAFE_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.+=-]{0,99}$"

@@ -20,7 +20,7 @@ from typing import Any
 import psutil
 
 from swarmbed.campaigns.executors import Executor, Outcome, Resources, RunFunction
-from swarmbed.wire.process import die_with_parent
+from swarmbed.wire.child_process import die_with_parent
 
 _stopping = False  # in a pool worker: SIGTERM came
 

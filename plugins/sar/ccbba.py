@@ -17,7 +17,7 @@ import numpy as np
 from pydantic import Field
 
 from swarmbed.extension import LocalView
-from swarmbed.plugins.sar.consensus import ReactiveCBBA, ReactiveParams
+from swarmbed.plugins.sar.reactive_cbba import ReactiveCBBA, ReactiveParams
 
 BIDS, LEADERS, RESULT = "bids", "leaders", "result"
 CLUSTER_STREAM = 0xCCBBA  # a fixed entropy word: every robot draws the same clustering stream

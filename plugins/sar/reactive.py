@@ -14,7 +14,7 @@ from __future__ import annotations
 from pydantic import Field
 
 from swarmbed.extension import LocalView
-from swarmbed.extension.nodes import ExplorationNode
+from swarmbed.extension.space_nodes import ExplorationNode
 from swarmbed.plugins.sar.base import TREES, SARStrategy, StrategyParams
 from swarmbed.plugins.sar.nodes import SAR_NODES
 

@@ -23,7 +23,7 @@ from typing import ClassVar, Literal
 from pydantic import Field
 
 from swarmbed.extension import LocalView
-from swarmbed.extension.nodes import ExplorationNode
+from swarmbed.extension.space_nodes import ExplorationNode
 from swarmbed.plugins.consensus import ConsensusState
 from swarmbed.plugins.sar.base import TREES, SARStrategy, StrategyParams
 from swarmbed.plugins.sar.interval import IntervalParams, next_interval

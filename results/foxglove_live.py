@@ -41,7 +41,7 @@ from swarmbed.results.recording import (
 )
 from swarmbed.wire.codec import WorldSample, delivered_in
 from swarmbed.wire.observation import Observation
-from swarmbed.wire.status import RunStatus
+from swarmbed.wire.run_status import RunStatus
 
 #: Foxglove's default WebSocket port
 DEFAULT_PORT = 8765

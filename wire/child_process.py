@@ -100,7 +100,7 @@ def child_args(
 ) -> argparse.Namespace:
     """Parse a child process's command line (its own flags, ``--run-id``, ``--parent-pid``, the log
     rotation and the zenoh flags), tie it to its parent and set up logging to stderr."""
-    from swarmbed.wire.session import add_zenoh_args
+    from swarmbed.wire.zenoh_session import add_zenoh_args
 
     ap = argparse.ArgumentParser(prog=prog, description=description)
     ap.add_argument("--run-id", required=True, help="the run to join (see the run's timings.json)")

@@ -9,8 +9,8 @@ import numpy as np
 
 from swarmbed.bt.blackboard import Blackboard
 from swarmbed.bt.node import ControlNode, DecoratorNode, TreeNode
+from swarmbed.bt.node_types import BUILTIN_TYPES
 from swarmbed.bt.palette import model_lines
-from swarmbed.bt.registry import BUILTIN_TYPES
 from swarmbed.bt.status import Status
 from swarmbed.bt.tree import SubTree, Tree
 from swarmbed.wire.btlog import MAX_ENTRIES, MAX_ITEMS, MAX_TEXT, BlackboardValue
