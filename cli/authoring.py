@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from swarmbed.bt import BTError, load_tree, palette_xml
 from swarmbed.extension.node_sets import node_registry
+from swarmbed.extension.presets import PRESET_KEY, presets_of
 from swarmbed.launch import config as cfg
 from swarmbed.plugins import registry
 
@@ -76,6 +77,7 @@ def _param_groups(name: str) -> list[tuple[str, list[tuple[str, str, str, str]]]
         try:
             cls = registry.resolve_scenario(name)
             groups.append((f"scenario.kind: {name} ({_first_line(cls)})", cfg.describe(cls.Params, "scenario.")))
+            groups += _preset_group(cls.Params, "scenario")
         except registry.PluginError:
             if ":" not in name:
                 raise
@@ -89,7 +91,20 @@ def _param_groups(name: str) -> list[tuple[str, list[tuple[str, str, str, str]]]
                 cfg.describe(allocator.Params, "allocator.") or [("(no parameters)", "", "", "")],
             )
         )
+        groups += _preset_group(allocator.Params, "allocator")
     return groups
+
+
+def _preset_group(params_model: type, section: str) -> list[tuple[str, list[tuple[str, str, str, str]]]]:
+    """The presets a plugin declares, each with the keys it sets and what it follows (none: no group)."""
+    presets = presets_of(params_model)
+    if not presets:
+        return []
+    rows = [
+        (name, "", "", "sets " + ", ".join(f"{k}={v}" for k, v in preset.values.items()) + f" ({preset.source})")
+        for name, preset in sorted(presets.items())
+    ]
+    return [(f"presets ({section}.{PRESET_KEY}: NAME; a key the experiment sets wins):", rows)]
 
 
 def _section_groups() -> list[tuple[str, list[tuple[str, str, str, str]]]]:

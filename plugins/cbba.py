@@ -56,6 +56,7 @@ import numpy as np
 from pydantic import ConfigDict, Field
 
 from swarmbed.extension import Allocator, LocalView, TaskInfo
+from swarmbed.extension.presets import Preset
 from swarmbed.plugins.consensus import ConsensusState
 from swarmbed.plugins.taskbook import TaskBook
 from swarmbed.plugins.teams import slot_id, task_of
@@ -68,6 +69,19 @@ class CBBAParams(QuietDefaults):
     model_config = ConfigDict(extra="forbid")
     #: a key for team tasks only: at its default, runs without them write the config.yaml they did
     QUIET: ClassVar[dict[str, Any]] = {"team_patience": 600.0}
+    #: the CBBA paper's consensus and SPACE's code's (the module's docstring says what each key follows)
+    presets: ClassVar[dict[str, Preset]] = {
+        "cbba_paper": Preset(
+            {"consensus_scope": "all", "stamp_every": None},
+            "Choi, Brunet, How 2009: Table 1 on every task a neighbour names, timestamps of the time itself",
+        ),
+        "space_code": Preset(
+            {"execute": "settled", "consensus_scope": "local_bids", "stamp_every": 300.0},
+            "SPACE's code: plugins/cbba/cbba.py works only on a settled bundle, applies Table 1 to sensed "
+            "tasks both sides bid on, and stamps with whole wall-clock seconds (300 simulated seconds: the "
+            "calibration of docs/reproduction.md section 7)",
+        ),
+    }
     max_tasks: int = Field(5, ge=1, description="L_t: tasks per bundle")
     discount: float = Field(0.999, gt=0, le=1, description="lambda of the time-discounted reward")
     score: Literal["time_discounted", "distance_discounted"] = "time_discounted"

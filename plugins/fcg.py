@@ -39,17 +39,31 @@ this rule, agents that each claimed a different team task at the start would wai
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.extension import Allocator, LocalView, TaskInfo
+from swarmbed.extension.presets import Preset
 
 CLAIM = "claim"
 
 
 class FCGParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
+    #: the readings of SPACE's paper and of its code (the module's docstring quotes both)
+    presets: ClassVar[dict[str, Preset]] = {
+        "space_text": Preset(
+            {"on_earlier_claim": "abandon"},
+            "SPACE, Section IV-D: the agent 'abandons that task and tries the task selection process again "
+            "in the next game loop'",
+        ),
+        "space_code": Preset(
+            {"on_earlier_claim": "keep", "heard_claims": "since_choice", "same_tick_claims": "id_order"},
+            "SPACE's code: plugins/greedy/greedy.py checks claims only when it chooses and empties its "
+            "received messages then; its main loop runs the agents' trees in id order within a step",
+        ),
+    }
     mode: Literal["MinDist", "Random", "MaxUtil"] = "MinDist"
     cost_weight: float = 1.0  # MaxUtil: utility = remaining workload - cost_weight * distance
     on_earlier_claim: Literal["keep", "abandon"] = Field(

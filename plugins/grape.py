@@ -44,12 +44,13 @@ SPACE's: (evolution number, timestamp, partition).
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from swarmbed.extension import HALT, HOLD, Allocator, LocalView
+from swarmbed.extension.presets import Preset
 from swarmbed.plugins.packed import pack_rows, read_tuples
 from swarmbed.plugins.taskbook import TaskBook
 
@@ -123,6 +124,23 @@ def _well_formed(data: object, numbered: bool) -> bool:
 
 class GRAPEParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
+    #: the original GRAPE and SPACE's MT-SR adaptation of it in its code
+    presets: ClassVar[dict[str, Preset]] = {
+        "grape_paper": Preset(
+            {"void_task": True, "hold_while_converging": False},
+            "Jang et al. 2018, GRAPE: the void task offered; agents move while the partition converges",
+        ),
+        "space_code": Preset(
+            {
+                "void_task": False,
+                "hold_while_converging": True,
+                "converging_stop": "halt",
+                "restart_bumps_evolution": False,
+            },
+            "SPACE's code: no void task; an agent held still (its movement reset) while the partition "
+            "converges; a restart after a completion is no new evolution",
+        ),
+    }
     cost_weight: float = Field(1.0, ge=0, description="weight of the distance cost")
     social_inhibition: float = Field(100.0, ge=0, description="f_s: exponent on the coalition size")
     nearest_start: bool = Field(True, description="start (and restart after completion) at the nearest task")

@@ -26,6 +26,7 @@ import numpy as np
 from pydantic import BaseModel, ValidationError
 
 from swarmbed.extension.allocator import Allocator
+from swarmbed.extension.presets import PresetError, apply_preset
 from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.targets import TargetError, is_target, load_target
 from swarmbed.wire.validation import validation_lines
@@ -162,9 +163,14 @@ def registered_scenario(kind: object, trusted: bool = False) -> type[Scenario]:
 
 
 def check_params(model: type[BaseModel], params: Mapping[str, Any], section: str) -> BaseModel:
-    """``params`` validated by a plugin's ``Params``. Validated laxly (YAML lists become tuples where
-    a field is a tuple), then refused where lax validation changed a value's kind: ``true`` read as
-    1, ``'3'`` as 3, ``'false'`` as False are errors here as they are in every other section."""
+    """``params`` validated by a plugin's ``Params``, the preset they name filled in first.
+    Validated laxly (YAML lists become tuples where a field is a tuple), then refused where lax
+    validation changed a value's kind: ``true`` read as 1, ``'3'`` as 3, ``'false'`` as False are
+    errors here as they are in every other section."""
+    try:
+        params = apply_preset(model, params, section)
+    except PresetError as exc:
+        raise PluginError(str(exc)) from None
     try:
         checked = model.model_validate(dict(params))
     except ValidationError as exc:

@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
+from swarmbed.extension.presets import Preset
 from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, sight
 from swarmbed.extension.space_nodes import SPACE_NODES
 from swarmbed.scenarios.kinematics import Limits, step
@@ -59,6 +60,15 @@ class MTSRParams(QuietDefaults):
 
     #: tasks that need one robot write the config.yaml (and the sweep digests) they did before teams
     QUIET: ClassVar[dict[str, Any]] = {"robots_needed": 1, "work_motion": "brake"}
+    #: SPACE's code's task geometry and motion (its config.yaml and TaskExecutingNode)
+    presets: ClassVar[dict[str, Preset]] = {
+        "space_code": Preset(
+            {"work_radius_per_workload": 1 / 3, "approach_radius": 50.0, "work_motion": "close_in"},
+            "SPACE's code: task radius amount / task_visualisation_factor (3) added to "
+            "threshold_done_by_arrival, target_approaching_radius 50, TaskExecutingNode keeps heading for "
+            "the task's centre while working",
+        ),
+    }
 
     model_config = ConfigDict(extra="forbid")
     width: float = Field(1400.0, gt=0, description="area width")

@@ -327,3 +327,37 @@ def test_names_are_resolved_once_where_the_experiment_is_checked_and_again_only_
     first = resolve_experiment(mine).targets.digests
     plugin.write_text(plugin.read_text() + "# edited\n")
     assert resolve_experiment(mine).targets.digests != first
+
+
+def test_a_preset_fills_its_keys_below_the_experiments_own_and_the_config_holds_the_values(tmp_path):
+    """``preset: NAME`` in a scenario or allocator section fills the keys the plugin's preset sets; a key
+    the experiment sets wins; the resolved experiment (what config.yaml records) is the one with every
+    key written out, and names no preset."""
+    code = ROOT / "experiments" / "space_mtsr_code.yaml"
+    exp = cfg.load(code, ["allocator={name: fcg, preset: space_code, heard_claims: tick}"])
+    assert exp.allocator.params()["on_earlier_claim"] == "keep"
+    assert exp.allocator.params()["same_tick_claims"] == "id_order"  # from the preset
+    assert exp.allocator.params()["heard_claims"] == "tick"  # the experiment's own key wins
+    scenario = exp.scenario.params()
+    assert (scenario["work_radius_per_workload"], scenario["approach_radius"]) == (1 / 3, 50.0)
+    assert scenario.get("work_motion", "brake") == "brake"  # the file's own key over the preset's close_in
+    assert "preset" not in scenario and "preset" not in exp.allocator.params()
+    spelled = cfg.load(
+        code,
+        [
+            "scenario.preset=null",
+            "scenario.work_radius_per_workload=0.3333333333333333",
+            "scenario.approach_radius=50",
+            "allocator={name: fcg, on_earlier_claim: keep, same_tick_claims: id_order, heard_claims: tick}",
+        ],
+    )
+    assert cfg.to_yaml(spelled) == cfg.to_yaml(exp)
+
+
+def test_an_unknown_preset_is_one_line_naming_the_plugins_presets():
+    with pytest.raises(cfg.ConfigError) as err:
+        cfg.load(QUICKSTART, ["allocator.preset=space_txt"])
+    assert str(err.value).count("\n") == 0
+    assert "allocator.preset" in str(err.value) and "space_code, space_text" in str(err.value)
+    with pytest.raises(cfg.ConfigError, match=r"scenario.preset=x: 'x' is not one of this plugin's presets \(none\)"):
+        cfg.load(ROOT / "experiments" / "sar" / "_base.yaml", ["scenario.preset=x"])
