@@ -119,7 +119,7 @@ def _section_groups() -> list[tuple[str, list[tuple[str, str, str, str]]]]:
         for row in cfg.describe(Experiment)
         if row[0].split(".")[0].removesuffix("[]") in ("placement", "swaps", "may_carry")
     ]
-    groups.append(("hosts (placement, swaps, may_carry: docs in the README's Several machines):", hosts))
+    groups.append(("hosts (placement, swaps, may_carry: docs/machines.md):", hosts))
     return groups
 
 

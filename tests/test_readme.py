@@ -1,4 +1,5 @@
-"""The README's measured facts come from real runs (docs/scripts/readme_facts.py): they cannot drift."""
+"""The docs' measured facts come from real runs (docs/scripts/readme_facts.py): they cannot drift; README and
+docs/ARCHITECTURE.md name every benchmark."""
 
 import importlib.util
 
@@ -18,19 +19,21 @@ def test_the_readme_states_what_the_quickstart_sends(tmp_path):
     q, c = measured["quickstart"], measured["cbba10"]
     # reproducible: exactly; measured on the wire: within a tenth (the run's timing moves them a little)
     assert stated["quickstart"]["ticks"] == q["ticks"] and stated["quickstart"]["payload"] == q["payload"]
-    assert stated["cbba10"]["payload"] == c["payload"], "README.md: run docs/scripts/readme_facts.py --write"
+    assert stated["cbba10"]["payload"] == c["payload"], "docs/results.md: run docs/scripts/readme_facts.py --write"
     for label in ("quickstart", "cbba10"):
         assert abs(stated[label]["tcp"] - measured[label]["tcp"]) <= 0.1 * measured[label]["tcp"], (label, measured)
 
 
 def test_the_readme_names_every_benchmark_in_both_its_lists():
-    """The Benchmarks section and the Layout table name every script in benchmarks/."""
+    """README's Benchmarks section and the folder table of docs/ARCHITECTURE.md name every script in
+    benchmarks/."""
     from pathlib import Path
 
     root = Path(__file__).resolve().parent.parent
     readme = (root / "README.md").read_text()
     section = readme.split("## Benchmarks", 1)[1].split("\n## ", 1)[0]
-    row = next(line for line in readme.splitlines() if line.startswith("| `benchmarks/` |"))
+    folders = (root / "docs" / "ARCHITECTURE.md").read_text()
+    row = next(line for line in folders.splitlines() if line.startswith("| `benchmarks/` |"))
     for script in sorted(p.name for p in (root / "benchmarks").glob("*.py") if p.name != "__init__.py"):
         assert f"`{script}`" in section, f"{script} missing from the Benchmarks section"
-        assert f"`{script}`" in row, f"{script} missing from the Layout table"
+        assert f"`{script}`" in row, f"{script} missing from the folder table of docs/ARCHITECTURE.md"

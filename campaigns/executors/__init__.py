@@ -38,7 +38,7 @@ class Resources:
 def resources_for(agents: int) -> Resources:
     """Cores and memory for a run of ``agents`` agents (measured on 2-core machines: a run of 50
     agents keeps 2 cores busy in lock-step, an agent forked from the fork server costs ~13 MB of its
-    own plus the shared pages, and the coordinator and proxy grow with the run; see README "Sweeps
+    own plus the shared pages, and the coordinator and proxy grow with the run; see docs/campaigns.md, "Sweeps
     on a cluster"): 2 cores up to 50 agents, one more per further 50 agents, up to 16; 1 GB plus
     50 MB per agent, rounded up."""
     cpus = min(16, 2 + max(0, math.ceil((agents - 50) / 50)))

@@ -1,6 +1,7 @@
-"""The README's measured facts about the quick start, from real runs: ``python docs/scripts/readme_facts.py``
-prints them, ``--write`` puts them into README.md between its ``readme-facts`` markers, and
-``tests/test_readme.py`` runs the same runs and holds the README to them (payload bytes and ticks
+"""The measured facts docs/results.md states about the quick start's bytes, from real runs:
+``python docs/scripts/readme_facts.py`` prints them, ``--write`` puts them into docs/results.md
+between its ``readme-facts`` markers, and ``tests/test_readme.py`` runs the same runs and holds the
+page to them (payload bytes and ticks
 exactly, being reproducible; TCP bytes within a tolerance, being measured).
 """
 
@@ -17,7 +18,7 @@ from swarmbed.launch import config as cfg
 from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parents[2]
-README = ROOT / "README.md"
+README = ROOT / "docs" / "results.md"
 START, END = "<!-- readme-facts -->", "<!-- /readme-facts -->"
 #: the runs the paragraph speaks of: (label, overrides)
 RUNS = (("quickstart", ()), ("cbba10", ("agents.count=10", "allocator.name=cbba")))
@@ -50,7 +51,7 @@ def paragraph(facts: dict[str, dict[str, int]]) -> str:
 
 
 def stated(text: str) -> dict[str, dict[str, int]]:
-    """The facts README.md states between its markers."""
+    """The facts the page states between its markers."""
     block = text.split(START, 1)[1].split(END, 1)[0]
     numbers = [int(n.replace(",", "")) for n in re.findall(r"\d[\d,]*(?= (?:ticks|payload|TCP))", block)]
     q_ticks, q_payload, q_tcp, c_payload, c_tcp = numbers
@@ -62,7 +63,7 @@ def stated(text: str) -> dict[str, dict[str, int]]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--write", action="store_true", help="put the facts into README.md")
+    ap.add_argument("--write", action="store_true", help="put the facts into docs/results.md")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         facts = measure(Path(tmp))
