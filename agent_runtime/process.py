@@ -17,6 +17,7 @@ import zenoh
 from pydantic import BaseModel
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
+from swarmbed.schema.experiment import AgentSpec
 from swarmbed.wire.btlog import encode_tree_changes
 from swarmbed.wire.child_process import child_args, pin_thread_state
 from swarmbed.wire.codec import (
@@ -40,7 +41,6 @@ from swarmbed.wire.reports import (
     Transport,
     encode_report,
 )
-from swarmbed.wire.schema import AgentSpec
 from swarmbed.wire.state import StateError
 from swarmbed.wire.tickdecode import TickDecoder
 from swarmbed.wire.transport import tcp_counters

@@ -2,7 +2,7 @@
 encode the action and the outgoing messages. The process in ``agent_runtime.process`` wraps it in
 Zenoh; tests and the conformance kit drive it directly.
 
-It is built from an :class:`~swarmbed.wire.schema.AgentSpec` alone: the scenario and allocator
+It is built from an :class:`~swarmbed.schema.experiment.AgentSpec` alone: the scenario and allocator
 classes are loaded from the targets the launcher resolved, never looked up by name here.
 """
 
@@ -21,11 +21,11 @@ from swarmbed.extension.context import NodeContext
 from swarmbed.extension.node_sets import node_registry, tree_path
 from swarmbed.extension.scenario import Scenario
 from swarmbed.extension.view import LocalView, Message, TaskInfo
+from swarmbed.schema.experiment import AgentSpec
 from swarmbed.wire.btlog import TreeChanges
 from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, unpack
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.reports import Final, Transport
-from swarmbed.wire.schema import AgentSpec
 from swarmbed.wire.seeds import agent_seeds
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled

@@ -23,9 +23,9 @@ from pathlib import Path
 from swarmbed.agent_runtime.runtime import AgentRuntime
 from swarmbed.launch import config as cfg
 from swarmbed.launch.config import resolve_experiment
+from swarmbed.schema.experiment import agent_spec
 from swarmbed.wire.codec import EMPTY_INBOX, encode_agent_out, encode_inbox, encode_tick
 from swarmbed.wire.observation import empty_tasks
-from swarmbed.wire.schema import agent_spec
 from swarmbed.wire.tickdecode import TickDecoder
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -30,9 +30,9 @@ import numpy as np
 
 from swarmbed.netem.ledger import Ledger
 from swarmbed.netem.radio import Radio, drop_reasons
+from swarmbed.schema.experiment import NetworkSection
+from swarmbed.schema.obstacles import ObstaclesSection, Walls
 from swarmbed.wire.codec import BROADCAST, RadioMessage
-from swarmbed.wire.obstacles import ObstaclesSection, Walls
-from swarmbed.wire.schema import NetworkSection
 
 
 def ms_per_tick(n: int, comm_range: float | None, ticks: int) -> tuple[float, int]:

@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from swarmbed.extension.scenario import sight
-from swarmbed.wire.obstacles import ObstaclesSection, Walls
+from swarmbed.schema.obstacles import ObstaclesSection, Walls
 
 RADIUS, REACH, ANGLE = 32.0, 12.0, math.pi / 2  # the CBBA-ETC arena and vision (experiments/sar/_base.yaml)
 

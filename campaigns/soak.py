@@ -47,9 +47,9 @@ from swarmbed.launch.runner import LiveRun, RunObserver, run_experiment
 from swarmbed.results.folders import SOAK_PROCESSES as PROCESSES
 from swarmbed.results.folders import SOAK_RUN as RUN
 from swarmbed.results.folders import SOAK_VERDICT as VERDICT
+from swarmbed.schema.experiment import Experiment
 from swarmbed.wire.child_process import process_name
 from swarmbed.wire.rowfile import RowFile
-from swarmbed.wire.schema import Experiment
 
 PROCESS_COLUMNS = ["wall_s", "tick", "process", "kind", "pid", "rss_mb", "cpu_pct", "fds", "threads", "tcp"]
 RUN_COLUMNS = [

@@ -57,10 +57,10 @@ from swarmbed.engine import results
 from swarmbed.launch import config as cfg
 from swarmbed.results.folders import ATTEMPTS, DERIVED, ERROR, PARQUET, SPEC, TABLE, dotted
 from swarmbed.results.run_folder import RunDir
+from swarmbed.schema.experiment import SAFE_NAME
 from swarmbed.wire import safefiles
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.rundir import MAX_CONFIG_BYTES, PROVENANCE, RunFileError, read_json_member, read_member
-from swarmbed.wire.schema import SAFE_NAME
 from swarmbed.wire.validation import validation_lines
 from swarmbed.wire.yamlfile import YamlFileError, parse_yaml, read_yaml
 

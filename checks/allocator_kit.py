@@ -32,9 +32,9 @@ from swarmbed.extension import HALT, HOLD, Allocator, LocalView, Message, TaskIn
 from swarmbed.netem import Radio
 from swarmbed.netem.exchange import Exchange
 from swarmbed.plugins.registry import make, resolve, resolve_scenario
+from swarmbed.schema.experiment import NetemSpec, NetworkSection
 from swarmbed.wire.codec import TASK_DTYPE, AgentOut, WorldSample, delivered_in, unpack
 from swarmbed.wire.observation import Observation
-from swarmbed.wire.schema import NetemSpec, NetworkSection
 from swarmbed.wire.state import pack_state, unpack_state
 
 DEFAULT_MAX_BYTES = 64 * 1024
@@ -211,7 +211,7 @@ def _declared_fields(scenario: str, n: int, seed: int) -> list[dict[str, Any]]:
     (its default parameters, ``n`` agents), for the fields the kit's instance does not set: a
     scenario of one's own is checked with the values its world gives (an item carried: -1), not
     with made-up ones. Empty where the scenario's world cannot be built here."""
-    from swarmbed.wire.schema import AgentsSection
+    from swarmbed.schema.experiment import AgentsSection
 
     try:
         cls = resolve_scenario(scenario)

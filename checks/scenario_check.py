@@ -29,8 +29,8 @@ import numpy as np
 
 from swarmbed.extension.actions import admit, conforms
 from swarmbed.extension.scenario import Scenario, World
+from swarmbed.schema.experiment import AgentsSection
 from swarmbed.wire.codec import pack, unpack
-from swarmbed.wire.schema import AgentsSection
 
 GARBAGE_ACTIONS: tuple[Any, ...] = (
     [],

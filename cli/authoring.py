@@ -110,7 +110,7 @@ def _preset_group(params_model: type, section: str) -> list[tuple[str, list[tupl
 def _section_groups() -> list[tuple[str, list[tuple[str, str, str, str]]]]:
     """Every key of an experiment outside a scenario's or an allocator's own: the sections, ROS 2,
     and where agents run (placement, swaps, may_carry)."""
-    from swarmbed.wire.schema import Experiment, Ros2Section
+    from swarmbed.schema.experiment import Experiment, Ros2Section
 
     groups = [(f"{name}:", cfg.describe(model, f"{name}.")) for name, model in cfg.SECTIONS.items()]
     groups.append(("ros2 (off unless given):", cfg.describe(Ros2Section, "ros2.")))

@@ -66,9 +66,7 @@ def cmd_certs(args: argparse.Namespace) -> int:
         return 2
     for path in written:
         print(path)
-    print(
-        "copy ca.pem and a machine's NAME.pem and NAME.key to it (never ca.key); see docs/machines.md, TLS between machines"
-    )
+    print("copy ca.pem and a machine's NAME.pem and NAME.key to it (never ca.key); see docs/machines.md (TLS)")
     return 0
 
 

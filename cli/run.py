@@ -113,7 +113,7 @@ def _live_views(exp, port: int | None) -> list:
     served = serve("127.0.0.1", port)
 
     def foxglove(session):
-        from swarmbed.wire.obstacles import wall_lines
+        from swarmbed.schema.obstacles import wall_lines
 
         walls = wall_lines(exp.obstacles)
         view = FoxgloveLive(session.world, exp.run.dt, walls=walls, served=served)

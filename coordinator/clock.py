@@ -18,8 +18,8 @@ import numpy as np
 
 from swarmbed.coordinator.live import Interval
 from swarmbed.engine.hooks import TickHook
+from swarmbed.schema.experiment import RunSection
 from swarmbed.wire.codec import NetemStep
-from swarmbed.wire.schema import RunSection
 
 
 class WallClock(TickHook):

@@ -35,6 +35,8 @@ from swarmbed.engine.recorder import Recorder
 from swarmbed.engine.run_errors import RunError
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario, World
+from swarmbed.schema.experiment import Experiment, Targets, agent_spec, netem_spec
+from swarmbed.schema.obstacles import wall_lines
 from swarmbed.wire.codec import (
     EMPTY_INBOX,
     NetemStep,
@@ -50,7 +52,6 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of
 from swarmbed.wire.membership import accept_handovers, serve_text
 from swarmbed.wire.observation import Observation
-from swarmbed.wire.obstacles import wall_lines
 from swarmbed.wire.reports import (
     AgentReport,
     Checkpoint,
@@ -61,7 +62,6 @@ from swarmbed.wire.reports import (
     decode_agent_report,
     decode_netem_report,
 )
-from swarmbed.wire.schema import Experiment, Targets, agent_spec, netem_spec
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.summary import RunSummary

@@ -26,6 +26,7 @@ from swarmbed.coordinator.tickets import Tickets
 from swarmbed.engine.hooks import TickHook
 from swarmbed.engine.run_errors import RunError
 from swarmbed.extension.scenario import World
+from swarmbed.schema.experiment import LOCAL, Experiment
 from swarmbed.wire.child_process import process_name
 from swarmbed.wire.codec import (
     TAG_CHECKPOINT,
@@ -52,7 +53,6 @@ from swarmbed.wire.reports import (
     decode_swap,
     encode_swap_answer,
 )
-from swarmbed.wire.schema import LOCAL, Experiment
 
 log = logging.getLogger("swarmbed.coordinator")
 

@@ -29,9 +29,9 @@ from swarmbed.coordinator.lifecycle import AgentLifecycle
 from swarmbed.engine.hooks import TickHook
 from swarmbed.engine.recorder import Recorder
 from swarmbed.extension.scenario import World
+from swarmbed.schema.experiment import Experiment
 from swarmbed.wire.reports import RestartRecord
 from swarmbed.wire.run_status import NetworkCounters, RunStatus, encode_status
-from swarmbed.wire.schema import Experiment
 
 if TYPE_CHECKING:
     from swarmbed.coordinator.clock import WallClock

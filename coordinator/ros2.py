@@ -44,6 +44,7 @@ import zenoh
 
 from swarmbed.engine.hooks import TickHook
 from swarmbed.extension.actions import ActionSpec
+from swarmbed.schema.experiment import Ros2Section
 from swarmbed.wire.codec import Delivered, WireError, WorldSample, delivered_in
 from swarmbed.wire.ros2_conventions import (
     LATCHED_QOS,
@@ -56,7 +57,6 @@ from swarmbed.wire.ros2_conventions import (
     stamp,
 )
 from swarmbed.wire.ros2_node import Ros2Node
-from swarmbed.wire.schema import Ros2Section
 
 NODE_NAME = NODE_PREFIX
 log = logging.getLogger("swarmbed.coordinator")

@@ -20,10 +20,10 @@ from swarmbed.engine.recorder import Membership as RecordedMembership
 from swarmbed.engine.recorder import Recorder
 from swarmbed.extension.actions import admit
 from swarmbed.extension.scenario import Scenario, World
+from swarmbed.schema.experiment import Experiment
 from swarmbed.wire.codec import NetemStep, WorldSample
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.reports import RestartRecord, SwapRecord
-from swarmbed.wire.schema import Experiment
 from swarmbed.wire.stages import Stages
 
 

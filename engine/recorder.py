@@ -15,11 +15,11 @@ from typing import Any, Protocol
 
 from swarmbed.engine import results
 from swarmbed.extension.scenario import World
+from swarmbed.schema.experiment import Experiment
 from swarmbed.wire.codec import NetemStep
 from swarmbed.wire.reports import Final, NetemFinal, RestartRecord, SwapRecord, Transport
 from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.rundir import MARKER_COLUMNS, RESTARTS, SWAPS
-from swarmbed.wire.schema import Experiment
 from swarmbed.wire.summary import RunSummary
 
 NETWORK_COLUMNS = ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]

@@ -12,7 +12,7 @@ from swarmbed.extension.view import LocalView
 
 if TYPE_CHECKING:
     from swarmbed.bt import TreeNode
-    from swarmbed.wire.schema import Experiment
+    from swarmbed.schema.experiment import Experiment
 
 
 class DecisionError(ValueError):

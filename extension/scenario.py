@@ -26,9 +26,9 @@ from pydantic import BaseModel
 from swarmbed.extension.actions import MOVE_ACTIONS, ActionSpec
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
+from swarmbed.schema.experiment import AgentsSection, Experiment
+from swarmbed.schema.obstacles import ObstaclesSection, Walls
 from swarmbed.wire.observation import Observation as BaseObservation
-from swarmbed.wire.obstacles import ObstaclesSection, Walls
-from swarmbed.wire.schema import AgentsSection, Experiment
 
 if TYPE_CHECKING:
     from swarmbed.bt import TreeNode

@@ -99,7 +99,7 @@ def access_rules(
 ) -> dict:
     """The hub's ``access_control`` section for one run (default deny). ``hosts``: each admitted
     host's user name -> (the host name it is bound to, the agents it may carry, as
-    :func:`~swarmbed.wire.schema.carriers` gives them). ``ros2_domain``: the ROS 2 domain the run
+    :func:`~swarmbed.schema.experiment.carriers` gives them). ``ros2_domain``: the ROS 2 domain the run
     publishes on, if it does; operators may then read its topics and join its graph (a ROS 2 node
     of theirs holds its own tokens), and publish on none of its topics. ``commanders``: operators
     who may also publish the robots' decisions (``/robot_<i>/cmd``, for the ``ros2`` allocator)."""

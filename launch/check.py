@@ -19,8 +19,8 @@ from pathlib import Path
 
 from swarmbed.checks.allocator_kit import random_instance, simulate
 from swarmbed.launch import config as cfg
+from swarmbed.schema.experiment import Experiment, hosts_of
 from swarmbed.wire.credentials import Identity
-from swarmbed.wire.schema import Experiment, hosts_of
 
 #: CPU seconds swarmbed's own processes spend per agent-tick with a no-op allocator (agent ~330 us,
 #: hub and proxy ~70 us each: docs/benchmarks.md, 2026-11-26, 50-200 agents)

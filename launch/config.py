@@ -1,7 +1,7 @@
 """Loading an experiment: YAML, ``--set dotted.key=value`` overrides, and every check before any
 process starts.
 
-The schema itself lives below the processes (``swarmbed.wire.schema``); this is the launcher's side
+The schema itself lives below the processes (``swarmbed.schema.experiment``); this is the launcher's side
 of it, and the only place where names are resolved: ``scenario.kind`` and ``allocator.name`` to
 their classes, whose ``Params`` models check their sections. The sections are written back fully
 resolved, so that ``config.yaml`` and every process see complete parameters. The behavior tree is
@@ -33,8 +33,7 @@ from swarmbed.plugins.registry import (
     resolve_scenario,
     scenario_target,
 )
-from swarmbed.wire.obstacles import PolygonEntry, WallEntry
-from swarmbed.wire.schema import (
+from swarmbed.schema.experiment import (
     AgentsSection,
     AllocatorSection,
     Experiment,
@@ -45,6 +44,7 @@ from swarmbed.wire.schema import (
     carriers,
     hosts_of,
 )
+from swarmbed.schema.obstacles import PolygonEntry, WallEntry
 from swarmbed.wire.targets import file_digests
 from swarmbed.wire.validation import validation_lines
 from swarmbed.wire.yamlfile import YamlFileError, non_finite, parse_yaml, read_yaml

@@ -16,10 +16,10 @@ import zenoh
 from swarmbed.launch.access import agent_user
 from swarmbed.launch.host_client import start_agents, stop_agents, wait_for_hosts
 from swarmbed.launch.launcher import Children
+from swarmbed.schema.experiment import LOCAL
 from swarmbed.wire.child_process import process_name
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.reports import StartAgents, StopAgents
-from swarmbed.wire.schema import LOCAL
 
 
 @dataclass

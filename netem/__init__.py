@@ -1,6 +1,6 @@
 """The emulated radio between agents: range, loss, rate cap, queue limit, latency, and a byte ledger.
 
-Its parameters are ``swarmbed.wire.schema.NetworkSection`` (the experiment's ``network:`` section).
+Its parameters are ``swarmbed.schema.experiment.NetworkSection`` (the experiment's ``network:`` section).
 """
 
 from swarmbed.netem.ledger import Ledger

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarmbed.netem.stage import Stage, TickCopies
-from swarmbed.wire.radio_sections import BurstSection
+from swarmbed.schema.radio_sections import BurstSection
 
 if TYPE_CHECKING:
     from swarmbed.netem.radio import Radio

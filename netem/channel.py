@@ -22,7 +22,7 @@ import numpy as np
 
 from swarmbed.netem.stage import EPS as _EPS
 from swarmbed.netem.stage import Stage, TickCopies
-from swarmbed.wire.radio_sections import ChannelSection
+from swarmbed.schema.radio_sections import ChannelSection
 
 if TYPE_CHECKING:
     from swarmbed.netem.radio import Radio

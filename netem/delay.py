@@ -23,7 +23,7 @@ import numpy as np
 
 from swarmbed.netem.bursts import occurrence
 from swarmbed.netem.normal import normal_cdf
-from swarmbed.wire.radio_sections import DelaySection
+from swarmbed.schema.radio_sections import DelaySection
 
 PARETO_SHAPE = 3.0
 _PARETO_MEAN = PARETO_SHAPE / (PARETO_SHAPE - 1)  # scale 1

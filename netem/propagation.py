@@ -36,7 +36,7 @@ import numpy as np
 from swarmbed.netem.normal import erfc
 from swarmbed.netem.stage import Stage, TickCopies
 from swarmbed.netem.walls import wall_loss_db
-from swarmbed.wire.radio_sections import PropagationSection
+from swarmbed.schema.radio_sections import PropagationSection
 
 if TYPE_CHECKING:
     from swarmbed.netem.radio import Radio

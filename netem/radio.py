@@ -55,9 +55,9 @@ from swarmbed.netem.propagation import ERROR_STAGE, SENSITIVITY_STAGE, Propagati
 from swarmbed.netem.stage import EPS as _EPS
 from swarmbed.netem.stage import Stage, TickCopies
 from swarmbed.netem.walls import WALLS_STAGE
+from swarmbed.schema.experiment import NetworkSection
+from swarmbed.schema.obstacles import Walls
 from swarmbed.wire.codec import BROADCAST, RadioMessage
-from swarmbed.wire.obstacles import Walls
-from swarmbed.wire.schema import NetworkSection
 
 
 def _seed_sequence(rng: np.random.Generator) -> np.random.SeedSequence:

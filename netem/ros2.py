@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 import zenoh
 
+from swarmbed.schema.experiment import NetemSpec
 from swarmbed.wire.codec import BROADCAST
 from swarmbed.wire.ros2_conventions import NODE_PREFIX, RADIO_OUTBOX, Ros2Types, stamp
 from swarmbed.wire.ros2_node import Ros2Node
-from swarmbed.wire.schema import NetemSpec
 
 NODE_NAME = NODE_PREFIX + "_radio"
 

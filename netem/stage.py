@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from swarmbed.wire.radio_sections import NetworkSection
+from swarmbed.schema.radio_sections import NetworkSection
 
 if TYPE_CHECKING:
     from swarmbed.netem.radio import Radio

@@ -60,7 +60,7 @@ from swarmbed.extension.presets import Preset
 from swarmbed.plugins.consensus import ConsensusState
 from swarmbed.plugins.taskbook import TaskBook
 from swarmbed.plugins.teams import slot_id, task_of
-from swarmbed.wire.schema import QuietDefaults
+from swarmbed.schema.experiment import QuietDefaults
 
 KIND = "cbba"
 

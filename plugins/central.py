@@ -50,7 +50,7 @@ from swarmbed.plugins.external import FallbackParams, WithFallback
 from swarmbed.plugins.grape import utility as grape_utility
 from swarmbed.plugins.packed import read_tuples
 from swarmbed.plugins.teams import by_slots
-from swarmbed.wire.schema import Experiment
+from swarmbed.schema.experiment import Experiment
 
 REPORT, ASSIGN = "report", "assign"
 

@@ -10,8 +10,8 @@ from typing import Any
 import pandas as pd
 
 from swarmbed.results.folders import dotted
+from swarmbed.schema.experiment import SAFE_NAME
 from swarmbed.wire import rundir
-from swarmbed.wire.schema import SAFE_NAME
 from swarmbed.wire.yamlfile import YamlFileError, parse_yaml
 
 VERSIONED = ("provenance.scenario.version", "provenance.allocator.version")

@@ -16,8 +16,8 @@ from pydantic import ValidationError
 
 from swarmbed.netem.propagation import delivery_probability
 from swarmbed.results.page import Page
+from swarmbed.schema.experiment import NetworkSection
 from swarmbed.wire.rundir import RECEIVER_LEDGER, RunFileError
-from swarmbed.wire.schema import NetworkSection
 
 DISTANCE_BINS = 25
 LONGEST_RUN_SHOWN = 40

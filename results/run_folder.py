@@ -19,9 +19,10 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
+from swarmbed.schema.experiment import MAX_AGENT_COUNT
+from swarmbed.schema.obstacles import ObstaclesSection, wall_lines
 from swarmbed.wire import rundir as names
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.obstacles import ObstaclesSection, wall_lines
 from swarmbed.wire.rundir import (
     CONFIG,
     LEDGER_COLUMNS,
@@ -34,7 +35,6 @@ from swarmbed.wire.rundir import (
     read_json_member,
     read_member,
 )
-from swarmbed.wire.schema import MAX_AGENT_COUNT
 from swarmbed.wire.summary import RunSummary, read_summary
 from swarmbed.wire.yamlfile import YamlFileError, parse_yaml
 

@@ -34,10 +34,10 @@ from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outs
 from swarmbed.extension.space_nodes import SPACE_NODES
 from swarmbed.scenarios.kinematics import Limits, step
 from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places, planner_problems
+from swarmbed.schema.experiment import MAX_TASKS, Experiment, QuietDefaults
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
-from swarmbed.wire.schema import MAX_TASKS, Experiment, QuietDefaults
 
 
 @dataclasses.dataclass(frozen=True, slots=True)

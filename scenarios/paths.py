@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from swarmbed.wire.obstacles import Point, Walls
+from swarmbed.schema.obstacles import Point, Walls
 
 #: tries per point before a spawn gives up (the map leaves almost no free room)
 MAX_TRIES = 10_000

@@ -48,10 +48,10 @@ from swarmbed.extension.space_nodes import SPACE_NODES
 from swarmbed.scenarios.budget import ACTIVITIES, IDLE, INSPECTING, MOVING, PENALTY, RESCUING, TimeBudget
 from swarmbed.scenarios.paths import Navigator, Planner, blocked_moves, free_places, planner_problems
 from swarmbed.scenarios.victims import ALIVE, EXPIRED, RESCUED, VictimRows
+from swarmbed.schema.experiment import MAX_TASKS, Experiment
 from swarmbed.wire.codec import TASK_DTYPE
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.observation import Observation as AnyObservation
-from swarmbed.wire.schema import MAX_TASKS, Experiment
 
 FORGET_AFTER = 2.0  # lifetimes after its spawn a victim's row may leave the world's arrays
 COLOR_NAMES = ("red", "green", "blue")

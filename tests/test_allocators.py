@@ -15,8 +15,8 @@ from swarmbed.plugins.cbba import CBBA
 from swarmbed.plugins.consensus import NONE, ConsensusState, consensus_message, read_message, table, table_masks
 from swarmbed.plugins.grape import VOID, pack_pairs, read_pairs
 from swarmbed.plugins.registry import entries, make
+from swarmbed.schema.experiment import NetworkSection
 from swarmbed.wire.codec import pack, unpack
-from swarmbed.wire.schema import NetworkSection
 from tests.conftest import experiment
 
 LOSSY = NetworkSection(loss=0.3)

@@ -44,7 +44,7 @@ def test_every_shipped_chaos_file_loads(path):
 
 @pytest.mark.parametrize("path", MAPS, ids=_id)
 def test_every_shipped_map_file_is_an_obstacles_section(path):
-    from swarmbed.wire.obstacles import ObstaclesSection
+    from swarmbed.schema.obstacles import ObstaclesSection
 
     section = ObstaclesSection.model_validate(yaml.safe_load(path.read_text())["obstacles"])
     assert len(section.compile()) > 0

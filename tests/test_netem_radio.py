@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from swarmbed.netem import Radio
+from swarmbed.schema.experiment import NetworkSection as NetemParams
 from swarmbed.wire.codec import BROADCAST, RadioMessage
-from swarmbed.wire.schema import NetworkSection as NetemParams
 
 
 def radio(**kw) -> Radio:

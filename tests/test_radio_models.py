@@ -13,10 +13,10 @@ from swarmbed.netem.delay import Delays
 from swarmbed.netem.ledger import Ledger
 from swarmbed.netem.normal import erfc
 from swarmbed.netem.radio import drop_reasons
+from swarmbed.schema.experiment import NetworkSection
+from swarmbed.schema.obstacles import ObstaclesSection
+from swarmbed.schema.radio_sections import BurstSection, DelaySection, WallsSection
 from swarmbed.wire.codec import BROADCAST, RadioMessage
-from swarmbed.wire.obstacles import ObstaclesSection
-from swarmbed.wire.radio_sections import BurstSection, DelaySection, WallsSection
-from swarmbed.wire.schema import NetworkSection
 
 SIGMAS = 4.5  # an empirical figure may stray this many standard errors from its formula
 

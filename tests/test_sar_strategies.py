@@ -400,7 +400,7 @@ def test_the_trees_runconsensus_node_keeps_the_robot_still_while_its_round_runs(
     after it announced."""
     from swarmbed.agent_runtime.runtime import AgentRuntime
     from swarmbed.launch.config import resolve_experiment
-    from swarmbed.wire.schema import agent_spec
+    from swarmbed.schema.experiment import agent_spec
     from tests.conftest import SAR_BASE, experiment
 
     def first_actions(wait: str) -> list:

@@ -71,7 +71,7 @@ def test_an_agent_refuses_a_plugin_file_that_differs_from_the_one_the_launcher_c
     file's digest as the launcher read it, and another file under that path is refused."""
     from swarmbed.agent_runtime.runtime import AgentRuntime
     from swarmbed.launch import config as cfg
-    from swarmbed.wire.schema import agent_spec
+    from swarmbed.schema.experiment import agent_spec
     from swarmbed.wire.targets import TargetError
     from tests.conftest import experiment
 

@@ -14,7 +14,7 @@ from scipy.sparse.csgraph import shortest_path
 from swarmbed.launch.config import ConfigError, resolve_experiment, to_yaml
 from swarmbed.launch.inprocess import run_in_process
 from swarmbed.scenarios.paths import Planner
-from swarmbed.wire.obstacles import ObstaclesSection, segments_cross
+from swarmbed.schema.obstacles import ObstaclesSection, segments_cross
 from tests.conftest import QUICKSTART, experiment
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -288,7 +288,7 @@ def test_views_draw_a_runs_walls_and_refuse_crafted_ones_in_one_line(tmp_path):
 
 def test_the_graph_built_a_slice_at_a_time_joins_the_same_pairs_as_all_at_once(monkeypatch):
     from swarmbed.scenarios import paths
-    from swarmbed.wire.obstacles import ObstaclesSection
+    from swarmbed.schema.obstacles import ObstaclesSection
 
     rng = np.random.default_rng(3)
     walls = [

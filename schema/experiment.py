@@ -26,8 +26,8 @@ from pydantic import (
     model_validator,
 )
 
-from swarmbed.wire.obstacles import ObstaclesSection
-from swarmbed.wire.radio_sections import NetworkSection, WallsSection
+from swarmbed.schema.obstacles import ObstaclesSection
+from swarmbed.schema.radio_sections import NetworkSection, WallsSection
 
 #: a name that becomes a folder (experiments, sweeps, their scenarios): no path separators, no ``..``
 SAFE_NAME = r"^[A-Za-z0-9_][A-Za-z0-9_.+=-]{0,99}$"
