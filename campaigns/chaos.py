@@ -59,10 +59,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from swarmbed.hosts import netns
 from swarmbed.launch.runner import LiveRun
+from swarmbed.records.rowfile import RowFile
 from swarmbed.results.folders import CHAOS as CHAOS_FILE
 from swarmbed.wire.child_process import process_name
 from swarmbed.wire.codec import NetemControl, encode_netem_control
-from swarmbed.wire.rowfile import RowFile
 from swarmbed.wire.validation import validation_lines
 from swarmbed.wire.yamlfile import YamlFileError, read_yaml
 

@@ -44,12 +44,12 @@ from swarmbed.campaigns.chaos import Chaos, ChaosPlan
 from swarmbed.engine import results
 from swarmbed.launch.hub import LOOPBACK_ONLY, HubOptions
 from swarmbed.launch.runner import LiveRun, RunObserver, run_experiment
+from swarmbed.records.rowfile import RowFile
 from swarmbed.results.folders import SOAK_PROCESSES as PROCESSES
 from swarmbed.results.folders import SOAK_RUN as RUN
 from swarmbed.results.folders import SOAK_VERDICT as VERDICT
 from swarmbed.schema.experiment import Experiment
 from swarmbed.wire.child_process import process_name
-from swarmbed.wire.rowfile import RowFile
 
 PROCESS_COLUMNS = ["wall_s", "tick", "process", "kind", "pid", "rss_mb", "cpu_pct", "fds", "threads", "tcp"]
 RUN_COLUMNS = [

@@ -14,8 +14,8 @@ from pathlib import Path
 
 from swarmbed.campaigns.sweep import RunSpec, experiment_for
 from swarmbed.launch.runner import run_experiment
+from swarmbed.records.rundir import REPRODUCIBLE
 from swarmbed.results.run_folder import RunDir
-from swarmbed.wire.rundir import REPRODUCIBLE
 
 VERIFY = ".verify"  # a leading dot: never the name of a scenario folder
 

@@ -35,6 +35,7 @@ from swarmbed.engine.recorder import Recorder
 from swarmbed.engine.run_errors import RunError
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario, World
+from swarmbed.records.summary import RunSummary
 from swarmbed.schema.experiment import Experiment, Targets, agent_spec, netem_spec
 from swarmbed.schema.obstacles import wall_lines
 from swarmbed.wire.codec import (
@@ -64,7 +65,6 @@ from swarmbed.wire.reports import (
 )
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
-from swarmbed.wire.summary import RunSummary
 from swarmbed.wire.zenoh_session import undeclare_all
 
 BLOCK = zenoh.CongestionControl.BLOCK

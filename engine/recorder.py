@@ -1,10 +1,10 @@
 """A run's result files, as the coordinator records them.
 
 During the run the time series (and, with ``run.record_trajectories``, trajectories and markers)
-stream to disk in whole rows (:class:`~swarmbed.wire.rowfile.RowFile`), so a long run never holds
+stream to disk in whole rows (:class:`~swarmbed.records.rowfile.RowFile`), so a long run never holds
 its history in memory and a failed one keeps what it recorded as ``partial_*`` files. At the end
 ``agents.csv``, ``timings.json``, ``transport.json``, the swap and restart logs and, last,
-``summary.json`` (checked against :class:`~swarmbed.wire.summary.RunSummary`) are written whole.
+``summary.json`` (checked against :class:`~swarmbed.records.summary.RunSummary`) are written whole.
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ from typing import Any, Protocol
 
 from swarmbed.engine import results
 from swarmbed.extension.scenario import World
+from swarmbed.records.rowfile import RowFile
+from swarmbed.records.rundir import MARKER_COLUMNS, RESTARTS, SWAPS
+from swarmbed.records.summary import RunSummary
 from swarmbed.schema.experiment import Experiment
 from swarmbed.wire.codec import NetemStep
 from swarmbed.wire.reports import Final, NetemFinal, RestartRecord, SwapRecord, Transport
-from swarmbed.wire.rowfile import RowFile
-from swarmbed.wire.rundir import MARKER_COLUMNS, RESTARTS, SWAPS
-from swarmbed.wire.summary import RunSummary
 
 NETWORK_COLUMNS = ["messages_sent", "bytes_sent", "copies", "delivered", "dropped"]
 

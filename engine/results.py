@@ -10,9 +10,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from swarmbed.wire import safefiles
-from swarmbed.wire.rowfile import write_error
-from swarmbed.wire.rundir import (  # noqa: F401 - the run directory's names, read as results.<NAME>
+from swarmbed.records.rowfile import write_error
+from swarmbed.records.rundir import (  # noqa: F401 - the run directory's names, read as results.<NAME>
     AGENTS,
     CONFIG,
     MARKERS,
@@ -22,6 +21,7 @@ from swarmbed.wire.rundir import (  # noqa: F401 - the run directory's names, re
     TRAJECTORIES,
     TRANSPORT,
 )
+from swarmbed.wire import safefiles
 
 
 def write_atomic(path: Path, text: str) -> None:

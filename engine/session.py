@@ -19,11 +19,11 @@ from swarmbed.engine.loop import Membership, TickInHand, TickLoop, Transport
 from swarmbed.engine.recorder import Recorder
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario, World
+from swarmbed.records.summary import RunSummary
 from swarmbed.schema.experiment import Experiment
 from swarmbed.wire.reports import Final, NetemFinal
 from swarmbed.wire.seeds import WORLD, component_rng
 from swarmbed.wire.stages import Stages
-from swarmbed.wire.summary import RunSummary
 
 #: the engines a run can be stepped by
 ENGINES = ("processes", "inprocess")

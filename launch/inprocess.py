@@ -25,11 +25,11 @@ from swarmbed.agent_runtime.runtime import AgentRuntime
 from swarmbed.engine import ENGINES, OneProcess, Session, TickInHand, refusals, results
 from swarmbed.launch.runner import RunResult, View, plan_run, start_result_dir
 from swarmbed.netem.exchange import Exchange
+from swarmbed.records.rundir import DEPLOYMENT
 from swarmbed.schema.experiment import Experiment, Targets, agent_spec, netem_spec
 from swarmbed.wire.codec import EMPTY_INBOX, NetemStep, WorldSample, decode_agent_out, encode_agent_out
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.reports import Final, NetemFinal
-from swarmbed.wire.rundir import DEPLOYMENT
 from swarmbed.wire.tickdecode import TickDecoder
 
 __all__ = ["ENGINES", "InProcess", "InProcessRun", "refusals", "run_in_process"]

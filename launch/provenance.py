@@ -19,7 +19,7 @@ from typing import Any
 
 import swarmbed
 from swarmbed.extension.allocator import Allocator
-from swarmbed.wire.rundir import PROVENANCE
+from swarmbed.records.rundir import PROVENANCE
 
 FILE = PROVENANCE
 LIBRARIES = ("numpy", "eclipse-zenoh", "msgpack", "pydantic")

@@ -40,12 +40,12 @@ from swarmbed.launch.launcher import (
 from swarmbed.launch.placement import AgentPlacement
 from swarmbed.launch.provenance import FILE as PROVENANCE
 from swarmbed.launch.provenance import provenance
+from swarmbed.records.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
+from swarmbed.records.rundir import BT, DEPLOYMENT, RESULT_FILES
 from swarmbed.schema.experiment import LOCAL, carriers, hosts_of
 from swarmbed.wire import safefiles
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.reports import HostInfo
-from swarmbed.wire.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
-from swarmbed.wire.rundir import BT, DEPLOYMENT, RESULT_FILES
 
 
 @dataclass

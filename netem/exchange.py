@@ -12,12 +12,12 @@ from pathlib import Path
 
 from swarmbed.netem.ledger import Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio, drop_reasons, measured
+from swarmbed.records.rowfile import RowFile
+from swarmbed.records.rundir import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER
 from swarmbed.schema.experiment import NetemSpec
 from swarmbed.schema.radio_sections import WallsSection
 from swarmbed.wire.codec import AgentOut, NetemStep, WorldSample, encode_inbox
 from swarmbed.wire.reports import NetemFinal, Transport
-from swarmbed.wire.rowfile import RowFile
-from swarmbed.wire.rundir import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER
 from swarmbed.wire.seeds import NETEM, component_rng
 
 

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from swarmbed.wire.rowfile import RowFile
-from swarmbed.wire.rundir import RECEIVER_COLUMNS
+from swarmbed.records.rowfile import RowFile
+from swarmbed.records.rundir import RECEIVER_COLUMNS
 
 SENT = "sent"
 DELIVERED = "delivered"
@@ -99,7 +99,7 @@ class ReceiverLog:
 
 class Ledger:
     """Accumulates rows tick by tick and streams finished ticks to a :class:`RowFile` (whose
-    columns are :data:`~swarmbed.wire.rundir.LEDGER_COLUMNS`)."""
+    columns are :data:`~swarmbed.records.rundir.LEDGER_COLUMNS`)."""
 
     def __init__(
         self, sink: RowFile | None = None, receivers: ReceiverLog | None = None, reasons: Sequence[str] = DROP_REASONS

@@ -20,6 +20,7 @@ import zenoh
 
 from swarmbed.netem.exchange import Exchange
 from swarmbed.netem.ros2 import Ros2Outboxes
+from swarmbed.records.rowfile import TableWriteError
 from swarmbed.schema.experiment import NetemSpec
 from swarmbed.wire.child_process import child_args, pin_thread_state
 from swarmbed.wire.codec import (
@@ -38,7 +39,6 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
 from swarmbed.wire.membership import fetch_spec, hand_over
 from swarmbed.wire.reports import NetemFatal, Transport, encode_report
-from swarmbed.wire.rowfile import TableWriteError
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.transport import tcp_counters

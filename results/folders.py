@@ -1,5 +1,5 @@
 """The files of a sweep folder and of a soak folder: one place that names them for the campaigns that
-write them and the views that read them (a run folder's files are named in ``swarmbed.wire.rundir``).
+write them and the views that read them (a run folder's files are named in ``swarmbed.records.rundir``).
 
 A sweep folder holds ``sweep.json`` (what was planned), one folder per scenario with a ``run_NNN``
 folder per run, and, once the sweep stops, ``sweep.csv`` and ``sweep.parquet`` (every run's summary
@@ -15,8 +15,8 @@ from typing import Any
 
 import pandas as pd
 
+from swarmbed.records.rundir import RunFileError
 from swarmbed.results.run_folder import read_table_member
-from swarmbed.wire.rundir import RunFileError
 
 # a sweep folder
 SPEC = "sweep.json"  # the sweep as planned: name, base, seed, runs, scenarios and their overrides

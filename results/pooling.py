@@ -9,9 +9,9 @@ from typing import Any
 
 import pandas as pd
 
+from swarmbed.records import rundir
 from swarmbed.results.folders import dotted
 from swarmbed.schema.experiment import SAFE_NAME
-from swarmbed.wire import rundir
 from swarmbed.wire.yamlfile import YamlFileError, parse_yaml
 
 VERSIONED = ("provenance.scenario.version", "provenance.allocator.version")

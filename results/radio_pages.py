@@ -15,9 +15,9 @@ import plotly.graph_objects as go
 from pydantic import ValidationError
 
 from swarmbed.netem.propagation import delivery_probability
+from swarmbed.records.rundir import RECEIVER_LEDGER, RunFileError
 from swarmbed.results.page import Page
 from swarmbed.schema.experiment import NetworkSection
-from swarmbed.wire.rundir import RECEIVER_LEDGER, RunFileError
 
 DISTANCE_BINS = 25
 LONGEST_RUN_SHOWN = 40

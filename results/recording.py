@@ -33,11 +33,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from swarmbed.results.colours import DROP_COLORS, WALL_COLOUR
-from swarmbed.results.run_folder import RunDir
-from swarmbed.wire import safefiles
-from swarmbed.wire.btlog import EPOCH_US, BtLogError, read_btlog
-from swarmbed.wire.rundir import (
+from swarmbed.records.rundir import (
     BT,
     MARKERS,
     RECEIVER_LEDGER,
@@ -47,6 +43,10 @@ from swarmbed.wire.rundir import (
     btlog_name,
     read_member,
 )
+from swarmbed.results.colours import DROP_COLORS, WALL_COLOUR
+from swarmbed.results.run_folder import RunDir
+from swarmbed.wire import safefiles
+from swarmbed.wire.btlog import EPOCH_US, BtLogError, read_btlog
 
 MAX_BTLOG_BYTES = 1 << 30  # one agent's tree log: far beyond a day's run
 

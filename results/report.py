@@ -23,6 +23,8 @@ import plotly.graph_objects as go
 
 import swarmbed
 from swarmbed.plugins.registry import registered_scenario
+from swarmbed.records.rundir import RECEIVER_LEDGER, TIMESERIES, TRAJECTORIES, TRANSPORT, RunFileError
+from swarmbed.records.summary import NetworkSummary, RunSummary
 from swarmbed.results.colours import DROP_COLORS, WALL_COLOUR
 from swarmbed.results.folders import PARQUET, SOAK_PROCESSES, TABLE, read_table
 from swarmbed.results.page import Page, _fmt
@@ -31,8 +33,6 @@ from swarmbed.results.radio_pages import radio_pages
 from swarmbed.results.run_folder import RunDir
 from swarmbed.results.soak_page import soak_report
 from swarmbed.wire import safefiles
-from swarmbed.wire.rundir import RECEIVER_LEDGER, TIMESERIES, TRAJECTORIES, TRANSPORT, RunFileError
-from swarmbed.wire.summary import NetworkSummary, RunSummary
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
 

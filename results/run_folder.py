@@ -5,8 +5,8 @@ recordings, analysis, sweeps' tables, the CLI) reads it through a ``RunDir``, wh
 out of the folder or a file that is not a regular one, bounds what it reads, and checks what a
 reader will allocate or draw from: the summary against its model, ``dt`` finite and positive,
 ticks whole and within the run's own count, coordinates finite. Each refusal is a
-:class:`~swarmbed.wire.rundir.RunFileError` naming the file and what is wrong with it. The file
-names are :mod:`swarmbed.wire.rundir`'s, shared with the processes that write them.
+:class:`~swarmbed.records.rundir.RunFileError` naming the file and what is wrong with it. The file
+names are :mod:`swarmbed.records.rundir`'s, shared with the processes that write them.
 """
 
 from __future__ import annotations
@@ -19,11 +19,8 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
-from swarmbed.schema.experiment import MAX_AGENT_COUNT
-from swarmbed.schema.obstacles import ObstaclesSection, wall_lines
-from swarmbed.wire import rundir as names
-from swarmbed.wire.errors import WireError
-from swarmbed.wire.rundir import (
+from swarmbed.records import rundir as names
+from swarmbed.records.rundir import (
     CONFIG,
     LEDGER_COLUMNS,
     MARKER_COLUMNS,
@@ -35,7 +32,10 @@ from swarmbed.wire.rundir import (
     read_json_member,
     read_member,
 )
-from swarmbed.wire.summary import RunSummary, read_summary
+from swarmbed.records.summary import RunSummary, read_summary
+from swarmbed.schema.experiment import MAX_AGENT_COUNT
+from swarmbed.schema.obstacles import ObstaclesSection, wall_lines
+from swarmbed.wire.errors import WireError
 from swarmbed.wire.yamlfile import YamlFileError, parse_yaml
 
 #: the most ticks a view believes a run has: far beyond any run's (a day at 1 ms)
@@ -62,7 +62,7 @@ def max_table_rows() -> int:
 
 def read_table_member(folder: Path, name: str, max_bytes: int = MAX_TABLE_BYTES, **read: Any) -> pd.DataFrame:
     """The CSV or Parquet table ``folder/name`` (a regular file inside ``folder``, see
-    :func:`~swarmbed.wire.rundir.member`), read as what its name says and nothing else: no
+    :func:`~swarmbed.records.rundir.member`), read as what its name says and nothing else: no
     decompression a name inside it or the target of a link would pick, at most
     :data:`MAX_TABLE_BYTES` on disk and :func:`max_table_rows` rows, counted before the rows are
     allocated. A RunFileError names the file for anything else."""

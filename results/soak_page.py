@@ -12,6 +12,7 @@ import pandas as pd
 import plotly.graph_objects as go
 
 import swarmbed
+from swarmbed.records.rundir import read_json_member
 from swarmbed.results.colours import DROP_COLORS
 from swarmbed.results.folders import CHAOS as CHAOS_FILE
 from swarmbed.results.folders import SOAK_PROCESSES as PROCESSES
@@ -19,7 +20,6 @@ from swarmbed.results.folders import SOAK_RUN as RUN
 from swarmbed.results.folders import SOAK_VERDICT as VERDICT
 from swarmbed.results.page import Page
 from swarmbed.results.run_folder import read_table_member
-from swarmbed.wire.rundir import read_json_member
 
 CHAOS_COLORS = {"kill_agent": "#D55E00", "stop_agent": "#E69F00", "loss_burst": "#0072B2", "rate_cap": "#009E73"}
 

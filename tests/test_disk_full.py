@@ -12,7 +12,7 @@ import pytest
 from swarmbed.engine import results
 from swarmbed.engine.run_errors import RunError
 from swarmbed.launch.runner import run_experiment
-from swarmbed.wire.rowfile import RowFile, TableWriteError
+from swarmbed.records.rowfile import RowFile, TableWriteError
 from tests.conftest import experiment, whole_rows
 
 

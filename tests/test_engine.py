@@ -12,7 +12,7 @@ import pytest
 
 from swarmbed.launch.inprocess import run_in_process
 from swarmbed.launch.runner import run_experiment
-from swarmbed.wire.rundir import RECEIVER_LEDGER
+from swarmbed.records.rundir import RECEIVER_LEDGER
 from tests.conftest import ROOT, SAR_BASE, experiment, same_results
 
 SAR = SAR_BASE

@@ -114,8 +114,8 @@ def test_receiver_ledger_books_each_copy_once_and_sums_to_the_sender_ledger(tmp_
     import pandas as pd
 
     from swarmbed.netem.ledger import Ledger, ReceiverLog
-    from swarmbed.wire.rowfile import RowFile
-    from swarmbed.wire.rundir import LEDGER_COLUMNS
+    from swarmbed.records.rowfile import RowFile
+    from swarmbed.records.rundir import LEDGER_COLUMNS
 
     rng = np.random.default_rng(7)
     sink = RowFile(tmp_path / "ledger.csv", LEDGER_COLUMNS, chunk_rows=7)  # small chunks: several writes

@@ -34,9 +34,9 @@ from swarmbed.coordinator.live import LiveStatus
 from swarmbed.engine import results
 from swarmbed.launch.access import OWNER, RunAccess, remove_orphaned_folders
 from swarmbed.launch.runner import run_experiment
+from swarmbed.records.rowfile import RowFile
 from swarmbed.results.report import report
 from swarmbed.wire.keys import Keys
-from swarmbed.wire.rowfile import RowFile
 from tests.conftest import ROOT, experiment, whole_rows
 from tests.test_report import CHROMIUM, NO_CHROMIUM, assert_renders
 

@@ -114,7 +114,7 @@ class NetemFinal(_Message):
     """The proxy's ledger at the end of the run."""
 
     kind: Literal["netem"]
-    totals: dict[str, Any]  # checked with the summary that carries it (swarmbed.wire.summary)
+    totals: dict[str, Any]  # checked with the summary that carries it (swarmbed.records.summary)
     per_sender: dict[str, dict[str, int]]
     per_kind: dict[str, dict[str, int]]
     malformed: int = Field(ge=0)

@@ -16,8 +16,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError
 
+from swarmbed.records.rundir import RunFileError, read_json_member
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.rundir import RunFileError, read_json_member
 
 
 class KindTotals(BaseModel):

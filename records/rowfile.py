@@ -27,7 +27,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from swarmbed.wire.rundir import PART_SUFFIX, PARTIAL_PREFIX
+from swarmbed.records.rundir import PART_SUFFIX, PARTIAL_PREFIX
 from swarmbed.wire.safefiles import create_fresh
 
 
