@@ -26,7 +26,7 @@ from swarmbed.bt.node import (
 )
 from swarmbed.bt.node_types import NodeRegistry
 from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
-from swarmbed.wire.safefiles import UnreadableFile, read_regular
+from swarmbed.files.safefiles import UnreadableFile, read_regular
 
 #: the most a behavior tree file may hold (Groot2's largest example trees are a few kB)
 MAX_TREE_BYTES = 4 << 20

@@ -57,6 +57,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from swarmbed.files.yamlfile import YamlFileError, read_yaml
 from swarmbed.hosts import netns
 from swarmbed.launch.runner import LiveRun
 from swarmbed.records.rowfile import RowFile
@@ -64,7 +65,6 @@ from swarmbed.results.folders import CHAOS as CHAOS_FILE
 from swarmbed.wire.child_process import process_name
 from swarmbed.wire.codec import NetemControl, encode_netem_control
 from swarmbed.wire.validation import validation_lines
-from swarmbed.wire.yamlfile import YamlFileError, read_yaml
 
 log = logging.getLogger("swarmbed.chaos")
 CHAOS_COLUMNS = ["wall_s", "tick", "action", "target", "detail", "outcome"]

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import psutil
 
-from swarmbed.wire import safefiles
+from swarmbed.files import safefiles
 from swarmbed.wire.child_process import process_alive
 
 CLAIM = "claim.json"

@@ -54,15 +54,15 @@ from tqdm import tqdm
 from swarmbed.campaigns import claims
 from swarmbed.campaigns.executors import Executor, Outcome, resources_for
 from swarmbed.engine import results
+from swarmbed.files import safefiles
+from swarmbed.files.yamlfile import YamlFileError, parse_yaml, read_yaml
 from swarmbed.launch import config as cfg
 from swarmbed.records.rundir import MAX_CONFIG_BYTES, PROVENANCE, RunFileError, read_json_member, read_member
 from swarmbed.results.folders import ATTEMPTS, DERIVED, ERROR, PARQUET, SPEC, TABLE, dotted
 from swarmbed.results.run_folder import RunDir
 from swarmbed.schema.experiment import SAFE_NAME
-from swarmbed.wire import safefiles
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.validation import validation_lines
-from swarmbed.wire.yamlfile import YamlFileError, parse_yaml, read_yaml
 
 
 class ScenarioEntry(BaseModel):

@@ -27,8 +27,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit, urlunsplit
 
+from swarmbed.files import safefiles
 from swarmbed.results.run_folder import RunDir, RunFileError
-from swarmbed.wire import safefiles
 
 #: the tag that names a run by its folder in the sweep, how a resumed sweep knows it was logged
 TAG = "swarmbed.run"

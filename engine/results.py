@@ -10,6 +10,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from swarmbed.files import safefiles
 from swarmbed.records.rowfile import write_error
 from swarmbed.records.rundir import (  # noqa: F401 - the run directory's names, read as results.<NAME>
     AGENTS,
@@ -21,7 +22,6 @@ from swarmbed.records.rundir import (  # noqa: F401 - the run directory's names,
     TRAJECTORIES,
     TRANSPORT,
 )
-from swarmbed.wire import safefiles
 
 
 def write_atomic(path: Path, text: str) -> None:

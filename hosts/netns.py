@@ -23,10 +23,10 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from swarmbed.files.safefiles import open_fresh
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
-from swarmbed.wire.safefiles import open_fresh
 
 
 def _ip(*args: str, ns: str | None = None, check: bool = True) -> subprocess.CompletedProcess:

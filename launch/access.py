@@ -39,7 +39,7 @@ from pathlib import Path
 
 import psutil
 
-from swarmbed.wire import safefiles
+from swarmbed.files import safefiles
 from swarmbed.wire.child_process import process_alive
 from swarmbed.wire.credentials import Identity, check_admitted, write_credentials, write_dictionary
 from swarmbed.wire.keys import HOSTS, PREFIX, Keys

@@ -13,7 +13,7 @@ import datetime
 import ipaddress
 from pathlib import Path
 
-from swarmbed.wire import safefiles
+from swarmbed.files import safefiles
 from swarmbed.wire.credentials import open_private
 
 CA = "ca"

@@ -25,6 +25,7 @@ from swarmbed.engine import refusals
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.node_sets import node_registry, tree_path
 from swarmbed.extension.scenario import Scenario
+from swarmbed.files.yamlfile import YamlFileError, non_finite, parse_yaml, read_yaml
 from swarmbed.plugins.registry import (
     PluginError,
     allocator_target,
@@ -47,7 +48,6 @@ from swarmbed.schema.experiment import (
 from swarmbed.schema.obstacles import PolygonEntry, WallEntry
 from swarmbed.wire.targets import file_digests
 from swarmbed.wire.validation import validation_lines
-from swarmbed.wire.yamlfile import YamlFileError, non_finite, parse_yaml, read_yaml
 
 __all__ = [
     "ConfigError",

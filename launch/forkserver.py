@@ -23,6 +23,7 @@ import sys
 
 import setproctitle
 
+from swarmbed.files.safefiles import create_fresh
 from swarmbed.launch.forkmessages import (
     Event,
     Exited,
@@ -33,7 +34,6 @@ from swarmbed.launch.forkmessages import (
     decode_request,
     encode,
 )
-from swarmbed.wire.safefiles import create_fresh
 
 # agents do no linear algebra: one BLAS thread, and no thread pool alive when the server forks
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")

@@ -24,6 +24,7 @@ from pathlib import Path
 import psutil
 
 import swarmbed
+from swarmbed.files.safefiles import open_fresh
 from swarmbed.launch.forkmessages import (
     Exited,
     Failed,
@@ -34,7 +35,6 @@ from swarmbed.launch.forkmessages import (
     decode_event,
     encode,
 )
-from swarmbed.wire.safefiles import open_fresh
 from swarmbed.wire.zenoh_session import RUNTIMES
 
 log = logging.getLogger("swarmbed.launcher")

@@ -23,6 +23,7 @@ from tqdm import tqdm
 from swarmbed.coordinator.coordinator import ZenohTransport
 from swarmbed.engine import Session, TickHook, results
 from swarmbed.engine.run_errors import RunError
+from swarmbed.files import safefiles
 from swarmbed.launch.access import RunAccess
 from swarmbed.launch.config import Experiment, Resolved, resolve_experiment, to_yaml
 from swarmbed.launch.host_client import HostError, host_info, wait_for_hosts
@@ -43,7 +44,6 @@ from swarmbed.launch.provenance import provenance
 from swarmbed.records.rowfile import PARTIAL_PREFIX, TableWriteError, keep_partial
 from swarmbed.records.rundir import BT, DEPLOYMENT, RESULT_FILES
 from swarmbed.schema.experiment import LOCAL, carriers, hosts_of
-from swarmbed.wire import safefiles
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.reports import HostInfo
 

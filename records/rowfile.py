@@ -27,8 +27,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from swarmbed.files.safefiles import create_fresh
 from swarmbed.records.rundir import PART_SUFFIX, PARTIAL_PREFIX
-from swarmbed.wire.safefiles import create_fresh
 
 
 class TableWriteError(OSError):

@@ -39,6 +39,7 @@ from matplotlib.ticker import NullLocator  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from swarmbed.extension import Figure, Scenario  # noqa: E402
+from swarmbed.files import safefiles
 from swarmbed.plugins.registry import registered_scenario  # noqa: E402
 from swarmbed.records.rundir import RunFileError, read_json_member  # noqa: E402
 from swarmbed.results.colours import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
@@ -46,7 +47,6 @@ from swarmbed.results.folders import PARQUET, SPEC, TABLE, read_table  # noqa: E
 from swarmbed.results.pooling import mixed_configurations, mixed_versions  # noqa: E402
 from swarmbed.results.run_folder import RunDir  # noqa: E402
 from swarmbed.results.stats import compare  # noqa: E402
-from swarmbed.wire import safefiles
 
 AGENTS, RANGE, ALLOCATOR = "agents.count", "network.range", "allocator"
 #: what every scenario's runs send, tabulated beside the scenario's own metrics

@@ -9,10 +9,10 @@ from typing import Any
 
 import pandas as pd
 
+from swarmbed.files.yamlfile import YamlFileError, parse_yaml
 from swarmbed.records import rundir
 from swarmbed.results.folders import dotted
 from swarmbed.schema.experiment import SAFE_NAME
-from swarmbed.wire.yamlfile import YamlFileError, parse_yaml
 
 VERSIONED = ("provenance.scenario.version", "provenance.allocator.version")
 

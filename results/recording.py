@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from swarmbed.files import safefiles
 from swarmbed.records.rundir import (
     BT,
     MARKERS,
@@ -45,7 +46,6 @@ from swarmbed.records.rundir import (
 )
 from swarmbed.results.colours import DROP_COLORS, WALL_COLOUR
 from swarmbed.results.run_folder import RunDir
-from swarmbed.wire import safefiles
 from swarmbed.wire.btlog import EPOCH_US, BtLogError, read_btlog
 
 MAX_BTLOG_BYTES = 1 << 30  # one agent's tree log: far beyond a day's run

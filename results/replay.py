@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from swarmbed.files import safefiles
 from swarmbed.records.rundir import MARKERS, RECEIVER_LEDGER, SUMMARY, TRAJECTORIES, RunFileError
 from swarmbed.results.colours import DROP_COLORS, LABEL_COLORS, WALL_COLOUR
 from swarmbed.results.run_folder import RunDir
-from swarmbed.wire import safefiles
 
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
 

@@ -22,6 +22,7 @@ import pandas as pd
 import plotly.graph_objects as go
 
 import swarmbed
+from swarmbed.files import safefiles
 from swarmbed.plugins.registry import registered_scenario
 from swarmbed.records.rundir import RECEIVER_LEDGER, TIMESERIES, TRAJECTORIES, TRANSPORT, RunFileError
 from swarmbed.records.summary import NetworkSummary, RunSummary
@@ -32,7 +33,6 @@ from swarmbed.results.pooling import mixed_configurations
 from swarmbed.results.radio_pages import radio_pages
 from swarmbed.results.run_folder import RunDir
 from swarmbed.results.soak_page import soak_report
-from swarmbed.wire import safefiles
 
 MAX_BINS = 300  # time series are binned to at most this many points: pages stay small for long runs
 

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
+from swarmbed.files.yamlfile import YamlFileError, parse_yaml
 from swarmbed.records import rundir as names
 from swarmbed.records.rundir import (
     CONFIG,
@@ -36,7 +37,6 @@ from swarmbed.records.summary import RunSummary, read_summary
 from swarmbed.schema.experiment import MAX_AGENT_COUNT
 from swarmbed.schema.obstacles import ObstaclesSection, wall_lines
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.yamlfile import YamlFileError, parse_yaml
 
 #: the most ticks a view believes a run has: far beyond any run's (a day at 1 ms)
 MAX_TICKS = 10**9

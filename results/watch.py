@@ -26,8 +26,8 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from swarmbed.files import safefiles
 from swarmbed.results.colours import LABEL_COLORS
-from swarmbed.wire import safefiles
 from swarmbed.wire.codec import WireError, decode_traffic
 from swarmbed.wire.keys import PREFIX, Keys, agent_id_of
 from swarmbed.wire.run_status import RunStatus, decode_status

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from swarmbed.wire import safefiles
+from swarmbed.files import safefiles
 from tests.conftest import QUICKSTART, sweep_in_process
 
 VICTIM = "a file the user owns\n"

@@ -2,10 +2,9 @@
 and what it is to be a run process (seeds, sessions, logs, credentials).
 
 Every process imports its keys and its encoders/decoders from here and nowhere else, so that
-coordinator, netem proxy and agents (possibly on other hosts) always agree on the protocol. It also
-holds safe file reading and writing (``safefiles.py``, ``yamlfile.py``), which every layer above
-uses; the experiment's schema is ``swarmbed.schema`` and what a run writes ``swarmbed.records``,
-just above.
+coordinator, netem proxy and agents (possibly on other hosts) always agree on the protocol. The
+experiment's schema is ``swarmbed.schema`` and what a run writes ``swarmbed.records``, just above;
+safe file reading and writing is ``swarmbed.files``, just below.
 """
 
 from swarmbed.wire.codec import WireError

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import IO
 
-from swarmbed.wire.safefiles import LinkRefused
+from swarmbed.files.safefiles import LinkRefused
 
 # roles a credentials file made by ``swarmbed credentials`` may have; the processes a run spawns
 # itself get their own identities (netem, agent-<id>) from the launcher

@@ -19,7 +19,7 @@ from typing import Any
 
 import yaml
 
-from swarmbed.wire.safefiles import UnreadableFile, read_regular
+from swarmbed.files.safefiles import UnreadableFile, read_regular
 
 #: larger than any experiment, sweep or chaos file we know of by two orders of magnitude
 MAX_YAML_BYTES = 1 << 20
