@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from swarmbed.plugins.packed import pack_columns, pack_rows, read_tuples
+from swarmbed.plugins.packed import pack_columns, pack_rows, read_array, read_tuples
 from swarmbed.wire.state import state_type
 
 NONE = -1
@@ -218,10 +218,9 @@ def _stamp_array(data: dict) -> tuple[np.ndarray, np.ndarray]:
     map of them would), a negative agent id (no agent has one: a crafted message) is no news."""
     for key, dtype in STAMP_KEYS:
         if key in data:
-            raw = data[key]
-            if not isinstance(raw, bytes) or len(raw) % dtype.itemsize:
+            rows = read_array(data[key], dtype)
+            if rows is None:
                 break
-            rows = np.frombuffer(raw, dtype)
             agents, stamps = rows["agent"].astype(np.int64), rows["stamp"].astype(float)
             if len(agents) > 1 and not (agents[1:] > agents[:-1]).all():  # ours are sorted, each once
                 last = len(agents) - 1 - np.unique(agents[::-1], return_index=True)[1]
@@ -289,7 +288,7 @@ class ConsensusState:
             told_s = np.full(len(self.stamps), _NEVER)
             told_s[: len(self.told_s)] = self.told_s[: len(self.stamps)]
             agents = np.flatnonzero((self.stamps > _NEVER) & (self.stamps != told_s))
-            if len(changed) + len(dropped) + len(agents) < len(winners) + len(self._known_stamps()[0]):
+            if len(changed) + len(dropped) + len(agents) < len(winners) + len(self.s):
                 delta = consensus_message(
                     self.now, sorted(changed + dropped), delta=True, stamp_columns=(agents, self.stamps[agents])
                 )

@@ -97,9 +97,18 @@ def _struct(dtype: np.dtype) -> struct.Struct:
     return struct.Struct(struct_format(dtype))
 
 
+def _packs(raw: Any, dtype: np.dtype) -> bool:
+    """Whether ``raw`` is packed entries of ``dtype``: bytes, a whole number of entries."""
+    return isinstance(raw, bytes) and len(raw) % dtype.itemsize == 0
+
+
 def read_tuples(raw: Any, dtype: np.dtype) -> list[tuple]:
     """The entries ``raw`` packs in ``dtype`` as tuples (``struct.iter_unpack``: no array made, which
     for a message of a few entries costs more than reading them); none for anything else."""
-    if not isinstance(raw, bytes) or len(raw) % dtype.itemsize:
-        return []
-    return list(_struct(dtype).iter_unpack(raw))
+    return list(_struct(dtype).iter_unpack(raw)) if _packs(raw, dtype) else []
+
+
+def read_array(raw: Any, dtype: np.dtype) -> np.ndarray | None:
+    """The entries ``raw`` packs in ``dtype`` as a read-only array over its bytes, or None for
+    anything that is not such entries."""
+    return np.frombuffer(raw, dtype) if _packs(raw, dtype) else None
