@@ -43,7 +43,7 @@ from swarmbed.wire.reports import (
 )
 from swarmbed.wire.state import StateError
 from swarmbed.wire.tickdecode import TickDecoder
-from swarmbed.wire.transport import tcp_counters
+from swarmbed.wire.tcp_counters import tcp_counters
 from swarmbed.wire.zenoh_session import one_receiving_worker, open_from_args
 
 log = logging.getLogger("swarmbed.agent")

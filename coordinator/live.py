@@ -5,10 +5,10 @@
 Monitors run in their own threads beside the tick loop. They do not read the coordinator's
 attributes (which the loop changes mid-tick); the coordinator publishes a :class:`LiveStatus`, an
 immutable record of the run between two ticks, after every tick while a monitor is attached
-(:meth:`~swarmbed.coordinator.coordinator.ZenohTransport.live`), and nothing when none is, so a run
+(:meth:`~swarmbed.coordinator.zenoh_transport.ZenohTransport.live`), and nothing when none is, so a run
 without monitors pays nothing. Wall-clock figures of the interval between two of a soak's samples
 (the slowest tick, the latest start) are taken, and reset, with
-:meth:`~swarmbed.coordinator.coordinator.ZenohTransport.take_interval`.
+:meth:`~swarmbed.coordinator.zenoh_transport.ZenohTransport.take_interval`.
 
 Everything here is a wall-clock fact of one run on one machine: never part of a run's result files.
 """

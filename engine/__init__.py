@@ -4,7 +4,7 @@ A :class:`Session` builds a run's world and recorder and steps it with a :class:
 :class:`Transport` (one call a tick: carry the observations and inboxes to the agents, bring back
 their actions and the next inboxes), with the run's :class:`Membership` and the
 :class:`~swarmbed.engine.hooks.TickHook` list around a tick. Two transports plug in from above the
-roles: the coordinator (:class:`swarmbed.coordinator.coordinator.ZenohTransport`: real processes over
+roles: the coordinator (:class:`swarmbed.coordinator.zenoh_transport.ZenohTransport`: real processes over
 Zenoh, through the netem proxy) and the in-process one (:mod:`swarmbed.launch.inprocess`:
 every agent's runtime and the radio stepped in this process).
 """

@@ -148,7 +148,7 @@ class Recorder:
     @staticmethod
     def transport(summary: RunSummary, reports: dict[int, Final], netem_report: NetemFinal) -> dict:
         """TCP bytes each process of the run measured on its own sockets, beside the radio payload
-        bytes of the ledger (see :mod:`swarmbed.wire.transport` for what they count).
+        bytes of the ledger (see :mod:`swarmbed.wire.tcp_counters` for what they count).
 
         Every link of a run has the hub (the coordinator's router) at one end, so measuring each
         client's end counts every byte once: what the clients sent is what the hub received, and

@@ -20,7 +20,7 @@ from typing import Any, Protocol
 import zenoh
 from tqdm import tqdm
 
-from swarmbed.coordinator.coordinator import ZenohTransport
+from swarmbed.coordinator.zenoh_transport import ZenohTransport
 from swarmbed.engine import Session, TickHook, results
 from swarmbed.engine.run_errors import RunError
 from swarmbed.files import safefiles

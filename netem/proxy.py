@@ -41,7 +41,7 @@ from swarmbed.wire.membership import fetch_spec, hand_over
 from swarmbed.wire.reports import NetemFatal, Transport, encode_report
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
-from swarmbed.wire.transport import tcp_counters
+from swarmbed.wire.tcp_counters import tcp_counters
 from swarmbed.wire.zenoh_session import open_from_args
 
 log = logging.getLogger("swarmbed.netem")
