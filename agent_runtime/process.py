@@ -42,8 +42,8 @@ from swarmbed.wire.reports import (
     encode_report,
 )
 from swarmbed.wire.state import StateError
-from swarmbed.wire.tickdecode import TickDecoder
 from swarmbed.wire.tcp_counters import tcp_counters
+from swarmbed.wire.tickdecode import TickDecoder
 from swarmbed.wire.zenoh_session import one_receiving_worker, open_from_args
 
 log = logging.getLogger("swarmbed.agent")
