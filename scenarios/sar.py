@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -43,6 +43,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from swarmbed.extension.actions import MOVE_ACTIONS
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.figures import Figure
+from swarmbed.extension.presets import Preset
 from swarmbed.extension.scenario import Scenario, Sensing, World, obstacles_outside, sight
 from swarmbed.extension.space_nodes import SPACE_NODES
 from swarmbed.scenarios.budget import ACTIVITIES, IDLE, INSPECTING, MOVING, PENALTY, RESCUING, TimeBudget
@@ -66,6 +67,16 @@ RESCUE_TIME = 0.0
 
 class SARParams(BaseModel):
     """The ``scenario:`` section of a search-and-rescue experiment (CBBA-ETC paper, Table 1)."""
+
+    presets: ClassVar[dict[str, Preset]] = {
+        "cbba_etc_text": Preset(
+            {"agent_loss_per": "second", "interrupt": "on_change", "failure_known": "start", "move_failure": "per_move"},
+            "the CBBA-ETC paper's text: robot loss 'per step', a step read as a simulated second (Figure 3: 'a "
+            "specific time step (233 seconds)'); behavior trees that 'can interrupt the current action sequence'; "
+            "a time penalty for failed moves only (Table 1), a Move one action of the tree (docs/reproduction.md "
+            "sections 1 and 10)",
+        ),
+    }
 
     model_config = ConfigDict(extra="forbid")
     arena_radius: float = Field(32.0, gt=0, description="radius of the circular arena (m)")

@@ -359,5 +359,21 @@ def test_an_unknown_preset_is_one_line_naming_the_plugins_presets():
         cfg.load(QUICKSTART, ["allocator.preset=space_txt"])
     assert str(err.value).count("\n") == 0
     assert "allocator.preset" in str(err.value) and "space_code, space_text" in str(err.value)
-    with pytest.raises(cfg.ConfigError, match=r"scenario.preset=x: 'x' is not one of this plugin's presets \(none\)"):
-        cfg.load(ROOT / "experiments" / "sar" / "_base.yaml", ["scenario.preset=x"])
+    with pytest.raises(cfg.ConfigError, match=r"allocator.preset: 'x' is not one of this plugin's presets \(none\)"):
+        cfg.load(QUICKSTART, ["allocator={name: nearest, preset: x}"])
+
+
+def test_every_shipped_preset_sets_keys_its_plugin_has_to_values_it_takes():
+    """A preset with a misspelt key or a value out of range would fail only where someone names it."""
+    from swarmbed.extension.presets import presets_of
+    from swarmbed.plugins import registry
+
+    models = [registry.resolve_scenario(kind).Params for kind in registry.scenario_names()]
+    models += [registry.resolve(name).Params for name, _ in registry.entries()]
+    checked = 0
+    for model in {id(m): m for m in models}.values():
+        for name, preset in presets_of(model).items():
+            assert set(preset.values) <= set(model.model_fields), (model.__name__, name)
+            model.model_validate(preset.values)
+            checked += 1
+    assert checked >= 8  # fcg 2, cbba 2, grape 2, mtsr 1, sar 1
