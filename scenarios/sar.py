@@ -70,7 +70,12 @@ class SARParams(BaseModel):
 
     presets: ClassVar[dict[str, Preset]] = {
         "cbba_etc_text": Preset(
-            {"agent_loss_per": "second", "interrupt": "on_change", "failure_known": "start", "move_failure": "per_move"},
+            {
+                "agent_loss_per": "second",
+                "interrupt": "on_change",
+                "failure_known": "start",
+                "move_failure": "per_move",
+            },
             "the CBBA-ETC paper's text: robot loss 'per step', a step read as a simulated second (Figure 3: 'a "
             "specific time step (233 seconds)'); behavior trees that 'can interrupt the current action sequence'; "
             "a time penalty for failed moves only (Table 1), a Move one action of the tree (docs/reproduction.md "
