@@ -68,11 +68,25 @@ def cmd_run(args: argparse.Namespace) -> int:
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / exp.name / f"seed{exp.run.seed}-{stamp}"
     why = refusals(exp, args.engine)
-    if args.engine == "inprocess" and (args.listen or args.admit or args.tls):
-        why.append("--listen, --admit and --tls are for a hub others join: the in-process engine has none")
+    if args.engine == "inprocess" and (args.listen or args.admit or args.tls or args.slurm):
+        why.append("--listen, --admit, --tls and --slurm are for a hub others join: the in-process engine has none")
     if why:
         print(f"error: {engine_prefix(args.engine)}{why[0]}", file=sys.stderr)
         return 2
+    allocation = None
+    if args.slurm:
+        from swarmbed.launch.slurm_allocation import SlurmError, read_allocation, spread
+
+        refused = _slurm_refusals(exp, args)
+        try:
+            allocation = None if refused else read_allocation()
+        except SlurmError as exc:
+            refused = str(exc)
+        if refused:
+            print(f"error: {refused}", file=sys.stderr)
+            return 2
+        assert allocation is not None
+        exp = exp.model_copy(update={"placement": spread(allocation.nodes, exp.agents.count)})
     if args.check:
         from swarmbed.launch.check import describe_plan
 
@@ -99,9 +113,36 @@ def cmd_run(args: argparse.Namespace) -> int:
         print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
         return 0
     hub = HubOptions(listen=args.listen, auth=not args.no_auth, admit=admitted, tls=tls)
-    result = run_experiment(exp, out, progress=not args.no_progress, hub=hub, views=views)
+    if allocation is not None:
+        from swarmbed.launch.slurm_allocation import SlurmError, SlurmHosts
+
+        logs = Path("runs") / "hosts" / f"slurm-{allocation.job_id}"
+        logs.mkdir(parents=True, exist_ok=True)
+        try:
+            with SlurmHosts(allocation, logs) as hosts:
+                print(
+                    f"slurm: job {allocation.job_id}, agents on {exp.placement}; hosts' logs in {logs}", file=sys.stderr
+                )
+                hub = HubOptions((*args.listen, hosts.hub), True, (*admitted, *hosts.identities), tls)
+                result = run_experiment(exp, out, progress=not args.no_progress, hub=hub, views=views)
+        except SlurmError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    else:
+        result = run_experiment(exp, out, progress=not args.no_progress, hub=hub, views=views)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
+
+
+def _slurm_refusals(exp, args: argparse.Namespace) -> str | None:
+    """Why ``--slurm`` cannot run this experiment with these flags, or None."""
+    if exp.placement or exp.swaps or exp.may_carry:
+        return "--slurm places the agents itself over the allocation's nodes: leave placement, swaps and may_carry out"
+    if args.no_auth:
+        return "--slurm starts host daemons that present credentials: it cannot run with --no-auth"
+    if args.tls:
+        return "--slurm with --tls is not supported yet: the nodes' links are plain TCP with credentials"
+    return None
 
 
 def _live_views(exp, port: int | None) -> list:
@@ -174,6 +215,12 @@ def register_run(sub: Subparsers) -> None:
     run.add_argument("--tls", metavar="DIR", help="certificates (swarmbed certs) for --listen tls/HOST:PORT endpoints")
     run.add_argument(
         "--tls-name", metavar="NAME", default="hub", help="the certificate in --tls DIR the hub presents (default: hub)"
+    )
+    run.add_argument(
+        "--slurm",
+        action="store_true",
+        help="inside a Slurm allocation (salloc, sbatch): start a host daemon on every node with srun and "
+        "spread the agents over them; the coordinator, the proxy and the results stay here (docs/machines.md)",
     )
     run.set_defaults(func=cmd_run)
 

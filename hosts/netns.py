@@ -83,6 +83,17 @@ class Lab:
 
     def add_host(self, name: str) -> str:
         """A namespace for host ``name`` with its daemon running; returns the namespace."""
+        ns = self.add_namespace()
+        self.start_daemon(name, ns)
+        return ns
+
+    def address(self, ns: str) -> str:
+        """The address of stand-in host ``ns`` on the bridge."""
+        return f"198.18.{self.net}.{10 + self.namespaces.index(ns)}"
+
+    def add_namespace(self) -> str:
+        """A namespace on the bridge, nothing running in it; returns its name. Its default route is
+        the bridge, so it reaches every address of this machine, as a machine on a LAN does."""
         i = len(self.namespaces)
         ns, veth = f"{self.tag}n{i}", f"{self.tag}v{i}"
         _ip("netns", "add", ns)
@@ -95,7 +106,7 @@ class Lab:
         _ip("addr", "add", f"198.18.{self.net}.{10 + i}/24", "dev", f"{veth}p", ns=ns)
         _ip("link", "set", f"{veth}p", "up", ns=ns)
         _ip("link", "set", "lo", "up", ns=ns)
-        self.start_daemon(name, ns)
+        _ip("route", "add", "default", "via", self.bridge_ip, ns=ns)
         return ns
 
     def start_daemon(self, name: str, ns: str) -> None:

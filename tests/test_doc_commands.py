@@ -45,7 +45,7 @@ def _argv(line: str) -> list[str]:
         takes_value = "=" not in word and k + 1 < len(words) and not words[k + 1].startswith("--")
         if flag in KEPT:
             argv += words[k : k + 2] if takes_value else [word] if "=" in word else []  # cut by a line end: dropped
-        elif flag not in DROPPED and flag != "--force" and flag != "--yes":
+        elif flag not in DROPPED and flag not in ("--force", "--yes", "--slurm"):
             raise AssertionError(f"{line}: {word} is neither kept nor dropped by this test: say which")
         k += 2 if takes_value and (flag in KEPT or flag in DROPPED) else 1
     return [*argv, "--check", "--yes"] if argv[0] == "sweep" else [*argv, "--check"]

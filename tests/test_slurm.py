@@ -1,0 +1,82 @@
+"""``swarmbed run --slurm`` under a real Slurm: slurmctld here, one slurmd per stand-in host (network
+namespaces), the run launched inside ``salloc`` as a user would. The agents spread over the
+allocation's nodes give the results of the same experiment on one machine."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from swarmbed.hosts.netns import LabError
+from swarmbed.hosts.slurm_lab import make_slurm_lab
+from swarmbed.launch.slurm_allocation import spread
+from tests.conftest import QUICKSTART, experiment, reference_run, same_results
+
+
+@pytest.fixture
+def cluster(lab, tmp_path):
+    """Three Slurm nodes n1..n3 on ``lab``; skips, with the reason, where Slurm cannot start."""
+    try:
+        the_cluster = make_slurm_lab(lab, tmp_path / "slurm", nodes=3)
+    except LabError as exc:
+        pytest.skip(str(exc))
+    try:
+        yield the_cluster
+    finally:
+        the_cluster.close()
+
+
+def test_spread_gives_contiguous_blocks_over_the_nodes_and_leaves_none_out():
+    assert spread(["a", "b", "c"], 20) == {"a": "0-6", "b": "7-13", "c": "14-19"}
+    assert spread(["a", "b", "c"], 2) == {"a": "0-0", "b": "1-1"}
+
+
+def test_slurm_outside_an_allocation_is_one_line(capsys, monkeypatch):
+    from swarmbed.cli.main import main
+
+    for name in ("SLURM_JOB_ID", "SLURM_JOB_NODELIST"):
+        monkeypatch.delenv(name, raising=False)
+    assert main(["run", str(QUICKSTART), "--slurm", "--check"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "error: --slurm: not inside a Slurm allocation (SLURM_JOB_ID unset): run it under salloc or sbatch"
+    assert main(["run", str(QUICKSTART), "--slurm", "--set", "placement={h: 0}", "--check"]) == 2
+    assert "places the agents itself" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("launcher", ["salloc", "sbatch"])
+def test_a_run_in_an_allocation_spreads_its_agents_over_the_nodes_and_gives_the_one_machine_results(
+    cluster, tmp_path, launcher
+):
+    """``salloc``: the run's hub, coordinator and proxy stay on the submitting machine; ``sbatch``:
+    they run on the allocation's first node (a namespace), beside that node's own daemon."""
+    sets = ["agents.count=9", "allocator={name: cbba}", "run.duration=60", "run.stop_when_done=false"]
+    reference_run(experiment(*sets), tmp_path / "local")
+    run = [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--slurm", "--no-progress"]
+    run += ["--out", str(tmp_path / "slurm_run"), *[arg for s in sets for arg in ("--set", s)]]
+    if launcher == "salloc":
+        cmd = ["salloc", "--nodes=3", "--immediate=60", "--job-name=swarmbed-test", *run]
+    else:
+        script = tmp_path / "job.sh"
+        script.write_text("#!/bin/sh\nexec " + " ".join(f"'{a}'" for a in run) + "\n")
+        cmd = ["sbatch", "--wait", "--nodes=3", "--job-name=swarmbed-test", f"--output={tmp_path}/job.out", str(script)]
+    done = subprocess.run(cmd, cwd=tmp_path, env=cluster.env, capture_output=True, text=True, timeout=300)
+    output = done.stdout + done.stderr + ((tmp_path / "job.out").read_text() if launcher == "sbatch" else "")
+    assert done.returncode == 0, output
+    same_results(tmp_path / "local", tmp_path / "slurm_run")
+    deployment = json.loads((tmp_path / "slurm_run" / "deployment.json").read_text())
+    where = {int(agent): host for agent, host in deployment["placement"].items()}
+    assert where == {
+        **dict.fromkeys(range(3), "n1"),
+        **dict.fromkeys(range(3, 6), "n2"),
+        **dict.fromkeys(range(6, 9), "n3"),
+    }
+    # each node's daemon ran in its own namespace and logged its agents there
+    for node, agent in (("n1", 0), ("n2", 4), ("n3", 8)):
+        assert list((tmp_path / "runs" / "hosts").glob(f"slurm-*/{node}/*/agent_{agent}.log")), (node, agent)
+    # the job steps ended with the run: nothing of the job is left running
+    left = subprocess.run(["squeue", "-h"], env=cluster.env, capture_output=True, text=True).stdout.strip()
+    assert left == "", left
+    assert not [p for p in os.listdir(tmp_path / "runs" / "hosts") if p.startswith("swarmbed-slurm-")]
