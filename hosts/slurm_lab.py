@@ -110,12 +110,14 @@ def make_slurm_lab(lab: Lab, folder: Path, nodes: int) -> SlurmLab:
         "MpiDefault=none",
         "SwitchType=switch/none",
     ]
+    # memory is not a consumable here (CR_Core); slurmd drains a node that claims more than it has
+    memory_mb = int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") * 0.9) // 2**20
     namespaces = []
     for k in range(1, nodes + 1):
         ns = lab.add_namespace()
         namespaces.append(ns)
         cluster.nodes.append(f"n{k}")
-        lines.append(f"NodeName=n{k} NodeAddr={lab.address(ns)} CPUs={os.cpu_count() or 1} RealMemory=1000")
+        lines.append(f"NodeName=n{k} NodeAddr={lab.address(ns)} CPUs={os.cpu_count() or 1} RealMemory={memory_mb}")
     lines.append(f"PartitionName=lab Nodes=n[1-{nodes}] Default=YES MaxTime=INFINITE State=UP OverSubscribe=YES")
     (folder / "state").mkdir(exist_ok=True)
     (folder / "slurm.conf").write_text("\n".join(lines) + "\n")

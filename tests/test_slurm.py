@@ -80,3 +80,37 @@ def test_a_run_in_an_allocation_spreads_its_agents_over_the_nodes_and_gives_the_
     left = subprocess.run(["squeue", "-h"], env=cluster.env, capture_output=True, text=True).stdout.strip()
     assert left == "", left
     assert not [p for p in os.listdir(tmp_path / "runs" / "hosts") if p.startswith("swarmbed-slurm-")]
+
+
+@pytest.mark.slow
+def test_a_sweep_through_the_slurm_executor_runs_its_runs_as_array_tasks_on_the_nodes(cluster, tmp_path, monkeypatch):
+    """``sweep --executor slurm`` against a real slurmctld: one array job, its tasks on the nodes
+    (network namespaces), every run's files those of the same sweep run here."""
+    from swarmbed.campaigns import executors
+    from swarmbed.campaigns.sweep import load_sweep, run_sweep
+
+    sweep = tmp_path / "sweep.yaml"
+    sweep.write_text(
+        f"name: pair\nbase: {QUICKSTART}\nseed: 11\nruns: 2\nset: {{agents.count: 3, run.duration: 60}}\n"
+        "grid:\n  network.range: [30, 60]\n"
+    )
+    local = run_sweep(load_sweep(sweep), tmp_path / "local", jobs=2, progress=False, in_process=True)
+    assert (local["status"] == "ok").all(), local
+    for name, value in cluster.env.items():
+        monkeypatch.setenv(name, value)
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "slurm"
+    executor = executors.get("slurm", folder=out / ".submitit", time="10")
+    table = run_sweep(load_sweep(sweep), out, progress=False, executor=executor)
+    assert (table["status"] == "ok").all(), table
+    runs = sorted(p.parent.relative_to(out) for p in out.glob("*/run_*/summary.json"))
+    assert len(runs) == 4
+    for rel in runs:
+        same_results(tmp_path / "local" / rel, out / rel)
+    nodes = {json.loads((out / rel / "deployment.json").read_text())["hub"][0] for rel in runs}
+    assert len(nodes) == 4  # each run its own hub
+    array = executor.jobs[0].job_id.split("_")[0]
+    shown = subprocess.run(["scontrol", "show", "job", "-o", array], env=cluster.env, capture_output=True, text=True)
+    tasks = [dict(f.split("=", 1) for f in line.split() if "=" in f) for line in shown.stdout.splitlines()]
+    assert len(tasks) == 4 and {t["JobState"] for t in tasks} == {"COMPLETED"}, shown.stdout
+    assert {t["NodeList"] for t in tasks} <= set(cluster.nodes), shown.stdout
