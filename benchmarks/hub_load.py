@@ -7,8 +7,9 @@ iproute2: the hosts are stand-ins, network namespaces on a bridge, one ``swarmbe
 For each layout, the same lock-step run (the no-op allocator, every agent messaging 5 peers a tick,
 no range): ticks per second; the hub's CPU per tick (the launcher's process: the hub router, the
 coordinator and this script's sampler thread) and its wake-ups per tick; the proxy's CPU per tick;
-and the TCP segments the hub's process sends and receives per tick, read from the kernel's counters
-of its own sockets (``swarmbed.wire.tcp_counters``) four times a second while the ticks run. Each
+the TCP segments the hub's process sends and receives per tick, read from the kernel's counters of
+its own sockets (``swarmbed.wire.tcp_counters``) four times a second while the ticks run; and the
+host daemons' own CPU (their routers) per tick, start-up included. Each
 layout's result files are compared with the all-local run's. Run it from a separate non-editable
 install on an otherwise idle machine.
 """
@@ -20,6 +21,8 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+
+import psutil
 
 from swarmbed.hosts.netns import Lab, LabError, make_lab
 from swarmbed.launch import config as cfg
@@ -80,6 +83,8 @@ def one(lab: Lab, out: Path, n: int, ticks: int, hosts: int) -> dict:
         *placement(n, hosts),
     ]
     segments = Segments()
+    daemons = [psutil.Process(lab.daemons[f"h{k}"].pid) for k in range(hosts)]
+    before = sum(d.cpu_times().user + d.cpu_times().system for d in daemons)
     try:
         result = run_experiment(
             cfg.load(ROOT / "experiments" / "quickstart.yaml", sets),
@@ -90,6 +95,7 @@ def one(lab: Lab, out: Path, n: int, ticks: int, hosts: int) -> dict:
         )
     finally:
         segments.stop.set()
+    daemon_cpu = sum(d.cpu_times().user + d.cpu_times().system for d in daemons) - before
     t = result.timings
     rate = t["ticks_per_s"]
     per_agent = t["per_agent_tick"]
@@ -99,6 +105,9 @@ def one(lab: Lab, out: Path, n: int, ticks: int, hosts: int) -> dict:
         "hub_wakeups_per_tick": per_agent["wakeups"]["hub"] * n,
         "netem_cpu_ms_per_tick": per_agent["cpu_us"]["netem"] * n / 1000,
         "hub_segments_per_tick": segments.per_second() / rate,
+        # the host daemons' own processes (their routers; the agents are their fork server's children),
+        # over the whole run, start-up included: an upper bound on their per-tick cost
+        "daemons_cpu_ms_per_tick": 1000 * daemon_cpu / ticks,
     }
 
 
@@ -119,7 +128,7 @@ def main() -> None:
             print(
                 f"{args.agents} agents, {args.ticks} ticks, no-op + 5 messages each a tick\n"
                 "hosts | ticks/s | hub CPU ms/tick | hub wake-ups/tick | hub TCP segments/tick | "
-                "proxy CPU ms/tick | same files as all local",
+                "proxy CPU ms/tick | host daemons' CPU ms/tick | same files as all local",
                 flush=True,
             )
             first: Path | None = None
@@ -131,7 +140,7 @@ def main() -> None:
                 print(
                     f"{hosts or 'local':>5} | {m['ticks_per_s']:7.1f} | {m['hub_cpu_ms_per_tick']:15.2f} | "
                     f"{m['hub_wakeups_per_tick']:17.0f} | {m['hub_segments_per_tick']:21.0f} | "
-                    f"{m['netem_cpu_ms_per_tick']:17.2f} | {same}",
+                    f"{m['netem_cpu_ms_per_tick']:17.2f} | {m['daemons_cpu_ms_per_tick']:25.2f} | {same}",
                     flush=True,
                 )
         finally:
