@@ -44,6 +44,7 @@ SPACE's: (evolution number, timestamp, partition).
 from __future__ import annotations
 
 import math
+from collections import Counter
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -199,9 +200,10 @@ class GRAPE(Allocator):
         needed = self.needs.get(task, (1, 0))[0]
         return utility(t.remaining, view.distance_to(t), size, p.cost_weight, p.social_inhibition, needed)
 
-    def coalition_size(self, task: int, with_me: bool) -> int:
-        others = sum(1 for a, t in self.partition.items() if t == task and a != self.agent_id)
-        return others + (1 if with_me else 0)
+    def others_on(self) -> Counter[int]:
+        """How many other agents the partition has on each task (a coalition's size is that, plus one
+        for this agent joining it): counted once a tick, not once per task in view."""
+        return Counter(t for a, t in self.partition.items() if a != self.agent_id)
 
     # -- the tick -------------------------------------------------------------------------------
     def decide(self, view: LocalView) -> int | None:
@@ -314,13 +316,14 @@ class GRAPE(Allocator):
     def choose(self, view: LocalView) -> None:
         """Algorithm 1: move to the coalition of highest utility if it beats the current one."""
         current = self.partition.get(self.agent_id, VOID)
+        others = self.others_on()
         if (current != VOID and current not in view.tasks) or (current == VOID and not self.params.void_task):
             current_u = -math.inf  # out of sight, done, or no task while there is no void task: any task is better
         else:
-            current_u = self.utility(view, current, self.coalition_size(current, True))
+            current_u = self.utility(view, current, others[current] + 1)
         best_task, best_u = (VOID, 0.0) if self.params.void_task else (VOID, -math.inf)
         for task in sorted(view.tasks):
-            u = self.utility(view, task, self.coalition_size(task, True))
+            u = self.utility(view, task, others[task] + 1)
             if u > best_u:
                 best_task, best_u = task, u
         if best_task != current and best_u > current_u:

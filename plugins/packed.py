@@ -23,19 +23,25 @@ FEW_ROWS = 32
 def _narrowest(wide: np.ndarray, keys: Sequence[tuple[Key, np.dtype]]) -> tuple[Key, np.ndarray]:
     """The first of ``keys`` whose dtype holds every entry of ``wide`` exactly, and the entries in it
     (ids: in range; stamps: whole numbers in range; a bid is always float64)."""
+    seen: dict[str, tuple[Any, Any, bool]] = {}  # per field: least, greatest, all whole; looked at once
     for key, dtype in keys[:-1]:
-        if all(_holds(wide[name], dtype[name]) for name in dtype.names or ()):
+        if all(_holds(wide, name, bound, dtype[name], seen) for name, bound in zip(dtype.names or (), _bounds(dtype))):
             return key, wide.astype(dtype)
     return keys[-1][0], wide
 
 
-def _holds(values: np.ndarray, dtype: np.dtype) -> bool:
-    if dtype.kind == "f" or dtype == values.dtype:
+def _holds(
+    wide: np.ndarray, name: str, bound: tuple[int, int] | None, dtype: np.dtype, seen: dict[str, tuple[Any, Any, bool]]
+) -> bool:
+    """Whether field ``name`` of ``wide`` fits ``dtype`` (of range ``bound``) exactly."""
+    if bound is None or dtype == wide.dtype[name]:
         return True
-    info = np.iinfo(dtype)
-    if not (info.min <= values.min() and values.max() <= info.max):
-        return False
-    return values.dtype.kind != "f" or bool((values == np.floor(values)).all())
+    if name not in seen:
+        values = wide[name]
+        whole = values.dtype.kind != "f" or bool((values == np.floor(values)).all())
+        seen[name] = (values.min(), values.max(), whole)
+    least, greatest, whole = seen[name]
+    return bool(bound[0] <= least and greatest <= bound[1]) and whole
 
 
 @functools.lru_cache(maxsize=64)
