@@ -15,7 +15,6 @@ import os
 import secrets
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -27,17 +26,12 @@ from swarmbed.files.safefiles import open_fresh
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
+from swarmbed.wire.zenoh_session import free_port
 
 
 def _ip(*args: str, ns: str | None = None, check: bool = True) -> subprocess.CompletedProcess:
     cmd = ["ip", *(["netns", "exec", ns, "ip"] if ns else []), *args]
     return subprocess.run(cmd, capture_output=True, text=True, check=check)
-
-
-def free_port(ip: str) -> int:
-    with socket.socket() as s:
-        s.bind((ip, 0))
-        return s.getsockname()[1]
 
 
 def why_not() -> str | None:

@@ -18,7 +18,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from swarmbed.hosts.netns import Lab, LabError, free_port
+from swarmbed.hosts.netns import Lab, LabError
+from swarmbed.wire.zenoh_session import free_port
 
 DAEMONS = ("slurmctld", "slurmd", "srun", "salloc", "scontrol", "sinfo", "munged")
 

@@ -34,6 +34,7 @@ from pathlib import Path
 from swarmbed.files.safefiles import open_fresh
 from swarmbed.launch.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
+from swarmbed.wire.zenoh_session import free_port
 
 
 class SlurmError(RuntimeError):
@@ -107,12 +108,6 @@ def spread(nodes: Sequence[str], n_agents: int) -> dict[str, str]:
             placement[node] = f"{start}-{start + count - 1}"
         start += count
     return placement
-
-
-def free_port(address: str) -> int:
-    with socket.socket() as s:
-        s.bind((address, 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass

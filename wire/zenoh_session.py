@@ -219,11 +219,16 @@ def tls_from_args(args: argparse.Namespace) -> dict[str, object] | None:
     return tls_settings(args.tls, name)
 
 
+def free_port(address: str) -> int:
+    """A TCP port currently free on ``address`` (the caller retries if it is taken meanwhile)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((address, 0))
+        return int(s.getsockname()[1])
+
+
 def free_loopback_endpoint() -> str:
     """A TCP endpoint on a currently free loopback port (the caller retries if it is taken meanwhile)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+    return f"tcp/127.0.0.1:{free_port('127.0.0.1')}"
 
 
 def undeclare_all(entities: list) -> None:
