@@ -106,8 +106,8 @@ class RunSection(Strict):
         description="Zenoh's threads in the agents and the proxy this machine starts: default (one worker receives "
         "and agents answer ticks in its callback, one more transmits, so keep-alives flow during a long tick), "
         "single (every runtime on one worker: the fewest wake-ups, but such agents take a 60 s lease: the hub "
-        "waits up to a minute for a frozen or cut-off agent, and one that wakes sooner finds the hub's 10 s lease "
-        "expired on its side and is lost then), or zenoh (Zenoh's own layout); results are the same with each "
+        "waits up to a minute for a frozen or cut-off agent, and one that wakes sooner mostly finds the hub's 10 s "
+        "lease expired on its side and is lost then, or else answers on), or zenoh (Zenoh's own layout); results are the same with each "
         "(docs/benchmarks.md)",
     )
     record_bt: bool = Field(

@@ -388,9 +388,10 @@ def test_a_killed_agent_is_lost_or_restarted_and_copies_to_it_are_booked(policy,
         assert alive.loc[2, "alive"] == 1 and alive.loc[2, "messages_sent"] > 0
 
 
-def _frozen_agent_soak(tmp_path, seconds: float, max_stall: float, *sets: str) -> dict:
+def _frozen_agent_soak(tmp_path, seconds: float, max_stall: float, *sets: str, lost: bool = True) -> dict:
     """A soak of 3 agents in which agent 1 is SIGSTOPped for 24 s at 2 s (no keep-alive either, as
-    a host cut off), going on without it once it is lost; its verdict."""
+    a host cut off), going on without it once it is lost; its verdict. ``lost``: check that the
+    agent was lost (False: leave that to the caller)."""
     plan = ChaosPlan.model_validate({"events": [{"action": "stop_agent", "at": [2], "for": 24, "agents": [1]}]})
     exp = experiment(
         "agents.count=3",
@@ -402,7 +403,8 @@ def _frozen_agent_soak(tmp_path, seconds: float, max_stall: float, *sets: str) -
     limits = Thresholds(max_rss_slope_pct_h=3000.0, max_fd_growth_h=1000.0, max_stall_s=max_stall)
     v = soak(exp, tmp_path / "soak", seconds, plan, interval=0.5, limits=limits)
     assert v["passed"], v["breaches"]
-    assert list(v["agents_lost"]) == ["1"], v["agents_lost"]
+    if lost:
+        assert list(v["agents_lost"]) == ["1"], v["agents_lost"]
     return v
 
 
@@ -420,13 +422,23 @@ def test_on_the_single_worker_layout_a_frozen_agent_stalls_the_ticks_for_its_fre
 ):
     """Issue 74 item 19: under ``run.zenoh_threads: single`` the agent's session has a 60 s lease, so
     the hub waits out a 24 s freeze (the ticks stall about as long, not the default layout's 10 s
-    lease); when the agent runs again, its own side finds the hub's 10 s lease long expired and
-    closes its session, and the hub loses it then: a tick or two after it froze, in ticks, and the
-    freeze's length in wall time (docs/benchmarks.md, the key's description)."""
-    v = _frozen_agent_soak(tmp_path, 36, 50.0, "run.tick_timeout=60", "run.zenoh_threads=single")
+    lease). When the agent runs again, two things race in its Zenoh runtime: the check of the hub's
+    10 s lease, long expired, which closes its session (the hub then loses it a tick or two after
+    it froze), and the hub's keep-alives queued in its socket, which renew the lease; the check
+    wins most times here (3 of 4 under load), the keep-alives sometimes, and then the agent simply
+    answers on. Either way the stall is the freeze (docs/benchmarks.md, the key's description)."""
+    v = _frozen_agent_soak(tmp_path, 36, 50.0, "run.tick_timeout=60", "run.zenoh_threads=single", lost=False)
     assert 22.0 < v["longest_stall_s"] < 40.0, v["longest_stall_s"]  # the freeze, not 10 s, not 60 s
-    froze, lost = v["faults"][0]["tick"], v["agents_lost"]["1"]
-    assert 0 < lost - froze <= 3, (froze, lost)
+    froze = v["faults"][0]["tick"]
+    if v["agents_lost"]:
+        assert list(v["agents_lost"]) == ["1"], v["agents_lost"]
+        assert 0 < v["agents_lost"]["1"] - froze <= 3, (froze, v["agents_lost"])
+    else:  # it kept its session: it is alive at the end and was heard after the freeze
+        alive = pd.read_csv(tmp_path / "soak" / "agents.csv")
+        assert alive.loc[1, "alive"] == 1
+        ledger = pd.read_csv(tmp_path / "soak" / "network_ledger.csv")
+        sent = ledger[(ledger.sender == 1) & (ledger.outcome == "sent")]
+        assert sent.tick.max() > froze + 100, (froze, sent.tick.max())
 
 
 def test_on_the_real_time_clock_a_stopped_agent_misses_ticks_and_the_soak_says_how_many(tmp_path):
