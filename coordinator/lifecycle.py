@@ -408,7 +408,7 @@ class AgentLifecycle(TickHook):
                     return CONSUMED
                 if rep.agent == agent and rep.kind in wanted:
                     return "restored" if rep.kind == "restored" else f"{rep.kind}: {getattr(rep, 'error', '')}"
-            if what == "leave" and not data.endswith(("/coordinator", "/netem")) and agent_id_of(data) == agent:
+            if what == "leave" and "/alive/agent/" in data and agent_id_of(data) == agent:
                 gone = incarnation_of(data)
                 if gone in (old, new):
                     return f"the {'old' if gone == old else 'new'} process of agent {agent} exited"

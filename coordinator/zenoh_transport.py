@@ -31,6 +31,7 @@ from swarmbed.coordinator.placement import Placement
 from swarmbed.coordinator.trees import TreeRecorder, TreeRelay
 from swarmbed.engine import Session, StopWhenAsked, TickHook, refusals
 from swarmbed.engine.hooks import Profile
+from swarmbed.engine.radio_split import merge_finals, merge_ledgers, merge_steps, proxy_name
 from swarmbed.engine.recorder import Recorder
 from swarmbed.engine.run_errors import RunError
 from swarmbed.extension.allocator import Allocator
@@ -112,6 +113,12 @@ class ZenohTransport(TickHook):
         self.joined: set[str] = set()
         self.reports: dict[int, Final] = {}
         self.netem_report: NetemFinal | None = None
+        # the proxies: one, or the K of a radio split over proxies (swarmbed.engine.radio_split), each
+        # with its token, its step of every tick and its final report, merged here
+        self.shards = exp.radio_split.shards
+        self.proxy_tokens = {key: i for i, key in enumerate(keys.netem_tokens(self.shards))}
+        self.steps: dict[int, NetemStep] = {}
+        self.finals: dict[int, NetemFinal] = {}
         self.malformed = 0
         self.clock = WallClock(exp.run)  # pacing and wall-clock facts (never in a lock-step run's files)
         self.last_tick = -1
@@ -178,7 +185,7 @@ class ZenohTransport(TickHook):
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
-        if key not in (self.keys.alive_netem, self.keys.alive_coordinator):
+        if key not in self.proxy_tokens and key != self.keys.alive_coordinator:
             try:
                 alive_agent_of(key, self.keys.root, self.n)
             except WireError as exc:  # a token no process of this run holds: never taken for one
@@ -199,12 +206,14 @@ class ZenohTransport(TickHook):
         undeclare_all(self._entities)
 
     def _who(self, key: str) -> str:
-        return "netem" if key == self.keys.alive_netem else f"agent_{agent_id_of(key)}"
+        if key in self.proxy_tokens:
+            return proxy_name(self.proxy_tokens[key])
+        return f"agent_{agent_id_of(key)}"
 
     def wait_for_members(self, check_children: Callable[[], None]) -> None:
         """Until the proxy and every agent hold a liveliness token; ``check_children`` raises if a
         launched process already exited."""
-        wanted = {"netem"} | {f"agent_{i}" for i in range(self.n)}
+        wanted = {proxy_name(i) for i in range(self.shards)} | {f"agent_{i}" for i in range(self.n)}
         deadline = time.monotonic() + self.exp.run.join_timeout
         while not wanted <= self.joined:
             check_children()
@@ -310,12 +319,20 @@ class ZenohTransport(TickHook):
                 except WireError as exc:
                     self._malformed(self.keys.netem_step, exc)
                     continue
-                if step.tick == k:
+                if step.tick != k:
+                    self._malformed(self.keys.netem_step, WireError(f"step for tick {step.tick} while at tick {k}"))
+                elif step.shard >= self.shards or step.shard in self.steps:
+                    self._malformed(self.keys.netem_step, WireError(f"a step of proxy {step.shard} not awaited"))
+                elif self.shards == 1:
                     return step
-                self._malformed(self.keys.netem_step, WireError(f"step for tick {step.tick} while at tick {k}"))
+                else:
+                    self.steps[step.shard] = step
+                    if len(self.steps) == self.shards:
+                        steps = [self.steps.pop(i) for i in range(self.shards)]
+                        return merge_steps(steps)
             elif what == "leave":
-                if data == self.keys.alive_netem:
-                    self._proxy_gone(k)
+                if data in self.proxy_tokens:
+                    self._proxy_gone(k, self.proxy_tokens[data])
                 if not data.endswith("/coordinator"):
                     agent = agent_id_of(data)
                     if incarnation_of(data) != self.agents.incarnation.get(agent, 0):
@@ -337,7 +354,7 @@ class ZenohTransport(TickHook):
         if isinstance(rep, NetemFatal):
             raise RunError(f"tick {k}: the netem proxy failed: {rep.error}; see logs/netem.log")
 
-    def _proxy_gone(self, k: int, grace: float = 0.5) -> None:
+    def _proxy_gone(self, k: int, shard: int = 0, grace: float = 0.5) -> None:
         """The proxy's token went: raise with its own error if it reported one (it reports before it
         lets go of the token, but the two travel apart), else with its exit status and log."""
 
@@ -348,9 +365,10 @@ class ZenohTransport(TickHook):
             return CONSUMED
 
         self.events.wait_for(grace, take)
-        how = self.placement.exit_status("netem") if self.placement else ""
+        name = proxy_name(shard)
+        how = self.placement.exit_status(name) if self.placement else ""
         raise RunError(
-            f"tick {k}: the netem proxy exited unexpectedly; see logs/netem.log" + (f"\n{how}" if how else "")
+            f"tick {k}: the netem proxy exited unexpectedly; see logs/{name}.log" + (f"\n{how}" if how else "")
         )
 
     def _await_fatal_report(self, agent: int, grace: float = 0.25) -> None:
@@ -409,13 +427,12 @@ class ZenohTransport(TickHook):
             self.agent_pubs[i].put(encode_stop("run complete"))
         live += retired  # stopped earlier, but they report too
         deadline = time.monotonic() + timeout
-        while self.netem_report is None or any(i not in self.reports for i in live):
+        while len(self.finals) < self.shards or any(i not in self.reports for i in live):
             try:
                 what, data = self.events.next(deadline - time.monotonic())
             except queue.Empty:
                 missing = [f"agent_{i}" for i in live if i not in self.reports]
-                if self.netem_report is None:
-                    missing.insert(0, "netem")
+                missing[:0] = [proxy_name(i) for i in range(self.shards) if i not in self.finals]
                 raise RunError(f"no final report within {timeout:.0f} s from: {', '.join(missing[:10])}") from None
             if what == "report":
                 self._on_report(data, self.last_tick)
@@ -426,8 +443,16 @@ class ZenohTransport(TickHook):
                     self._malformed(self.keys.netem_report, exc)
                     continue
                 if isinstance(report, NetemFatal):
-                    raise RunError(f"the netem proxy failed at the end of the run: {report.error}; see logs/netem.log")
-                self.netem_report = report
+                    raise RunError(f"the netem proxy failed at the end of the run: {report.error}; see logs/netem*.log")
+                if report.shard >= self.shards or report.shard in self.finals:
+                    self._malformed(self.keys.netem_report, WireError(f"a report of proxy {report.shard} not awaited"))
+                    continue
+                self.finals[report.shard] = report
+        if self.shards == 1:
+            self.netem_report = self.finals[0]
+        else:  # every proxy wrote its part of the ledger in the run folder, here
+            merge_ledgers(self.out_dir, self.shards)
+            self.netem_report = merge_finals([self.finals[i] for i in range(self.shards)])
 
     def write_results(self, run: Session, timings: dict) -> RunSummary:
         """The run's result files, from the final reports :meth:`stop_and_collect` gathered."""

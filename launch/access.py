@@ -111,7 +111,7 @@ def access_rules(
         _allow("netem-subscribe", ["declare_subscriber"], [k.world, k.agent_out_all, k.netem_stop, k.netem_control]),
         _allow("netem-query", ["query"], [k.netem_config, k.netem_report]),
         _allow("netem-serve", ["declare_queryable", "reply"], [k.netem_awaiting]),
-        _allow("netem-alive", ["liveliness_token"], [k.alive_netem]),
+        _allow("netem-alive", ["liveliness_token"], [k.alive_netem, k.alive_netem_shard_all]),
         _allow("watch-alive", ["declare_liveliness_subscriber", "liveliness_query"], [alive]),
         # operators read only what is published with DROP (progress, views): a reader that stops
         # reading must never hold up a key the run blocks on (ticks, outputs, steps, the world)

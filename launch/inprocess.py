@@ -24,7 +24,7 @@ from pathlib import Path
 from swarmbed.agent_runtime.runtime import AgentRuntime
 from swarmbed.engine import ENGINES, OneProcess, Session, TickInHand, refusals, results
 from swarmbed.launch.runner import RunResult, View, plan_run, start_result_dir
-from swarmbed.netem.exchange import Exchange
+from swarmbed.netem.exchange import Exchange, SplitExchange
 from swarmbed.records.rundir import DEPLOYMENT
 from swarmbed.schema.experiment import Experiment, Targets, agent_spec, netem_spec
 from swarmbed.wire.codec import EMPTY_INBOX, NetemStep, WorldSample, decode_agent_out, encode_agent_out
@@ -45,7 +45,8 @@ class InProcess:
         spec = agent_spec(exp, targets)
         self.runtimes = {i: AgentRuntime(spec, i) for i in range(exp.agents.count)}
         self.decoder = TickDecoder(next(iter(self.runtimes.values())).scenario.Observation) if self.runtimes else None
-        self.radio_exchange = Exchange(netem_spec(exp), out_dir)
+        radio = netem_spec(exp)
+        self.radio_exchange = Exchange(radio, out_dir) if radio.split.shards == 1 else SplitExchange(radio, out_dir)
 
     def exchange(
         self,
@@ -55,7 +56,7 @@ class InProcess:
         inboxes: Mapping[int, bytes],
         decisions: Mapping[int, int],
     ) -> NetemStep:
-        self.radio_exchange.radio.confirm()  # the inboxes made for this tick arrived
+        self.radio_exchange.confirm()  # the inboxes made for this tick arrived
         outs = {}
         for i, obs in observed.items():
             runtime = self.runtimes[i]

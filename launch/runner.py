@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from swarmbed.coordinator.zenoh_transport import ZenohTransport
 from swarmbed.engine import Session, TickHook, results
+from swarmbed.engine.radio_split import proxy_name
 from swarmbed.engine.run_errors import RunError
 from swarmbed.files import safefiles
 from swarmbed.launch.access import RunAccess
@@ -253,9 +254,12 @@ def _start_processes(plan: RunPlan, setup: _Setup) -> dict[str, Any]:
     returns each remote host's information."""
     exp, children, placement = plan.exp, setup.children, setup.placement
     try:
-        children.spawn(
-            "netem", "swarmbed.netem", [*placement.common, *setup.identity("netem"), "--out", str(plan.out_dir)]
-        )
+        for shard in range(exp.radio_split.shards):  # a split radio's proxy i>0 logs to logs/netem-i.log
+            children.spawn(
+                proxy_name(shard),
+                "swarmbed.netem",
+                [*placement.common, *setup.identity("netem"), "--out", str(plan.out_dir), "--shard", str(shard)],
+            )
         for i in range(exp.agents.count):
             if plan.where[i] == LOCAL:
                 placement.first(i)
@@ -349,6 +353,7 @@ def _execute(
             "placement": {str(i): h for i, h in plan.where.items()},
             "hosts": _host_documents(hosts),
             **({"ros2": exp.ros2.model_dump(mode="json")} if exp.ros2 else {}),
+            **({"radio_split": exp.radio_split.model_dump()} if exp.radio_split.shards > 1 else {}),
         }
         results.write_json(out_dir / DEPLOYMENT, deployment)
         try:
@@ -405,7 +410,7 @@ def _tick_costs(children: Children) -> dict[str, dict[str, float]]:
     kinds: dict[str, dict[str, float]] = {k: {"wakeups": 0.0, "cpu_s": 0.0} for k in ("agents", "netem", "hub")}
     cpu, woke = children.cpu_s(), children.wakeups()
     for name in set(cpu) | set(woke):
-        kind = "netem" if name == "netem" else "agents" if name.startswith("agent_") else None
+        kind = "netem" if name.split("-")[0] == "netem" else "agents" if name.startswith("agent_") else None
         if kind:
             kinds[kind]["wakeups"] += woke.get(name, 0)
             kinds[kind]["cpu_s"] += cpu.get(name, 0.0)

@@ -10,6 +10,7 @@ import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
+from swarmbed.engine.radio_split import BATCH_COLUMNS, ledger_part, merge_finals, merge_ledgers, merge_steps, owners
 from swarmbed.netem.ledger import Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio, drop_reasons, measured
 from swarmbed.records.rowfile import RowFile
@@ -25,19 +26,30 @@ class Exchange:
     """The radio, its ledger (streamed to ``network_ledger.csv`` in ``out_dir``) and the running
     counters a step reports as differences."""
 
-    def __init__(self, spec: NetemSpec, out_dir: Path) -> None:
+    def __init__(self, spec: NetemSpec, out_dir: Path, shard: int = 0) -> None:
+        """``shard``: which proxy of a split radio this is (``spec.split``, :mod:`.shards`): it
+        decides the copies of the agents in its region and writes its part of the ledger."""
         self.out_dir = out_dir
-        self.sink = RowFile(out_dir / LEDGER, LEDGER_COLUMNS)
+        self.split = spec.split if spec.split.shards > 1 else None
+        self.shard = shard
+        if self.split is None:
+            self.sink = RowFile(out_dir / LEDGER, LEDGER_COLUMNS)
+        else:
+            self.sink = RowFile(out_dir / ledger_part(shard), BATCH_COLUMNS)
         self.receivers: ReceiverLog | None = None
         if spec.network.ledger == "per_receiver":
             self.receivers = ReceiverLog(out_dir / (RECEIVER_LEDGER + ".part"), measured=measured(spec.network))
-        self.ledger = Ledger(self.sink, self.receivers, drop_reasons(spec.network))
+        self.ledger = Ledger(self.sink, self.receivers, drop_reasons(spec.network), batched=self.split is not None)
         walls = None
         if spec.obstacles is not None:
             walls = spec.obstacles.compile((spec.network.walls or WallsSection()).loss_db)
         self.radio = Radio(spec.network, spec.agents, spec.dt, component_rng(spec.seed, NETEM), self.ledger, walls)
         self._last = [0, 0, 0, 0, 0]
         self._last_drops: dict[str, int] = dict(self.ledger.dropped)
+
+    def confirm(self) -> None:
+        """The inboxes made for the tick about to be routed arrived (:meth:`Radio.confirm`)."""
+        self.radio.confirm()
 
     def route(
         self,
@@ -53,8 +65,14 @@ class Exchange:
         gone = set(lost)
         late = [a for a in w.ids if a not in outs and a not in gone]  # only ever on the real-time clock
         members = set(w.ids)
-        self.radio.route(w.tick, w.ids, w.xs, w.ys, {a: o.messages for a, o in outs.items() if a in members})
-        inboxes = self.radio.deliver(w.tick + 1, [a for a in w.alive_next if a not in gone])
+        sent = {a: o.messages for a, o in outs.items() if a in members}
+        owned: set[int] | None = None
+        order: dict[int, list[int]] | None = None
+        if self.split is not None:
+            owned = {a for a, o in zip(w.ids, owners(w.xs, self.split).tolist(), strict=True) if o == self.shard}
+            order = {}
+        self.radio.route(w.tick, w.ids, w.xs, w.ys, sent, owned)
+        inboxes = self.radio.deliver(w.tick + 1, [a for a in w.alive_next if a not in gone], order)
         led = self.ledger
         led.close_tick(w.tick)
         self.sink.tick()
@@ -67,15 +85,21 @@ class Exchange:
                 events[name] = events.get(name, 0) + n
         drops = {r: n - self._last_drops[r] for r, n in led.dropped.items() if n != self._last_drops[r]}
         self._last_drops = dict(led.dropped)
+        actions = {a: o.action for a, o in outs.items() if a in members}
+        lost_now = list(newly_lost or ())
+        if self.shard:  # proxy 0 of a split radio carries the agents' actions, events and losses
+            actions, events, lost_now, late = {}, {}, [], []
         return NetemStep(
             w.tick,
-            {a: o.action for a, o in outs.items() if a in members},
+            actions,
             {a: encode_inbox(v) for a, v in inboxes.items()},
             counters,
-            list(newly_lost or ()),
+            lost_now,
             events,
             drops,
             late,
+            self.shard,
+            order or {},
         )
 
     def finish(self, last_tick: int, malformed: int, transport: Transport | None = None) -> NetemFinal:
@@ -85,7 +109,7 @@ class Exchange:
         self.ledger.close_tick(1 << 62)
         self.ledger.check()
         self.sink.finish()
-        files = [LEDGER]
+        files = [LEDGER if self.split is None else ledger_part(self.shard)]
         if self.receivers is not None:
             self.receivers.close()
             os.replace(self.out_dir / (RECEIVER_LEDGER + ".part"), self.out_dir / RECEIVER_LEDGER)
@@ -99,3 +123,25 @@ class Exchange:
             ledger=files,
             transport=transport,
         )
+
+
+class SplitExchange:
+    """A radio split over ``spec.split.shards`` exchanges in this process, merged after each tick
+    as the hub merges the proxies of a split radio (:mod:`.shards`): what the in-process engine
+    runs for ``radio_split``, and the reference the proxies' merge is checked against."""
+
+    def __init__(self, spec: NetemSpec, out_dir: Path) -> None:
+        self.out_dir = out_dir
+        self.parts = [Exchange(spec, out_dir, shard) for shard in range(spec.split.shards)]
+
+    def confirm(self) -> None:
+        for part in self.parts:
+            part.confirm()
+
+    def route(self, w: WorldSample, outs: Mapping[int, AgentOut]) -> NetemStep:
+        return merge_steps([part.route(w, outs) for part in self.parts])
+
+    def finish(self, last_tick: int, malformed: int) -> NetemFinal:
+        finals = [part.finish(last_tick, malformed) for part in self.parts]
+        merge_ledgers(self.out_dir, len(self.parts))
+        return merge_finals(finals)

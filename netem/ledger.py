@@ -102,11 +102,18 @@ class Ledger:
     columns are :data:`~swarmbed.records.rundir.LEDGER_COLUMNS`)."""
 
     def __init__(
-        self, sink: RowFile | None = None, receivers: ReceiverLog | None = None, reasons: Sequence[str] = DROP_REASONS
+        self,
+        sink: RowFile | None = None,
+        receivers: ReceiverLog | None = None,
+        reasons: Sequence[str] = DROP_REASONS,
+        batched: bool = False,
     ) -> None:
         """``reasons``: every reason a copy may be dropped for (the radio's ``drop_reasons``): each
-        is counted, from zero, in ``dropped``; booking any other is an error."""
+        is counted, from zero, in ``dropped``; booking any other is an error. ``batched``: each row
+        starts with the number of the :meth:`close_tick` that wrote it (a split radio's part,
+        :mod:`.shards`)."""
         self.receivers = receivers
+        self.batch: int | None = 0 if batched else None
         self._open: dict[tuple[int, int, str, str], list[int]] = defaultdict(lambda: [0, 0])
         self._sink = sink
         self.messages_sent = 0
@@ -172,8 +179,14 @@ class Ledger:
         done = sorted(k for k in self._open if k[0] <= tick)
         for key in done:
             messages, nbytes = self._open.pop(key)
-            if self._sink is not None:
+            if self._sink is None:
+                continue
+            if self.batch is None:
                 self._sink.write((*key, messages, nbytes))
+            else:
+                self._sink.write((self.batch, *key, messages, nbytes))
+        if self.batch is not None:
+            self.batch += 1
         if self.receivers is not None:
             self.receivers.flush()
 

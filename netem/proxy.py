@@ -9,6 +9,7 @@ and this tick's counters. The ledger streams to ``network_ledger.csv`` in the ru
 
 from __future__ import annotations
 
+import argparse
 import logging
 import queue
 import threading
@@ -57,12 +58,15 @@ def _matching(publisher: zenoh.Publisher) -> bool:
 
 
 class Proxy:
-    def __init__(self, spec: NetemSpec, keys: Keys, session: zenoh.Session, out_dir: Path) -> None:
+    def __init__(self, spec: NetemSpec, keys: Keys, session: zenoh.Session, out_dir: Path, shard: int = 0) -> None:
         self.spec = spec
         self.keys = keys
         self.session = session
         self.out_dir = out_dir
-        self.exchange = Exchange(spec, out_dir)
+        if not 0 <= shard < spec.split.shards:
+            raise ValueError(f"--shard {shard}: the run's radio is split over {spec.split.shards} proxies")
+        self.shard = shard
+        self.exchange = Exchange(spec, out_dir, shard)
         self.sink, self.ledger, self.radio = self.exchange.sink, self.exchange.ledger, self.exchange.radio
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         # agents' outputs gather here, taken in Zenoh's own thread (no Python thread hop per
@@ -140,7 +144,7 @@ class Proxy:
         self.step_pub = s.declare_publisher(k.netem_step, congestion_control=zenoh.CongestionControl.BLOCK)
         # DROP: a watcher that stops reading loses samples and never holds up a tick
         self.traffic_pub = s.declare_publisher(k.view_traffic, congestion_control=zenoh.CongestionControl.DROP)
-        token = s.liveliness().declare_token(k.alive_netem)
+        token = s.liveliness().declare_token(k.netem_tokens(self.spec.split.shards)[self.shard])
         try:
             return self._loop()
         finally:
@@ -356,22 +360,28 @@ class Proxy:
         if self.watched:  # the totals as the run ends
             self.traffic_pub.put(encode_traffic(self.traffic))
         report = self.exchange.finish(last_tick, self.malformed, Transport.model_validate({"tcp": tcp_counters()}))
+        report = report.model_copy(update={"shard": self.shard})
         if not hand_over(self.session, self.keys.netem_report, encode_report(report)):
             log.error("netem: the coordinator did not take the final report")
+
+
+def _proxy_args(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("--out", required=True, help="run directory for the ledger")
+    ap.add_argument("--shard", type=int, default=0, help="which proxy of a radio split over proxies (radio_split)")
 
 
 def main(argv: list[str] | None = None) -> int:
     args = child_args(
         "swarmbed netem",
         "run the netem proxy of one swarmbed run",
-        lambda ap: ap.add_argument("--out", required=True, help="run directory for the ledger"),
+        _proxy_args,
         argv,
     )
     keys = Keys(args.run_id)
     with open_from_args(args) as session:
         try:
             spec = fetch_spec(session, keys.netem_config, NetemSpec, f"netem config of run {args.run_id}")
-            return Proxy(spec, keys, session, Path(args.out)).run()
+            return Proxy(spec, keys, session, Path(args.out), args.shard).run()
         except Exception as exc:
             # logged and reported while the session, and with it the liveliness token, is still
             # held: the launcher stops every child once the token goes, which could cut it off

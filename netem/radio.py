@@ -35,6 +35,12 @@ model draws from its own stream, spawned from the radio's seed sequence in this 
 shadowing, fading, reception, bursts, delay; so turning one model on never changes another's draws,
 and a run with none of them draws exactly what it drew before they existed. Shadowing, fading and
 time-based bursts advance once per tick, whether anything was sent or not.
+
+With ``network.draws: per_copy`` the loss draw of a copy is instead a function of the copy alone
+(:func:`per_copy_uniform`: the run's radio key, the tick, the sender, the message's place among
+its sender's messages of the tick, the receiver), so that it does not depend on which other copies
+a radio decided before it: what lets K radios, each deciding the copies of the senders in its
+region (``radio_split``), draw what one radio draws.
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import defaultdict, deque
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Container, Iterable, Mapping, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -67,6 +73,28 @@ def _seed_sequence(rng: np.random.Generator) -> np.random.SeedSequence:
     return seq
 
 
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+
+def _mix(z: np.ndarray) -> np.ndarray:
+    """SplitMix64's finaliser over an array of uint64 (wrapping arithmetic)."""
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+def per_copy_uniform(key: int, tick: int, senders: np.ndarray, seqs: np.ndarray, receivers: np.ndarray) -> np.ndarray:
+    """One number in [0, 1) per copy, from the copy's own coordinates only: ``key`` (the radio's),
+    ``tick``, and per copy its sender, the place of its message among the sender's messages of the
+    tick, and its receiver, absorbed one after the other through SplitMix64's finaliser; the top
+    53 bits make the float. Statistical quality, not secrecy: a stream per copy, independent of the
+    order in which copies are decided and of which radio decides them."""
+    h = np.full(len(senders), np.uint64(key), dtype=np.uint64)
+    for part in (np.full(len(senders), tick, dtype=np.int64), senders, seqs, receivers):
+        h = _mix(h + _GOLDEN + np.asarray(part, dtype=np.int64).astype(np.uint64))
+    return (h >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
+
+
 def measured(params: NetworkSection) -> bool:
     """Whether ``params`` turn on a model that computes per-copy figures (the receiver ledger's
     distance, power_dbm, snr_db and delay_s columns)."""
@@ -78,7 +106,11 @@ def _out_of_range(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarra
 
 
 def _loss(radio: Radio, copies: TickCopies, at: np.ndarray) -> np.ndarray:
-    return radio.rng.random(len(at)) < radio.params.loss
+    if radio.params.draws == "per_copy":
+        u = per_copy_uniform(radio.copy_key, copies.tick, copies.senders[at], copies.seqs[at], copies.receivers[at])
+    else:
+        u = radio.rng.random(len(at))
+    return u < radio.params.loss
 
 
 #: what may drop a copy after it is addressed and queued, in the order a copy meets them (the
@@ -126,6 +158,7 @@ class _Send(NamedTuple):
     drops: list[tuple[str, np.ndarray]]  # copies dropped before range and loss: (reason, receivers)
     rows: np.ndarray  # the receivers (rows of the sorted alive ids) still in play
     end: float  # end of its transmission, in seconds
+    seq: int  # its place among its sender's messages of the tick
     unheard: int = 0  # a broadcast's copies out of range, counted without being made (see _near)
 
 
@@ -152,7 +185,10 @@ class Radio:
         # (tick, sender, kind, size, receivers delivered to, receivers found dead, their measures or None)
         self._unconfirmed: list[tuple[int, int, str, int, np.ndarray, np.ndarray, np.ndarray | None]] = []
         # the models beyond the disk, each with its own stream (see the module's docstring)
-        streams = [np.random.default_rng(s) for s in _seed_sequence(rng).spawn(5)]
+        seq = _seed_sequence(rng)
+        streams = [np.random.default_rng(s) for s in seq.spawn(5)]
+        # network.draws: per_copy: the key of every copy's own draw, from the sequence's next child
+        self.copy_key = int(seq.spawn(1)[0].generate_state(1, np.uint64)[0])
         self.propagation = Propagation(params.propagation, n_agents, dt, *streams[:3]) if params.propagation else None
         self.bursts = Bursts(params.burst, n_agents, dt, streams[3]) if params.burst else None
         self.delays = Delays(params.delay, n_agents, streams[4]) if params.delay else None
@@ -184,8 +220,12 @@ class Radio:
         xs: Sequence[float],
         ys: Sequence[float],
         outs: Mapping[int, Iterable[RadioMessage]],
+        owned: Container[int] | None = None,
     ) -> None:
         """Take every message sent at ``tick``. ``ids``/``xs``/``ys``: agents alive at ``tick``.
+        ``owned``: the senders whose copies this radio decides (one shard of a split radio); every
+        other sender's messages only take their place in its transmit queue, so each shard's
+        queues are what one radio's are. None: every sender.
 
         Three passes: each message is addressed and queued (Python, per message); the drop stages
         (:data:`STAGES`: range, the models, loss) decide for every copy of the tick at once, each on
@@ -201,20 +241,25 @@ class Radio:
             self.propagation.advance(tick, alive, x, y)
         if self.bursts is not None:
             self.bursts.advance()
-        near = self._near(outs, row_of, x, y)
+        mine = outs if owned is None else {s: m for s, m in outs.items() if s in owned}
+        near = self._near(mine, row_of, x, y)
         sends: list[_Send] = []
         for sender in sorted(outs):
             sender_row = row_of.get(sender)
-            for msg in outs[sender]:
+            decided = owned is None or sender in owned
+            for seq, msg in enumerate(outs[sender]):
                 if sender_row is None:
                     raise KeyError(f"agent {sender} sent at tick {tick} but is not alive then")
-                sends.append(self._address(tick, sender, sender_row, msg, alive, row_of, every_row, near))
+                if decided:
+                    sends.append(self._address(tick, sender, sender_row, msg, alive, row_of, every_row, seq, near))
+                elif self.params.rate is not None:
+                    self._transmit(tick, sender, len(msg.payload))
         if not sends:
             return
         counts = np.fromiter((len(s.rows) for s in sends), dtype=np.int64, count=len(sends))
         rows = np.concatenate([s.rows for s in sends])
         from_rows = np.repeat(np.fromiter((s.sender_row for s in sends), dtype=np.int64, count=len(sends)), counts)
-        copies = TickCopies(alive, x, y, rows, from_rows, sends, counts)
+        copies = TickCopies(tick, alive, x, y, rows, from_rows, sends, counts)
         in_play = np.ones(len(rows), dtype=bool)
         drops: list[tuple[str, np.ndarray]] = []  # (reason, which copies), in booking order
         for stage in self.stages if len(rows) else ():
@@ -266,6 +311,7 @@ class Radio:
         alive: np.ndarray,
         row_of: dict[int, int],
         every_row: np.ndarray,
+        seq: int,
         near: dict[int, np.ndarray] | None = None,
     ) -> _Send:
         """A message's intended receivers (as rows of ``alive``, the sorted ids; ``row_of`` maps an
@@ -289,6 +335,18 @@ class Radio:
                 else:
                     ok.append(row)
             rows = np.asarray(ok, dtype=np.int64)
+        end = self._transmit(tick, sender, len(msg.payload))
+        if end is None:
+            drops.append(("queue_full", alive[rows]))
+            return _Send(sender, sender_row, msg, intended, drops, rows[:0], tick * self.dt, seq)
+        if near is not None and msg.dest == BROADCAST:
+            heard = near[sender_row]
+            return _Send(sender, sender_row, msg, intended, drops, heard, end, seq, len(rows) - len(heard))
+        return _Send(sender, sender_row, msg, intended, drops, rows, end, seq)
+
+    def _transmit(self, tick: int, sender: int, size: int) -> float | None:
+        """The end of the transmission of a ``size``-byte message ``sender`` queues at ``tick``
+        (now, without a rate cap), or None where its queue is full (tail drop)."""
         p = self.params
         end = t_now = tick * self.dt
         if p.rate is not None:
@@ -296,15 +354,11 @@ class Radio:
             while queue and queue[0] <= t_now + _EPS:
                 queue.popleft()
             if p.limit is not None and len(queue) >= p.limit:
-                drops.append(("queue_full", alive[rows]))
-                return _Send(sender, sender_row, msg, intended, drops, rows[:0], end)
-            end = max(t_now, self._busy_until[sender]) + len(msg.payload) / p.rate
+                return None
+            end = max(t_now, self._busy_until[sender]) + size / p.rate
             self._busy_until[sender] = end
             queue.append(end)
-        if near is not None and msg.dest == BROADCAST:
-            heard = near[sender_row]
-            return _Send(sender, sender_row, msg, intended, drops, heard, end, len(rows) - len(heard))
-        return _Send(sender, sender_row, msg, intended, drops, rows, end)
+        return end
 
     def _book_and_schedule(
         self,
@@ -396,8 +450,11 @@ class Radio:
             ledger.sent(book_at, sender, msg.kind, size, len(to))
             ledger.book(book_at, sender, msg.kind, size, "late", len(to), to)
 
-    def deliver(self, tick: int, alive: Iterable[int]) -> dict[int, list[list]]:
+    def deliver(
+        self, tick: int, alive: Iterable[int], order: dict[int, list[int]] | None = None
+    ) -> dict[int, list[list]]:
         """Inboxes for ``tick``: ``{receiver: [[sender, kind, payload], ...]}`` for agents in ``alive``.
+        ``order``: filled with each inbox item's send tick (what a split radio's merge orders by).
 
         Their bookings stay tentative until :meth:`confirm` (the tick really happened) or
         :meth:`finish` (the run ended first: ``run_ended``). A message's ``[sender, kind, payload]``
@@ -406,12 +463,14 @@ class Radio:
         alive_ids = np.fromiter(alive, dtype=np.int64)
         is_alive[alive_ids[(alive_ids >= 0) & (alive_ids < self.n_agents)]] = True
         inboxes: dict[int, list[list]] = {}
-        for receivers, sender, kind, payload, _sent, figures in self._pending.pop(tick, ()):
+        for receivers, sender, kind, payload, sent, figures in self._pending.pop(tick, ()):
             there = is_alive[receivers]
             reached, dead = receivers[there], receivers[~there]
             item = [sender, kind, payload]
             for r in reached.tolist():
                 inboxes.setdefault(r, []).append(item)
+                if order is not None:
+                    order.setdefault(r, []).append(sent)
             if figures is not None:  # delivered copies first, then the dead ones, as they are booked
                 figures = np.concatenate([figures[there], figures[~there]])
             self._unconfirmed.append((tick, sender, kind, len(payload), reached, dead, figures))

@@ -25,6 +25,7 @@ class TickCopies:
 
     def __init__(
         self,
+        tick: int,
         alive: np.ndarray,
         x: np.ndarray,
         y: np.ndarray,
@@ -33,6 +34,7 @@ class TickCopies:
         sends: Sequence[Any],
         counts: np.ndarray,
     ) -> None:
+        self.tick = tick
         self.alive, self.x, self.y = alive, x, y  # alive ids, sorted, and their positions
         self.rows, self.from_rows = rows, from_rows  # each copy's receiver and sender, as rows of alive
         self._sends, self._counts = sends, counts
@@ -52,6 +54,12 @@ class TickCopies:
     def distance(self) -> np.ndarray:
         f, r = self.from_rows, self.rows
         return np.hypot(self.x[f] - self.x[r], self.y[f] - self.y[r])
+
+    @cached_property
+    def seqs(self) -> np.ndarray:
+        """Each copy's message's place among its sender's messages of the tick."""
+        per_message = np.fromiter((s.seq for s in self._sends), dtype=np.int64, count=len(self._sends))
+        return np.repeat(per_message, self._counts)
 
     @cached_property
     def sizes(self) -> np.ndarray:

@@ -107,7 +107,8 @@ class RunSection(Strict):
         "and agents answer ticks in its callback, one more transmits, so keep-alives flow during a long tick), "
         "single (every runtime on one worker: the fewest wake-ups, but such agents take a 60 s lease: the hub "
         "waits up to a minute for a frozen or cut-off agent, and one that wakes sooner mostly finds the hub's 10 s "
-        "lease expired on its side and is lost then, or else answers on), or zenoh (Zenoh's own layout); results are the same with each "
+        "lease expired on its side and is lost then, or else answers on), or zenoh (Zenoh's own layout); results "
+        "are the same with each "
         "(docs/benchmarks.md)",
     )
     record_bt: bool = Field(
@@ -253,6 +254,31 @@ class Ros2Section(Strict):
     )
 
 
+class RadioSplit(Strict):
+    """The radio decided by several netem proxies (docs/machines.md, "A radio split by region").
+    Where the copies are decided is not part of the results: config.yaml leaves this out."""
+
+    shards: int = Field(1, ge=1, le=64, description="netem proxies; each decides the copies its region's agents send")
+    strip_width: float = Field(
+        50.0,
+        gt=0,
+        description="regions are strips this wide across x, dealt to the proxies in turn (strip j: proxy j mod shards)",
+    )
+
+
+#: what a radio split over proxies cannot do yet, each with why (refused before any process starts)
+SPLIT_REFUSES = {
+    "network.draws: sequential": "one stream of loss draws in copy order cannot be split; set network.draws: per_copy",
+    "network.propagation": "its shadowing and fading streams advance over every link at once",
+    "network.burst": "its burst states advance over every link at once",
+    "network.delay": "its jitter stream is drawn in copy order over the whole tick",
+    "network.channel": "a receiver's airtime is shared by copies from every region",
+    "network.ledger: per_receiver": "the receivers' Parquet ledger is not merged across proxies",
+    "run.clock: realtime": "late answers are booked by the one proxy that routed the tick",
+    "ros2": "the radio topics are published by one proxy",
+}
+
+
 class Experiment(Strict, QuietDefaults):
     #: a world without obstacles writes the config.yaml it wrote before they existed
     QUIET: ClassVar[dict[str, Any]] = {"obstacles": None}
@@ -286,6 +312,9 @@ class Experiment(Strict, QuietDefaults):
     ros2: Ros2Section | None = Field(
         None, exclude=True, description="publish poses, tasks, inboxes and /clock as ROS 2 topics; null: off"
     )
+    radio_split: RadioSplit = Field(
+        RadioSplit(), exclude=True, description="the radio decided by several netem proxies, by region of the arena"
+    )
     obstacles: ObstaclesSection | None = Field(
         None, description="walls and polygons that block motion, sight and the radio (docs/walls.md); null: open ground"
     )
@@ -307,6 +336,26 @@ class Experiment(Strict, QuietDefaults):
                         f"obstacles: material {material!r} has no loss in network.walls.loss_db "
                         f"(known: {', '.join(sorted(table)) or 'none'})"
                     )
+        return self
+
+    @model_validator(mode="after")
+    def _splittable(self) -> Experiment:
+        if self.radio_split.shards == 1:
+            return self
+        n = self.network
+        present = {
+            "network.draws: sequential": n.draws == "sequential",
+            "network.propagation": n.propagation is not None,
+            "network.burst": n.burst is not None,
+            "network.delay": n.delay is not None,
+            "network.channel": n.channel is not None,
+            "network.ledger: per_receiver": n.ledger == "per_receiver",
+            "run.clock: realtime": self.run.clock == "realtime",
+            "ros2": self.ros2 is not None,
+        }
+        for what, why in SPLIT_REFUSES.items():
+            if present[what]:
+                raise ValueError(f"radio_split.shards: {self.radio_split.shards} cannot go with {what} ({why})")
         return self
 
     @model_validator(mode="after")
@@ -357,6 +406,7 @@ class NetemSpec(Strict):
     answer_within: float | None = None
     ros2: Ros2Section | None = None  # publish what each robot sent as ROS 2 topics
     obstacles: ObstaclesSection | None = None  # the walls the radio's copies may cross
+    split: RadioSplit = RadioSplit()  # the proxies the radio is split over (each is told its own index)
 
 
 def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
@@ -382,4 +432,5 @@ def netem_spec(exp: Experiment) -> NetemSpec:
         answer_within=within,
         ros2=exp.ros2,
         obstacles=exp.obstacles,
+        split=exp.radio_split,
     )

@@ -193,6 +193,11 @@ class NetworkSection(BaseModel):
     ledger: Literal["per_sender", "per_receiver"] = Field(
         "per_sender", description="per_receiver adds network_ledger_receivers.parquet: one row per copy"
     )
+    draws: Literal["sequential", "per_copy"] = Field(
+        "sequential",
+        description="the loss draws: sequential (one stream, in copy order) or per_copy (each copy's own, from "
+        "its tick, sender, message and receiver: what a radio split over proxies needs, radio_split)",
+    )
     # the models beyond the disk (docs/radio.md); left out, the radio is the disk above
     propagation: PropagationSection | None = Field(
         None, description="log-distance path loss, shadowing, fading and SNR-based reception"
@@ -212,6 +217,8 @@ class NetworkSection(BaseModel):
         for key in _MODEL_KEYS:
             if data.get(key) is None:
                 data.pop(key, None)
+        if data.get("draws") == "sequential":  # so does one that keeps the one stream of draws
+            data.pop("draws")
         return data
 
 

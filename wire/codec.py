@@ -11,7 +11,7 @@ cross Zenoh. The agent measures it when it encodes; the proxy measures it again 
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 import msgpack
@@ -347,23 +347,32 @@ class NetemStep:
     events: dict[str, int]  # the agents' event counts of this tick, summed
     drops: dict[str, int]  # copies dropped at this tick, by reason (those that had any)
     late: list[int]  # real-time clock: agents whose output missed this tick's deadline
+    # a radio split over proxies (swarmbed.engine.radio_split): which proxy sent the step, and per
+    # receiver the send tick of each item of its inbox (what the merge orders by)
+    shard: int = 0
+    order: dict[int, list[int]] = field(default_factory=dict)
 
 
 def encode_netem_step(s: NetemStep) -> bytes:
-    return pack([s.tick, s.actions, s.inboxes, s.counters, s.lost, s.events, s.drops, s.late])
+    fields = [s.tick, s.actions, s.inboxes, s.counters, s.lost, s.events, s.drops, s.late]
+    return pack(fields + [s.shard, s.order] if s.shard or s.order else fields)
 
 
 def decode_netem_step(data: bytes) -> NetemStep:
     msg = unpack(data)
     _expect(
-        isinstance(msg, list) and len(msg) == 8,
-        "netem step must be [tick, actions, inboxes, counters, lost, events, drops, late]",
+        isinstance(msg, list) and len(msg) in (8, 10),
+        "netem step must be [tick, actions, inboxes, counters, lost, events, drops, late(, shard, order)]",
     )
-    tick, actions, inboxes, counters, lost, events, drops, late = msg
+    tick, actions, inboxes, counters, lost, events, drops, late = msg[:8]
+    shard, order = msg[8:] if len(msg) == 10 else (0, {})
+    _expect(_is_int(shard) and 0 <= shard < 64 and isinstance(order, dict), "bad netem step: shard or order")
+    for receiver, ticks in order.items():
+        _expect(_is_int(receiver) and isinstance(ticks, list) and all(map(_is_int, ticks)), "bad netem step order")
     _expect(_is_int(tick) and isinstance(actions, dict) and isinstance(inboxes, dict), "bad netem step")
     _expect(isinstance(counters, list) and len(counters) == 5 and isinstance(lost, list), "bad netem step")
     _expect(isinstance(events, dict) and isinstance(drops, dict) and isinstance(late, list), "bad netem step")
-    return NetemStep(tick, actions, inboxes, counters, lost, events, drops, late)
+    return NetemStep(tick, actions, inboxes, counters, lost, events, drops, late, shard, order)
 
 
 def encode_traffic(totals: dict[int, list[int]]) -> bytes:

@@ -145,6 +145,18 @@ class Keys:
     def alive_netem(self) -> str:
         return f"{self.root}/alive/netem"
 
+    def alive_netem_shard(self, shard: int) -> str:
+        """The token of proxy ``shard`` of a radio split over proxies (one proxy holds ``alive_netem``)."""
+        return f"{self.root}/alive/netem/{shard}"
+
+    @property
+    def alive_netem_shard_all(self) -> str:
+        return f"{self.root}/alive/netem/*"
+
+    def netem_tokens(self, shards: int) -> list[str]:
+        """The tokens of a run's proxies: its one proxy's, or each proxy's of a split radio."""
+        return [self.alive_netem] if shards == 1 else [self.alive_netem_shard(i) for i in range(shards)]
+
     @property
     def alive_coordinator(self) -> str:
         return f"{self.root}/alive/coordinator"

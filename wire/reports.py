@@ -120,6 +120,7 @@ class NetemFinal(_Message):
     malformed: int = Field(ge=0)
     ledger: list[str]
     transport: Transport | None = None
+    shard: int = Field(0, ge=0, lt=64)  # which proxy of a split radio (swarmbed.engine.radio_split)
 
 
 class NetemFatal(_Message):
