@@ -355,7 +355,7 @@ class Experiment(Strict, QuietDefaults):
         }
         for what, why in SPLIT_REFUSES.items():
             if present[what]:
-                raise ValueError(f"radio_split.shards: {self.radio_split.shards} cannot go with {what} ({why})")
+                raise ValueError(f"a radio split over {self.radio_split.shards} proxies cannot go with {what} ({why})")
         return self
 
     @model_validator(mode="after")

@@ -46,14 +46,19 @@ def test_slurm_outside_an_allocation_is_one_line(capsys, monkeypatch):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("launcher", ["salloc", "sbatch"])
+@pytest.mark.parametrize(("launcher", "shards"), [("salloc", 1), ("sbatch", 1), ("salloc", 3)])
 def test_a_run_in_an_allocation_spreads_its_agents_over_the_nodes_and_gives_the_one_machine_results(
-    cluster, tmp_path, launcher
+    cluster, tmp_path, launcher, shards
 ):
     """``salloc``: the run's hub, coordinator and proxy stay on the submitting machine; ``sbatch``:
-    they run on the allocation's first node (a namespace), beside that node's own daemon."""
+    they run on the allocation's first node (a namespace), beside that node's own daemon. With
+    ``shards`` 3 the radio is split over three proxies (per-copy loss draws, strips of 30), and the
+    files are still those of one machine with one radio."""
     sets = ["agents.count=9", "allocator={name: cbba}", "run.duration=60", "run.stop_when_done=false"]
+    if shards > 1:
+        sets += ["network.loss=0.1", "network.draws=per_copy", "radio_split.strip_width=30"]
     reference_run(experiment(*sets), tmp_path / "local")
+    sets += [f"radio_split.shards={shards}"]
     run = [sys.executable, "-m", "swarmbed", "run", str(QUICKSTART), "--slurm", "--no-progress"]
     run += ["--out", str(tmp_path / "slurm_run"), *[arg for s in sets for arg in ("--set", s)]]
     if launcher == "salloc":
@@ -73,6 +78,7 @@ def test_a_run_in_an_allocation_spreads_its_agents_over_the_nodes_and_gives_the_
         **dict.fromkeys(range(3, 6), "n2"),
         **dict.fromkeys(range(6, 9), "n3"),
     }
+    assert len(list((tmp_path / "slurm_run" / "logs").glob("netem*.log"))) == shards
     # each node's daemon ran in its own namespace and logged its agents there
     for node, agent in (("n1", 0), ("n2", 4), ("n3", 8)):
         assert list((tmp_path / "runs" / "hosts").glob(f"slurm-*/{node}/*/agent_{agent}.log")), (node, agent)
