@@ -452,6 +452,7 @@ def _timings(
     shared = {k: v for k, v in usage["shared"].items() if k.startswith("agent_")}
     agent_cpu = [v for k, v in cpu.items() if k.startswith("agent_")]
     agent_rss = [v for k, v in rss.items() if k.startswith("agent_")]
+    proxy_cpu = [v for k, v in cpu.items() if k.split("-")[0] == "netem"]  # netem, netem-1, ...: a split radio
     run_s = coord.wall["run_s"]
     return {
         "run_s": run_s,
@@ -462,7 +463,8 @@ def _timings(
         "peak_rss_mb": peak,
         "cpu_s": {
             "coordinator": own_cpu_s() - hub_cpu_before,
-            "netem": cpu.get("netem"),
+            "netem": sum(proxy_cpu) if proxy_cpu else None,
+            **({"netem_max": max(proxy_cpu)} if len(proxy_cpu) > 1 else {}),
             "agents_total": sum(agent_cpu),
             "agent_max": max(agent_cpu, default=None),
         },
