@@ -16,12 +16,11 @@ converge as ``run.dt`` shrinks (tests/test_world.py pins it).
 
 Moves, inspections and rescues fail with their probabilities. A failed inspection or rescue is known
 when it is tried and costs only that tick (``failure_known: start``; the paper gives failed moves a
-time penalty and these none); ``failure_known: end`` charges its whole duration, as swarmbed did
-before 2026-11-26. A move is the run of ticks a robot spends going toward one goal (a point, or a
-victim): it fails at its start and leaves the robot stuck for ``move_penalty`` seconds, after which
-it tries again (``move_failure: per_move``, which converges as dt shrinks); ``per_tick`` draws on
-every tick of moving, as before 2026-11-26. In steady state a rescued or expired victim is
-replaced at once; in finite mode it is not. After ``agent_loss_grace`` seconds each robot is lost
+time penalty and these none); ``failure_known: end`` charges its whole duration. A move is the run
+of ticks a robot spends going toward one goal (a point, or a victim): it fails at its start and
+leaves the robot stuck for ``move_penalty`` seconds, after which it tries again (``move_failure:
+per_move``, which converges as dt shrinks); ``per_tick`` draws on every tick of moving. In steady
+state a rescued or expired victim is replaced at once; in finite mode it is not. After ``agent_loss_grace`` seconds each robot is lost
 for good with probability ``agent_loss`` per step: per tick, per simulated second
 (``agent_loss_per: second``, one draw a tick at 1 - (1 - p)^dt), or per decision of the robot
 (``decision``: one draw for each robot that chose, at the tick before, an action other than the one it
@@ -91,8 +90,8 @@ class SARParams(BaseModel):
     first_ages: Literal["new", "spread"] = Field(
         "spread",
         description="the first victims' ages: spread, uniform over a lifetime (a steady state from the start: "
-        "expiries come one by one, not all at once every lifetime), or new, all born at time 0, as before "
-        "2026-11-28 (their replacements then expire in waves a lifetime apart for the whole run)",
+        "expiries come one by one, not all at once every lifetime), or new, all born at time 0 "
+        "(their replacements then expire in waves a lifetime apart for the whole run)",
     )
     colors: int = Field(3, ge=1, le=3, description="RED, GREEN, BLUE")
     vision_range: float = Field(12.0, gt=0, description="conical vision: range (m)")
@@ -106,8 +105,8 @@ class SARParams(BaseModel):
         0.0,
         ge=0,
         description="seconds the 'abandon' action takes (the text: 'the robot executes an \"abandon\" action'; "
-        "no duration given): the robot is busy for it, booked in the time budget as penalty; 0: instant, "
-        "as before 2026-11-28 (docs/reproduction.md section 9, M3)",
+        "no duration given): the robot is busy for it, booked in the time budget as penalty; 0: instant "
+        "(docs/reproduction.md section 9, M3)",
     )
     inspect_time: float = Field(
         INSPECT_TIME,
@@ -141,15 +140,15 @@ class SARParams(BaseModel):
         description="a robot busy inspecting or rescuing whose action this tick is not to go on with it: on_change "
         "stops the action and does the new one this tick (the paper's behavior trees 'can interrupt the current "
         "action sequence' when the target's status changes; allocator.monitor says who watches), never lets the "
-        "action run its whole length, as before 2026-11-28",
+        "action run its whole length",
     )
     agent_loss: float = Field(0.0, ge=0, le=1, description="probability per step that a robot is lost for good")
     agent_loss_grace: float = Field(500.0, ge=0, description="seconds before agent loss can happen")
     agent_loss_per: Literal["tick", "second", "decision"] = Field(
         "tick",
         description="the 'step' agent_loss is a probability per (the text: 'per step'; its SimPy world's steps "
-        "are read as seconds by one caption, 'a specific time step (233 seconds)'): tick (runs before "
-        "2026-11-28), second (per tick 1 - (1 - p)^dt: the same loss per simulated second at any run.dt) or "
+        "are read as seconds by one caption, 'a specific time step (233 seconds)'): tick, "
+        "second (per tick 1 - (1 - p)^dt: the same loss per simulated second at any run.dt) or "
         "decision (a step of the robot's own process in a process-based simulation: each time its tree or "
         "state machine chooses a new action, or chooses again after a timed action)",
     )

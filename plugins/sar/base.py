@@ -30,7 +30,7 @@ class StrategyParams(BaseModel):
         description="whether the robot watches its target while it inspects or rescues it, and turns to something "
         "else once the target is gone or no longer its own (with scenario.interrupt: on_change that stops the "
         "action); None: as the text has it, the behavior-tree strategies do (their condition nodes watch the "
-        "target), cbba and c-cbba, state machines, do not; true reproduces runs of before 2026-11-28",
+        "target), cbba and c-cbba, state machines, do not; true: every strategy watches",
     )
 
 

@@ -51,8 +51,8 @@ class CCBBAParams(ReactiveParams):
         description="what a consensus costs the robot in simulated time: leaders (the text: a member that "
         "sent its bids stands still until its leader's result arrives, at most leader_wait ticks; a leader "
         "exchanges with the other leaders in rounds of round_ticks until one brings nothing new, then sends "
-        "the result) or free (a member acts at once, a leader relays to both at once, as runs before "
-        "2026-11-28 did); None: leaders",
+        "the result) or free (a member acts at once, a leader relays to both at once); "
+        "None: leaders",
     )
     leader_wait: int = Field(
         20, ge=1, description="consensus_wait leaders: ticks a robot waits at most for its cluster's result"

@@ -48,7 +48,7 @@ class ConsensusParams(StrategyParams):
     bundle_build: Literal["top_up", "rebuild"] = Field(
         "rebuild",
         description="Algorithm 3: rebuild starts each build from B_i <- empty, as the algorithm is written; "
-        "top_up keeps the bundle and adds to it (the default until 2026-11; docs/reproduction.md section 4)",
+        "top_up keeps the bundle and adds to it (docs/reproduction.md section 4)",
     )
     available: Literal["own", "known"] = Field(
         "own",
@@ -58,7 +58,7 @@ class ConsensusParams(StrategyParams):
     consensus_wait: Literal["free", "round", "agree"] | None = Field(
         None,
         description="what a consensus costs the robot in simulated time (docs/reproduction.md sections 1 and 5): "
-        "free (nothing: it acts in the tick it announced, as runs before 2026-11-28 did), round (one "
+        "free (nothing: it acts in the tick it announced), round (one "
         "communication round: it stands still round_ticks ticks listening, then acts on what came back), "
         "agree (rounds until one brings nothing new, a local agreement, at most max_rounds); "
         "None: as the text has it, agree for cbba and cbba-tree, round for cbba-etc",
@@ -77,7 +77,7 @@ class ReactiveParams(ConsensusParams):
         description="cbba and c-cbba, state machines whose action cycle is build, consensus, execute in "
         "turn: hold (an inspection or rescue under way is the cycle's execute step; the robot builds and "
         "starts a round again once it ends) or negotiate (it keeps building and starting rounds while it "
-        "holds to the action, as runs before 2026-11-28 did). Only while it holds (allocator.monitor off)",
+        "holds to the action). Only while it holds (allocator.monitor off)",
     )
 
 
