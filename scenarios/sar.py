@@ -20,8 +20,9 @@ time penalty and these none); ``failure_known: end`` charges its whole duration.
 of ticks a robot spends going toward one goal (a point, or a victim): it fails at its start and
 leaves the robot stuck for ``move_penalty`` seconds, after which it tries again (``move_failure:
 per_move``, which converges as dt shrinks); ``per_tick`` draws on every tick of moving. In steady
-state a rescued or expired victim is replaced at once; in finite mode it is not. After ``agent_loss_grace`` seconds each robot is lost
-for good with probability ``agent_loss`` per step: per tick, per simulated second
+state a rescued or expired victim is replaced at once; in finite mode it is not. After
+``agent_loss_grace`` seconds each robot is lost for good with probability ``agent_loss`` per step:
+per tick, per simulated second
 (``agent_loss_per: second``, one draw a tick at 1 - (1 - p)^dt), or per decision of the robot
 (``decision``: one draw for each robot that chose, at the tick before, an action other than the one it
 was doing, or chose anew once a timed action, a move penalty or an abandon ended).
