@@ -123,7 +123,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                 print(
                     f"slurm: job {allocation.job_id}, agents on {exp.placement}; hosts' logs in {logs}", file=sys.stderr
                 )
-                hub = HubOptions((*args.listen, hosts.hub), True, (*admitted, *hosts.identities), tls)
+                listen = (*args.listen, hosts.hub)
+                hub = HubOptions(listen, True, (*admitted, *hosts.identities), tls, hosts.proxy_command)
                 result = run_experiment(exp, out, progress=not args.no_progress, hub=hub, views=views)
         except SlurmError as exc:
             print(f"error: {exc}", file=sys.stderr)

@@ -7,7 +7,7 @@ other hosts' routers), whether it checks credentials, whose besides the run's ow
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import zenoh
@@ -27,16 +27,20 @@ class HubOptions:
     names. ``auth``: without it anyone who reaches the hub may do anything (trusted benches only).
     ``admit``: operators and host daemons let in beside the run's own processes. ``tls``: the hub's
     certificates (:func:`~swarmbed.wire.zenoh_session.tls_settings`) for ``tls/`` endpoints in ``listen``.
+    ``remote_proxy``: for a radio split over proxies, the command that runs proxy ``shard`` elsewhere,
+    from the arguments it would run with here (``--slurm``: a job step on one of the allocation's
+    nodes, :class:`~swarmbed.launch.slurm_allocation.SlurmHosts`); None: every proxy runs here.
     """
 
     listen: Sequence[str] = ()
     auth: bool = True
     admit: Sequence[Identity] = ()
     tls: Mapping[str, object] | None = None
+    remote_proxy: Callable[[int, list[str]], list[str]] | None = None
 
     def admitting(self, *more: Identity) -> HubOptions:
         """The same hub, letting ``more`` in as well."""
-        return HubOptions(self.listen, self.auth, (*self.admit, *more), self.tls)
+        return HubOptions(self.listen, self.auth, (*self.admit, *more), self.tls, self.remote_proxy)
 
 
 LOOPBACK_ONLY = HubOptions()

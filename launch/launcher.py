@@ -253,6 +253,7 @@ class Children:
         self.log_dir = log_dir
         self.env = dict(env or {})  # beside python_env(): e.g. zenoh_env(run.zenoh_threads)
         self.procs: dict[str, subprocess.Popen | ForkedProcess] = {}
+        self.elsewhere: set[str] = set()  # children started on another machine (adopt)
         self.started_at: dict[str, float] = {}
         self.forked = fork_agents
         self.server: ForkServer | None = ForkServer(log_dir / "forkserver.log", env=self.env) if fork_agents else None
@@ -274,6 +275,25 @@ class Children:
                     env=python_env(self.env),
                 )
         self.procs[name] = proc
+        self.started_at[name] = time.monotonic()
+        return proc
+
+    def adopt(self, name: str, command: list[str]) -> subprocess.Popen:
+        """Run ``command``, which starts child ``name`` elsewhere (``srun`` on another node): its
+        output goes to the child's log here, its exit is watched like any child's, and its CPU and
+        memory, which are the starter's, are not counted as the child's."""
+        with open_fresh(self.log_dir / f"{name}.log") as log:
+            proc = subprocess.Popen(
+                command,
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+                close_fds=True,
+                env=python_env(self.env),
+            )
+        self.procs[name] = proc
+        self.elsewhere.add(name)
         self.started_at[name] = time.monotonic()
         return proc
 
@@ -311,6 +331,8 @@ class Children:
         """``read(pid)`` for every child still there."""
         out = {}
         for name, proc in self.procs.items():
+            if name in self.elsewhere:
+                continue
             try:
                 out[name] = read(proc.pid)
             except (psutil.Error, OSError, ValueError):

@@ -254,12 +254,14 @@ def _start_processes(plan: RunPlan, setup: _Setup) -> dict[str, Any]:
     returns each remote host's information."""
     exp, children, placement = plan.exp, setup.children, setup.placement
     try:
-        for shard in range(exp.radio_split.shards):  # a split radio's proxy i>0 logs to logs/netem-i.log
-            children.spawn(
-                proxy_name(shard),
-                "swarmbed.netem",
-                [*placement.common, *setup.identity("netem"), "--out", str(plan.out_dir), "--shard", str(shard)],
-            )
+        shards = exp.radio_split.shards
+        for shard in range(shards):  # a split radio's proxy i>0 logs to logs/netem-i.log
+            args = [*placement.common, *setup.identity("netem"), "--out", str(plan.out_dir.resolve())]
+            args += ["--shard", str(shard)]
+            if shards > 1 and plan.hub.remote_proxy is not None:
+                children.adopt(proxy_name(shard), plan.hub.remote_proxy(shard, args))
+            else:
+                children.spawn(proxy_name(shard), "swarmbed.netem", args)
         for i in range(exp.agents.count):
             if plan.where[i] == LOCAL:
                 placement.first(i)

@@ -172,6 +172,25 @@ class SlurmHosts:
                 step, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env, start_new_session=True
             )
 
+    def proxy_command(self, shard: int, args: list[str]) -> list[str]:
+        """Proxy ``shard`` of a radio split over proxies as a job step on node ``shard`` mod the
+        nodes, connecting to the hub where the daemons do, with the run's proxy credentials copied
+        to the shared private folder (the run's own are in this machine's temporary folder)."""
+        assert self._private is not None
+        node = self.allocation.nodes[shard % len(self.allocation.nodes)]
+        args = list(args)
+        args[args.index("--connect") + 1] = self.hub
+        if "--credentials" in args:
+            at = args.index("--credentials") + 1
+            shared = self._private / "netem.credentials"
+            if not shared.exists():
+                shutil.copyfile(args[at], shared)
+                shared.chmod(0o600)
+            args[at] = str(shared)
+        step = ["srun", "--nodes=1", "--ntasks=1", f"--nodelist={node}", "--overlap"]
+        step += [f"--job-name=swarmbed-netem-{shard}", "--kill-on-bad-exit=0"]
+        return [*step, sys.executable, "-m", "swarmbed.netem", *args]
+
     def __exit__(self, *exc: object) -> None:
         self._terminate_steps()
         for proc in self.steps.values():

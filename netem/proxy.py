@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import queue
+import socket
 import threading
 import time
 from pathlib import Path
@@ -381,6 +383,10 @@ def main(argv: list[str] | None = None) -> int:
     with open_from_args(args) as session:
         try:
             spec = fetch_spec(session, keys.netem_config, NetemSpec, f"netem config of run {args.run_id}")
+            if spec.split.shards > 1:
+                node = os.environ.get("SLURMD_NODENAME")
+                where = f" on Slurm node {node}" if node else f" on {socket.gethostname()}"
+                log.info("netem: proxy %d of %d%s", args.shard, spec.split.shards, where)
             return Proxy(spec, keys, session, Path(args.out), args.shard).run()
         except Exception as exc:
             # logged and reported while the session, and with it the liveliness token, is still

@@ -52,8 +52,8 @@ def test_a_run_in_an_allocation_spreads_its_agents_over_the_nodes_and_gives_the_
 ):
     """``salloc``: the run's hub, coordinator and proxy stay on the submitting machine; ``sbatch``:
     they run on the allocation's first node (a namespace), beside that node's own daemon. With
-    ``shards`` 3 the radio is split over three proxies (per-copy loss draws, strips of 30), and the
-    files are still those of one machine with one radio."""
+    ``shards`` 3 the radio is split over three proxies (per-copy loss draws, strips of 30), each a
+    job step on its own node, and the files are still those of one machine with one radio."""
     sets = ["agents.count=9", "allocator={name: cbba}", "run.duration=60", "run.stop_when_done=false"]
     if shards > 1:
         sets += ["network.loss=0.1", "network.draws=per_copy", "radio_split.strip_width=30"]
@@ -79,6 +79,11 @@ def test_a_run_in_an_allocation_spreads_its_agents_over_the_nodes_and_gives_the_
         **dict.fromkeys(range(6, 9), "n3"),
     }
     assert len(list((tmp_path / "slurm_run" / "logs").glob("netem*.log"))) == shards
+    if shards > 1:  # each proxy ran as a job step on its own node (proxy i on node i mod 3)
+        for shard, node in enumerate(("n1", "n2", "n3")):
+            name = "netem" if shard == 0 else f"netem-{shard}"
+            text = (tmp_path / "slurm_run" / "logs" / f"{name}.log").read_text()
+            assert f"proxy {shard} of 3 on Slurm node {node}" in text, text[-2000:]
     # each node's daemon ran in its own namespace and logged its agents there
     for node, agent in (("n1", 0), ("n2", 4), ("n3", 8)):
         assert list((tmp_path / "runs" / "hosts").glob(f"slurm-*/{node}/*/agent_{agent}.log")), (node, agent)
