@@ -109,11 +109,13 @@ def _preset_group(params_model: type, section: str) -> list[tuple[str, list[tupl
 
 def _section_groups() -> list[tuple[str, list[tuple[str, str, str, str]]]]:
     """Every key of an experiment outside a scenario's or an allocator's own: the sections, ROS 2,
-    and where agents run (placement, swaps, may_carry)."""
-    from swarmbed.schema.experiment import Experiment, Ros2Section
+    the radio's split and where agents run (placement, swaps, may_carry)."""
+    from swarmbed.schema.experiment import Experiment, RadioSplit, Ros2Section
 
     groups = [(f"{name}:", cfg.describe(model, f"{name}.")) for name, model in cfg.SECTIONS.items()]
     groups.append(("ros2 (off unless given):", cfg.describe(Ros2Section, "ros2.")))
+    split = cfg.describe(RadioSplit, "radio_split.")
+    groups.append(("radio_split (the radio over several netem proxies: docs/machines.md):", split))
     hosts = [
         row
         for row in cfg.describe(Experiment)
