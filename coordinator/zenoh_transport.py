@@ -329,7 +329,10 @@ class ZenohTransport(TickHook):
                     self.steps[step.shard] = step
                     if len(self.steps) == self.shards:
                         steps = [self.steps.pop(i) for i in range(self.shards)]
-                        return merge_steps(steps)
+                        try:
+                            return merge_steps(steps)
+                        except WireError as exc:  # a proxy's own step is inconsistent: it is broken
+                            raise RunError(f"tick {k}: the proxies' steps do not merge: {exc}") from None
             elif what == "leave":
                 if data in self.proxy_tokens:
                     self._proxy_gone(k, self.proxy_tokens[data])

@@ -31,7 +31,7 @@ import numpy as np
 from swarmbed.records.rowfile import RowFile
 from swarmbed.records.rundir import LEDGER, LEDGER_COLUMNS
 from swarmbed.schema.experiment import RadioSplit
-from swarmbed.wire.codec import NetemStep, encode_inbox, unpack
+from swarmbed.wire.codec import NetemStep, WireError, encode_inbox, unpack
 from swarmbed.wire.reports import NetemFinal
 
 #: the ledger part a proxy of a split radio writes, with a ``batch`` column before the ledger's
@@ -56,13 +56,18 @@ def owners(xs: Sequence[float] | np.ndarray, split: RadioSplit) -> np.ndarray:
 
 def merge_inbox(parts: Sequence[tuple[bytes, Sequence[int]]]) -> bytes:
     """One receiver's inbox from the proxies' parts (each: its encoded inbox and every item's send
-    tick), in the order one radio delivers: by send tick, then sender, each part's own order kept."""
+    tick), in the order one radio delivers: by send tick, then sender, each part's own order kept.
+    Raises WireError where a part does not match its send ticks."""
     if len(parts) == 1:
         return parts[0][0]
     runs = []
     for data, ticks in parts:
         items = unpack(data)
-        runs.append([(t, item[0], i, item) for i, (t, item) in enumerate(zip(ticks, items, strict=True))])
+        if not (isinstance(items, list) and len(items) == len(ticks)):
+            raise WireError(f"an inbox part of {len(ticks)} send ticks is not a list of as many items")
+        if not all(isinstance(item, list) and len(item) == 3 and isinstance(item[0], int) for item in items):
+            raise WireError("an inbox part's item is not [sender, kind, payload]")
+        runs.append([(t, item[0], i, item) for i, (t, item) in enumerate(zip(ticks, items))])
     merged = heapq.merge(*runs, key=lambda e: (e[0], e[1]))
     return encode_inbox([e[3] for e in merged])
 

@@ -11,7 +11,15 @@ from swarmbed.engine.radio_split import merge_inbox, owners
 from swarmbed.netem.exchange import Exchange, SplitExchange
 from swarmbed.netem.radio import per_copy_uniform
 from swarmbed.schema.experiment import RadioSplit, netem_spec
-from swarmbed.wire.codec import BROADCAST, AgentOut, RadioMessage, WorldSample, decode_inbox, encode_inbox
+from swarmbed.wire.codec import (
+    BROADCAST,
+    AgentOut,
+    RadioMessage,
+    WireError,
+    WorldSample,
+    decode_inbox,
+    encode_inbox,
+)
 from tests.conftest import experiment, reference_run, same_results
 
 SPLIT = ["network.draws=per_copy", "radio_split.strip_width=30"]
@@ -65,6 +73,10 @@ def test_a_receivers_inbox_parts_merge_in_the_order_one_radio_delivers():
     b = encode_inbox([[2, "k", b"c"], [7, "k", b"d"]])  # sent at ticks 3 and 4
     merged = decode_inbox(merge_inbox([(a, [3, 5]), (b, [3, 4])]))
     assert [(d.sender, d.payload) for d in merged] == [(2, b"c"), (4, b"a"), (7, b"d"), (1, b"b")]
+    # a part that does not match its send ticks is a wire error, never a crash of the hub
+    for bad in ([(a, [3]), (b, [3, 4])], [(encode_inbox([["x", "k", b""]]), [1]), (b, [3, 4])]):
+        with pytest.raises(WireError):
+            merge_inbox(bad)
 
 
 def test_k_exchanges_give_one_exchanges_steps_and_ledger_as_agents_wander_across_regions(tmp_path):
