@@ -264,26 +264,15 @@ class Children:
         if module == AGENT_MODULE and self.server is not None:
             proc = self.server.spawn(name, args, log_path)
         else:
-            with open_fresh(log_path) as log:
-                proc = subprocess.Popen(
-                    [sys.executable, "-m", module, *args, "--parent-pid", str(os.getpid())],
-                    stdin=subprocess.DEVNULL,
-                    stdout=log,
-                    stderr=subprocess.STDOUT,
-                    start_new_session=True,
-                    close_fds=True,
-                    env=python_env(self.env),
-                )
+            proc = self._run([sys.executable, "-m", module, *args, "--parent-pid", str(os.getpid())], log_path)
         self.procs[name] = proc
         self.started_at[name] = time.monotonic()
         return proc
 
-    def adopt(self, name: str, command: list[str]) -> subprocess.Popen:
-        """Run ``command``, which starts child ``name`` elsewhere (``srun`` on another node): its
-        output goes to the child's log here, its exit is watched like any child's, and its CPU and
-        memory, which are the starter's, are not counted as the child's."""
-        with open_fresh(self.log_dir / f"{name}.log") as log:
-            proc = subprocess.Popen(
+    def _run(self, command: list[str], log_path: Path) -> subprocess.Popen:
+        """``command`` in a session of its own, its output to ``log_path``, with the children's environment."""
+        with open_fresh(log_path) as log:
+            return subprocess.Popen(
                 command,
                 stdin=subprocess.DEVNULL,
                 stdout=log,
@@ -292,6 +281,12 @@ class Children:
                 close_fds=True,
                 env=python_env(self.env),
             )
+
+    def adopt(self, name: str, command: list[str]) -> subprocess.Popen:
+        """Run ``command``, which starts child ``name`` elsewhere (``srun`` on another node): its
+        output goes to the child's log here, its exit is watched like any child's, and its CPU and
+        memory, which are the starter's, are not counted as the child's."""
+        proc = self._run(command, self.log_dir / f"{name}.log")
         self.procs[name] = proc
         self.elsewhere.add(name)
         self.started_at[name] = time.monotonic()

@@ -27,8 +27,9 @@ class Exchange:
     counters a step reports as differences."""
 
     def __init__(self, spec: NetemSpec, out_dir: Path, shard: int = 0) -> None:
-        """``shard``: which proxy of a split radio this is (``spec.split``, :mod:`.shards`): it
-        decides the copies of the agents in its region and writes its part of the ledger."""
+        """``shard``: which proxy of a split radio this is (``spec.split``,
+        :mod:`swarmbed.engine.radio_split`): it decides the copies of the agents in its region and
+        writes its part of the ledger."""
         self.out_dir = out_dir
         self.split = spec.split if spec.split.shards > 1 else None
         self.shard = shard
@@ -122,13 +123,15 @@ class Exchange:
             malformed=malformed,
             ledger=files,
             transport=transport,
+            shard=self.shard,
         )
 
 
 class SplitExchange:
     """A radio split over ``spec.split.shards`` exchanges in this process, merged after each tick
-    as the hub merges the proxies of a split radio (:mod:`.shards`): what the in-process engine
-    runs for ``radio_split``, and the reference the proxies' merge is checked against."""
+    as the hub merges the proxies of a split radio (:mod:`swarmbed.engine.radio_split`): what the
+    in-process engine runs for ``radio_split``, and the reference the proxies' merge is checked
+    against."""
 
     def __init__(self, spec: NetemSpec, out_dir: Path) -> None:
         self.out_dir = out_dir

@@ -111,7 +111,7 @@ class Ledger:
         """``reasons``: every reason a copy may be dropped for (the radio's ``drop_reasons``): each
         is counted, from zero, in ``dropped``; booking any other is an error. ``batched``: each row
         starts with the number of the :meth:`close_tick` that wrote it (a split radio's part,
-        :mod:`.shards`)."""
+        :mod:`swarmbed.engine.radio_split`)."""
         self.receivers = receivers
         self.batch: int | None = 0 if batched else None
         self._open: dict[tuple[int, int, str, str], list[int]] = defaultdict(lambda: [0, 0])

@@ -362,7 +362,6 @@ class Proxy:
         if self.watched:  # the totals as the run ends
             self.traffic_pub.put(encode_traffic(self.traffic))
         report = self.exchange.finish(last_tick, self.malformed, Transport.model_validate({"tcp": tcp_counters()}))
-        report = report.model_copy(update={"shard": self.shard})
         if not hand_over(self.session, self.keys.netem_report, encode_report(report)):
             log.error("netem: the coordinator did not take the final report")
 
