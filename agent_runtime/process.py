@@ -29,10 +29,7 @@ from swarmbed.wire.codec import (
     encode_handover,
     encode_stop,
 )
-from swarmbed.wire.keys import Keys
-from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_over, is_alive
-from swarmbed.wire.observation import Observation
-from swarmbed.wire.reports import (
+from swarmbed.wire.control import (
     Checkpoint,
     Fatal,
     Restored,
@@ -41,6 +38,9 @@ from swarmbed.wire.reports import (
     Transport,
     encode_report,
 )
+from swarmbed.wire.keys import Keys
+from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_over, is_alive
+from swarmbed.wire.observation import Observation
 from swarmbed.wire.state import StateError
 from swarmbed.wire.tcp_counters import tcp_counters
 from swarmbed.wire.tickdecode import TickDecoder

@@ -24,8 +24,8 @@ from swarmbed.extension.view import LocalView, Message, TaskInfo
 from swarmbed.schema.experiment import AgentSpec
 from swarmbed.wire.btlog import TreeChanges
 from swarmbed.wire.codec import RadioMessage, WireError, decode_inbox, unpack
+from swarmbed.wire.control import Final, Transport
 from swarmbed.wire.observation import Observation
-from swarmbed.wire.reports import Final, Transport
 from swarmbed.wire.seeds import agent_seeds
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled

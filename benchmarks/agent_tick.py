@@ -20,9 +20,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from swarmbed import config as cfg
 from swarmbed.agent_runtime.runtime import AgentRuntime
-from swarmbed.launch import config as cfg
-from swarmbed.launch.config import resolve_experiment
+from swarmbed.config import resolve_experiment
 from swarmbed.schema.experiment import agent_spec
 from swarmbed.wire.codec import EMPTY_INBOX, encode_agent_out, encode_inbox, encode_tick
 from swarmbed.wire.observation import empty_tasks

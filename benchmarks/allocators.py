@@ -26,7 +26,7 @@ from pathlib import Path
 
 from lockstep import floor as barrier
 
-from swarmbed.launch import config as cfg
+from swarmbed import config as cfg
 from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent

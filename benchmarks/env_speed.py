@@ -17,8 +17,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from swarmbed import config as cfg
 from swarmbed.envs import SwarmbedParallelEnv
-from swarmbed.launch import config as cfg
 from swarmbed.launch.inprocess import run_in_process
 from swarmbed.launch.runner import run_experiment
 

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from swarmbed.campaigns import executors
 from swarmbed.campaigns.sweep import load_sweep, run_sweep
-from swarmbed.results.folders import ATTEMPTS
+from swarmbed.results.campaign_folders import ATTEMPTS
 
 SAR = Path(__file__).resolve().parent.parent / "experiments" / "sar" / "base_R20_V100.yaml"
 

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from swarmbed import config as cfg
 from swarmbed.hosts.netns import Lab, LabError, make_lab
-from swarmbed.launch import config as cfg
 from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import psutil
 
+from swarmbed import config as cfg
 from swarmbed.hosts.netns import Lab, LabError, make_lab
-from swarmbed.launch import config as cfg
 from swarmbed.launch.runner import run_experiment
 from swarmbed.wire.tcp_counters import tcp_counters
 

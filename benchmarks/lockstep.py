@@ -38,7 +38,7 @@ import psutil
 import zenoh
 
 import swarmbed
-from swarmbed.launch import config as cfg
+from swarmbed import config as cfg
 from swarmbed.launch.hub import HubOptions, open_hub
 from swarmbed.launch.launcher import wakeups
 from swarmbed.launch.runner import run_experiment

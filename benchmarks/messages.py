@@ -18,7 +18,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from swarmbed.launch import config as cfg
+from swarmbed import config as cfg
 from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -23,7 +23,7 @@ import statistics
 import tempfile
 from pathlib import Path
 
-from swarmbed.launch import config as cfg
+from swarmbed import config as cfg
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.runner import run_experiment
 from swarmbed.wire import stages

@@ -5,7 +5,7 @@ and asking for the checkpoints.
 
 A process is one *incarnation* of an agent: the first is 0, each swap or restart try makes the
 next. State is accepted only when the coordinator asked for it (:mod:`.tickets`). Processes are
-started and stopped through the :class:`~swarmbed.coordinator.placement.Placement` the launcher
+started and stopped through the :class:`~swarmbed.coordinator.process_control.Placement` the launcher
 gives; as a hook of the engine's tick loop it swaps, restarts and checkpoints before each tick.
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 import zenoh
 
 from swarmbed.coordinator.events import CONSUMED, EventQueue
-from swarmbed.coordinator.placement import Placement
+from swarmbed.coordinator.process_control import Placement
 from swarmbed.coordinator.tickets import Tickets
 from swarmbed.engine.hooks import TickHook
 from swarmbed.engine.run_errors import RunError
@@ -38,8 +38,7 @@ from swarmbed.wire.codec import (
     encode_control,
     encode_stop,
 )
-from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
-from swarmbed.wire.reports import (
+from swarmbed.wire.control import (
     AgentReport,
     Checkpoint,
     Fatal,
@@ -53,6 +52,7 @@ from swarmbed.wire.reports import (
     decode_swap,
     encode_swap_answer,
 )
+from swarmbed.wire.keys import Keys, agent_id_of, incarnation_of
 
 log = logging.getLogger("swarmbed.coordinator")
 

@@ -30,7 +30,7 @@ from swarmbed.engine.hooks import TickHook
 from swarmbed.engine.recorder import Recorder
 from swarmbed.extension.scenario import World
 from swarmbed.schema.experiment import Experiment
-from swarmbed.wire.reports import RestartRecord
+from swarmbed.wire.control import RestartRecord
 from swarmbed.wire.run_status import NetworkCounters, RunStatus, encode_status
 
 if TYPE_CHECKING:

@@ -20,7 +20,7 @@ from typing import BinaryIO
 import zenoh
 
 from swarmbed.files.safefiles import make_dirs, open_fresh
-from swarmbed.records.rundir import BT, PART_SUFFIX, PARTIAL_PREFIX, btlog_name
+from swarmbed.records.run_folder import BT, PART_SUFFIX, PARTIAL_PREFIX, btlog_name
 from swarmbed.wire.btlog import decode_tree_changes, file_head, records, tree_size
 from swarmbed.wire.errors import WireError
 from swarmbed.wire.keys import Keys, agent_id_of

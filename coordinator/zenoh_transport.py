@@ -7,7 +7,7 @@ and message of tick k taken, or on the real-time clock those that came before th
 a run over processes adds around a tick are the hooks it hands the loop: the wall clock
 (:mod:`~swarmbed.coordinator.clock`), the agents' lifecycle, which starts, swaps and restarts
 them and is the run's membership (:mod:`~swarmbed.coordinator.lifecycle`), ROS 2 topics
-(:mod:`~swarmbed.coordinator.ros2`) and the run's progress (:mod:`~swarmbed.coordinator.live`).
+(:mod:`~swarmbed.coordinator.ros2_hub`) and the run's progress (:mod:`~swarmbed.coordinator.live`).
 The coordinator's session is the run's Zenoh hub: it listens, everyone else connects to it as a
 client.
 """
@@ -17,9 +17,9 @@ from __future__ import annotations
 import logging
 import queue
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import zenoh
 
@@ -27,11 +27,10 @@ from swarmbed.coordinator.clock import WallClock
 from swarmbed.coordinator.events import CONSUMED, EventQueue
 from swarmbed.coordinator.lifecycle import AgentLifecycle
 from swarmbed.coordinator.live import Interval, LiveStatus, Watched
-from swarmbed.coordinator.placement import Placement
+from swarmbed.coordinator.process_control import Placement
 from swarmbed.coordinator.trees import TreeRecorder, TreeRelay
 from swarmbed.engine import Session, StopWhenAsked, TickHook, refusals
 from swarmbed.engine.hooks import Profile
-from swarmbed.engine.radio_split import merge_finals, merge_ledgers, merge_steps, proxy_name
 from swarmbed.engine.recorder import Recorder
 from swarmbed.engine.run_errors import RunError
 from swarmbed.extension.allocator import Allocator
@@ -51,10 +50,7 @@ from swarmbed.wire.codec import (
     encode_world,
     unpack,
 )
-from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of
-from swarmbed.wire.membership import accept_handovers, serve_text
-from swarmbed.wire.observation import Observation
-from swarmbed.wire.reports import (
+from swarmbed.wire.control import (
     AgentReport,
     Checkpoint,
     Fatal,
@@ -64,6 +60,9 @@ from swarmbed.wire.reports import (
     decode_agent_report,
     decode_netem_report,
 )
+from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of, proxy_name
+from swarmbed.wire.membership import accept_handovers, serve_text
+from swarmbed.wire.observation import Observation
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.zenoh_session import undeclare_all
@@ -71,6 +70,33 @@ from swarmbed.wire.zenoh_session import undeclare_all
 BLOCK = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("swarmbed.coordinator")
 __all__ = ["RunError", "ZenohTransport"]
+
+
+class RadioMerge(Protocol):
+    """The merge of a split radio's K proxy parts into what one proxy gives; the launcher hands it
+    (``swarmbed.netem.radio_split``), as the coordinator imports no other process role."""
+
+    def merge_steps(self, steps: Sequence[NetemStep]) -> NetemStep: ...
+
+    def merge_finals(self, finals: Sequence[NetemFinal]) -> NetemFinal: ...
+
+    def merge_ledgers(self, out_dir: Path, shards: int) -> Path: ...
+
+
+class _OneProxy:
+    """One proxy's parts need no merge: a run of one radio never calls these."""
+
+    def merge_steps(self, steps: Sequence[NetemStep]) -> NetemStep:
+        raise RuntimeError("one proxy: no steps to merge")
+
+    def merge_finals(self, finals: Sequence[NetemFinal]) -> NetemFinal:
+        raise RuntimeError("one proxy: no reports to merge")
+
+    def merge_ledgers(self, out_dir: Path, shards: int) -> Path:
+        raise RuntimeError("one proxy: no ledger parts to merge")
+
+
+_ONE_PROXY = _OneProxy()
 
 
 class ZenohTransport(TickHook):
@@ -94,6 +120,7 @@ class ZenohTransport(TickHook):
         carriers: Mapping[str, frozenset[int]] | None = None,
         placement: Placement | None = None,
         decider: Any = None,
+        radio_merge: RadioMerge | None = None,
     ) -> None:
         self.exp = exp
         self.scenario = scenario
@@ -113,9 +140,12 @@ class ZenohTransport(TickHook):
         self.joined: set[str] = set()
         self.reports: dict[int, Final] = {}
         self.netem_report: NetemFinal | None = None
-        # the proxies: one, or the K of a radio split over proxies (swarmbed.engine.radio_split), each
+        # the proxies: one, or the K of a radio split over proxies (swarmbed.netem.radio_split), each
         # with its token, its step of every tick and its final report, merged here
         self.shards = exp.radio_split.shards
+        if self.shards > 1 and radio_merge is None:
+            raise ValueError("a radio split over proxies needs the merge of their parts (radio_merge)")
+        self.radio_merge: RadioMerge = radio_merge or _ONE_PROXY
         self.proxy_tokens = {key: i for i, key in enumerate(keys.netem_tokens(self.shards))}
         self.steps: dict[int, NetemStep] = {}
         self.finals: dict[int, NetemFinal] = {}
@@ -139,7 +169,7 @@ class ZenohTransport(TickHook):
         the live status, a soak's stop and the profile."""
         hooks: list[TickHook] = [self.clock, self.agents, self]
         if self.ros2 is not None:
-            from swarmbed.coordinator.ros2 import Ros2Publishing
+            from swarmbed.coordinator.ros2_hub import Ros2Publishing
 
             hooks.append(Ros2Publishing(self.ros2, self.world, self._task_size))
         hooks += [self.watched, self.stop]
@@ -170,7 +200,7 @@ class ZenohTransport(TickHook):
         self._entities += self.agent_pubs + [self.world_pub, self.stop_pub, self.status_pub]
         self._entities.append(s.liveliness().declare_token(k.alive_coordinator))
         if self.exp.ros2 is not None:  # the run as ROS 2 topics (docs/ros2.md): the hub is also a ROS 2 node
-            from swarmbed.coordinator.ros2 import Ros2Commands, Ros2Out
+            from swarmbed.coordinator.ros2_hub import Ros2Commands, Ros2Out
 
             try:
                 walls = wall_lines(self.exp.obstacles)
@@ -330,7 +360,7 @@ class ZenohTransport(TickHook):
                     if len(self.steps) == self.shards:
                         steps = [self.steps.pop(i) for i in range(self.shards)]
                         try:
-                            return merge_steps(steps)
+                            return self.radio_merge.merge_steps(steps)
                         except WireError as exc:  # a proxy's own step is inconsistent: it is broken
                             raise RunError(f"tick {k}: the proxies' steps do not merge: {exc}") from None
             elif what == "leave":
@@ -454,8 +484,8 @@ class ZenohTransport(TickHook):
         if self.shards == 1:
             self.netem_report = self.finals[0]
         else:  # every proxy wrote its part of the ledger in the run folder, here
-            merge_ledgers(self.out_dir, self.shards)
-            self.netem_report = merge_finals([self.finals[i] for i in range(self.shards)])
+            self.radio_merge.merge_ledgers(self.out_dir, self.shards)
+            self.netem_report = self.radio_merge.merge_finals([self.finals[i] for i in range(self.shards)])
 
     def write_results(self, run: Session, timings: dict) -> RunSummary:
         """The run's result files, from the final reports :meth:`stop_and_collect` gathered."""

@@ -10,15 +10,15 @@ import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-from swarmbed.engine.radio_split import BATCH_COLUMNS, ledger_part, merge_finals, merge_ledgers, merge_steps, owners
 from swarmbed.netem.ledger import Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio, drop_reasons, measured
+from swarmbed.netem.radio_split import BATCH_COLUMNS, merge_finals, merge_ledgers, merge_steps, owners
 from swarmbed.records.rowfile import RowFile
-from swarmbed.records.rundir import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER
+from swarmbed.records.run_folder import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER, ledger_part
 from swarmbed.schema.experiment import NetemSpec
 from swarmbed.schema.radio_sections import WallsSection
 from swarmbed.wire.codec import AgentOut, NetemStep, WorldSample, encode_inbox
-from swarmbed.wire.reports import NetemFinal, Transport
+from swarmbed.wire.control import NetemFinal, Transport
 from swarmbed.wire.seeds import NETEM, component_rng
 
 
@@ -28,7 +28,7 @@ class Exchange:
 
     def __init__(self, spec: NetemSpec, out_dir: Path, shard: int = 0) -> None:
         """``shard``: which proxy of a split radio this is (``spec.split``,
-        :mod:`swarmbed.engine.radio_split`): it decides the copies of the agents in its region and
+        :mod:`swarmbed.netem.radio_split`): it decides the copies of the agents in its region and
         writes its part of the ledger."""
         self.out_dir = out_dir
         self.split = spec.split if spec.split.shards > 1 else None
@@ -129,7 +129,7 @@ class Exchange:
 
 class SplitExchange:
     """A radio split over ``spec.split.shards`` exchanges in this process, merged after each tick
-    as the hub merges the proxies of a split radio (:mod:`swarmbed.engine.radio_split`): what the
+    as the hub merges the proxies of a split radio (:mod:`swarmbed.netem.radio_split`): what the
     in-process engine runs for ``radio_split``, and the reference the proxies' merge is checked
     against."""
 

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from swarmbed.records.rowfile import RowFile
-from swarmbed.records.rundir import RECEIVER_COLUMNS
+from swarmbed.records.run_folder import RECEIVER_COLUMNS
 
 SENT = "sent"
 DELIVERED = "delivered"
@@ -99,7 +99,7 @@ class ReceiverLog:
 
 class Ledger:
     """Accumulates rows tick by tick and streams finished ticks to a :class:`RowFile` (whose
-    columns are :data:`~swarmbed.records.rundir.LEDGER_COLUMNS`)."""
+    columns are :data:`~swarmbed.records.run_folder.LEDGER_COLUMNS`)."""
 
     def __init__(
         self,
@@ -111,7 +111,7 @@ class Ledger:
         """``reasons``: every reason a copy may be dropped for (the radio's ``drop_reasons``): each
         is counted, from zero, in ``dropped``; booking any other is an error. ``batched``: each row
         starts with the number of the :meth:`close_tick` that wrote it (a split radio's part,
-        :mod:`swarmbed.engine.radio_split`)."""
+        :mod:`swarmbed.netem.radio_split`)."""
         self.receivers = receivers
         self.batch: int | None = 0 if batched else None
         self._open: dict[tuple[int, int, str, str], list[int]] = defaultdict(lambda: [0, 0])

@@ -22,7 +22,7 @@ from typing import Any
 import zenoh
 
 from swarmbed.netem.exchange import Exchange
-from swarmbed.netem.ros2 import Ros2Outboxes
+from swarmbed.netem.ros2_radio import Ros2Outboxes
 from swarmbed.records.rowfile import TableWriteError
 from swarmbed.schema.experiment import NetemSpec
 from swarmbed.wire.child_process import child_args, pin_thread_state
@@ -39,9 +39,9 @@ from swarmbed.wire.codec import (
     encode_traffic,
     pack,
 )
+from swarmbed.wire.control import NetemFatal, Transport, encode_report
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
 from swarmbed.wire.membership import fetch_spec, hand_over
-from swarmbed.wire.reports import NetemFatal, Transport, encode_report
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.tcp_counters import tcp_counters

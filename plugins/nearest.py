@@ -1,6 +1,6 @@
 """Nearest task, no communication: each agent pursues the nearest task it sees (ties to the lower
 id) and sends nothing. The baseline every allocator with a radio should beat, and the policy the
-ROS 2 example node (``examples/ros2_nearest.py``) plays through the ``ros2`` allocator."""
+ROS 2 example node (``docs/ros2/nearest_node.py``) plays through the ``ros2`` allocator."""
 
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ Other installed packages add theirs through entry points, read on first use:
 - group ``swarmbed.allocators``: ``name = "package.module:Class"`` for every scenario, or
   ``name@scenario = ...`` for one.
 
-Only the launcher resolves names (``swarmbed.launch.config``); the processes it starts load
+Only the launcher resolves names (``swarmbed.config``); the processes it starts load
 the targets it hands them.
 """
 

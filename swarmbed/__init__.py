@@ -1,21 +1,61 @@
 """swarmbed: a Zenoh-networked emulation testbed for decentralized multi-robot task allocation.
 
-The project's folders stay at the top of the repository and install as subpackages of this one
-namespace (``wire/`` is ``swarmbed.wire``, ``cli/`` is ``swarmbed.cli``, ...): pyproject.toml lists
-them, docs/ARCHITECTURE.md says what each holds and what it may import.
+The public API (:mod:`swarmbed.api`), for running experiments from Python::
+
+    import swarmbed
+
+    exp = swarmbed.load("experiments/quickstart.yaml", overrides=["agents.count=8"])
+    result = swarmbed.run(exp, "runs/demo", engine="inprocess")
+    print(result.summary.ticks, len(result.folder.ledger()))
+
+``load``, ``run``, ``open_run``, ``register_allocator``, ``register_scenario``, and the types they
+take and give (``Experiment``, ``Results``, ``RunDir``, ``InProcessRun``, ``ConfigError``,
+``PluginError``). They are imported on first use, so the processes of a run, which import only
+the packages below, never load the launcher. docs/ARCHITECTURE.md maps the packages.
 """
 
-import os as _os
+from __future__ import annotations
+
+from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version
+from typing import TYPE_CHECKING, Any
 
 try:
     __version__ = version("swarmbed")
-except PackageNotFoundError:  # running from a checkout that was never installed
+except PackageNotFoundError:  # a checkout that was never installed
     __version__ = "0+unknown"
 
-# In a checkout, this folder sits beside the subpackages' folders: Python started in the checkout's
-# root (``python -m swarmbed ...``, and every process it spawns) finds this folder first, before any
-# installed copy, and must then find the subpackages beside it.
-_checkout = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__)))
-if all(_os.path.isfile(_os.path.join(_checkout, name, "__init__.py")) for name in ("wire", "netem", "coordinator")):
-    __path__.append(_checkout)
+if TYPE_CHECKING:
+    from swarmbed.api import (
+        ConfigError,
+        Experiment,
+        InProcessRun,
+        PluginError,
+        Results,
+        RunDir,
+        load,
+        open_run,
+        register_allocator,
+        register_scenario,
+        run,
+    )
+
+__all__ = [
+    "ConfigError",
+    "Experiment",
+    "InProcessRun",
+    "PluginError",
+    "Results",
+    "RunDir",
+    "load",
+    "open_run",
+    "register_allocator",
+    "register_scenario",
+    "run",
+]
+
+
+def __getattr__(name: str) -> Any:
+    if name in __all__:  # loaded by name, on first use: the package root itself imports nothing of ours
+        return getattr(import_module("swarmbed.api"), name)
+    raise AttributeError(f"module 'swarmbed' has no attribute {name!r}")

@@ -11,7 +11,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from swarmbed.launch import config as cfg
+from swarmbed import config as cfg
 from swarmbed.wire.credentials import Identity, write_credentials
 
 pytest_plugins = ("tests.netns",)  # the `lab` fixture: stand-in hosts in network namespaces

@@ -269,7 +269,7 @@ def test_grape_holds_its_agents_still_while_the_partition_converges(hold, stop, 
 def test_a_halted_agent_stops_at_once_where_a_held_one_brakes():
     """The world's side of HALT: ``halt`` zeroes the speed this tick; ``stop`` brakes within the
     acceleration limit (the agent rolls on)."""
-    from swarmbed.launch.config import resolve_experiment
+    from swarmbed.config import resolve_experiment
     from tests.conftest import experiment
 
     exp = experiment("agents.count=1", "scenario.initial_tasks=1", "run.seed=3")
@@ -695,7 +695,7 @@ def test_a_follower_that_hears_no_leader_lets_its_fallback_allocator_decide(tmp_
 
 
 def test_a_fallback_that_is_not_an_allocator_is_refused_where_the_experiment_is_loaded():
-    from swarmbed.launch.config import ConfigError
+    from swarmbed.config import ConfigError
 
     with pytest.raises(ConfigError) as exc:
         experiment("allocator={name: hungarian, fallback: nosuch}")

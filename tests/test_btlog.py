@@ -151,7 +151,7 @@ SAR_RUN = ["allocator.name=cbba-etc", "run.duration=30"]
 @pytest.mark.slow
 def test_a_recorded_run_has_one_btlog_per_agent_identical_on_a_rerun_with_swaps_and_the_same_results(tmp_path):
     from swarmbed.launch.runner import run_experiment
-    from swarmbed.records.rundir import BT
+    from swarmbed.records.run_folder import BT
     from tests.conftest import QUICKSTART, RESULTS, experiment
 
     sar = QUICKSTART.parent / "sar" / "_base.yaml"

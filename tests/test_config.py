@@ -2,8 +2,8 @@
 
 import pytest
 
-from swarmbed.launch import config as cfg
-from swarmbed.launch.config import resolve_experiment
+from swarmbed import config as cfg
+from swarmbed.config import resolve_experiment
 from tests.conftest import QUICKSTART, ROOT
 
 
@@ -100,14 +100,16 @@ def test_a_bad_tree_given_with_set_is_refused_before_any_process_starts(tmp_path
     refused = r"^--set agents.behavior_tree=.*bad.xml: .*bad.xml:3 <Nope>: unknown node"
     with pytest.raises(cfg.ConfigError, match=refused):
         cfg.load(QUICKSTART, ["agents.behavior_tree=bad.xml"])
-    (tmp_path / "good.xml").write_text((ROOT / "extension" / "trees" / "space_default.xml").read_text())
+    (tmp_path / "good.xml").write_text((ROOT / "swarmbed" / "extension" / "trees" / "space_default.xml").read_text())
     exp = cfg.load(QUICKSTART, ["agents.behavior_tree=good.xml"])
     assert exp.agents.behavior_tree == str(tmp_path / "good.xml")
 
 
 def test_a_tree_named_in_the_file_is_read_from_the_files_folder(tmp_path, monkeypatch):
     (tmp_path / "trees").mkdir()
-    (tmp_path / "trees" / "mine.xml").write_text((ROOT / "extension" / "trees" / "space_default.xml").read_text())
+    (tmp_path / "trees" / "mine.xml").write_text(
+        (ROOT / "swarmbed" / "extension" / "trees" / "space_default.xml").read_text()
+    )
     text = QUICKSTART.read_text().replace(
         "  exploration_duration: 60", "  exploration_duration: 60\n  behavior_tree: trees/mine.xml"
     )

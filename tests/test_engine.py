@@ -12,7 +12,7 @@ import pytest
 
 from swarmbed.launch.inprocess import run_in_process
 from swarmbed.launch.runner import run_experiment
-from swarmbed.records.rundir import RECEIVER_LEDGER
+from swarmbed.records.run_folder import RECEIVER_LEDGER
 from tests.conftest import ROOT, SAR_BASE, experiment, same_results
 
 SAR = SAR_BASE
@@ -144,8 +144,8 @@ class _Calls:
 
 
 def _tick_loop_with_fakes(tmp_path, calls: _Calls, lose_at: int | None = None, stop_after: int | None = None):
+    from swarmbed.config import resolve_experiment
     from swarmbed.engine import OneProcess, Session, TickHook
-    from swarmbed.launch.config import resolve_experiment
     from swarmbed.wire.codec import NetemStep
 
     exp = experiment("run.duration=3", "run.dt=1", "agents.count=2")  # three ticks

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 import yaml
 
+from swarmbed import config as cfg
 from swarmbed.campaigns.chaos import load_chaos
 from swarmbed.campaigns.sweep import experiment_for, load_sweep
 from swarmbed.cli.main import main
-from swarmbed.launch import config as cfg
 from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parent.parent
-TREES = sorted([*(ROOT / "extension" / "trees").glob("*.xml"), *(ROOT / "plugins").rglob("*.xml")])
+TREES = sorted([*(ROOT / "swarmbed" / "extension" / "trees").glob("*.xml"), *(ROOT / "plugins").rglob("*.xml")])
 YAML = sorted((ROOT / "experiments").rglob("*.yaml"))
 CHAOS = [f for f in YAML if "events" in (yaml.safe_load(f.read_text()) or {})]  # faults for swarmbed soak
 MAPS = [f for f in YAML if set(yaml.safe_load(f.read_text()) or {}) == {"obstacles"}]  # obstacles: a map file

@@ -7,10 +7,10 @@ import json
 import pandas as pd
 import pytest
 
+from swarmbed import config as cfg
 from swarmbed.bt import BTError, load_tree
 from swarmbed.cli import main as cli
 from swarmbed.extension.space_nodes import space_registry
-from swarmbed.launch import config as cfg
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.runner import RunError, plan_run
 from swarmbed.plugins.registry import PluginError, resolve
@@ -205,8 +205,8 @@ def test_capped_runs_are_counted_and_marked_per_cell():
 
 
 def test_swap_requests_are_bounded_before_they_are_queued():
+    from swarmbed.wire.control import SwapRequest, decode_swap
     from swarmbed.wire.errors import WireError
-    from swarmbed.wire.reports import SwapRequest, decode_swap
 
     assert decode_swap(b'{"agent": 3, "to": "labpc2"}') == SwapRequest(agent=3, to="labpc2")
     for crafted, why in (

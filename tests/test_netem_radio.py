@@ -115,7 +115,7 @@ def test_receiver_ledger_books_each_copy_once_and_sums_to_the_sender_ledger(tmp_
 
     from swarmbed.netem.ledger import Ledger, ReceiverLog
     from swarmbed.records.rowfile import RowFile
-    from swarmbed.records.rundir import LEDGER_COLUMNS
+    from swarmbed.records.run_folder import LEDGER_COLUMNS
 
     rng = np.random.default_rng(7)
     sink = RowFile(tmp_path / "ledger.csv", LEDGER_COLUMNS, chunk_rows=7)  # small chunks: several writes

@@ -1,8 +1,8 @@
-"""The install layout: the top-level folders install as one ``swarmbed.*`` namespace, every package
-folder is listed, and the layers import only downward."""
+"""The install layout: the mission's folders at the root and swarmbed/ install as one ``swarmbed.*``
+namespace, every package folder is listed, no two modules share a name, and the layers import only
+downward."""
 
 import ast
-import re
 import subprocess
 import sys
 import tomllib
@@ -120,35 +120,42 @@ def test_experiments_holds_experiment_files_and_no_code():
     assert list(folder.rglob("*.yaml")), "no experiment files"
 
 
-def test_the_architecture_diagram_is_its_source_and_names_every_package():
-    """docs/ARCHITECTURE.md opens with docs/architecture.mmd as written, and the diagram names every
-    top-level package the install maps (a new package must be drawn)."""
-    source = (ROOT / "docs" / "architecture.mmd").read_text()
-    page = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
-    assert "```mermaid\n" + source + "```" in page, "docs/ARCHITECTURE.md: copy docs/architecture.mmd into it"
-    words = set(re.findall(r"[a-z_]+", source))
-    top = {name.split(".")[1] for name in _setuptools()["packages"] if name.count(".") >= 1}
-    assert top <= words, sorted(top - words)
-
-
-#: file names two packages share because they hold one concept in two roles, the folder saying which
-SHARED_NAMES = {
-    "__main__.py": "each runnable package's entry (python -m swarmbed, swarmbed.agent_runtime, swarmbed.netem)",
-    "placement.py": "where agents run: the Placement the coordinator is handed, the AgentPlacement the launcher makes",
-    "ros2.py": "a process role's own ROS 2 node: the coordinator's /swarmbed, the proxy's /swarmbed_radio",
-}
-
-
-def test_no_two_modules_share_a_file_name_but_one_concept_in_two_roles():
-    """A traceback's file name says where it is: no two installed modules share a name, but those
-    written down above with the concept they share."""
+def test_no_two_modules_share_a_file_name():
+    """A traceback's file name says where it is, and one concept has one name: no two installed
+    modules share a file name (the dunder entries ``__init__`` and ``__main__`` aside)."""
     by_name: dict[str, list[str]] = {}
     setuptools = _setuptools()
     for package in setuptools["packages"]:
         folder = _folder_of(package, setuptools["package-dir"])
         for path in folder.glob("*.py"):
-            if path.name != "__init__.py":
+            if not path.name.startswith("__"):
                 by_name.setdefault(path.name, []).append(f"{package}.{path.stem}")
     shared = {name: where for name, where in by_name.items() if len(where) > 1}
-    assert set(shared) <= set(SHARED_NAMES), {n: w for n, w in shared.items() if n not in SHARED_NAMES}
-    assert set(SHARED_NAMES) <= set(shared), f"no longer shared, take them off: {set(SHARED_NAMES) - set(shared)}"
+    assert not shared, shared
+
+
+#: what the repository's root holds: the mission's folders (the process roles, the plugins, the
+#: experiment files), the tests, docs and benchmarks, and swarmbed/ for every other package
+ROOT_FOLDERS = {
+    "coordinator",
+    "agent_runtime",
+    "netem",
+    "plugins",
+    "experiments",
+    "tests",
+    "docs",
+    "benchmarks",
+    "swarmbed",
+}
+
+
+def test_the_root_shows_the_mission_and_everything_else_is_in_swarmbed():
+    made_here = {"runs", "build", "__pycache__"}  # what runs, builds and Python leave (.gitignore)
+    folders = {
+        p.name
+        for p in ROOT.iterdir()
+        if p.is_dir() and not p.name.startswith(".") and p.name not in made_here and not p.name.endswith(".egg-info")
+    }
+    assert folders == ROOT_FOLDERS, f"the root's folders: {sorted(folders)}"
+    mapped = set(_setuptools()["package-dir"].values())
+    assert mapped == {"swarmbed", "coordinator", "agent_runtime", "netem", "plugins", "experiments"}, mapped

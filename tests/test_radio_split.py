@@ -1,4 +1,4 @@
-"""A radio split over K netem proxies (``radio_split``, swarmbed.engine.radio_split): the per-copy
+"""A radio split over K netem proxies (``radio_split``, swarmbed.netem.radio_split): the per-copy
 loss draws against their formula, K radios deciding what one radio decides, and K proxy
 processes giving one proxy's result files byte for byte."""
 
@@ -7,9 +7,9 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from swarmbed.engine.radio_split import merge_inbox, owners
 from swarmbed.netem.exchange import Exchange, SplitExchange
 from swarmbed.netem.radio import per_copy_uniform
+from swarmbed.netem.radio_split import merge_inbox, owners
 from swarmbed.schema.experiment import RadioSplit, netem_spec
 from swarmbed.wire.codec import (
     BROADCAST,

@@ -7,8 +7,7 @@ import json
 
 import pytest
 
-from swarmbed.wire.errors import WireError
-from swarmbed.wire.reports import (
+from swarmbed.wire.control import (
     HostInfo,
     RestartRecord,
     SwapPending,
@@ -20,6 +19,7 @@ from swarmbed.wire.reports import (
     encode_json,
     encode_swap_answer,
 )
+from swarmbed.wire.errors import WireError
 
 HOST = {"name": "h1", "cores": 2, "mem_free_mb": 2048, "pid": 4242, "endpoint": "tcp/10.0.0.2:7447", "agents": {}}
 

@@ -132,7 +132,7 @@ def test_a_decision_travels_in_the_tick_sample_only_when_there_is_one():
 
 
 def test_a_command_key_names_a_robot_of_the_run():
-    from swarmbed.coordinator.ros2 import _robot_of
+    from swarmbed.coordinator.ros2_hub import _robot_of
 
     assert _robot_of("7/robot_3/cmd/swarmbed_msgs::msg::dds_::TaskCommand_/RIHS01_x", 5) == 3
     for key in (
@@ -149,7 +149,7 @@ def test_a_command_key_names_a_robot_of_the_run():
 
 def test_the_shipped_rviz_configuration_shows_topics_the_run_publishes():
     """docs/ros2/swarmbed.rviz parses, is in the map frame, and every topic it names is one the
-    hub's node publishes (coordinator/ros2.py)."""
+    hub's node publishes (coordinator/ros2_hub.py)."""
     import yaml
 
     from tests.conftest import ROOT
@@ -158,7 +158,7 @@ def test_the_shipped_rviz_configuration_shows_topics_the_run_publishes():
     manager = config["Visualization Manager"]
     assert manager["Global Options"]["Fixed Frame"] == "map"
     topics = {d["Topic"]["Value"] for d in manager["Displays"] if "Topic" in d}
-    source = (ROOT / "coordinator" / "ros2.py").read_text()
+    source = (ROOT / "coordinator" / "ros2_hub.py").read_text()
     assert topics == {"/robots", "/tasks", "/radio", "/robot_0/odom"}
     for topic in topics:
         assert f'"{topic}"' in source or 'f"/robot_{i}/odom"' in source, topic
@@ -187,7 +187,7 @@ def test_each_distribution_s_keys_and_cdr_are_rosbags_store_of_it(distro):
 
 
 def test_a_distribution_rosbags_does_not_offer_is_refused_in_one_line():
-    from swarmbed.launch.config import ConfigError
+    from swarmbed.config import ConfigError
     from tests.conftest import experiment
 
     with pytest.raises(ConfigError) as exc:

@@ -399,7 +399,7 @@ def test_the_trees_runconsensus_node_keeps_the_robot_still_while_its_round_runs(
     stands (``stop``) for the round's two ticks before it moves; with ``free`` it moves a tick
     after it announced."""
     from swarmbed.agent_runtime.runtime import AgentRuntime
-    from swarmbed.launch.config import resolve_experiment
+    from swarmbed.config import resolve_experiment
     from swarmbed.schema.experiment import agent_spec
     from tests.conftest import SAR_BASE, experiment
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from swarmbed import config as cfg
 from swarmbed.checks.scenario_check import ScenarioCheckError, check_scenario
 from swarmbed.extension.scenario import Scenario
-from swarmbed.launch import config as cfg
 from swarmbed.launch.runner import run_experiment
 from swarmbed.plugins.registry import resolve_scenario, scenario_names
 from swarmbed.wire.codec import WireError

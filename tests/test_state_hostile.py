@@ -168,14 +168,14 @@ def test_state_type_refuses_local_classes_and_two_classes_under_one_name():
 )
 def test_a_crafted_agent_report_is_a_wire_error_naming_its_field(report, named):
     from swarmbed.wire.codec import WireError, pack
-    from swarmbed.wire.reports import decode_agent_report
+    from swarmbed.wire.control import decode_agent_report
 
     with pytest.raises(WireError, match=named):
         decode_agent_report(pack(report))
 
 
 def test_every_report_a_process_writes_decodes_to_its_model():
-    from swarmbed.wire.reports import (
+    from swarmbed.wire.control import (
         Final,
         NetemFatal,
         Transport,

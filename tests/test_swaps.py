@@ -8,8 +8,8 @@ import textwrap
 import numpy as np
 import pytest
 
+from swarmbed import config as cfg
 from swarmbed.checks.allocator_kit import ConformanceError, check_snapshot
-from swarmbed.launch import config as cfg
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.runner import run_experiment
 from swarmbed.plugins.registry import register

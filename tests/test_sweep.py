@@ -10,8 +10,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from swarmbed import config as cfg
 from swarmbed.campaigns.sweep import load_sweep, run_seeds, run_sweep
-from swarmbed.launch import config as cfg
 from swarmbed.results.analyze import analyze
 from tests.conftest import QUICKSTART
 

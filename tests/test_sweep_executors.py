@@ -17,7 +17,7 @@ import pytest
 
 from swarmbed.campaigns import claims, executors
 from swarmbed.campaigns.sweep import load_sweep, run_sweep, status
-from swarmbed.results.folders import ATTEMPTS, read_table
+from swarmbed.results.campaign_folders import ATTEMPTS, read_table
 from tests.conftest import QUICKSTART, cmdline, same_results, under_way
 
 SWEEP = textwrap.dedent(f"""

@@ -69,8 +69,8 @@ def test_a_copied_file_restores_a_snapshot_made_from_the_original(tmp_path):
 def test_an_agent_refuses_a_plugin_file_that_differs_from_the_one_the_launcher_checked(tmp_path):
     """A host daemon's agent resolves ``file.py:Class`` on its own machine: the spec carries the
     file's digest as the launcher read it, and another file under that path is refused."""
+    from swarmbed import config as cfg
     from swarmbed.agent_runtime.runtime import AgentRuntime
-    from swarmbed.launch import config as cfg
     from swarmbed.schema.experiment import agent_spec
     from swarmbed.wire.targets import TargetError
     from tests.conftest import experiment

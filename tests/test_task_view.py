@@ -3,8 +3,8 @@
 import numpy as np
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
+from swarmbed.config import resolve_experiment
 from swarmbed.extension.view import TaskInfo
-from swarmbed.launch.config import resolve_experiment
 from swarmbed.schema.experiment import agent_spec
 from swarmbed.wire.codec import TASK_DTYPE
 from tests.conftest import experiment

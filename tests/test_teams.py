@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from swarmbed.checks.allocator_kit import random_instance, simulate
-from swarmbed.launch.config import ConfigError, resolve_experiment
+from swarmbed.config import ConfigError, resolve_experiment
 from swarmbed.plugins.central import least_travel, nash_stable_partition, sequential_greedy
 from swarmbed.plugins.grape import utility
 from swarmbed.plugins.teams import by_slots

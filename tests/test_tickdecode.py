@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swarmbed.launch import config as cfg
+from swarmbed import config as cfg
 from swarmbed.wire import codec
 from swarmbed.wire.codec import (
     TASK_DTYPE,

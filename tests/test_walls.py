@@ -11,7 +11,7 @@ import pytest
 from scipy.sparse import lil_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from swarmbed.launch.config import ConfigError, resolve_experiment, to_yaml
+from swarmbed.config import ConfigError, resolve_experiment, to_yaml
 from swarmbed.launch.inprocess import run_in_process
 from swarmbed.scenarios.paths import Planner
 from swarmbed.schema.obstacles import ObstaclesSection, segments_cross

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from swarmbed.config import resolve_experiment
 from swarmbed.extension.scenario import within
-from swarmbed.launch.config import resolve_experiment
 from swarmbed.scenarios import sar
 from swarmbed.scenarios.kinematics import Limits, step
 from swarmbed.scenarios.sar import ALIVE

@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from swarmbed.launch import config as cfg
+from swarmbed import config as cfg
 from swarmbed.launch.inprocess import run_in_process
 from swarmbed.plugins import fcg
 

@@ -39,7 +39,7 @@ def shared_line(who: str, held: collections.Counter, same_tick: int | None = Non
 
 
 def ours(seed: int, radio_range: int, same_tick_claims: str) -> None:
-    from swarmbed.launch import config as cfg
+    from swarmbed import config as cfg
     from swarmbed.launch.inprocess import run_in_process
     from swarmbed.plugins import fcg
 

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import yaml
 
+from swarmbed import config as cfg
 from swarmbed.campaigns.sweep import experiment_for, load_sweep, plan
-from swarmbed.launch import config as cfg
 from swarmbed.wire import stages
 
 ROOT = Path(__file__).resolve().parents[2]

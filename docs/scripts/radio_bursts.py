@@ -19,7 +19,7 @@ import numpy as np
 from scipy import stats
 
 from swarmbed.results.analyze import ci95
-from swarmbed.results.folders import read_table
+from swarmbed.results.campaign_folders import read_table
 
 ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
 

@@ -14,7 +14,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from swarmbed.launch import config as cfg
+from swarmbed import config as cfg
 from swarmbed.launch.runner import run_experiment
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -25,9 +25,9 @@ from statistics import mean
 import numpy as np
 from tree_world import BASE, trial  # this folder is on sys.path when the script runs
 
+from swarmbed import config as cfg
+from swarmbed.config import resolve_experiment
 from swarmbed.engine.session import run_world
-from swarmbed.launch import config as cfg
-from swarmbed.launch.config import resolve_experiment
 from swarmbed.scenarios.sar import ALIVE
 
 

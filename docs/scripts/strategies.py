@@ -22,7 +22,7 @@ import pandas as pd
 import yaml
 
 from swarmbed.results.analyze import ci95
-from swarmbed.results.folders import read_table
+from swarmbed.results.campaign_folders import read_table
 from swarmbed.results.stats import paired_p
 
 ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]

@@ -18,7 +18,7 @@ import tempfile
 from pathlib import Path
 from statistics import mean
 
-from swarmbed.launch import config as cfg
+from swarmbed import config as cfg
 from swarmbed.launch.inprocess import run_in_process
 
 BASE = Path(__file__).resolve().parents[2] / "experiments" / "sar" / "_base.yaml"

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmbed.results.analyze import ci95
-from swarmbed.results.folders import read_table
+from swarmbed.results.campaign_folders import read_table
 from swarmbed.results.stats import paired_p
 
 ORDER = ["tree", "comm", "cbba", "cbba-tree", "cbba-etc", "c-cbba"]
