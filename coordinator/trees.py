@@ -11,7 +11,6 @@ and ticks already recorded (ignored: the first account of a tick stands).
 from __future__ import annotations
 
 import logging
-import os
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -19,7 +18,7 @@ from typing import BinaryIO
 
 import zenoh
 
-from swarmbed.files.safefiles import make_dirs, open_fresh
+from swarmbed.files.safefiles import make_dirs, open_fresh, rename
 from swarmbed.records.run_folder import BT, PART_SUFFIX, PARTIAL_PREFIX, btlog_name
 from swarmbed.wire.btlog import decode_tree_changes, file_head, records, tree_size
 from swarmbed.wire.errors import WireError
@@ -80,7 +79,7 @@ class TreeRecorder:
                     log.warning(
                         "coordinator: agent %d's tree log ends at tick %d of %d", agent, entry.last_tick, last_tick
                     )
-                os.replace(entry.path, self.folder / btlog_name(agent))
+                rename(entry.path, self.folder / btlog_name(agent))
             self.logs.clear()
 
     def abandon(self) -> None:
@@ -88,7 +87,7 @@ class TreeRecorder:
         with self.lock:
             for agent, entry in self.logs.items():
                 entry.file.close()
-                os.replace(entry.path, self.folder / (PARTIAL_PREFIX + btlog_name(agent)))
+                rename(entry.path, self.folder / (PARTIAL_PREFIX + btlog_name(agent)))
             self.logs.clear()
 
 

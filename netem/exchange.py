@@ -6,10 +6,10 @@ applies. The netem proxy runs it on what arrived over Zenoh; the in-process engi
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
+from swarmbed.files.safefiles import rename
 from swarmbed.netem.ledger import Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio, drop_reasons, measured
 from swarmbed.netem.radio_split import BATCH_COLUMNS, merge_finals, merge_ledgers, merge_steps, owners
@@ -113,7 +113,7 @@ class Exchange:
         files = [LEDGER if self.split is None else ledger_part(self.shard)]
         if self.receivers is not None:
             self.receivers.close()
-            os.replace(self.out_dir / (RECEIVER_LEDGER + ".part"), self.out_dir / RECEIVER_LEDGER)
+            rename(self.out_dir / (RECEIVER_LEDGER + ".part"), self.out_dir / RECEIVER_LEDGER)
             files.append(RECEIVER_LEDGER)
         return NetemFinal(
             kind="netem",

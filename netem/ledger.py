@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from swarmbed.files.safefiles import open_fresh
 from swarmbed.records.rowfile import RowFile
 from swarmbed.records.run_folder import RECEIVER_COLUMNS
 
@@ -52,7 +53,8 @@ class ReceiverLog:
             names += MEASURE_COLUMNS
         self.measured = measured
         self.schema = pa.schema(list(zip(names, types)))
-        self._writer: Any = pq.ParquetWriter(path, self.schema)
+        self._file = open_fresh(path)  # created fresh, never through a link
+        self._writer: Any = pq.ParquetWriter(self._file, self.schema)
         self.group = group
         self.rows = 0
         self._cols: tuple[list, ...] = tuple([] for _ in names)
@@ -95,6 +97,7 @@ class ReceiverLog:
     def close(self) -> None:
         self.flush(force=True)
         self._writer.close()
+        self._file.close()
 
 
 class Ledger:

@@ -21,6 +21,7 @@ from typing import Any
 
 import zenoh
 
+from swarmbed.files.safefiles import rooted
 from swarmbed.netem.exchange import Exchange
 from swarmbed.netem.ros2_radio import Ros2Outboxes
 from swarmbed.records.rowfile import TableWriteError
@@ -386,7 +387,8 @@ def main(argv: list[str] | None = None) -> int:
                 node = os.environ.get("SLURMD_NODENAME")
                 where = f" on Slurm node {node}" if node else f" on {socket.gethostname()}"
                 log.info("netem: proxy %d of %d%s", args.shard, spec.split.shards, where)
-            return Proxy(spec, keys, session, Path(args.out), args.shard).run()
+            with rooted(args.out):  # the run's folder, opened once: no link below it is followed
+                return Proxy(spec, keys, session, Path(args.out), args.shard).run()
         except Exception as exc:
             # logged and reported while the session, and with it the liveliness token, is still
             # held: the launcher stops every child once the token goes, which could cut it off

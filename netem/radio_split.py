@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import csv
 import heapq
-import os
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from swarmbed.files.safefiles import remove
 from swarmbed.records.rowfile import RowFile
 from swarmbed.records.run_folder import LEDGER, LEDGER_COLUMNS, ledger_part
 from swarmbed.schema.experiment import RadioSplit
@@ -134,7 +134,7 @@ def merge_ledgers(out_dir: Path, shards: int) -> Path:
     _write_batch(sink, batch)
     sink.finish()
     for shard in range(shards):
-        os.remove(out_dir / ledger_part(shard))
+        remove(out_dir / ledger_part(shard))
     return out_dir / LEDGER
 
 

@@ -221,3 +221,130 @@ def test_analyze_and_report_refuse_a_sweep_table_larger_than_they_read_in_one_li
         assert done.returncode != 0 and len(err.splitlines()) == 1 and "sweep.csv" in err and "bytes" in err, err
         assert time.monotonic() - started < 60
     assert _swarmbed("analyze", received).returncode == 0  # within the default bound
+
+
+# -- issue 82, items 1-6: a folder opened once, nothing below it reached through a link ------------
+def _received(swept: Path, tmp_path: Path) -> Path:
+    received = tmp_path / "received"
+    shutil.copytree(swept / "out", received, symlinks=True)
+    shutil.copy(swept / "s.yaml", tmp_path / "s.yaml")
+    return received
+
+
+def _outside(tmp_path: Path) -> tuple[Path, Path]:
+    """A folder outside the sweep holding one file a user owns: (folder, file)."""
+    folder = tmp_path / "outside"
+    (folder / "base" / "run_000").mkdir(parents=True)
+    victim = folder / "base" / "run_000" / "mine.txt"
+    victim.write_text(VICTIM)
+    return folder, victim
+
+
+def _untouched(folder: Path, victim: Path) -> None:
+    assert victim.read_text() == VICTIM
+    assert sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*")) == [
+        "base",
+        "base/run_000",
+        "base/run_000/mine.txt",
+    ]
+
+
+INPROCESS = ("--engine", "inprocess", "--no-progress", "--set", "run.duration=40")
+
+
+def test_verify_through_a_planted_verify_link_deletes_and_writes_nothing_outside(swept, tmp_path):
+    received, (outside, victim) = _received(swept, tmp_path), _outside(tmp_path)
+    (received / ".verify").symlink_to(outside, target_is_directory=True)
+    done = _swarmbed("sweep", tmp_path / "s.yaml", "--out", received, "--verify", "1", *INPROCESS)
+    assert done.returncode != 0 and "link" in done.stderr.strip().splitlines()[-1], done.stderr
+    _untouched(outside, victim)
+
+
+def test_a_planted_submitit_link_is_refused_before_submitit_writes_a_script(swept, tmp_path):
+    received, (outside, victim) = _received(swept, tmp_path), _outside(tmp_path)
+    (received / ".submitit").symlink_to(outside, target_is_directory=True)
+    done = _swarmbed("sweep", tmp_path / "s.yaml", "--out", received, "--executor", "slurm", "--no-progress")
+    err = done.stderr.strip()
+    assert done.returncode != 0 and len(err.splitlines()) == 1 and ".submitit" in err and "link" in err, err
+    _untouched(outside, victim)
+
+
+def test_a_planted_mlruns_link_is_refused_for_the_default_store(swept, tmp_path):
+    received, (outside, victim) = _received(swept, tmp_path), _outside(tmp_path)
+    (received / "mlruns").symlink_to(outside, target_is_directory=True)
+    done = _swarmbed("sweep", tmp_path / "s.yaml", "--out", received, "--mlflow", *INPROCESS)
+    err = done.stderr.strip()
+    assert done.returncode != 0 and len(err.splitlines()) == 1 and "mlruns" in err and "link" in err, err
+    _untouched(outside, victim)
+
+
+def test_redo_mismatched_through_a_linked_scenario_folder_deletes_no_summary_outside(swept, tmp_path):
+    received = _received(swept, tmp_path)
+    outside = tmp_path / "outside"
+    shutil.move(received / "base", outside)
+    (received / "base").symlink_to(outside, target_is_directory=True)
+    summaries = {p: p.read_bytes() for p in outside.rglob("summary.json")}
+    assert summaries
+    again = ("--engine", "inprocess", "--no-progress", "--set", "run.duration=41", "--redo-mismatched")
+    done = _swarmbed("sweep", tmp_path / "s.yaml", "--out", received, *again)
+    err = done.stderr.strip()
+    assert done.returncode != 0 and len(err.splitlines()) == 1 and "link" in err, err
+    assert {p: p.read_bytes() for p in outside.rglob("summary.json")} == summaries
+
+
+def test_a_resumed_sweep_never_appends_to_a_hard_linked_attempts_file(swept, tmp_path):
+    received = _received(swept, tmp_path)
+    run = received / "base" / "run_001"
+    (run / "summary.json").unlink()  # unfinished: the resumed sweep runs it again and records the attempt
+    victim = _victims(tmp_path, 1)[0]
+    (run / "attempts.jsonl").unlink()
+    os.link(victim, run / "attempts.jsonl")
+    done = _swarmbed("sweep", tmp_path / "s.yaml", "--out", received, *INPROCESS)
+    assert done.returncode == 0, done.stderr
+    assert victim.read_text() == VICTIM and victim.stat().st_nlink == 1
+    lines = (run / "attempts.jsonl").read_text().splitlines()
+    assert [json.loads(line)["event"] for line in lines[-2:]] == ["start", "end"]
+
+
+def test_a_folder_swapped_for_a_link_while_a_run_writes_gets_no_file_outside(tmp_path):
+    """The run's bt/ folder is swapped for a link to a folder outside, over and over, while the
+    run's coordinator creates and renames its tree logs there; nothing may land outside (the run
+    may refuse the link and fail: that is the point)."""
+    import threading
+
+    run, outside, stop = tmp_path / "run", tmp_path / "outside", threading.Event()
+    outside.mkdir()
+
+    def swap() -> None:
+        real = tmp_path / "bt_real"
+        while not stop.is_set():
+            try:
+                if (run / "bt").is_dir() and not (run / "bt").is_symlink():
+                    os.rename(run / "bt", real)
+                    (run / "bt").symlink_to(outside, target_is_directory=True)
+                    time.sleep(0.001)
+                    (run / "bt").unlink()
+                    os.rename(real, run / "bt")
+            except OSError:
+                pass
+
+    swapper = threading.Thread(target=swap, daemon=True)
+    swapper.start()
+    try:
+        _swarmbed(
+            "run",
+            QUICKSTART,
+            "--out",
+            run,
+            "--no-progress",
+            "--set",
+            "run.record_bt=true",
+            "--set",
+            "run.duration=600",
+            "--set",
+            "agents.count=8",
+        )
+    finally:
+        stop.set()
+        swapper.join()
+    assert list(outside.iterdir()) == []

@@ -30,6 +30,8 @@ from swarmbed.files import safefiles
 from swarmbed.wire.child_process import process_alive
 
 CLAIM = "claim.json"
+#: the most read of a claim (one is about 200 bytes)
+MAX_CLAIM_BYTES = 64 << 10
 LOCK = "claim.lock"
 STALE_AFTER_S = 120.0  # a claim not touched for this long is abandoned (its holder's node died)
 
@@ -56,20 +58,18 @@ class Holder:
 def holder(run_dir: Path) -> Holder | None:
     """The claim on ``run_dir`` as its file says, or None (no claim, or an unreadable one)."""
     path = run_dir / CLAIM
-    try:
-        data = json.loads(path.read_text())
+    try:  # bounded and without blocking: a received folder's claim.json may be /dev/zero or a FIFO
+        data = json.loads(safefiles.read_file(path, MAX_CLAIM_BYTES))
         return Holder(
-            str(data["host"]), int(data["pid"]), float(data["started"]), str(data["token"]), path.stat().st_mtime
+            str(data["host"]), int(data["pid"]), float(data["started"]), str(data["token"]), path.lstat().st_mtime
         )
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, RecursionError):
         return None
 
 
 @contextmanager
 def _locked(run_dir: Path) -> Iterator[None]:
-    if (run_dir / LOCK).is_symlink():  # planted in a received folder: replaced, never followed
-        (run_dir / LOCK).unlink()
-    fd = os.open(run_dir / LOCK, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    fd = safefiles.open_lock(run_dir / LOCK)  # a link planted in a received folder is replaced, never followed
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
         yield
@@ -102,7 +102,7 @@ class Claim:
         with _locked(self.run_dir):
             now = holder(self.run_dir)
             if now is not None and now.token == self.token:
-                (self.run_dir / CLAIM).unlink(missing_ok=True)
+                safefiles.remove(self.run_dir / CLAIM)
 
     def __enter__(self) -> Claim:
         return self
@@ -114,7 +114,7 @@ class Claim:
 def take(run_dir: Path, stale_after: float = STALE_AFTER_S) -> Claim | Holder:
     """Claim ``run_dir`` for this process: the :class:`Claim`, or the live :class:`Holder` that
     has it already."""
-    run_dir.mkdir(parents=True, exist_ok=True)
+    safefiles.make_folder(run_dir)
     with _locked(run_dir):
         current = holder(run_dir)
         if current is not None and current.alive(stale_after):

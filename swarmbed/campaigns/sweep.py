@@ -219,6 +219,8 @@ def load_sweep(
 
 #: the most runs a sweep plans (scenarios x runs): every planned run is an object and a folder
 MAX_PLANNED_RUNS = 1_000_000
+#: the most read of a run's attempts.jsonl (a line a start or end of an attempt, about 150 bytes)
+MAX_ATTEMPTS_BYTES = 4 << 20
 
 
 def _check_size(scenarios: int, runs: int, where: str) -> None:
@@ -273,7 +275,7 @@ def execute(spec: RunSpec, stale_after: float = claims.STALE_AFTER_S, in_process
     with claim:
         if RunDir(out).complete:  # completed by someone else since it was planned
             return "ok", "done elsewhere"
-        (out / ERROR).unlink(missing_ok=True)
+        safefiles.remove(out / ERROR)
         started = time.time()
         _record_attempt(out, event="start", time=started)
         try:
@@ -344,10 +346,10 @@ def run_status(run_dir: Path, stale_after: float = claims.STALE_AFTER_S) -> str:
 
 def _last_attempt(run_dir: Path) -> dict[str, Any]:
     """The last line of a run's ``attempts.jsonl`` ({} if none can be read)."""
-    try:
-        lines = (run_dir / ATTEMPTS).read_text().splitlines()
+    try:  # bounded and without blocking: a received folder's attempts.jsonl may be /dev/zero or a FIFO
+        lines = safefiles.read_file(run_dir / ATTEMPTS, MAX_ATTEMPTS_BYTES).splitlines()
         last = json.loads(lines[-1]) if lines else {}
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return {}
     return last if isinstance(last, dict) else {}
 
@@ -410,7 +412,7 @@ def write_tables(table: pd.DataFrame, out: Path) -> None:
     an earlier table are removed: they may show another sweep's scenarios."""
     for pattern in DERIVED:
         for stale in out.glob(pattern):
-            stale.unlink(missing_ok=True)
+            safefiles.remove(stale)
     with safefiles.replacing(out / TABLE) as tmp:
         table.to_csv(tmp, index=False)
     with safefiles.replacing(out / PARQUET) as tmp:
@@ -518,7 +520,7 @@ def _check_completed(specs: list[RunSpec], out: Path, redo: bool) -> None:
         return
     if redo:
         for spec, _, _ in mismatched:
-            (Path(spec.out_dir) / results.SUMMARY).unlink(missing_ok=True)
+            safefiles.remove(Path(spec.out_dir) / results.SUMMARY)
         return
     spec, made, planned = mismatched[0]
     raise cfg.ConfigError(
@@ -526,6 +528,16 @@ def _check_completed(specs: list[RunSpec], out: Path, redo: bool) -> None:
         f"(first: {Path(spec.out_dir).relative_to(out)}: {config_differences(made, planned) or 'no config.yaml'}); "
         f"redo them with --redo-mismatched, or give --out a new folder"
     )
+
+
+def _remove_parts(run_dir: Path) -> None:
+    """The ``*.part`` files of an interrupted run removed (none through a link: a run folder reached
+    through one is left alone)."""
+    try:
+        for partial_file in run_dir.glob("*.part"):
+            safefiles.remove(partial_file)
+    except OSError:
+        pass
 
 
 def run_sweep(
@@ -547,11 +559,26 @@ def run_sweep(
     (lock-step only; the same result files as processes, for tests and calibration sweeps).
     ``on_complete``: called in this process with each run that is complete, those completed before
     first (a resumed sweep), then each as it completes (``--mlflow`` logs them)."""
+    with safefiles.rooted(out):  # the sweep's folder, opened once: no run folder is reached through a link
+        return _run_sweep(sweep, out, jobs, progress, executor, stale_after, redo_mismatched, in_process, on_complete)
+
+
+def _run_sweep(
+    sweep: Sweep,
+    out: Path,
+    jobs: int | None = None,
+    progress: bool = True,
+    executor: Executor | None = None,
+    stale_after: float = claims.STALE_AFTER_S,
+    redo_mismatched: bool = False,
+    in_process: bool = False,
+    on_complete: Callable[[RunSpec], None] | None = None,
+) -> pd.DataFrame:
     from swarmbed.campaigns import executors
 
     if jobs is not None and jobs < 1:
         raise cfg.ConfigError(f"--jobs {jobs}: at least one run must be able to go at once")
-    out.mkdir(parents=True, exist_ok=True)
+    safefiles.make_folder(out)
     specs = plan(sweep, out)
     agents: dict[str, int] = {}  # per scenario name
     try:
@@ -602,8 +629,7 @@ def run_sweep(
         bar.close()
         for spec in specs:  # an incomplete run leaves no half-written file behind
             if not RunDir(spec.out_dir).complete:
-                for partial_file in Path(spec.out_dir).glob("*.part"):
-                    partial_file.unlink(missing_ok=True)
+                _remove_parts(Path(spec.out_dir))
         done = _complete(specs)
         write_tables(collect(sweep, out, stale_after), out)  # what completed can be analyzed at once
         raise SweepInterrupted(

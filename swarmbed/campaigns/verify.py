@@ -8,11 +8,11 @@ again go to ``<sweep>/.verify/<scenario>/run_NNN``, where a user can diff what d
 
 from __future__ import annotations
 
-import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
 from swarmbed.campaigns.sweep import RunSpec, experiment_for
+from swarmbed.files import safefiles
 from swarmbed.launch.runner import run_experiment
 from swarmbed.records.run_folder import REPRODUCIBLE, RunDir
 
@@ -40,8 +40,10 @@ def verify_in_processes(planned: Sequence[RunSpec], out: Path, k: int) -> bool:
     for spec in chosen:
         made = Path(spec.out_dir)
         again = out / VERIFY / made.relative_to(out)
-        shutil.rmtree(again, ignore_errors=True)
-        run_experiment(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra), again, progress=False)
+        with safefiles.rooted(out, create=False):  # .verify and the folders in it: never through a link
+            safefiles.remove_tree(again)
+            safefiles.make_folder(again)
+            run_experiment(experiment_for(spec.base, spec.scenario, spec.seed, spec.extra), again, progress=False)
         differ = differing_files(made, again)
         if differ:
             same = False

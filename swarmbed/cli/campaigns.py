@@ -7,10 +7,11 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from swarmbed import config as cfg
 from swarmbed.cli.common import add_engine, engine_prefix, positive, refusals
+from swarmbed.files import safefiles
 from swarmbed.plugins import registry
 
 if TYPE_CHECKING:
@@ -28,10 +29,11 @@ def _sweep_executor(args: argparse.Namespace, out: Path) -> Executor:
         raise executors.ExecutorError("--slurm-*, --detach: only with --executor slurm")
     if args.executor != "dask" and args.scheduler:
         raise executors.ExecutorError("--scheduler: only with --executor dask")
+    submitit = out / ".submitit"  # submitit's scripts and pickles: a folder the helper made, never a link's
     return executors.get(
         args.executor,
         jobs=args.jobs,
-        folder=out / ".submitit",
+        folder=safefiles.make_folder(submitit) if args.executor == "slurm" else submitit,
         partition=args.slurm_partition,
         time=args.slurm_time,
         parallel=args.jobs,
@@ -47,6 +49,8 @@ def _mlflow_logger(uri: str | None, name: str, out: Path):
         return None
     from swarmbed.campaigns.tracking import MlflowLog, default_uri
 
+    if not uri:  # the default store, in a folder the helper made below the sweep (never a link's target)
+        safefiles.make_folder(out / "mlruns")
     log = MlflowLog(uri or default_uri(out), name)
 
     def log_run(spec) -> None:
@@ -56,9 +60,7 @@ def _mlflow_logger(uri: str | None, name: str, out: Path):
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from swarmbed.campaigns.executors import ExecutorError
-    from swarmbed.campaigns.sweep import experiment_for, load_sweep, plan, run_sweep, status
-    from swarmbed.campaigns.tracking import TrackingError
+    from swarmbed.campaigns.sweep import experiment_for, load_sweep, plan, status
 
     if args.status:
         try:
@@ -97,6 +99,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    with safefiles.rooted(out):  # the sweep's folder, opened once: nothing below it is reached through a link
+        return _sweep_into(args, sweep, out, planned)
+
+
+def _sweep_into(args: argparse.Namespace, sweep: Any, out: Path, planned: list) -> int:
+    """The sweep run into ``out`` (opened by the caller), its table and figures printed."""
+    from swarmbed.campaigns.executors import ExecutorError
+    from swarmbed.campaigns.sweep import run_sweep
+    from swarmbed.campaigns.tracking import TrackingError
+
     try:
         executor = _sweep_executor(args, out)
         on_complete = _mlflow_logger(args.mlflow, sweep.name, out)

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarmbed import config as cfg
+from swarmbed.files import safefiles
 from swarmbed.plugins import registry
 
 if TYPE_CHECKING:
@@ -52,7 +52,7 @@ def taken(out: Path, force: bool) -> str | None:
         else:
             what = "files"
         return f"--out {out}: holds {what} already; give another --out, or --force to clear it first"
-    shutil.rmtree(out)
+    safefiles.remove_tree(out)
     return None
 
 

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from swarmbed import config as cfg
 from swarmbed.cli.common import add_engine, engine_prefix, fmt, keys_epilog, port_number, refusals, taken
+from swarmbed.files import safefiles
 
 if TYPE_CHECKING:
     from swarmbed.cli.common import Subparsers
@@ -117,7 +118,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from swarmbed.launch.slurm_allocation import SlurmError, SlurmHosts
 
         logs = Path("runs") / "hosts" / f"slurm-{allocation.job_id}"
-        logs.mkdir(parents=True, exist_ok=True)
+        safefiles.make_folder(logs)
         try:
             with SlurmHosts(allocation, logs) as hosts:
                 print(

@@ -21,7 +21,6 @@ from __future__ import annotations
 import ipaddress
 import logging
 import os
-import shutil
 import signal
 import tempfile
 import threading
@@ -33,6 +32,7 @@ from typing import Any
 import psutil
 import zenoh
 
+from swarmbed.files import safefiles
 from swarmbed.launch.access import EVERY_MESSAGE
 from swarmbed.launch.host_client import HostError
 from swarmbed.launch.launcher import AGENT_MODULE, Children, ForkServerError
@@ -96,7 +96,7 @@ class Host:
             if children is None:
                 log_dir = self.logs / run_id
                 try:
-                    log_dir.mkdir(parents=True, exist_ok=True)
+                    safefiles.make_folder(log_dir)
                 except OSError as exc:
                     return HostAnswer(error=f"cannot write logs to {log_dir}: {exc.strerror}")
                 try:
@@ -308,14 +308,14 @@ def serve(
         session = zenoh.open(zenoh_config(mode, connect, listen, zenoh_config_file, settings=settings))
     except zenoh.ZError as exc:  # a --listen port another process holds, an endpoint that cannot be
         if private:
-            shutil.rmtree(private, ignore_errors=True)
+            safefiles.remove_tree(private)
         raise HostError(
             f"host {name}: cannot open its router on {', '.join(listen)} ({str(exc).splitlines()[0][:160]}); "
             "is the port in use? give another --listen"
         ) from None
     except BaseException:
         if private:
-            shutil.rmtree(private, ignore_errors=True)
+            safefiles.remove_tree(private)
         raise
     with session:
         host = Host(name, session, listen[0], logs, agent_credentials)
@@ -336,6 +336,6 @@ def serve(
         finally:
             host.close()
             if private:
-                shutil.rmtree(private, ignore_errors=True)
+                safefiles.remove_tree(private)
     log.info("host %s: stopped", name)
     return 0

@@ -22,7 +22,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from swarmbed.files.safefiles import open_fresh
+from swarmbed.files.safefiles import make_folder, open_fresh, own_folders, remove_tree
 from swarmbed.launch.hub import HubOptions
 from swarmbed.launch.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
@@ -154,8 +154,8 @@ class Lab:
                     pass
             time.sleep(0.05)
         daemon.wait(timeout=10)
-        for private in Path(tempfile.gettempdir()).glob(f"swarmbed-host-{name}-*"):  # its identities, never removed
-            shutil.rmtree(private, ignore_errors=True)
+        for private in own_folders(Path(tempfile.gettempdir()), f"swarmbed-host-{name}-*"):  # its identities
+            remove_tree(private)
 
     def pids(self, name: str) -> list[str]:
         ns = self.namespaces[list(self.daemons).index(name)]
@@ -235,7 +235,7 @@ def make_lab(logs: Path) -> Lab:
         raise LabError(reason)
     tag = "sb" + secrets.token_hex(2)
     lab = Lab(tag, net=int(secrets.randbelow(200)) + 20, logs=logs)
-    logs.mkdir(parents=True, exist_ok=True)
+    make_folder(logs)
     try:
         _ip("link", "add", f"{tag}br", "type", "bridge")
         _ip("addr", "add", f"{lab.bridge_ip}/24", "dev", f"{tag}br")

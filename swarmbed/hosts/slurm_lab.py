@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from swarmbed.files import safefiles
 from swarmbed.hosts.netns import Lab, LabError
 from swarmbed.wire.zenoh_session import free_port
 
@@ -84,7 +85,7 @@ def make_slurm_lab(lab: Lab, folder: Path, nodes: int) -> SlurmLab:
     reason = why_not()
     if reason:
         raise LabError(reason)
-    folder.mkdir(parents=True, exist_ok=True)
+    safefiles.make_folder(folder)
     cluster = SlurmLab(lab, folder)
     ctld_port = free_port(lab.bridge_ip)
     slurmd_port = free_port(lab.bridge_ip)
@@ -120,8 +121,8 @@ def make_slurm_lab(lab: Lab, folder: Path, nodes: int) -> SlurmLab:
         cluster.nodes.append(f"n{k}")
         lines.append(f"NodeName=n{k} NodeAddr={lab.address(ns)} CPUs={os.cpu_count() or 1} RealMemory={memory_mb}")
     lines.append(f"PartitionName=lab Nodes=n[1-{nodes}] Default=YES MaxTime=INFINITE State=UP OverSubscribe=YES")
-    (folder / "state").mkdir(exist_ok=True)
-    (folder / "slurm.conf").write_text("\n".join(lines) + "\n")
+    safefiles.make_folder(folder / "state")
+    safefiles.write_text(folder / "slurm.conf", "\n".join(lines) + "\n")
     conf = str(folder / "slurm.conf")
     try:
         _munge()

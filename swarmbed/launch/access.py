@@ -32,7 +32,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import shutil
 import tempfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -48,6 +47,7 @@ from swarmbed.wire.ros2_conventions import NODE_PREFIX as ROS2_NODE_PREFIX
 
 log = logging.getLogger("swarmbed.access")
 OWNER = "owner.json"  # in a run's private folder: the launcher that made it (pid, start time)
+MAX_OWNER_BYTES = 4096  # an owner record is about 60 bytes
 
 EVERY_MESSAGE = [
     "put",
@@ -253,7 +253,7 @@ class RunAccess:
         }
 
     def close(self) -> None:
-        shutil.rmtree(self.folder, ignore_errors=True)
+        safefiles.remove_tree(self.folder)
 
 
 def claim_folder(folder: Path) -> None:
@@ -264,16 +264,17 @@ def claim_folder(folder: Path) -> None:
 
 def remove_orphaned_folders(tmp: Path | None = None) -> list[Path]:
     """Remove the private folders of runs whose launcher is gone (killed before :meth:`RunAccess.close`
-    ran); returns them. A folder without a readable owner record, or not ours, is left alone."""
+    ran); returns them. Only this user's folders that are not links are looked at, their owner
+    record read bounded and without blocking; one without a readable record is left alone."""
     removed = []
-    for folder in Path(tmp or tempfile.gettempdir()).glob("swarmbed-*-*"):
-        try:
-            owner = json.loads((folder / OWNER).read_text())
+    for folder in safefiles.own_folders(Path(tmp or tempfile.gettempdir()), "swarmbed-*-*"):
+        try:  # another local user may have planted owner.json as a FIFO or a link to /dev/zero
+            owner = json.loads(safefiles.read_file(folder / OWNER, MAX_OWNER_BYTES))
             orphaned = not process_alive(int(owner["pid"]), float(owner["started"]))
-        except (OSError, ValueError, KeyError, TypeError):
+        except (OSError, ValueError, KeyError, TypeError, RecursionError):
             continue
         if orphaned:
-            shutil.rmtree(folder, ignore_errors=True)
+            safefiles.remove_tree(folder)
             removed.append(folder)
     if removed:
         log.info("removed %d private folders of runs whose launcher is gone", len(removed))

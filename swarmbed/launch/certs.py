@@ -14,7 +14,7 @@ import ipaddress
 from pathlib import Path
 
 from swarmbed.files import safefiles
-from swarmbed.wire.credentials import open_private
+from swarmbed.wire.credentials import write_private
 
 CA = "ca"
 
@@ -36,12 +36,8 @@ def _crypto():
 
 def _write_key(path: Path, key) -> None:
     _, _, serialization, _, _, _ = _crypto()
-    with open_private(path, "wb") as f:
-        f.write(
-            key.private_bytes(
-                serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
-            )
-        )
+    pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
+    write_private(path, pem)
 
 
 def _names(addresses: list[str]):
@@ -68,7 +64,7 @@ def make_certs(folder: Path, machines: list[str], days: int = 365) -> list[Path]
     """A CA in ``folder`` (made once, reused after) and ``<name>.pem`` / ``<name>.key`` for each
     machine spec (see :func:`parse_machine`); returns the files written."""
     x509, hashes, serialization, ec, eku, oid = _crypto()
-    folder.mkdir(parents=True, exist_ok=True)
+    safefiles.make_folder(folder)
     now = datetime.datetime.now(datetime.UTC)
     ca_pem, ca_key_path = folder / f"{CA}.pem", folder / f"{CA}.key"
     if ca_pem.exists() and ca_key_path.exists():

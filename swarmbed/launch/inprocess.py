@@ -19,10 +19,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
+from contextlib import ExitStack
 from pathlib import Path
 
 from swarmbed.agent_runtime.runtime import AgentRuntime
 from swarmbed.engine import ENGINES, OneProcess, Session, TickInHand, refusals, results
+from swarmbed.files import safefiles
 from swarmbed.launch.runner import RunResult, View, plan_run, start_result_dir
 from swarmbed.netem.exchange import Exchange, SplitExchange
 from swarmbed.records.run_folder import DEPLOYMENT
@@ -89,13 +91,19 @@ class InProcessRun:
         if why:
             raise ValueError(f"--engine inprocess: {why[0]}")
         self.exp, self.out_dir = exp, Path(out_dir)
-        start_result_dir(plan)
-        self.session = Session(exp, resolved.scenario(), resolved.allocator_cls, self.out_dir)
-        self.world = self.session.world
-        self.engine = InProcess(exp, resolved.targets, self.out_dir)
-        self.session.connect(self.engine, OneProcess(self.world), [view(self.session) for view in views])
-        self.result: RunResult | None = None
-        self.session.start()
+        self._folder = ExitStack()  # the run's folder, opened once: every file of the run reached from it
+        self._folder.enter_context(safefiles.rooted(self.out_dir))
+        try:
+            start_result_dir(plan)
+            self.session = Session(exp, resolved.scenario(), resolved.allocator_cls, self.out_dir)
+            self.world = self.session.world
+            self.engine = InProcess(exp, resolved.targets, self.out_dir)
+            self.session.connect(self.engine, OneProcess(self.world), [view(self.session) for view in views])
+            self.result: RunResult | None = None
+            self.session.start()
+        except BaseException:
+            self._folder.close()
+            raise
 
     @property
     def over(self) -> bool:
@@ -117,6 +125,7 @@ class InProcessRun:
             self.session.step(decisions)
         except BaseException:
             self.session.abandon()
+            self._folder.close()
             raise
         if self.session.over:
             self.finish()
@@ -134,14 +143,15 @@ class InProcessRun:
         if self.result is not None:
             return self.result
         self.session.loop.end()  # a run cut short (a learner's episode): the hooks hear it end too
-        try:
-            reports, netem = self.engine.reports(), self.engine.finish(self.session.last_tick)
-            timings = {"engine": "inprocess", "run_s": time.perf_counter() - self.t0}
-            summary = self.session.write(reports, netem, malformed=0, clock=None, timings=timings)
-        except BaseException:
-            self.session.abandon()
-            raise
-        results.write_json(self.out_dir / DEPLOYMENT, {"engine": "inprocess", "agents": "this process"})
+        with self._folder:  # closed once the files are written, or the run abandoned
+            try:
+                reports, netem = self.engine.reports(), self.engine.finish(self.session.last_tick)
+                timings = {"engine": "inprocess", "run_s": time.perf_counter() - self.t0}
+                summary = self.session.write(reports, netem, malformed=0, clock=None, timings=timings)
+            except BaseException:
+                self.session.abandon()
+                raise
+            results.write_json(self.out_dir / DEPLOYMENT, {"engine": "inprocess", "agents": "this process"})
         self.result = RunResult(self.out_dir, summary.document, timings)
         return self.result
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import secrets
-import shutil
 import time
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
@@ -118,13 +117,11 @@ def start_result_dir(plan: RunPlan) -> None:
     """The run's folder with its configuration and provenance, and no result of an earlier run in it:
     a stale summary must never vouch for a new, unfinished run."""
     out_dir, resolved = plan.out_dir, plan.resolved
-    out_dir.mkdir(parents=True, exist_ok=True)
+    safefiles.make_folder(out_dir)
     for name in RESULT_FILES:
-        (out_dir / name).unlink(missing_ok=True)
-        (out_dir / (PARTIAL_PREFIX + name)).unlink(missing_ok=True)
-    if (out_dir / BT).is_symlink():  # a link planted in a received folder is removed, never followed
-        (out_dir / BT).unlink()
-    shutil.rmtree(out_dir / BT, ignore_errors=True)
+        safefiles.remove(out_dir / name)
+        safefiles.remove(out_dir / (PARTIAL_PREFIX + name))
+    safefiles.remove_tree(out_dir / BT)  # a link planted in a received folder is removed, never followed
     safefiles.make_dirs(out_dir, out_dir / "logs")
     results.write_atomic(out_dir / results.CONFIG, to_yaml(plan.exp))
     results.write_json(
@@ -156,8 +153,9 @@ def run_experiment(
     them each tick (:mod:`swarmbed.envs`). ``views``: each makes, from the run's session, a hook
     that shows the run as it goes (a live Foxglove server, :mod:`swarmbed.results.foxglove_live`)."""
     plan = plan_run(exp, out_dir, hub)
-    start_result_dir(plan)
-    return _execute(plan, progress, on_ready, fork_agents, observers, decider, views)
+    with safefiles.rooted(out_dir):  # every file of the run reached from one handle on its folder
+        start_result_dir(plan)
+        return _execute(plan, progress, on_ready, fork_agents, observers, decider, views)
 
 
 @dataclass
@@ -491,8 +489,8 @@ def _keep_no_torn_result(coord: ZenohTransport, out_dir: Path) -> None:
         if coord.last_tick >= 0:
             keep_partial(partial)
         else:
-            partial.unlink(missing_ok=True)
+            safefiles.remove(partial)
     if not (out_dir / results.SUMMARY).exists():  # results written before a failure at the very end
         for name in RESULT_FILES:
             if name != DEPLOYMENT and (out_dir / name).exists():
-                os.replace(out_dir / name, out_dir / (PARTIAL_PREFIX + name))
+                safefiles.rename(out_dir / name, out_dir / (PARTIAL_PREFIX + name))

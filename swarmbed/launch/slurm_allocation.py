@@ -31,6 +31,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from swarmbed.files import safefiles
 from swarmbed.files.safefiles import open_fresh
 from swarmbed.launch.launcher import python_env
 from swarmbed.wire.credentials import Identity, write_credentials
@@ -184,8 +185,7 @@ class SlurmHosts:
             at = args.index("--credentials") + 1
             shared = self._private / "netem.credentials"
             if not shared.exists():
-                shutil.copyfile(args[at], shared)
-                shared.chmod(0o600)
+                safefiles.write_bytes(shared, safefiles.read_regular(args[at], 1 << 20), mode=0o600)
             args[at] = str(shared)
         step = ["srun", "--nodes=1", "--ntasks=1", f"--nodelist={node}", "--overlap"]
         step += [f"--job-name=swarmbed-netem-{shard}", "--kill-on-bad-exit=0"]
@@ -204,7 +204,7 @@ class SlurmHosts:
                     os.killpg(proc.pid, signal.SIGKILL)
                     proc.wait()
         if self._private is not None:
-            shutil.rmtree(self._private, ignore_errors=True)
+            safefiles.remove_tree(self._private)
 
     def _terminate_steps(self) -> None:
         """SIGTERM to each daemon through Slurm (``scancel --signal``), which a daemon takes as its

@@ -27,7 +27,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from swarmbed.files.safefiles import create_fresh
+from swarmbed.files.safefiles import create_fresh, rename
 from swarmbed.records.run_folder import PART_SUFFIX, PARTIAL_PREFIX
 
 
@@ -114,7 +114,7 @@ class RowFile:
             raise write_error(exc, self.path.parent) from None
         os.close(self._fd)
         self._fd = None
-        os.replace(self.part, self.path)
+        rename(self.part, self.path)
         return self.path
 
     def abandon(self) -> Path | None:
@@ -138,5 +138,5 @@ def keep_partial(part: Path) -> Path | None:
         return None
     name = part.name.removesuffix(PART_SUFFIX)
     target = part.with_name(PARTIAL_PREFIX + name)
-    os.replace(part, target)
+    rename(part, target)
     return target

@@ -187,10 +187,29 @@ MAX_TABLE_BYTES = 2 << 30
 MAX_TABLE_ROWS = 10_000_000
 
 
+def env_limit(name: str, default: int) -> int:
+    """The limit the environment variable ``name`` sets, or ``default`` where it is unset or empty;
+    a RunFileError naming the variable for anything but a whole number in ASCII digits
+    (``"²".isdigit()`` is true, and ``int("²")`` fails)."""
+    given = os.environ.get(name, "").strip()
+    if not given:
+        return default
+    if not (given.isascii() and given.isdigit()) or len(given) > 18:
+        raise RunFileError(f"{name}={given[:20]!r}: not a whole number of ASCII digits; unset it for {default:,}")
+    return int(given)
+
+
 def max_table_rows() -> int:
-    """:data:`MAX_TABLE_ROWS`, or ``SWARMBED_MAX_TABLE_ROWS`` where it is set to a whole number."""
-    given = os.environ.get("SWARMBED_MAX_TABLE_ROWS", "")
-    return int(given) if given.isdigit() else MAX_TABLE_ROWS
+    """:data:`MAX_TABLE_ROWS`, or ``SWARMBED_MAX_TABLE_ROWS`` where it is set."""
+    return env_limit("SWARMBED_MAX_TABLE_ROWS", MAX_TABLE_ROWS)
+
+
+def _text_table(path: Path, shown: Path) -> None:
+    """Refuse at once a CSV whose first 64 kB hold a NUL byte: a table of text never does, and
+    pandas would take a file of NULs up to its size cap before it fails."""
+    with open(path, "rb") as f:
+        if b"\0" in f.read(64 << 10):
+            raise RunFileError(f"{shown}: holds NUL bytes, not a table of text: not read")
 
 
 def read_table_member(folder: Path, name: str, max_bytes: int = MAX_TABLE_BYTES, **read: Any) -> pd.DataFrame:
@@ -214,6 +233,7 @@ def read_table_member(folder: Path, name: str, max_bytes: int = MAX_TABLE_BYTES,
                 raise RunFileError(too_many)
             frame = pd.read_parquet(path)
         else:
+            _text_table(path, shown)
             frame = pd.read_csv(path, compression=None, nrows=rows + 1, **read)
             if len(frame) > rows:
                 raise RunFileError(too_many)

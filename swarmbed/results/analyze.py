@@ -213,7 +213,7 @@ def _allocator_label(value) -> str:
     if isinstance(value, str) and value.startswith("{"):
         try:
             named = json.loads(value)
-        except ValueError:
+        except (ValueError, RecursionError):  # a crafted cell nested 100,000 deep
             return value
         return str(named.get("name", value)) if isinstance(named, dict) else value
     return str(value)
@@ -623,7 +623,7 @@ def analyze(
             f"(they have: {', '.join(sorted(set(df[ALLOCATOR])))})"
         )
     for stale in ("statistics.csv", "statistics.md"):  # never leave an earlier analysis's statistics
-        (out / stale).unlink(missing_ok=True)
+        safefiles.remove(out / stale)
     if "scenario_kind" not in df:
         df["scenario_kind"] = ""
     _group_by_setting(df)

@@ -9,13 +9,12 @@ its verdict.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
-from swarmbed.records.run_folder import RunFileError, read_table_member
+from swarmbed.records.run_folder import RunFileError, env_limit, read_table_member
 
 # a sweep folder
 SPEC = "sweep.json"  # the sweep as planned: name, base, seed, runs, scenarios and their overrides
@@ -43,8 +42,7 @@ MAX_SWEEP_TABLE_BYTES = 64 << 20
 
 
 def max_sweep_table_bytes() -> int:
-    given = os.environ.get("SWARMBED_MAX_SWEEP_TABLE_BYTES", "")
-    return int(given) if given.isdigit() else MAX_SWEEP_TABLE_BYTES
+    return env_limit("SWARMBED_MAX_SWEEP_TABLE_BYTES", MAX_SWEEP_TABLE_BYTES)
 
 
 def read_table(sweep_dir: Path) -> pd.DataFrame:

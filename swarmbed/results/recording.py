@@ -132,7 +132,7 @@ def _write_mcap(run: Path, out: Path) -> dict:
     size = span / 100  # an agent's sphere: a hundredth of the arena's extent
 
     context = foxglove.Context()
-    out.unlink(missing_ok=True)
+    safefiles.remove(out)
     writer = foxglove.open_mcap(out, context=context)
     agents_ch = channels.SceneUpdateChannel("/agents", context=context)
     poses_ch = channels.PosesInFrameChannel("/agents/poses", context=context)

@@ -17,9 +17,8 @@ import stat
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import IO
 
-from swarmbed.files.safefiles import LinkRefused
+from swarmbed.files import safefiles
 
 # roles a credentials file made by ``swarmbed credentials`` may have; the processes a run spawns
 # itself get their own identities (netem, agent-<id>) from the launcher
@@ -97,28 +96,21 @@ def check_host_name(name: str) -> str:
     return name
 
 
-def open_private(path: str | Path, mode: str = "w", replace: bool = True) -> IO:
-    """``path`` opened for writing (``"w"`` or ``"wb"``), emptied and readable by its owner only
-    (mode 600, also when it existed before); a link at ``path`` is refused. ``replace=False``: a
-    FileExistsError if ``path`` exists (checked and created in one step)."""
-    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | (os.O_TRUNC if replace else os.O_EXCL)
-    try:
-        fd = os.open(path, flags, 0o600)
-    except OSError as exc:  # a link standing there is never written through: the secret stays here
-        if exc.errno == errno.ELOOP:
-            raise LinkRefused(path) from None
-        raise
-    f = os.fdopen(fd, mode)
-    os.fchmod(fd, 0o600)  # an existing file keeps its mode through O_CREAT
-    return f
+def write_private(path: str | Path, data: bytes, replace: bool = True) -> Path:
+    """``data`` as the whole file ``path``, readable by its owner only (mode 600 from its creation):
+    written under a fresh name and renamed over ``path``, so a link or a hard link standing there is
+    replaced, never written through or truncated. ``replace=False``: a FileExistsError if anything
+    stands at ``path``."""
+    if not replace and os.path.lexists(path):
+        raise FileExistsError(errno.EEXIST, "exists", str(path))
+    return safefiles.write_bytes(path, data, mode=0o600)
 
 
 def write_credentials(path: Path, identity: Identity, replace: bool = True) -> Path:
     """Write ``identity`` to ``path``, created readable and writable by its owner only. ``replace=False``:
     a CredentialsError if ``path`` exists (a user's file is never replaced without asking)."""
     try:
-        with open_private(path, replace=replace) as f:
-            json.dump(asdict(identity), f)
+        write_private(path, json.dumps(asdict(identity)).encode(), replace=replace)
     except FileExistsError:
         raise CredentialsError(f"{path}: exists; give --force to replace it with new credentials") from None
     except OSError as exc:
@@ -185,6 +177,4 @@ def check_admitted(identities: Iterable[Identity]) -> list[Identity]:
 def write_dictionary(path: Path, identities: Iterable[Identity]) -> Path:
     """A Zenoh usrpwd dictionary file (``user:password`` lines) admitting ``identities``, created
     readable by its owner only."""
-    with open_private(path) as f:
-        f.writelines(f"{i.user}:{i.password}\n" for i in identities)
-    return Path(path)
+    return write_private(path, "".join(f"{i.user}:{i.password}\n" for i in identities).encode())
