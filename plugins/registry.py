@@ -29,7 +29,7 @@ from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.presets import PresetError, apply_preset
 from swarmbed.extension.scenario import Scenario
 from swarmbed.wire.targets import TargetError, is_target, load_target
-from swarmbed.wire.validation import validation_lines
+from swarmbed.wire.validation import did_you_mean, validation_lines
 
 ANY = "*"
 ALLOCATOR_GROUP = "swarmbed.allocators"
@@ -95,7 +95,7 @@ def scenario_target(kind: str) -> str:
     if is_target(kind):
         return kind
     raise PluginError(
-        f"unknown scenario {kind!r}; registered: {', '.join(scenario_names())}; "
+        f"unknown scenario {kind!r}{did_you_mean(kind, scenario_names())}; registered: {', '.join(scenario_names())}; "
         "or give 'module:Class' / 'path/to/file.py:Class'"
     )
 
@@ -116,7 +116,7 @@ def allocator_target(name: str, scenario: str | None = None) -> str:
         if is_target(name):
             return name
         raise PluginError(
-            f"unknown allocator {name!r}; registered: {', '.join(names())}; "
+            f"unknown allocator {name!r}{did_you_mean(name, names())}; registered: {', '.join(names())}; "
             "or give 'module:Class' / 'path/to/file.py:Class'"
         )
     if scenario is None:

@@ -125,3 +125,37 @@ def test_a_limit_set_to_a_digit_python_reads_but_int_refuses_is_named(swept):
     done = _swarmbed("analyze", swept, env=env)
     err = done.stderr.strip()
     assert done.returncode != 0 and "SWARMBED_MAX_SWEEP_TABLE_BYTES" in err and len(err.splitlines()) == 1, err
+
+
+@pytest.mark.slow  # MLflow's client starts a process
+def test_mlflow_takes_every_normalised_key_and_names_two_that_collide(tmp_path, capsys):
+    """Issue 82 item 14: ``a//b`` and ``a/`` stopped a sweep's logging; ``x?`` and ``x!`` merged silently."""
+    pytest.importorskip("mlflow")
+    from mlflow.entities import Param
+    from mlflow.tracking import MlflowClient
+
+    from swarmbed.campaigns.tracking import default_uri, safe_keys
+
+    os.environ.setdefault("MLFLOW_ALLOW_FILE_STORE", "true")
+    client = MlflowClient(tracking_uri=default_uri(tmp_path))
+    run = client.create_run(client.create_experiment("keys"))
+    keys = safe_keys({"a//b": "1", "a/": "2", "x?": "3", "x!": "4", "plain.key": "5", "../up": "6"}, "parameter")
+    client.log_batch(run.info.run_id, params=[Param(k, v) for k, v in keys.items()])
+    logged = client.get_run(run.info.run_id).data.params
+    assert logged == {"a.b": "1", "a": "2", "x_": "4", "plain.key": "5", "up": "6"}, logged
+    err = capsys.readouterr().err
+    assert "'x?'" in err and "'x!'" in err and "not logged" in err, err
+
+
+def test_the_report_of_an_in_process_sweep_says_tcp_was_not_measured(swept):
+    """Issue 82 item 23: no ``nan ± 0.0 (n=0)`` row and no empty chart for what in-process runs cannot measure."""
+    import re
+
+    from swarmbed.results.report import sweep_report
+
+    page, figures = sweep_report(swept)
+    text = re.sub(r"<script.*?</script>", "", page, flags=re.S)  # plotly's own code holds "(n=0)"
+    assert "nan ±" not in text and "(n=0)" not in text
+    assert "not measured in-process" in text
+    assert "wire.agent_tcp_bytes_sent per scenario" not in page
+    assert figures >= 2  # the radio's own figures are still drawn

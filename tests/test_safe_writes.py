@@ -172,7 +172,7 @@ def test_mlflow_logs_only_regular_files_inside_the_run_and_takes_hostile_keys(tm
     client = MlflowClient(tracking_uri=default_uri(out))
     experiment = client.get_experiment_by_name("tracked")
     (logged,) = client.search_runs([experiment.experiment_id], filter_string=f"tags.`{TAG}` = 'base/run_000'")
-    assert logged.data.metrics["_/_/x"] == 1.5
+    assert logged.data.metrics["x"] == 1.5
     names = {f.path for f in client.list_artifacts(logged.info.run_id, "run")}
     assert "run/summary.json" in names and "run/shadow" not in names and "run/linked_dir" not in names
     inner = {f.path for f in client.list_artifacts(logged.info.run_id, "run/logs")}

@@ -36,5 +36,9 @@ class NodeRegistry:
         """Registered types that BehaviorTree.CPP does not ship (what Groot2 needs a model for)."""
         return [t for i, t in sorted(self._types.items()) if i not in self._builtin]
 
+    def ids(self) -> list[str]:
+        """Every registered node ID, sorted."""
+        return sorted(self._types)
+
     def __contains__(self, node_id: str) -> bool:
         return node_id in self._types

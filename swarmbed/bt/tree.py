@@ -27,6 +27,7 @@ from swarmbed.bt.node import (
 from swarmbed.bt.node_types import NodeRegistry
 from swarmbed.bt.status import FAILURE, IDLE, RUNNING, SUCCESS, Status
 from swarmbed.files.safefiles import UnreadableFile, read_regular
+from swarmbed.wire.validation import did_you_mean
 
 #: the most a behavior tree file may hold (Groot2's largest example trees are a few kB)
 MAX_TREE_BYTES = 4 << 20
@@ -136,7 +137,8 @@ class _Builder:
             raise BTError(f"{self.here(el)}: <{tag}> needs an ID attribute")
         node_type = self.registry.get(node_id)
         if node_type is None:
-            raise BTError(f"{self.here(el, node_id)}: unknown node type '{node_id}'")
+            hint = did_you_mean(node_id, self.registry.ids())
+            raise BTError(f"{self.here(el, node_id)}: unknown node type '{node_id}'{hint}")
         where = self.here(el, node_id)
         ports = node_type.provided_ports()
         raw: dict[str, str] = {}

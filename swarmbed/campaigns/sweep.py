@@ -68,7 +68,7 @@ from swarmbed.records.run_folder import (
 from swarmbed.results.campaign_folders import ATTEMPTS, DERIVED, ERROR, PARQUET, SPEC, TABLE, dotted
 from swarmbed.schema.experiment import SAFE_NAME
 from swarmbed.wire.errors import WireError
-from swarmbed.wire.validation import validation_lines
+from swarmbed.wire.validation import did_you_mean, validation_lines
 
 
 class ScenarioEntry(BaseModel):
@@ -150,13 +150,30 @@ def _overlap(a: str, b: str) -> bool:
     return a == b or a.startswith(b + ".") or b.startswith(a + ".")
 
 
+def _only(entries: list[SweepScenario], only: Sequence[str], path: Path) -> list[SweepScenario]:
+    """The scenarios named in ``only`` (all of them if it is empty); a name the file lacks is refused."""
+    if not only:
+        return entries
+    known = [e.name for e in entries]
+    for name in only:
+        if name not in known:
+            raise cfg.ConfigError(
+                f"--scenario {name}: {path} has no scenario of that name{did_you_mean(name, known)}; "
+                f"it has: {', '.join(known)}"
+            )
+    return [e for e in entries if e.name in only]
+
+
 def load_sweep(
     path: str | Path,
     runs: int | None = None,
     grid: Sequence[str] = (),
     extra: Sequence[str] = (),
     seed: int | None = None,
+    only: Sequence[str] = (),
 ) -> Sweep:
+    """The sweep file ``path`` planned: its scenarios (or, with ``only``, the ones of those names),
+    each crossed with the grid (the file's and ``grid``'s ``key=v1,v2`` axes), ``runs`` each."""
     path = Path(path)
     try:
         data = read_yaml(path) or {}
@@ -180,6 +197,17 @@ def load_sweep(
             del grid_spec[named]
         grid_spec[key] = values
     entries = [SweepScenario(e.name, tuple(e.set.items())) for e in spec.scenarios] or [SweepScenario("", ())]
+    entries = _only(entries, only, path)
+    for entry in entries:  # an axis over a key a scenario sets would run one cell under names that differ
+        for key in grid_spec:
+            leaves = [leaf for k, v in entry.overrides for leaf in dotted(v, f"{k}.")]
+            clash = next((leaf for leaf in leaves if _overlap(leaf, key)), None)
+            if clash is not None:
+                raise cfg.ConfigError(
+                    f"{path}: the grid's {key} axis and scenario {entry.name}'s {clash} set the same key: its "
+                    f"cells would all run the grid's value under the scenario's name; take {clash} out of the "
+                    "scenario, or pick scenarios that do not set it with --scenario"
+                )
     keys = list(grid_spec)
     runs_each = spec.runs if runs is None else runs
     _check_size(len(entries) * math.prod(len(v) for v in grid_spec.values()), runs_each, str(path))

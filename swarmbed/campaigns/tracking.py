@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -57,11 +58,29 @@ def redacted(uri: str) -> str:
 
 
 def safe_key(key: str) -> str:
-    """``key`` as MLflow takes it: letters, digits and ``_-. /`` only, no ``..`` step, no leading
-    ``/``; at most :data:`MAX_KEY` characters."""
+    """``key`` as MLflow takes it, in any store: letters, digits and ``_-. `` only (a ``/`` is a
+    folder in MLflow's file store, where ``a`` and ``a/b`` cannot both be: it becomes ``.``), no
+    empty step and no ``..``; at most :data:`MAX_KEY` characters."""
     key = re.sub(r"[^A-Za-z0-9_\-. /]", "_", key)
-    key = "/".join("_" if step in ("..", ".") else step for step in key.split("/")).lstrip("/")
-    return key.replace("..", "_.")[:MAX_KEY] or "_"
+    steps = [step for step in re.split(r"[/.]", key) if step]  # no empty step: a//b, a/, .x
+    return ".".join(steps)[:MAX_KEY].rstrip(".") or "_"
+
+
+def safe_keys(values: dict[str, Any], what: str) -> dict[str, Any]:
+    """``values`` under :func:`safe_key`'s keys; where two keys become one (``x?`` and ``x!`` are
+    both ``x_``), the first is kept and the other named on stderr, never merged silently."""
+    out: dict[str, Any] = {}
+    origin: dict[str, str] = {}
+    for key in sorted(values):
+        safe = safe_key(key)
+        if safe in out:
+            print(
+                f"mlflow: {what} {key!r} and {origin[safe]!r} are both {safe!r} to MLflow: {key!r} not logged",
+                file=sys.stderr,
+            )
+            continue
+        out[safe], origin[safe] = values[key], key
+    return out
 
 
 def default_uri(sweep_dir: Path) -> str:
@@ -120,11 +139,10 @@ class MlflowLog:
             config, summary = folder.config(), folder.json("summary.json")
         except RunFileError as exc:
             raise TrackingError(str(exc)) from None
-        params = [Param(safe_key(k), v[:MAX_VALUE]) for k, v in sorted(flatten(config).items())]
+        params = [Param(k, v[:MAX_VALUE]) for k, v in safe_keys(flatten(config), "parameter").items()]
         stamp = int(os.path.getmtime(Path(run_dir) / "summary.json") * 1000)
-        metrics = [
-            Metric(safe_key(k), float(v), stamp, 0) for k, v in sorted(numbers(summary).items()) if math.isfinite(v)
-        ]
+        measured = {k: v for k, v in numbers(summary).items() if math.isfinite(v)}
+        metrics = [Metric(k, float(v), stamp, 0) for k, v in safe_keys(measured, "metric").items()]
         tags = [RunTag(TAG, key), RunTag("swarmbed.sweep", self.sweep_name)]
         run = self.client.create_run(self.experiment_id, run_name=key, tags={t.key: t.value for t in tags})
         run_id = run.info.run_id

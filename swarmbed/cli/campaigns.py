@@ -59,6 +59,17 @@ def _mlflow_logger(uri: str | None, name: str, out: Path):
     return log_run
 
 
+def _not_a_sweep_folder(out: Path) -> str | None:
+    """Why ``out`` cannot take a sweep, or None: a folder holding one run (its config.yaml) is a run's,
+    and a sweep would fill it with scenario folders and tables beside the run's files."""
+    from swarmbed.records.run_folder import CONFIG, SUMMARY
+    from swarmbed.results.campaign_folders import SPEC
+
+    if out.is_dir() and not (out / SPEC).exists() and ((out / CONFIG).exists() or (out / SUMMARY).exists()):
+        return f"--out {out}: holds a run (its {CONFIG}), not a sweep: give the sweep a folder of its own"
+    return None
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     from swarmbed.campaigns.sweep import experiment_for, load_sweep, plan, status
 
@@ -74,8 +85,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if not args.sweep:
         print("error: give a sweep file (or --status DIR)", file=sys.stderr)
         return 2
-    sweep = load_sweep(args.sweep, args.runs, args.grid, args.set, args.seed)
+    sweep = load_sweep(args.sweep, args.runs, args.grid, args.set, args.seed, args.scenario)
     out = Path(args.out) if args.out else Path("runs") / sweep.name
+    problem = _not_a_sweep_folder(out)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
     planned = plan(sweep, out)
     first = {spec.scenario.name: spec for spec in reversed(planned)}
     every = {name: experiment_for(spec.base, spec.scenario, spec.seed, spec.extra) for name, spec in first.items()}
@@ -222,6 +237,13 @@ def register_sweep(sub: Subparsers) -> None:
     )
     sw.add_argument("--seed", type=int, help="sweep seed (overrides the file)")
     sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2", help="add a grid axis")
+    sw.add_argument(
+        "--scenario",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="run only this scenario of the file (repeatable)",
+    )
     sw.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every run")
     sw.add_argument("--no-progress", action="store_true")
     sw.add_argument("--yes", action="store_true", help=f"start a sweep of more than {1000:,} runs without asking")

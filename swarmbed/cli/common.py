@@ -5,14 +5,26 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 from swarmbed import config as cfg
 from swarmbed.files import safefiles
 from swarmbed.plugins import registry
+from swarmbed.wire.validation import did_you_mean
 
 if TYPE_CHECKING:
     Subparsers = argparse._SubParsersAction[argparse.ArgumentParser]  # what add_subparsers returns
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser, its errors one line (argparse prints the whole usage block first) with a
+    did-you-mean for an unknown option and where the usage is."""
+
+    def error(self, message: str) -> NoReturn:
+        if message.startswith("unrecognized arguments: "):
+            options = [o for action in self._actions for o in action.option_strings]
+            message += did_you_mean(message.split(": ", 1)[1].split()[0].split("=")[0], options)
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def keys_epilog() -> str:

@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
-import argparse
 import os
 import signal
 import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from swarmbed import __version__
 from swarmbed import config as cfg
 from swarmbed.bt import BTError
 from swarmbed.cli.authoring import register_bt, register_check_allocator, register_check_scenario, register_params
 from swarmbed.cli.campaigns import register_analyze, register_replay, register_report, register_sweep
+from swarmbed.cli.common import Parser
 from swarmbed.cli.hosts import register_certs, register_credentials, register_host, register_hosts, register_swap
 from swarmbed.cli.run import register_run, register_soak
 from swarmbed.cli.views import register_groot, register_watch
@@ -52,7 +53,8 @@ VERBS: tuple[Callable[[Subparsers], None], ...] = (
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
+    ap = Parser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
+    ap.add_argument("--version", action="version", version=f"swarmbed {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     for register in VERBS:
         register(sub)
@@ -66,8 +68,8 @@ def main(argv: list[str] | None = None) -> int:
         import importlib
 
         return importlib.import_module(args.module).main(rest)
-    if rest:
-        ap.error(f"unrecognized arguments: {' '.join(rest)}")
+    if rest:  # the verb's own parser names its options, and the closest to a mistyped one
+        sub.choices[args.command].error(f"unrecognized arguments: {' '.join(rest)}")
     stopped_by = [signal.SIGINT]
 
     def on_sigterm(signum: int, _frame: object) -> None:  # `kill`: stop as Ctrl-C stops, cleaning up

@@ -16,6 +16,7 @@ from swarmbed.files import safefiles
 
 if TYPE_CHECKING:
     from swarmbed.cli.common import Subparsers
+    from swarmbed.wire.keys import Keys
 
 
 def print_summary(summary: dict, out_dir: Path, scenario, stream=sys.stdout) -> None:
@@ -126,14 +127,24 @@ def cmd_run(args: argparse.Namespace) -> int:
                 )
                 listen = (*args.listen, hosts.hub)
                 hub = HubOptions(listen, True, (*admitted, *hosts.identities), tls, hosts.proxy_command)
-                result = run_experiment(exp, out, progress=not args.no_progress, hub=hub, views=views)
+                result = run_experiment(
+                    exp, out, progress=not args.no_progress, hub=hub, views=views, on_ready=_say_where
+                )
         except SlurmError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
     else:
-        result = run_experiment(exp, out, progress=not args.no_progress, hub=hub, views=views)
+        result = run_experiment(exp, out, progress=not args.no_progress, hub=hub, views=views, on_ready=_say_where)
     print_summary(result.summary, out, cfg.resolve_experiment(exp).scenario())
     return 0
+
+
+def _say_where(keys: Keys, endpoint: str) -> None:
+    """Once every process joined: the run id and endpoint that ``watch``, ``swap`` and ``groot`` need."""
+    print(
+        f"run {keys.run_id} at {endpoint}: swarmbed watch|swap --connect {endpoint} --run {keys.run_id}",
+        file=sys.stderr,
+    )
 
 
 def _slurm_refusals(exp, args: argparse.Namespace) -> str | None:

@@ -34,7 +34,7 @@ from pathlib import Path
 from swarmbed.files import safefiles
 from swarmbed.files.safefiles import open_fresh
 from swarmbed.launch.launcher import python_env
-from swarmbed.wire.credentials import Identity, write_credentials
+from swarmbed.wire.credentials import CredentialsError, Identity, check_host_name, write_credentials
 from swarmbed.wire.zenoh_session import free_port
 
 
@@ -64,7 +64,17 @@ def _scontrol(*args: str, env: Mapping[str, str] | None = None) -> str:
     return done.stdout
 
 
-NODE_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
+#: a Slurm job id: digits, an array task's _N or a het job's +N (never a path: it names folders)
+JOB_ID = re.compile(r"[0-9]{1,12}([_+][0-9]{1,9})?")
+
+
+def _usable(node: str) -> bool:
+    """Whether ``node`` can name a host: the one host-name rule of placements and host daemons."""
+    try:
+        check_host_name(node)
+    except CredentialsError:
+        return False
+    return True
 
 
 def read_allocation(env: Mapping[str, str] | None = None) -> Allocation:
@@ -73,8 +83,10 @@ def read_allocation(env: Mapping[str, str] | None = None) -> Allocation:
     job, nodelist = env.get("SLURM_JOB_ID"), env.get("SLURM_JOB_NODELIST")
     if not job or not nodelist:
         raise SlurmError("--slurm: not inside a Slurm allocation (SLURM_JOB_ID unset): run it under salloc or sbatch")
+    if not JOB_ID.fullmatch(job):
+        raise SlurmError(f"--slurm: SLURM_JOB_ID {job[:40]!r} is not a Slurm job id (digits)")
     nodes = tuple(_scontrol("show", "hostnames", nodelist, env=dict(env)).split())
-    bad = [n for n in nodes if not NODE_NAME.fullmatch(n)]
+    bad = [n for n in nodes if not _usable(n)]
     if not nodes or bad:
         raise SlurmError(f"--slurm: job {job}'s node list {nodelist!r} gives no usable node names: {bad or 'none'}")
     addresses = {}

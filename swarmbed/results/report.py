@@ -413,14 +413,11 @@ def sweep_report(sweep: Path) -> tuple[str, int]:
     rows = []
     for scenario, group in ok.groupby("scenario"):
         for m in metrics:
-            rows.append(
-                (
-                    f"{scenario}: {m}",
-                    f"{group[m].mean():,.1f} ± {_ci(group[m]):,.1f} (n={group[m].count()})",
-                    "sweep.csv",
-                )
-            )
+            n = int(group[m].count())
+            shown = f"{group[m].mean():,.1f} ± {_ci(group[m]):,.1f} (n={n})" if n else _NOT_MEASURED.get(m, "no value")
+            rows.append((f"{scenario}: {m}", shown, "sweep.csv"))
     page.table(rows, ("scenario: figure", "mean ± 95 % CI", "from"))
+    metrics = [m for m in metrics if ok[m].count()]  # a chart of nothing is left out
     for m in metrics:
         g = ok.groupby("scenario")[m]
         fig = go.Figure(
@@ -431,7 +428,9 @@ def sweep_report(sweep: Path) -> tuple[str, int]:
     if benefit:
         page.heading("Cost and benefit", f"One point per run: {benefit} against what it cost on the radio.")
         for cost in [
-            c for c in ("network.messages_sent", "network.bytes_sent", "wire.agent_tcp_bytes_sent") if c in ok
+            c
+            for c in ("network.messages_sent", "network.bytes_sent", "wire.agent_tcp_bytes_sent")
+            if c in ok and ok[c].count()
         ]:
             fig = go.Figure(
                 [
@@ -458,6 +457,13 @@ def sweep_report(sweep: Path) -> tuple[str, int]:
         f"report made {time.strftime('%Y-%m-%d %H:%M')}"
     )
     return page.render(subtitle), page.figures
+
+
+#: why a figure of a sweep has no value in any run (a run on the in-process engine has no sockets)
+_NOT_MEASURED = {
+    "wire.agent_tcp_bytes_sent": "not measured in-process (no sockets)",
+    "wire.overhead_ratio": "not measured in-process (no sockets)",
+}
 
 
 def is_soak(folder: Path) -> bool:

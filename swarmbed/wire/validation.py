@@ -4,6 +4,7 @@ that turns one into a message (experiments, sweeps, chaos plans and plugin param
 from __future__ import annotations
 
 import difflib
+from collections.abc import Iterable
 from typing import Any, get_args
 
 from pydantic import BaseModel, ValidationError
@@ -21,6 +22,12 @@ def _message(error: Any, model: type[BaseModel] | None = None) -> str:
     if error["type"] == "value_error" and "error" in error.get("ctx", {}):
         return str(error["ctx"]["error"])  # a validator's own words, without "Value error, "
     return str(error["msg"])
+
+
+def did_you_mean(given: str, known: Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` for the name in ``known`` closest to ``given`` (difflib's ratio), or ''."""
+    near = difflib.get_close_matches(str(given), list(known), n=1, cutoff=0.6)
+    return f" (did you mean {near[0]!r}?)" if near else ""
 
 
 def _closest_key(model: type[BaseModel], loc: tuple) -> str | None:

@@ -114,4 +114,7 @@ def make(
     detach: bool = False,
     **_ignored: Any,
 ) -> SlurmExecutor:
+    for flag, value in (("--slurm-partition", partition), ("--slurm-cluster", cluster), ("--out", str(folder))):
+        if value is not None and any(ord(c) < 32 or ord(c) == 127 for c in value):
+            raise ExecutorError(f"{flag} {value[:40]!r}: a control character would become a line of the batch script")
     return SlurmExecutor(folder, partition, parse_time_min(time), parallel, cluster, detach)
