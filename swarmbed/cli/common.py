@@ -13,7 +13,7 @@ from swarmbed.plugins import registry
 from swarmbed.wire.validation import did_you_mean
 
 if TYPE_CHECKING:
-    Subparsers = argparse._SubParsersAction[argparse.ArgumentParser]  # what add_subparsers returns
+    Subparsers = argparse._SubParsersAction["Parser"]  # what add_subparsers returns
 
 
 class Parser(argparse.ArgumentParser):
