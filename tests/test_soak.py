@@ -25,9 +25,12 @@ from swarmbed.campaigns.soak import (
     VERDICT,
     Thresholds,
     fault_breaches,
+    fault_counts,
     parse_duration,
+    plan_coverage,
     rss_growth,
     soak,
+    speed_trends,
     tick_rates,
 )
 from swarmbed.coordinator.live import LiveStatus
@@ -77,6 +80,49 @@ def test_rss_growth_is_judged_only_where_it_is_there():
     assert judged["rss"] == "grows" and judged["rss_growth_mb"] > 25
     slow = rss_growth(hours, 72 + hours / 7200 * 20 + rng.uniform(-0.3, 0.3, len(hours)), limits)  # 12 %/h
     assert slow["rss"] == "grows" and slow["rss_slope_low_pct_h"] > 0
+
+
+def _soak_tables(minutes: float, coordinator_ms, rate=100.0, seed=2):
+    """A soak's process and run tables, sampled every 5 s: a coordinator whose CPU per tick is
+    ``coordinator_ms(t)`` and agents at a steady 10 ms a tick, ``rate`` ticks a second."""
+    rng = np.random.default_rng(seed)
+    wall = np.arange(5.0, minutes * 60 + 1, 5.0)
+    ticks = np.cumsum(np.full(len(wall), rate * 5.0))
+    procs, runs = [], []
+    for t, tick in zip(wall, ticks):
+        noise = rng.uniform(0.97, 1.03)
+        procs.append({"wall_s": t, "kind": "coordinator", "cpu_pct": coordinator_ms(t) * rate / 10 * noise})
+        procs.append({"wall_s": t, "kind": "agent", "cpu_pct": 10.0 * rate / 10 * noise})
+        runs.append({"wall_s": t, "tick": tick, "ticks_per_s": rate * noise})
+    return pd.DataFrame(procs), pd.DataFrame(runs)
+
+
+def test_a_cost_per_tick_that_grows_is_a_breach_and_a_steady_one_is_not():
+    """Issue 82 item 17: a 15-minute soak passed while the coordinator's CPU per tick rose from 3.8
+    to 4.9 ms. Here it rises as much over an hour; a steady one and a short window are not breaches."""
+    limits = Thresholds()
+    procs, runs = _soak_tables(60, lambda t: 3.8 + 1.1 * t / 3600)
+    speed = speed_trends(procs, runs, limits)
+    assert speed["cpu_ms_per_tick"]["coordinator"]["trend"] == "grows"
+    assert speed["cpu_ms_per_tick"]["agent"]["trend"] == "steady"
+    assert speed["ticks_per_s"]["trend"] == "steady"
+    assert speed["cpu_ms_per_tick"]["coordinator"]["mean"] == pytest.approx(4.6, rel=0.05)
+    steady = speed_trends(*_soak_tables(60, lambda t: 3.8), limits)
+    assert steady["cpu_ms_per_tick"]["coordinator"]["trend"] == "steady"
+    short = speed_trends(*_soak_tables(4, lambda t: 3.8 + 1.1 * t / 240), limits)
+    assert short["cpu_ms_per_tick"]["coordinator"]["trend"] == "too short to judge"
+
+
+def test_the_verdict_counts_faults_by_action_in_time_order_and_says_what_the_plan_could_not_show():
+    plan = ChaosPlan.model_validate(
+        {"events": [{"action": "kill_agent", "every": 120}, {"action": "stop_agent", "at": [10, 500], "for": 2}]}
+    )
+    notes = plan_coverage(plan, 300.0)
+    assert any("kill_agent every 120 s" in n and "too few" in n for n in notes)
+    assert any("stop_agent at 500 s" in n for n in notes)
+    assert plan_coverage(plan, 3600.0) == []
+    faults = [{"action": "kill_agent"}, {"action": "stop_agent"}, {"action": "kill_agent"}]
+    assert fault_counts(faults) == {"kill_agent": 2, "stop_agent": 1}
 
 
 def test_tick_rates_leave_out_the_window_cut_short_as_the_soak_stops():

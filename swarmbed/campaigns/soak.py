@@ -24,6 +24,13 @@ breach only where it is there: the slope over its limit, the slope's 95 % confid
 above zero and at least ``min_rss_growth_mb`` of growth over the judged window. A window so short
 that growth at the limit would stay under that floor is reported "too short to judge" instead of
 extrapolating a wiggle of a few tenths of a MB to tens of % per hour.
+
+Speed is judged as memory is: over the second half, the CPU milliseconds per tick of each kind of
+process (all its processes together) and the run's ticks per second, each a Theil-Sen slope in %
+of its mean per hour; a breach where the cost per tick grows (or the rate falls) beyond its limit,
+with the slope's 95 % interval on that side of zero and at least ``min_speed_change_pct`` of change
+over the window. The verdict counts the faults of each action that ran and says which of the
+plan's actions the soak was too short to show (fewer than three expected at their mean gap).
 """
 
 from __future__ import annotations
@@ -93,6 +100,15 @@ class Thresholds:
     #: RSS growth over the judged window below which no slope is a breach: allocators' arenas and
     #: Python's free lists move a process's RSS by a few tenths of a MB at random
     min_rss_growth_mb: float = 5.0
+    #: how fast a kind of process's CPU per tick may grow, and the run's ticks per second may fall,
+    #: in % of its mean per hour over the judged window (the second half), before it is a breach
+    max_cpu_tick_slope_pct_h: float = 20.0
+    max_rate_fall_pct_h: float = 20.0
+    #: the least change over the judged window that is a breach: a few % moves with the machine's day
+    min_speed_change_pct: float = 10.0
+    #: the shortest judged window (the soak's second half) whose speed trend is judged: over a few
+    #: minutes a restart's or a fault's extra work reads as tens of % per hour
+    min_speed_window_s: float = 300.0
 
 
 def kind_of(name: str) -> str:
@@ -265,6 +281,77 @@ def rss_growth(t: np.ndarray, rss: np.ndarray, limits: Thresholds) -> dict[str, 
     }
 
 
+def speed_trend(
+    t: np.ndarray, y: np.ndarray, limit_pct_h: float, min_change_pct: float, falling: bool, min_window_s: float = 0.0
+) -> dict:
+    """The trend of a speed figure ``y`` over ``t`` (the judged window): its Theil-Sen slope in %
+    of its mean per hour, and whether it is a breach: beyond ``limit_pct_h`` in the bad direction
+    (up for CPU per tick, down for ticks per second), the slope's 95 % interval on that side of
+    zero, and a change of at least ``min_change_pct`` % over the window. A window shorter than
+    ``min_window_s`` is reported, not judged."""
+    keep = np.isfinite(y)
+    t, y = t[keep], y[keep]
+    if len(t) < MIN_SAMPLES or np.ptp(t) <= 0 or not y.mean():
+        mean = round(float(y.mean()), 3) if len(y) else None
+        return {"mean": mean, "slope_pct_h": None, "trend": "too short to judge"}
+    mean = float(y.mean())
+    slope, low, high = _theil_sen(t, y)
+    pct = slope * 3600 / mean * 100
+    change = abs(slope * np.ptp(t)) / mean * 100
+    sign = -1 if falling else 1
+    bad = sign * pct > limit_pct_h and (high < 0 if falling else low > 0) and change >= min_change_pct
+    trend = ("falls" if falling else "grows") if bad else "steady"
+    if np.ptp(t) < min_window_s:
+        trend = "too short to judge"
+    return {"mean": round(mean, 3), "slope_pct_h": round(pct, 2), "change_pct": round(change, 1), "trend": trend}
+
+
+def speed_trends(procs: Any, counters: Any, limits: Thresholds) -> dict[str, Any]:
+    """CPU milliseconds per tick of each kind of process (all its processes together) and the run's
+    ticks per second, each over the second half of the soak, with their trends."""
+    half = float(counters["wall_s"].max()) / 2 if len(counters) else 0.0
+    judged = counters[counters["wall_s"] >= half].sort_values("wall_s")
+    wall = judged["wall_s"].to_numpy(float)
+    spans = np.diff(wall, prepend=wall[0] if len(wall) else 0.0)
+    ticks = np.diff(judged["tick"].to_numpy(float), prepend=np.nan)
+    rate_limit, cpu_limit = limits.max_rate_fall_pct_h, limits.max_cpu_tick_slope_pct_h
+    floor, window = limits.min_speed_change_pct, limits.min_speed_window_s
+    rates = judged["ticks_per_s"].to_numpy(float)
+    out: dict[str, Any] = {"ticks_per_s": speed_trend(wall, rates, rate_limit, floor, True, window)}
+    out["cpu_ms_per_tick"] = {}
+    for kind, rows in procs[procs["wall_s"] >= half].groupby("kind"):
+        cpu = rows.groupby("wall_s")["cpu_pct"].sum().reindex(wall).to_numpy(float) / 100  # cores busy
+        per_tick = np.where(ticks > 0, 1000 * cpu * spans / np.where(ticks > 0, ticks, 1), np.nan)
+        out["cpu_ms_per_tick"][kind] = speed_trend(wall, per_tick, cpu_limit, floor, False, window)
+    return out
+
+
+def fault_counts(faults: list[dict[str, Any]]) -> dict[str, int]:
+    """How many faults of each action ran."""
+    counts: dict[str, int] = {}
+    for f in faults:
+        counts[f["action"]] = counts.get(f["action"], 0) + 1
+    return counts
+
+
+def plan_coverage(plan: ChaosPlan | None, duration_s: float) -> list[str]:
+    """What the chaos plan asked for that the soak was too short to show, one line each: an action
+    at a mean gap longer than a third of the soak (fewer than three expected), or listed times
+    after its end."""
+    notes = []
+    for event in plan.events if plan else []:
+        if event.every is not None and duration_s / event.every < 3:
+            notes.append(
+                f"{event.action} every {event.every:g} s on average: about {duration_s / event.every:.1f} in "
+                f"{duration_s:.0f} s, too few to judge it (a soak of {3 * event.every:.0f} s or more, or "
+                "experiments/soak/chaos_short.yaml)"
+            )
+        late = [t for t in event.at if t + event.duration >= duration_s]
+        if late:
+            notes.append(f"{event.action} at {', '.join(f'{t:g}' for t in late)} s: after the soak's end, never run")
+    return notes
+
+
 def fault_breaches(faults: list[dict[str, Any]]) -> list[str]:
     """The faults that were not survived: unresolved, a restart that failed, or never injected."""
     bad = ("unresolved", "restart failed", "not injected")
@@ -344,9 +431,22 @@ def _breaches(
     failure: str | None,
     conserved: bool,
     faults: list[dict[str, Any]],
+    speed: dict[str, Any] | None = None,
 ) -> list[str]:
     """Every breach of the thresholds, one line each, in the order the soak's page lists them."""
     breaches = []
+    for kind, trend in sorted((speed or {}).get("cpu_ms_per_tick", {}).items()):
+        if trend["trend"] == "grows":
+            breaches.append(
+                f"CPU per tick of the {kind} processes grows {trend['slope_pct_h']:.1f} %/h "
+                f"({trend['change_pct']:.0f} % over the judged window; limit {limits.max_cpu_tick_slope_pct_h:g} %/h)"
+            )
+    rate = (speed or {}).get("ticks_per_s", {})
+    if rate.get("trend") == "falls":
+        breaches.append(
+            f"ticks per second fall {-rate['slope_pct_h']:.1f} %/h ({rate['change_pct']:.0f} % over the judged "
+            f"window; limit {limits.max_rate_fall_pct_h:g} %/h)"
+        )
     for _kind, worst in sorted(by_kind.items()):
         if worst["rss"] == "grows":
             breaches.append(
@@ -391,6 +491,7 @@ def verdict(
     summary: dict | None,
     failure: str | None,
     slowest_tick: tuple[float, int],
+    plan: ChaosPlan | None = None,
 ) -> dict[str, Any]:
     """The soak's verdict from its files (see the module docstring)."""
     import pandas as pd
@@ -404,7 +505,9 @@ def verdict(
     net = (summary or {}).get("network", {})
     conserved = bool(net) and net["copies"] == net["delivered"] + net["dropped_total"]
     faults = [dict(zip(["wall_s", "tick", "action", "target", "detail", "outcome"], row)) for row in chaos_rows]
-    breaches = _breaches(by_kind, limits, slowest_tick, failure, conserved, faults)
+    faults.sort(key=lambda f: float(f["wall_s"]))  # logged as each ended: shown in the order they began
+    speed = speed_trends(procs, counters, limits)
+    breaches = _breaches(by_kind, limits, slowest_tick, failure, conserved, faults, speed)
     return {
         "passed": not breaches,
         "breaches": breaches,
@@ -418,6 +521,9 @@ def verdict(
         "agents_lost": (summary or {}).get("agents_lost"),
         "restarts": (summary or {}).get("agent_restarts", 0),
         "faults": faults,
+        "faults_by_action": fault_counts(faults),
+        "plan_not_shown": plan_coverage(plan, end),
+        "speed": speed,
         "by_kind": by_kind,
         "processes": per_process,
         "thresholds": vars(limits),
@@ -451,7 +557,8 @@ def soak(
         raise RunError(failure or "the soak never got under way")
     live = getattr(monitor, "run", None)  # set once the run got under way
     slowest = live.coordinator.live().slowest_tick if live else (0.0, -1)
-    result = verdict(out_dir, limits or Thresholds(), injector.rows if injector else [], summary, failure, slowest)
+    rows = injector.rows if injector else []
+    result = verdict(out_dir, limits or Thresholds(), rows, summary, failure, slowest, chaos)
     results.write_json(out_dir / VERDICT, result)
     return result
 
@@ -472,7 +579,20 @@ def format_verdict(v: dict[str, Any]) -> str:
         f"{'balanced' if v['conserved'] else 'NOT balanced'}; restarts {v['restarts']}; "
         f"agents lost {len(v['agents_lost'] or {})}"
     )
+    speed = v.get("speed", {})
+    for kind, trend in sorted(speed.get("cpu_ms_per_tick", {}).items()):
+        if trend.get("slope_pct_h") is not None:
+            lines.append(
+                f"  {kind:<12} CPU {trend['mean']:.2f} ms a tick, {trend['slope_pct_h']:+.1f} %/h ({trend['trend']})"
+            )
+    rate = speed.get("ticks_per_s", {})
+    if rate.get("slope_pct_h") is not None:
+        lines.append(f"  ticks/s {rate['mean']:.1f}, {rate['slope_pct_h']:+.1f} %/h ({rate['trend']})")
+    if v.get("faults_by_action"):
+        counts = ", ".join(f"{n} {action}" for action, n in sorted(v["faults_by_action"].items()))
+        lines.append(f"  faults that ran: {counts}")
     for f in v["faults"]:
         lines.append(f"  fault {f['wall_s']:>8.1f} s tick {f['tick']}: {f['action']} {f['target']}: {f['outcome']}")
+    lines += [f"  NOTE: {note}" for note in v.get("plan_not_shown", [])]
     lines += [f"  BREACH: {b}" for b in v["breaches"]]
     return "\n".join(lines)
