@@ -87,3 +87,25 @@ def test_run_says_its_run_id_and_endpoint_for_watch_and_swap(tmp_path):
     assert done.returncode == 0, done.stderr
     run_id = json.loads((out / "deployment.json").read_text())["run_id"]
     assert f"run {run_id} at tcp/" in done.stderr and f"--run {run_id}" in done.stderr, done.stderr
+
+
+def test_long_work_says_it_is_alive_a_line_a_minute_where_no_terminal_shows_a_bar():
+    """Issue 82 item 19: a soak, a replay, an analysis went silent for minutes or hours."""
+    import io
+
+    from swarmbed.results.progress import Progress
+
+    out = io.StringIO()
+    with Progress(200, "replay", "frames", every_s=0.0, stream=out) as bar:
+        bar.update(50)
+        bar.update(100, "tick 1,000")
+    lines = out.getvalue().splitlines()
+    assert lines[0].startswith("replay: 50 of 200 frames (25 %) after 00:00:0")
+    assert lines[1].endswith("; tick 1,000")
+    quiet = io.StringIO()
+    with Progress(200, "replay", every_s=60.0, stream=quiet) as bar:
+        bar.update(199)
+    assert quiet.getvalue() == ""  # within its first minute
+    off = io.StringIO()
+    Progress(10, "x", enabled=False, every_s=0.0, stream=off).update(5)
+    assert off.getvalue() == ""

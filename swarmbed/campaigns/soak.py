@@ -40,6 +40,7 @@ import os
 import re
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -55,8 +56,10 @@ from swarmbed.records.rowfile import RowFile
 from swarmbed.results.campaign_folders import SOAK_PROCESSES as PROCESSES
 from swarmbed.results.campaign_folders import SOAK_RUN as RUN
 from swarmbed.results.campaign_folders import SOAK_VERDICT as VERDICT
+from swarmbed.results.progress import Progress
 from swarmbed.schema.experiment import Experiment
 from swarmbed.wire.child_process import process_name
+from swarmbed.wire.keys import Keys
 
 PROCESS_COLUMNS = ["wall_s", "tick", "process", "kind", "pid", "rss_mb", "cpu_pct", "fds", "threads", "tcp"]
 RUN_COLUMNS = [
@@ -121,9 +124,10 @@ class Monitor:
     """Samples the run's processes and counters every ``interval`` wall seconds; stops the run
     when ``duration_s`` is up (a :class:`~swarmbed.launch.runner.RunObserver`)."""
 
-    def __init__(self, duration_s: float, interval: float = 5.0) -> None:
+    def __init__(self, duration_s: float, interval: float = 5.0, progress: Progress | None = None) -> None:
         self.duration_s = duration_s
         self.interval = interval
+        self.progress = progress
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._procs: dict[int, psutil.Process] = {}
@@ -151,6 +155,9 @@ class Monitor:
         coord = self.run.coordinator
         while not self._stop.wait(self.interval - (time.monotonic() - self.started) % self.interval):
             self._sample()
+            if self.progress is not None:
+                status = coord.live()
+                self.progress.update(min(time.monotonic() - self.started, self.duration_s), f"tick {status.tick:,}")
             if time.monotonic() - self.started >= self.duration_s:
                 coord.stop.ask()
 
@@ -539,20 +546,24 @@ def soak(
     limits: Thresholds | None = None,
     progress: bool = True,
     hub: HubOptions = LOOPBACK_ONLY,
+    on_ready: Callable[[Keys, str], None] | None = None,
 ) -> dict[str, Any]:
     """Run ``exp`` for ``duration_s`` wall seconds under ``chaos``; write and return the verdict.
     ``hub``: where the run's hub listens and whom it admits (a soak across hosts, an operator)."""
     from swarmbed.engine.run_errors import RunError
 
     exp = exp.model_copy(update={"run": exp.run.model_copy(update={"duration": UNBOUNDED_S, "stop_when_done": False})})
-    monitor = Monitor(duration_s, interval)
+    bar = Progress(duration_s, "soak", "s", enabled=progress)
+    monitor = Monitor(duration_s, interval, bar)
     injector = Chaos(chaos, duration_s, exp.run.seed) if chaos and chaos.events else None
     observers: list[RunObserver] = [monitor, *([injector] if injector else [])]
     summary, failure = None, None
     try:
-        summary = run_experiment(exp, out_dir, progress=False, observers=observers, hub=hub).summary
+        summary = run_experiment(exp, out_dir, False, on_ready, hub, observers=observers).summary
     except RunError as exc:
         failure = str(exc)
+    finally:
+        bar.close()
     if not (out_dir / PROCESSES).exists():
         raise RunError(failure or "the soak never got under way")
     live = getattr(monitor, "run", None)  # set once the run got under way

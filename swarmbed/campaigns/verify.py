@@ -37,7 +37,8 @@ def verify_in_processes(planned: Sequence[RunSpec], out: Path, k: int) -> bool:
     if len(chosen) < k:
         print(f"verify: only {len(chosen)} of the {k} runs asked for are complete")
     same = True
-    for spec in chosen:
+    for done_count, spec in enumerate(chosen):
+        print(f"verify: run {done_count + 1} of {len(chosen)} again in processes: {spec.out_dir}", flush=True)
         made = Path(spec.out_dir)
         again = out / VERIFY / made.relative_to(out)
         with safefiles.rooted(out, create=False):  # .verify and the folders in it: never through a link

@@ -265,6 +265,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             control=args.control,
             mixed_versions_ok=args.mixed_versions,
             trusted=args.trust_plugins,
+            progress=True,
         )
     except (AnalyzeError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -332,6 +333,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             args.to,
             args.fps,
             args.every,
+            progress=True,
         )
     except ReplayError as exc:
         print(f"error: {exc}", file=sys.stderr)

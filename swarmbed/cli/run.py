@@ -255,10 +255,12 @@ def cmd_soak(args: argparse.Namespace) -> int:
     limits = Thresholds(args.max_rss_slope, args.max_fd_growth, args.max_stall)
     print(
         f"soak: {exp.name}, {exp.agents.count} agents, {duration:.0f} s of wall time"
-        f"{f', chaos from {args.chaos}' if plan else ''}; files in {out}",
+        f"{f', chaos from {args.chaos}' if plan else ''}; files in {out}\n"
+        "soak: a line a minute here; to watch it live, swarmbed watch with the endpoint and run id below",
         flush=True,
     )
-    result = soak(exp, out, duration, plan, args.interval, limits, hub=HubOptions(auth=not args.no_auth))
+    hub = HubOptions(auth=not args.no_auth)
+    result = soak(exp, out, duration, plan, args.interval, limits, hub=hub, on_ready=_say_where)
     print(format_verdict(result))
     return 0 if result["passed"] else 1
 

@@ -49,6 +49,7 @@ from swarmbed.records.run_folder import (  # noqa: E402
 from swarmbed.results.campaign_folders import PARQUET, SPEC, TABLE, read_table  # noqa: E402
 from swarmbed.results.colours import STRATEGY_ORDER, strategy_color, strategy_label  # noqa: E402
 from swarmbed.results.pooling import mixed_configurations, mixed_versions  # noqa: E402
+from swarmbed.results.progress import Progress
 from swarmbed.results.stats import compare  # noqa: E402
 
 AGENTS, RANGE, ALLOCATOR = "agents.count", "network.range", "allocator"
@@ -606,7 +607,11 @@ def figures_of(cls: type[Scenario]) -> tuple[Figure, ...]:
 
 
 def analyze(
-    sweep_dirs: list[Path] | Path, control: str | None = None, mixed_versions_ok: bool = False, trusted: bool = False
+    sweep_dirs: list[Path] | Path,
+    control: str | None = None,
+    mixed_versions_ok: bool = False,
+    trusted: bool = False,
+    progress: bool = False,
 ) -> list[Path]:
     """Tables and figures from sweep directories, written to the first. The figures and the metric
     labels are the ones each scenario names (``Scenario.figures``, ``Scenario.metric_labels``).
@@ -629,6 +634,8 @@ def analyze(
     _group_by_setting(df)
     kinds = sorted(df["scenario_kind"].fillna("").astype(str).unique())
     summaries, tables, written = [], [], []
+    total = sum(len(figures_of(scenario_class(kind, trusted))) for kind in kinds)
+    bar = Progress(total, "analyze", "figures", enabled=progress)
     for kind in kinds:
         rows = df[df["scenario_kind"].fillna("").astype(str) == kind].copy()
         rows.attrs = df.attrs
@@ -647,6 +654,8 @@ def analyze(
         canvas = Canvas(out, f"{kind}_" if len(kinds) > 1 else "", labels, counts)
         for figure in figures:
             written += DRAW[figure.kind](rows, figure, canvas)
+            bar.update(bar.done + 1, figure.kind)
+    bar.close()
     summary = pd.concat(summaries, ignore_index=True)
     safefiles.write_text(out / "scenario_summary.csv", summary.to_csv(index=False))
     safefiles.write_text(out / "scenario_summary.md", to_markdown(summary))

@@ -19,6 +19,7 @@ import pandas as pd
 from swarmbed.files import safefiles
 from swarmbed.records.run_folder import MARKERS, RECEIVER_LEDGER, SUMMARY, TRAJECTORIES, RunDir, RunFileError
 from swarmbed.results.colours import DROP_COLORS, LABEL_COLORS, WALL_COLOUR
+from swarmbed.results.progress import Progress
 
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
 
@@ -108,6 +109,7 @@ def replay(
     end: float | None = None,
     fps: int = 10,
     every: int | None = None,
+    progress: bool = False,
 ) -> tuple[Path, int]:
     """Write the movie (``.gif``, or ``.mp4`` where ffmpeg is installed); returns it and its frame count."""
     import matplotlib
@@ -185,8 +187,8 @@ def replay(
     movie = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
     writer = animation.PillowWriter(fps=fps) if out.suffix == ".gif" else animation.FFMpegWriter(fps=fps)
     try:
-        with safefiles.replacing(out) as tmp:
-            movie.save(tmp, writer=writer)
+        with safefiles.replacing(out) as tmp, Progress(len(frames), "replay", "frames", enabled=progress) as bar:
+            movie.save(tmp, writer=writer, progress_callback=lambda i, _n: bar.update(i + 1))
     finally:
         plt.close(fig)
     return out, len(frames)
