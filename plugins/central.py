@@ -83,6 +83,12 @@ class CentralParams(FallbackParams):
         10.0, ge=0, description="simulated seconds a follower works on its last assignment without a fresh one"
     )
     discount: float = Field(0.999, gt=0, le=1, description="sga: lambda of the score discount ** (d / v) * R")
+    max_phantoms: int = Field(
+        3,
+        ge=1,
+        description="goals in a row at which a follower found no task it had ever seen: past it, the follower "
+        "treats the leader as failed and follows the next (a leader that lies sends robots after tasks no run has)",
+    )
     commit: bool = Field(
         True,
         description="the leader keeps an agent on its task until the task is done or the agent is gone, and "
@@ -98,7 +104,8 @@ class Centralized(WithFallback):
     Params = CentralParams
     params: CentralParams
     message_kinds = (REPORT, ASSIGN)
-    event_names = ("assignments_sent", "reports_sent")
+    event_names = ("assignments_sent", "reports_sent", "phantom_goals")
+    version = "2"  # 2: a follower never takes again a goal it found empty, and leaves a leader of phantom goals
 
     @classmethod
     def check(cls, exp: Experiment, params: BaseModel) -> list[str]:
@@ -115,17 +122,22 @@ class Centralized(WithFallback):
         self.assigned: tuple[int, float, float, float] | None = None  # (task, x, y, time the assignment came)
         self.plan: dict[int, int] = {}  # agent -> task, the leader's last assignment
         self.needed: dict[int, int] = {}  # team tasks (ST-MR) the leader knows: task -> robots it needs
+        self.seen: set[int] = set()  # every task this agent has had in view
+        self.empty: set[int] = set()  # goals this follower reached and found without their task: never again
+        self.phantoms = 0  # goals in a row whose task this agent never saw
+        self.distrusted: set[int] = set()  # leaders that sent it after phantoms, max_phantoms times in a row
 
     # -- the roles ------------------------------------------------------------------------------
     def leader(self, now: float) -> int:
         """Who leads as this agent sees it at ``now``."""
-        if self.params.leader != "lowest_alive":
+        if self.params.leader != "lowest_alive" and int(self.params.leader) not in self.distrusted:
             return int(self.params.leader)
-        recent = [a for a, t in self.heard.items() if now - t <= self.params.heard_within]
+        recent = [a for a, t in self.heard.items() if now - t <= self.params.heard_within and a not in self.distrusted]
         return min([self.agent_id, *recent])
 
     def decide(self, view: LocalView) -> int | None:
         now = view.time
+        self.seen.update(view.tasks)
         self._read(view, now)
         leader = self.leader(now)
         teams = view.coalitions()
@@ -158,9 +170,26 @@ class Centralized(WithFallback):
             return self.fallback_decide(view)
         task, x, y, _ = self.assigned
         if task not in view.tasks and math.hypot(x - view.x, y - view.y) < view.awareness_range:
-            self.assigned = None  # in sight of where it stood, and gone: done
+            self._found_empty(task, now)  # in sight of where it stood, and gone: done, or never there
             return self.fallback_decide(view)
+        if task in view.tasks:
+            self.phantoms = 0
         return task
+
+    def _found_empty(self, task: int, now: float) -> None:
+        """The goal of ``task`` is in sight and holds no task: it is never taken again, and where this
+        agent never saw that task at all, it counts as a phantom of the leader's; ``max_phantoms`` in
+        a row and the leader is treated as failed (the next lowest id leads, as when one is lost)."""
+        self.assigned = None
+        self.empty.add(task)
+        if task in self.seen:
+            self.phantoms = 0
+            return
+        self.phantoms += 1
+        self.count("phantom_goals")
+        if self.phantoms >= self.params.max_phantoms:
+            self.distrusted.add(self.leader(now))
+            self.phantoms = 0
 
     def _read(self, view: LocalView, now: float) -> None:
         """Note who was heard; keep a report (as the leader would use it) and the leader's assignment."""
@@ -176,6 +205,8 @@ class Centralized(WithFallback):
                     self._learn(msg.sender, float(x), float(y), rows, view)
             elif msg.kind == ASSIGN and msg.sender == self.leader(now):
                 for agent, task, x, y in read_tuples(data, ASSIGN_ROW):
+                    if int(task) in self.empty:
+                        continue  # a goal it found empty: left out, as the leader should have
                     if agent == self.agent_id and self._plausible(int(task), float(x), float(y), view):
                         self.assigned = (int(task), float(x), float(y), now)
                         break
