@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 
+import psutil
 import pytest
 
 from swarmbed.hosts.netns import LabError
@@ -136,3 +137,42 @@ def test_a_sweep_through_the_slurm_executor_runs_its_runs_as_array_tasks_on_the_
     tasks = [dict(f.split("=", 1) for f in line.split() if "=" in f) for line in shown.stdout.splitlines()]
     assert len(tasks) == 4 and {t["JobState"] for t in tasks} == {"COMPLETED"}, shown.stdout
     assert {t["NodeList"] for t in tasks} <= set(cluster.nodes), shown.stdout
+
+
+@pytest.mark.slow
+def test_the_slurm_lab_command_starts_a_cluster_a_user_can_reach_and_stops_it_whole(tmp_path):
+    """Issue 82 item 18: a documented way to try ``run --slurm`` on one machine."""
+    import signal
+
+    from swarmbed.hosts.netns import why_not as no_namespaces
+    from swarmbed.hosts.slurm_lab import why_not as no_slurm
+
+    reason = no_namespaces() or no_slurm()
+    if reason:
+        pytest.skip(reason)
+    folder = tmp_path / "lab"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "swarmbed", "slurm-lab", "--nodes", "2", "--folder", str(folder)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        lines = [proc.stdout.readline() for _ in range(4)]
+        assert lines[1].strip() == f"export SLURM_CONF={folder / 'slurm.conf'}", lines
+        env = dict(os.environ, SLURM_CONF=str(folder / "slurm.conf"))
+        sinfo = subprocess.run(["sinfo", "-h", "-o", "%D %t"], env=env, capture_output=True, text=True).stdout
+        assert sinfo.split() == ["2", "idle"], sinfo
+        conf = str(folder / "slurm.conf")
+        nodes = {  # the network namespaces this lab's slurmd run in
+            os.stat(f"/proc/{p.pid}/ns/net").st_ino
+            for p in psutil.process_iter(["cmdline"])
+            if conf in (p.info["cmdline"] or []) and "slurmd" in (p.info["cmdline"] or [""])[0]
+        }
+        ours = [n for n in os.listdir("/var/run/netns") if os.stat(f"/var/run/netns/{n}").st_ino in nodes]
+        assert len(ours) == 2, ours
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0 and "slurm-lab: stopped" in out, (out, err)
+    assert "slurmctld" not in err  # its start-up lines went to its log, not the user's terminal
+    left = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout.split()
+    assert not set(ours) & set(left), left

@@ -125,6 +125,59 @@ def register_host(sub: Subparsers) -> None:
     host.set_defaults(func=cmd_host)
 
 
+def cmd_slurm_lab(args: argparse.Namespace) -> int:
+    """A Slurm cluster on this machine until Ctrl-C: slurmctld, and one slurmd per network namespace."""
+    import signal
+    import threading
+
+    from swarmbed.hosts.netns import LabError, make_lab
+    from swarmbed.hosts.slurm_lab import make_slurm_lab
+
+    folder = Path(args.folder).resolve()
+    try:
+        lab = make_lab(folder / "logs")
+    except LabError as exc:
+        print(f"error: slurm-lab: {exc}", file=sys.stderr)
+        return 2
+    try:
+        cluster = make_slurm_lab(lab, folder, args.nodes)
+    except LabError as exc:
+        lab.close()
+        print(f"error: slurm-lab: {exc}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    print(
+        f"slurm-lab: {args.nodes} nodes n1..n{args.nodes} up (logs in {folder}); in another terminal:\n"
+        f"  export SLURM_CONF={folder / 'slurm.conf'}\n"
+        f"  salloc --nodes={args.nodes} swarmbed run experiments/quickstart.yaml --slurm\n"
+        "Ctrl-C here stops the cluster and removes its namespaces.",
+        flush=True,
+    )
+    try:
+        while not stop.wait(1.0):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not leave namespaces behind
+        cluster.close()
+        lab.close()
+    print("slurm-lab: stopped", flush=True)
+    return 0
+
+
+def register_slurm_lab(sub: Subparsers) -> None:
+    """``swarmbed slurm-lab``: its arguments, run by :func:`cmd_slurm_lab`."""
+    lab = sub.add_parser(
+        "slurm-lab",
+        help="a Slurm cluster on this machine (root, slurm-wlm): one node per network namespace, to try run --slurm",
+    )
+    lab.add_argument("--nodes", type=positive, default=3, help="how many nodes (default 3)")
+    lab.add_argument("--folder", default="runs/slurm-lab", help="its slurm.conf, state and logs")
+    lab.set_defaults(func=cmd_slurm_lab)
+
+
 def cmd_hosts(args: argparse.Namespace) -> int:
     from swarmbed.launch.host_client import host_info, visible_hosts
 

@@ -14,7 +14,14 @@ from swarmbed.bt import BTError
 from swarmbed.cli.authoring import register_bt, register_check_allocator, register_check_scenario, register_params
 from swarmbed.cli.campaigns import register_analyze, register_replay, register_report, register_sweep
 from swarmbed.cli.common import Parser
-from swarmbed.cli.hosts import register_certs, register_credentials, register_host, register_hosts, register_swap
+from swarmbed.cli.hosts import (
+    register_certs,
+    register_credentials,
+    register_host,
+    register_hosts,
+    register_slurm_lab,
+    register_swap,
+)
 from swarmbed.cli.run import register_run, register_soak
 from swarmbed.cli.views import register_groot, register_watch
 from swarmbed.engine.run_errors import RunError
@@ -46,6 +53,7 @@ VERBS: tuple[Callable[[Subparsers], None], ...] = (
     register_check_scenario,
     register_host,
     register_hosts,
+    register_slurm_lab,
     register_watch,
     register_groot,
     register_swap,

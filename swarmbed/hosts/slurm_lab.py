@@ -126,7 +126,9 @@ def make_slurm_lab(lab: Lab, folder: Path, nodes: int) -> SlurmLab:
     conf = str(folder / "slurm.conf")
     try:
         _munge()
-        cluster.daemons.append(subprocess.Popen([_tool("slurmctld"), "-D", "-i", "-f", conf], env=cluster.env))
+        with safefiles.open_fresh(folder / "slurmctld.out") as noise:  # its start-up lines stay out of a terminal
+            ctld = [_tool("slurmctld"), "-D", "-i", "-f", conf]
+            cluster.daemons.append(subprocess.Popen(ctld, env=cluster.env, stdout=noise, stderr=noise))
         for node, ns in zip(cluster.nodes, namespaces):
             cmd = ["nsenter", f"--net=/var/run/netns/{ns}", _tool("slurmd"), "-D", "-f", conf, "-N", node]
             cluster.daemons.append(subprocess.Popen(cmd, env=cluster.env, stderr=subprocess.DEVNULL))
