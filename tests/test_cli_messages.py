@@ -109,3 +109,25 @@ def test_long_work_says_it_is_alive_a_line_a_minute_where_no_terminal_shows_a_ba
     off = io.StringIO()
     Progress(10, "x", enabled=False, every_s=0.0, stream=off).update(5)
     assert off.getvalue() == ""
+
+
+def test_watch_breaks_between_figures_on_an_80_column_terminal():
+    """Issue 82 item 27: ``watch`` wrapped its cells inside figures at 80 columns."""
+    from rich.console import Console
+
+    from swarmbed.results.watch import RunView
+    from swarmbed.wire.run_status import NetworkCounters, RunStatus
+
+    row = {"tick": 10, "time": 10.0, **{f"metric_{i}": 1000.5 * i for i in range(8)}}
+    status = RunStatus(
+        name="quickstart", scenario="mtsr", allocator="fcg", tick=10, time=10.0, ticks=2000, wall_s=1.0, row=row,
+        network=NetworkCounters(messages_sent=10, bytes_sent=100, copies=40, delivered=30, dropped=10),
+        drops={"out_of_range": 8, "loss": 1, "queue_full": 1, "late": 0}, alive=list(range(5)),
+    )  # fmt: skip
+    console = Console(width=80, record=True, color_system=None)
+    console.print(RunView("abc", status=status).render())
+    text = console.export_text()
+    for i in range(8):
+        pair = f"metric_{i} {1000.5 * i:,.1f}"
+        assert any(pair in line for line in text.splitlines()), (pair, text)
+    assert max(len(line) for line in text.splitlines()) <= 80

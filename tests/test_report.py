@@ -227,6 +227,25 @@ def test_replay_is_a_movie_with_one_frame_per_chosen_tick(recorded, tmp_path):
     assert sorted(p.name for p in run.iterdir()) == before  # nothing written into the run
 
 
+def test_replay_frames_have_a_legend_and_each_agents_id(recorded, tmp_path, monkeypatch):
+    """Issue 82 item 27: the frames had no legend and no agent ids."""
+    from matplotlib.axes import Axes
+
+    from swarmbed.results.replay import replay
+
+    written, legends = [], []
+    annotate, legend = Axes.annotate, Axes.legend
+    monkeypatch.setattr(
+        Axes, "annotate", lambda self, text, *a, **k: written.append(text) or annotate(self, text, *a, **k)
+    )
+    monkeypatch.setattr(Axes, "legend", lambda self, *a, **k: legends.append(k.get("handles")) or legend(self, *a, **k))
+    replay(recorded[True], tmp_path / "m.gif", start=10, end=13)
+    agents = pd.read_csv(recorded[True] / "trajectories.csv")["agent"].unique()
+    assert {str(a) for a in agents} <= set(written)
+    labels = [h.get_label() for h in legends[0]]
+    assert "agent (its id beside it)" in labels and "task or victim" in labels
+
+
 def test_replay_says_what_is_missing(runs, capsys):
     assert cli(["replay", str(runs["a"])]) == 2
     assert "run.record_trajectories=true" in capsys.readouterr().err

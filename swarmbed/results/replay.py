@@ -21,6 +21,7 @@ from swarmbed.records.run_folder import MARKERS, RECEIVER_LEDGER, SUMMARY, TRAJE
 from swarmbed.results.colours import DROP_COLORS, LABEL_COLORS, WALL_COLOUR
 from swarmbed.results.progress import Progress
 
+MAX_ID_LABELS = 60  # agents whose ids a frame writes beside them; more would hide the map
 MAX_FRAMES = 600  # without --every, ticks are skipped so that a movie has at most this many frames
 
 
@@ -83,15 +84,20 @@ def _frame_ticks(traj: pd.DataFrame, dt: float, start: float | None, end: float 
 
 
 def _legend(ax: Any, copies: pd.DataFrame | None) -> None:
-    """Delivered and each drop reason the run has, or a note that links need the per-receiver ledger."""
-    if copies is not None:
-        from matplotlib.lines import Line2D
+    """What the marks are (agents, tasks or victims), and, with the per-receiver ledger, delivered
+    copies and each drop reason the run has; without it a note that links need that ledger."""
+    from matplotlib.lines import Line2D
 
+    handles = [
+        Line2D([], [], ls="", marker="o", color="#222222", label="agent (its id beside it)"),
+        Line2D([], [], ls="", marker="s", color="#999999", label="task or victim"),
+    ]
+    if copies is not None:
         reasons = [r for r in DROP_COLORS if r != "run_ended" and r in set(copies["outcome"])]
-        handles = [Line2D([], [], color="#1f77b4", lw=1, label="delivered")]
+        handles += [Line2D([], [], color="#1f77b4", lw=1, label="delivered")]
         handles += [Line2D([], [], color=DROP_COLORS[r], lw=1, ls="--", label=r.replace("_", " ")) for r in reasons]
-        ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
-    else:
+    ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
+    if copies is None:
         ax.text(
             0.01,
             0.01,
@@ -152,6 +158,7 @@ def replay(
     _legend(ax, copies)
     present: dict[int, tuple[float, float, str]] = {}
     applied = [-1]  # last tick whose marker events are in `present`
+    ids: list[Any] = []  # the agents' id labels of the frame drawn
 
     def draw(k: int):
         for t in marker_ticks:
@@ -167,6 +174,12 @@ def replay(
         agents.set_offsets(np.array(list(pos.values())) if pos else np.empty((0, 2)))
         if now is not None:
             agents.set_facecolor([LABEL_COLORS.get(lab, "#222222") for lab in now["label"]])
+        for text in ids:
+            text.remove()
+        ids.clear()
+        if len(pos) <= MAX_ID_LABELS:  # beyond, the ids would hide the map
+            for a, (x, y) in pos.items():
+                ids.append(ax.annotate(str(a), (x, y), xytext=(4, 4), textcoords="offset points", fontsize=6))
         if present:
             marks.set_offsets(np.array([(x, y) for x, y, _ in present.values()]))
             marks.set_color([LABEL_COLORS.get(lab, "#999999") for *_, lab in present.values()])

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
+from rich.columns import Columns
 from rich.console import Console, Group
 from rich.live import Live
 from rich.table import Table
@@ -124,41 +125,38 @@ class RunView:
         if s is None:
             return Group(Text(f"run {self.run_id}: waiting for its first progress sample ..."))
         dt = s.time / max(s.tick, 1) if s.tick else 0.0
-        head = Table.grid(padding=(0, 2))
+        head = Table.grid(padding=(0, 2))  # two columns: a label, and figures that never break inside
+        head.add_row(Text(s.name, style="bold"), _lines([f"run {self.run_id}", f"{s.scenario} / {s.allocator}"]))
         head.add_row(
-            Text(s.name, style="bold"),
-            f"run {self.run_id}",
-            f"{s.scenario} / {s.allocator}",
+            "progress",
+            _lines(
+                [
+                    f"tick {s.tick + 1:,} of {s.ticks:,}",
+                    f"t = {s.time:,.1f} s",
+                    f"{self.ticks_per_s:,.1f} ticks/s",
+                    f"({self.ticks_per_s * dt:,.1f} sim s per wall s)",
+                ]
+            ),
         )
-        head.add_row(
-            f"tick {s.tick + 1:,} of {s.ticks:,}",
-            f"t = {s.time:,.1f} s",
-            f"{self.ticks_per_s:,.1f} ticks/s  ({self.ticks_per_s * dt:,.1f} sim s per wall s)",
-        )
-        outcome = "  ".join(
+        figures = [
             f"{k} {v:,}" if isinstance(v, int) else f"{k} {v:,.1f}"
             for k, v in s.row.items()
             if k not in ("tick", "time")
-        )
-        head.add_row("outcome", outcome, "")
+        ]
+        head.add_row("outcome", _lines(figures))
         net = s.network
-        head.add_row(
-            "radio",
-            f"{net.messages_sent:,} messages, {net.bytes_sent:,} B",
-            f"copies {net.delivered:,} delivered / {net.copies:,}",
-        )
-        drops = ", ".join(f"{r} {n:,}" for r, n in sorted(s.drops.items())) or "none"
-        head.add_row("dropped", drops, f"late ticks {s.late_ticks:,}")
+        radio = [f"{net.messages_sent:,} messages", f"{net.bytes_sent:,} B"]
+        head.add_row("radio", _lines([*radio, f"copies {net.delivered:,} delivered / {net.copies:,}"]))
+        drops = [f"{r} {n:,}" for r, n in sorted(s.drops.items())] or ["none"]
+        head.add_row("dropped", _lines([*drops, f"late ticks {s.late_ticks:,}"]))
         agents_alive = sorted({i for k in alive if k.startswith("agent/") and (i := _agent_or_none(k)) is not None})
-        procs = [("coordinator", "coordinator" in alive), ("netem", "netem" in alive)]
-        head.add_row(
-            "processes",
-            "  ".join(f"{n} {'up' if ok else 'DOWN'}" for n, ok in procs),
-            f"agents {len(agents_alive)} up of {len(s.alive)} in the world",
-        )
+        procs = [
+            f"{n} {'up' if ok else 'DOWN'}"
+            for n, ok in (("coordinator", "coordinator" in alive), ("netem", "netem" in alive))
+        ]
+        head.add_row("processes", _lines([*procs, f"agents {len(agents_alive)} up of {len(s.alive)} in the world"]))
         table = Table(
-            title="payload each agent sent since the first watcher attached (the run totals are above; "
-            "rates: per wall second, last 2 s)",
+            title="payload each agent sent since the first watcher attached\n(rates: per wall second, last 2 s)",
             title_justify="left",
         )
         for col in ("agent", "process", "msgs/s", "B/s", "messages", "bytes"):
@@ -181,6 +179,12 @@ class RunView:
             + " ".join(f"{k}={v:.6g}" for k, v in s.row.items() if k not in ("tick", "time"))
             + f" messages={s.network.messages_sent} dropped={s.network.dropped}"
         )
+
+
+def _lines(items: list[str]) -> Columns:
+    """``items`` side by side, as many to a line as the terminal holds, each held together: a narrow
+    terminal breaks between two figures, never inside one."""
+    return Columns([Text(item, no_wrap=True) for item in items], padding=(0, 2))
 
 
 def write_map(status: RunStatus, path: Path, bounds: list[float]) -> None:
