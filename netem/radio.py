@@ -133,12 +133,22 @@ def drop_reasons(params: NetworkSection) -> tuple[str, ...]:
     return DROP_REASONS + tuple(s.reason for s in STAGES if s.reason not in DROP_REASONS and s.on(params))
 
 
+#: up to this many agents, :func:`neighbours` compares every pair (a few microseconds) instead of
+#: building SciPy's KD-tree, whose import alone costs a process about a second of CPU
+PAIRWISE_UP_TO = 128
+
+
 def neighbours(x: np.ndarray, y: np.ndarray, rows: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
-    """Every point within ``reach`` of each point of ``rows`` (itself included), by SciPy's KD-tree
-    and its own distance: (sender, candidate) pairs grouped by sender in the order of ``rows``,
-    candidates ascending. The caller tests them again with the radio's own distance. A uniform grid
-    of ``reach``-wide cells (the 3 x 3 cells about each sender, then a sort) measured 1.3-2.6x
-    slower at 200-1,000 agents (docs/benchmarks.md)."""
+    """Every point within ``reach`` of each point of ``rows`` (itself included), by its own distance:
+    (sender, candidate) pairs grouped by sender in the order of ``rows``, candidates ascending. The
+    caller tests them again with the radio's own distance, so the two ways below give it the same
+    copies. Up to :data:`PAIRWISE_UP_TO` points, every pair is compared; beyond, SciPy's KD-tree
+    finds them (a uniform grid of ``reach``-wide cells, the 3 x 3 cells about each sender, then a
+    sort, measured 1.3-2.6x slower at 200-1,000 agents: docs/benchmarks.md)."""
+    if len(x) <= PAIRWISE_UP_TO:
+        near = np.hypot(x[None, :] - x[rows][:, None], y[None, :] - y[rows][:, None]) <= reach
+        senders, candidates = np.nonzero(near)  # row-major: grouped by sender, candidates ascending
+        return rows[senders], candidates.astype(np.int64)
     from scipy.spatial import cKDTree
 
     points = np.column_stack((x, y))
