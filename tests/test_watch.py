@@ -143,8 +143,8 @@ def test_watch_serves_a_running_run_to_foxglove(tmp_path, operator):
     )
     try:
         line = watcher.stderr.readline()
-        port = int(re.search(r"ws://127\.0\.0\.1:(\d+)", line).group(1))
-        ws = websocket.create_connection(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], timeout=30)
+        url = re.search(r"ws://127\.0\.0\.1:\d+/\S+", line).group(0)  # with the run's token
+        ws = websocket.create_connection(url, subprotocols=["foxglove.sdk.v1"], timeout=30)
         channels: dict[str, dict] = {}
         while not {"/agents", "/agents/poses", "/markers"} <= set(channels):
             message = json.loads(ws.recv())

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarmbed import config as cfg
-from swarmbed.cli.common import add_engine, engine_prefix, fmt, keys_epilog, port_number, refusals, taken
+from swarmbed.cli.common import add_engine, engine_prefix, fmt, keys_epilog, port_number, positive, refusals, taken
 from swarmbed.files import safefiles
 
 if TYPE_CHECKING:
@@ -97,7 +97,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from swarmbed.results.recording import RecordingError
 
     try:  # the port is taken before the output folder is touched: a port in use leaves nothing behind
-        views = _live_views(exp, args.foxglove)
+        views = _live_views(exp, args.foxglove, args.view_clients)
     except RecordingError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -158,20 +158,20 @@ def _slurm_refusals(exp, args: argparse.Namespace) -> str | None:
     return None
 
 
-def _live_views(exp, port: int | None) -> list:
+def _live_views(exp, port: int | None, max_clients: int = 4) -> list:
     """The live views ``swarmbed run`` was asked for (``--foxglove``), each made from the run's session."""
     if port is None:
         return []
     from swarmbed.results.foxglove_live import FoxgloveLive, serve
 
-    served = serve("127.0.0.1", port)
+    served = serve("127.0.0.1", port, max_clients)
 
     def foxglove(session):
         from swarmbed.schema.obstacles import wall_lines
 
         walls = wall_lines(exp.obstacles)
         view = FoxgloveLive(session.world, exp.run.dt, walls=walls, served=served)
-        print(f"Foxglove: open connection ws://127.0.0.1:{view.port}", file=sys.stderr, flush=True)
+        print(f"Foxglove: open connection {view.url}", file=sys.stderr, flush=True)
         return view
 
     return [foxglove]
@@ -202,6 +202,9 @@ def register_run(sub: Subparsers) -> None:
         metavar="PORT",
         help="serve the run live to Foxglove over its WebSocket protocol on 127.0.0.1:PORT (default 8765; "
         "the channels of replay --mcap; the viewers extra)",
+    )
+    run.add_argument(
+        "--view-clients", type=positive, default=4, metavar="N", help="viewers --foxglove admits at once (default 4)"
     )
     add_engine(run)
     run.add_argument(

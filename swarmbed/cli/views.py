@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from swarmbed.cli.common import client_session, port_number
+from swarmbed.cli.common import client_session, port_number, positive
 from swarmbed.wire.zenoh_session import add_zenoh_args
 
 if TYPE_CHECKING:
@@ -27,11 +27,11 @@ def cmd_watch(args: argparse.Namespace) -> int:
         from swarmbed.results.recording import RecordingError
 
         try:
-            live = StatusFoxglove(args.foxglove)
+            live = StatusFoxglove(args.foxglove, max_clients=args.view_clients)
         except RecordingError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
-        print(f"Foxglove: open connection ws://127.0.0.1:{live.port}", file=sys.stderr, flush=True)
+        print(f"Foxglove: open connection {live.url}", file=sys.stderr, flush=True)
     with session:
         try:
             return watch(
@@ -61,6 +61,9 @@ def register_watch(sub: Subparsers) -> None:
         metavar="PORT",
         help="also serve the run to Foxglove on 127.0.0.1:PORT (default 8765; 0: a free port): agents, poses "
         "and markers from the run's progress samples (the viewers extra)",
+    )
+    wat.add_argument(
+        "--view-clients", type=positive, default=4, metavar="N", help="viewers --foxglove admits at once (default 4)"
     )
     add_zenoh_args(wat)
     wat.set_defaults(func=cmd_watch)

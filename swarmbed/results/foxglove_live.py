@@ -2,13 +2,16 @@
 channels served live while the run goes.
 
 A hook of the engine's tick loop (:class:`~swarmbed.engine.TickHook`) that starts Foxglove's
-WebSocket server (its SDK, the one that writes the MCAP recordings) on 127.0.0.1 and logs, at each
-tick as the transport carries it, what :mod:`.recording` writes after a run: ``/agents`` and
-``/agents/poses`` (each agent with its heading, from its observation), ``/markers`` (tasks or
-victims as they appear and vanish) and ``/radio`` (the copies delivered at this tick, as lines
-from sender to receiver). Foxglove (or Lichtblick) connects with "Open connection" to
-``ws://127.0.0.1:PORT``. Nothing feeds back into the run; a run without it pays nothing. A run with
-obstacles also has ``/walls`` (its walls as lines, again every 50 ticks for a viewer that joins late).
+WebSocket server (its SDK, the one that writes the MCAP recordings) and logs, at each tick as the
+transport carries it, what :mod:`.recording` writes after a run: ``/agents`` and ``/agents/poses``
+(each agent with its heading, from its observation), ``/markers`` (tasks or victims as they appear
+and vanish) and ``/radio`` (the copies delivered at this tick, as lines from sender to receiver).
+Foxglove (or Lichtblick) connects with "Open connection" to the URL the command prints,
+``ws://127.0.0.1:PORT/TOKEN``: a gate (:mod:`.view_gate`) admits at most ``--view-clients``
+viewers at once (default 4), each with the run's token, and relays them to the server on a
+loopback port of its own. Nothing feeds back into the run; a run without it pays nothing. A run
+with obstacles also has ``/walls`` (its walls as lines, again every 50 ticks for a viewer that
+joins late).
 
 ``watch --foxglove`` (:class:`StatusFoxglove`) serves a run already under way, from anywhere its
 hub is reachable, out of the progress samples ``swarmbed watch`` reads: ``/agents``,
@@ -39,6 +42,7 @@ from swarmbed.results.recording import (
     _stamp,
     _walls_update,
 )
+from swarmbed.results.view_gate import MAX_CLIENTS, ViewGate
 from swarmbed.wire.codec import WorldSample, delivered_in
 from swarmbed.wire.observation import Observation
 from swarmbed.wire.run_status import RunStatus
@@ -54,8 +58,22 @@ BACKLOG_MESSAGES = 32
 WALLS_EVERY = 50
 
 
-def serve(host: str, port: int) -> tuple[Any, Any, dict[str, Any]]:
-    """Foxglove's server on host:port (0: a free one) with the live view's scene channels."""
+class Served:
+    """Foxglove's server on a loopback port of its own, behind a :class:`ViewGate` on the port the
+    user asked for: :attr:`port` and :attr:`url` (with the run's token) are the gate's."""
+
+    def __init__(self, server: Any, gate: ViewGate) -> None:
+        self.server, self.gate = server, gate
+        self.port, self.url = gate.port, gate.url
+
+    def stop(self) -> None:
+        self.gate.close()
+        self.server.stop()
+
+
+def serve(host: str, port: int, max_clients: int = MAX_CLIENTS) -> tuple[Any, Served, dict[str, Any]]:
+    """Foxglove's server with the live view's scene channels, behind a gate on host:port (0: a free
+    one) that admits ``max_clients`` viewers at once, each with the run's token."""
     try:
         import foxglove
         from foxglove import channels
@@ -63,17 +81,23 @@ def serve(host: str, port: int) -> tuple[Any, Any, dict[str, Any]]:
         raise RecordingError("a live view needs Foxglove's SDK: pip install 'swarmbed[viewers]'") from None
     context = foxglove.Context()
     try:
-        server = foxglove.start_server(
-            name="swarmbed", host=host, port=port, context=context, message_backlog_size=BACKLOG_MESSAGES
-        )
-    except (RuntimeError, OSError, OverflowError, ValueError) as exc:  # a port in use: one line, not a traceback
+        gate = ViewGate(0, host, port, max_clients)
+    except (OSError, OverflowError, ValueError) as exc:  # a port in use: one line, not a traceback
         raise RecordingError(f"--foxglove {port}: cannot serve on {host}:{port}: {str(exc).splitlines()[0]}") from None
+    try:
+        server = foxglove.start_server(
+            name="swarmbed", host="127.0.0.1", port=0, context=context, message_backlog_size=BACKLOG_MESSAGES
+        )
+    except (RuntimeError, OSError) as exc:
+        gate.close()
+        raise RecordingError(f"--foxglove: cannot start Foxglove's server: {str(exc).splitlines()[0]}") from None
+    gate.backend_port = server.port
     made = {
         "/agents": channels.SceneUpdateChannel("/agents", context=context),
         "/agents/poses": channels.PosesInFrameChannel("/agents/poses", context=context),
         "/markers": channels.SceneUpdateChannel("/markers", context=context),
     }
-    return context, server, made
+    return context, Served(server, gate), made
 
 
 #: how long closing the live view waits for its server to stop: the SDK's stop() waits for every
@@ -102,7 +126,7 @@ class FoxgloveLive(TickHook):
         port: int = DEFAULT_PORT,
         host: str = "127.0.0.1",
         walls: list[tuple[tuple[float, float], tuple[float, float]]] | None = None,
-        served: tuple[Any, Any, dict[str, Any]] | None = None,
+        served: tuple[Any, Served, dict[str, Any]] | None = None,
     ) -> None:
         """``served``: a server :func:`serve` started already (the command binds its port before it
         makes the output folder); else one is started on ``host:port``."""
@@ -110,7 +134,7 @@ class FoxgloveLive(TickHook):
 
         self.world, self.dt = world, dt
         self.context, self.server, made = served or serve(host, port)
-        self.port = self.server.port
+        self.port, self.url = self.server.port, self.server.url
         self.agents, self.poses, self.markers = made["/agents"], made["/agents/poses"], made["/markers"]
         self.radio = channels.SceneUpdateChannel("/radio", context=self.context)
         self.walls = list(walls or [])
@@ -168,9 +192,9 @@ class FoxgloveLive(TickHook):
 class StatusFoxglove:
     """``swarmbed watch --foxglove``: a running run's progress samples, served to Foxglove."""
 
-    def __init__(self, port: int = DEFAULT_PORT, host: str = "127.0.0.1") -> None:
-        self.context, self.server, made = serve(host, port)
-        self.port = self.server.port
+    def __init__(self, port: int = DEFAULT_PORT, host: str = "127.0.0.1", max_clients: int = MAX_CLIENTS) -> None:
+        self.context, self.server, made = serve(host, port, max_clients)
+        self.port, self.url = self.server.port, self.server.url
         self.agents, self.poses, self.markers = made["/agents"], made["/agents/poses"], made["/markers"]
         self.last_tick = -2
         self.where: dict[int, tuple[float, float]] = {}  # each agent's position in the last sample
