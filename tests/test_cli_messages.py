@@ -131,3 +131,15 @@ def test_watch_breaks_between_figures_on_an_80_column_terminal():
         pair = f"metric_{i} {1000.5 * i:,.1f}"
         assert any(pair in line for line in text.splitlines()), (pair, text)
     assert max(len(line) for line in text.splitlines()) <= 80
+
+
+def test_run_check_and_sweep_check_give_one_cell_the_same_estimate(capsys):
+    """Issue 82 item 22: the same cell was 33 s by ``run --check`` and 61 s by ``sweep --check``."""
+    import re
+
+    assert main(["run", str(QUICKSTART), "--check"]) == 0
+    alone = re.search(r"estimated wall time: .*?about (\S+ \w+)", capsys.readouterr().out).group(1)
+    assert main(["sweep", str(QUICKSTART), "--runs", "4", "--check", "--jobs", "2"]) == 0
+    out = capsys.readouterr().out
+    assert f"about {alone} a run alone" in out, (alone, out)
+    assert "estimated wall time" in out.splitlines()[-1]

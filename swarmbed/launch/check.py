@@ -44,8 +44,10 @@ def allocator_seconds_per_agent_tick(exp: Experiment) -> float:
     return (time.process_time() - started) / (n * CALIBRATION_ROUNDS)
 
 
-def estimate_wall_s(exp: Experiment, cores: int | None = None, engine: str = "processes") -> float:
-    """Rough wall seconds of one run of ``exp`` on this machine (the in-process engine: on one core)."""
+def run_cost(exp: Experiment, engine: str = "processes") -> tuple[float, float, int]:
+    """One run of ``exp``: its fixed wall seconds (start-up, the planner's graph), the CPU seconds of
+    its ticks, and the most cores those can use at once (one in-process; agents + hub + proxy in
+    processes). The one estimator behind ``run --check`` and ``sweep --check``."""
     try:
         allocator = allocator_seconds_per_agent_tick(exp)
     except Exception:  # an allocator the kit cannot drive (a scenario of its own): the engine's cost alone
@@ -56,12 +58,17 @@ def estimate_wall_s(exp: Experiment, cores: int | None = None, engine: str = "pr
         planning = sight_tests(exp.obstacles.compile()) * SECONDS_PER_SIGHT_TEST
     else:
         planning = 0.0
+    agent_ticks = exp.ticks * exp.agents.count
     if engine == "inprocess":
-        ticking = exp.ticks * exp.agents.count * (INPROCESS_CPU_PER_AGENT_TICK + allocator)
-        return planning + INPROCESS_STARTUP_S + ticking
-    cores = max(1, min(cores or os.cpu_count() or 1, exp.agents.count + 2))
-    ticking = exp.ticks * exp.agents.count * (PROCESS_CPU_PER_AGENT_TICK + allocator) / cores
-    return planning + STARTUP_S + STARTUP_PER_AGENT_S * exp.agents.count + ticking
+        return planning + INPROCESS_STARTUP_S, agent_ticks * (INPROCESS_CPU_PER_AGENT_TICK + allocator), 1
+    fixed = planning + STARTUP_S + STARTUP_PER_AGENT_S * exp.agents.count
+    return fixed, agent_ticks * (PROCESS_CPU_PER_AGENT_TICK + allocator), exp.agents.count + 2
+
+
+def estimate_wall_s(exp: Experiment, cores: int | None = None, engine: str = "processes") -> float:
+    """Rough wall seconds of one run of ``exp`` alone on ``cores`` (this machine's by default)."""
+    fixed, cpu, parallel = run_cost(exp, engine)
+    return fixed + cpu / max(1, min(cores or os.cpu_count() or 1, parallel))
 
 
 def _upto(exps: Sequence[Experiment]) -> str:
@@ -121,14 +128,20 @@ def describe_sweep(
     go ``min(jobs, runs_left)`` at a time, the cores shared among them; the whole takes at least
     its longest run."""
     lines = [f"check: the sweep is valid; nothing was started ({n_runs} runs planned, {runs_left} still to run)"]
-    at_once = max(1, min(jobs, runs_left))
-    each = []
+    at_once, cores = max(1, min(jobs, runs_left)), os.cpu_count() or 1
+    costs = []
     for name, exp in per_run.items():
-        one = estimate_wall_s(exp, cores=max(1, (os.cpu_count() or 1) // at_once), engine=engine)
-        lines.append(f"  {name}: {exp.agents.count} agents, {exp.ticks:,} ticks, about {_duration(one)} a run")
-        each.append(one)
+        cost = run_cost(exp, engine)
+        alone = cost[0] + cost[1] / max(1, min(cores, cost[2]))
+        lines.append(f"  {name}: {exp.agents.count} agents, {exp.ticks:,} ticks, about {_duration(alone)} a run alone")
+        costs.append((alone, cost))
     if per_run and runs_left:
-        whole = max(max(each), sum(each) / len(each) * runs_left / at_once)
+        # the runs share the cores: the whole is the CPU of every run left over the cores it can use,
+        # plus each run's fixed part, `at_once` of them overlapping; never less than its longest run
+        mean_fixed = sum(c[1][0] for c in costs) / len(costs)
+        mean_cpu = sum(c[1][1] for c in costs) / len(costs)
+        usable = min(cores, at_once * max(c[1][2] for c in costs))
+        whole = max(max(c[0] for c in costs), runs_left * (mean_fixed / at_once + mean_cpu / usable))
         lines.append(
             f"  estimated wall time: {_upto(list(per_run.values()))} {_duration(whole)} with --jobs {jobs}"
             f" ({runs_left} run{'s' if runs_left != 1 else ''}, {at_once} at a time)"
