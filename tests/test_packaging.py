@@ -159,3 +159,16 @@ def test_the_root_shows_the_mission_and_everything_else_is_in_swarmbed():
     assert folders == ROOT_FOLDERS, f"the root's folders: {sorted(folders)}"
     mapped = set(_setuptools()["package-dir"].values())
     assert mapped == {"swarmbed", "coordinator", "agent_runtime", "netem", "plugins", "experiments"}, mapped
+
+
+@pytest.mark.slow  # starts processes
+def test_a_small_in_process_run_imports_no_analysis_library(tmp_path):
+    """Issue 84 item 3: pandas (0.5 s) and SciPy's KD-tree (about 1 s) stay off a run's path."""
+    code = (
+        "import sys; from swarmbed.cli.main import main; "
+        f"main(['run', {str(ROOT / 'experiments' / 'quickstart.yaml')!r}, '--engine', 'inprocess', "
+        f"'--out', {str(tmp_path / 'run')!r}, '--no-progress']); "
+        "print('imported:', *(m for m in ('pandas', 'scipy', 'matplotlib', 'plotly') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip().splitlines()[-1] == "imported:", done.stdout[-500:]

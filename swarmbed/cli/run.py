@@ -94,13 +94,15 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         print(describe_plan(exp, out, admitted, args.engine))
         return 0
-    from swarmbed.results.recording import RecordingError
+    views: list = []
+    if args.foxglove is not None:  # pandas and Foxglove's SDK only for a run that shows itself live
+        from swarmbed.results.recording import RecordingError
 
-    try:  # the port is taken before the output folder is touched: a port in use leaves nothing behind
-        views = _live_views(exp, args.foxglove, args.view_clients)
-    except RecordingError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        try:  # the port is taken before the output folder is touched: a port in use leaves nothing behind
+            views = _live_views(exp, args.foxglove, args.view_clients)
+        except RecordingError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     problem = taken(out, args.force)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
