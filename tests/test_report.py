@@ -113,7 +113,7 @@ def test_report_command_names_a_folder_that_is_neither_run_nor_sweep(tmp_path, c
 def test_every_run_writes_a_summary_its_model_accepts_and_a_crafted_one_is_named(runs, tmp_path, capsys):
     """summary.json has a model (swarmbed.records.summary): the coordinator checks it before writing,
     and a report of a summary that does not fit it is one line that names the field."""
-    from swarmbed.records.summary import read_summary
+    from swarmbed.records.run_folder import read_summary
 
     summary = read_summary(runs["a"] / "summary.json")
     assert summary.network.per_kind["claim"].model_extra["delivered"] > 0

@@ -27,14 +27,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pydantic import ValidationError
 
+from swarmbed.records.summary import RunSummary
 from swarmbed.schema.experiment import MAX_AGENT_COUNT
 from swarmbed.schema.obstacles import ObstaclesSection, wall_lines
 from swarmbed.wire.errors import WireError
 
 if TYPE_CHECKING:
     import pandas as pd
-
-    from swarmbed.records.summary import RunSummary
 
 CONFIG = "config.yaml"  # the resolved experiment
 PROVENANCE = "provenance.json"  # which code made the run
@@ -269,8 +268,6 @@ class RunDir:
         """``summary.json``, checked against its model (at most :data:`MAX_AGENTS` agents)."""
         if self._summary is None:
             try:
-                from swarmbed.records.summary import read_summary  # summary.py reads its file through this module
-
                 summary = read_summary(self.path / SUMMARY)
             except WireError as exc:
                 raise RunFileError(str(exc)) from None
@@ -390,3 +387,16 @@ def _whole_ticks(frame: pd.DataFrame, path: Path, ticks: int) -> None:
             f"{path}: tick {frame['tick'].iloc[int(np.argmax(bad))]!r} is not a tick of this run (0 to {ticks})"
         )
     frame["tick"] = values.astype(np.int64)
+
+
+def read_summary(path: Path) -> RunSummary:
+    """A run's ``summary.json``, checked against :class:`RunSummary`; a WireError naming the file for
+    anything else (a link out of its folder, a huge or torn file, another shape)."""
+    try:
+        document = read_json_member(path.parent, path.name)
+    except RunFileError as exc:
+        raise WireError(str(exc)) from None
+    try:
+        return RunSummary.of(document)
+    except WireError as exc:
+        raise WireError(f"{path}: {exc}") from None

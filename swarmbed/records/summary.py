@@ -4,19 +4,18 @@ and the sweeps, reports and soak pages that read it.
 The keys every run has are declared here; the scenario's own outcome keys (its ``summary_keys``)
 and the allocator's event counters sit beside them at the top level (``extra``). The coordinator
 builds the summary as this model (:meth:`RunSummary.of`) before it writes it, so a run never
-completes with a summary its readers cannot read; readers load it with :func:`read_summary`, which
-checks it the same way. The model keeps the document it was made from (:attr:`RunSummary.document`):
-``summary.json`` is that document, key for key, and a sweep's table flattens it as written.
+completes with a summary its readers cannot read; readers load it with
+:func:`swarmbed.records.run_folder.read_summary`, which checks it the same way. The model keeps
+the document it was made from (:attr:`RunSummary.document`): ``summary.json`` is that document,
+key for key, and a sweep's table flattens it as written.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError
 
-from swarmbed.records.run_folder import RunFileError, read_json_member
 from swarmbed.wire.errors import WireError
 
 
@@ -99,16 +98,3 @@ class RunSummary(BaseModel):
         if key not in extra:
             raise KeyError(key)
         return extra[key]
-
-
-def read_summary(path: Path) -> RunSummary:
-    """A run's ``summary.json``, checked against :class:`RunSummary`; a WireError naming the file for
-    anything else (a link out of its folder, a huge or torn file, another shape)."""
-    try:
-        document = read_json_member(path.parent, path.name)
-    except RunFileError as exc:
-        raise WireError(str(exc)) from None
-    try:
-        return RunSummary.of(document)
-    except WireError as exc:
-        raise WireError(f"{path}: {exc}") from None
