@@ -56,3 +56,13 @@ def test_importing_a_role_loads_no_launcher():
     code = "import sys, swarmbed.netem.proxy, swarmbed.agent_runtime.process; print(' '.join(sys.modules))"
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert not [m for m in loaded if m.startswith(("swarmbed.api", "swarmbed.launch", "swarmbed.config"))], loaded
+
+
+def test_the_package_root_hands_on_exactly_the_api():
+    """The root lists the API's names without importing it (its processes stay lean): the two lists
+    are one, and each name reaches the object the API module holds."""
+    from swarmbed import api
+
+    assert swarmbed.__all__ == api.__all__
+    for name in api.__all__:
+        assert getattr(swarmbed, name) is getattr(api, name)

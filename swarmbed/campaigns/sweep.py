@@ -587,87 +587,74 @@ def run_sweep(
     (lock-step only; the same result files as processes, for tests and calibration sweeps).
     ``on_complete``: called in this process with each run that is complete, those completed before
     first (a resumed sweep), then each as it completes (``--mlflow`` logs them)."""
-    with safefiles.rooted(out):  # the sweep's folder, opened once: no run folder is reached through a link
-        return _run_sweep(sweep, out, jobs, progress, executor, stale_after, redo_mismatched, in_process, on_complete)
-
-
-def _run_sweep(
-    sweep: Sweep,
-    out: Path,
-    jobs: int | None = None,
-    progress: bool = True,
-    executor: Executor | None = None,
-    stale_after: float = claims.STALE_AFTER_S,
-    redo_mismatched: bool = False,
-    in_process: bool = False,
-    on_complete: Callable[[RunSpec], None] | None = None,
-) -> pd.DataFrame:
     from swarmbed.campaigns import executors
 
-    if jobs is not None and jobs < 1:
-        raise cfg.ConfigError(f"--jobs {jobs}: at least one run must be able to go at once")
-    safefiles.make_folder(out)
-    specs = plan(sweep, out)
-    agents: dict[str, int] = {}  # per scenario name
-    try:
-        for spec in specs:  # every scenario is valid before anything starts
-            if spec.scenario.name not in agents:
-                exp = experiment_for(spec.base, spec.scenario, spec.seed, spec.extra)
-                agents[spec.scenario.name] = exp.agents.count
-        _check_completed(specs, out, redo_mismatched)
-    except KeyboardInterrupt:  # while planning: nothing started, but a resumed sweep's table is brought up to date
-        done = _complete(specs)
-        if done and (out / SPEC).exists():
-            write_tables(collect(sweep, out, stale_after), out)
-        raise SweepInterrupted(
-            f"interrupted while planning: nothing was started; {done} of {len(specs)} runs are complete"
-            + (f" and in {out / TABLE}" if done and (out / SPEC).exists() else "")
-        ) from None
-    write_spec(sweep, out)
-    executor = executor or executors.get("local", jobs=jobs)
-    todo = [s for s in specs if run_status(Path(s.out_dir), stale_after) != "ok"]
-    for spec in todo:  # a received sweep folder's run folder that is a link is refused, not run into
-        safefiles.inside(out, Path(spec.out_dir) / results.SUMMARY)
-    done_before = len(specs) - len(todo)
-    if on_complete is not None:
-        for spec in specs:
-            if spec not in todo:
-                on_complete(spec)
-    bar = tqdm(total=len(specs), initial=done_before, unit="run", desc=sweep.name, disable=not progress)
-    fn = partial(execute, stale_after=stale_after, in_process=in_process)
-    retried: set[str] = set()
-    try:
-        while todo:
-            again = []
-            sizes = [resources_for(agents[s.scenario.name]) for s in todo]
-            for index, (state, detail) in executor.map(fn, todo, sizes):
-                spec = todo[index]
-                if state == "lost" and claims.holder(Path(spec.out_dir)) is None and spec.out_dir not in retried:
-                    retried.add(spec.out_dir)  # its worker died before it began: it never ran
-                    again.append(spec)
-                    continue
-                if state != "ok":
-                    bar.write(f"{state}: {spec.out_dir}: {detail}", file=sys.stderr)
-                elif on_complete is not None:
+    with safefiles.rooted(out):  # the sweep's folder, opened once: no run folder is reached through a link
+        if jobs is not None and jobs < 1:
+            raise cfg.ConfigError(f"--jobs {jobs}: at least one run must be able to go at once")
+        safefiles.make_folder(out)
+        specs = plan(sweep, out)
+        agents: dict[str, int] = {}  # per scenario name
+        try:
+            for spec in specs:  # every scenario is valid before anything starts
+                if spec.scenario.name not in agents:
+                    exp = experiment_for(spec.base, spec.scenario, spec.seed, spec.extra)
+                    agents[spec.scenario.name] = exp.agents.count
+            _check_completed(specs, out, redo_mismatched)
+        except KeyboardInterrupt:  # while planning: nothing started, but a resumed sweep's table is brought up to date
+            done = _complete(specs)
+            if done and (out / SPEC).exists():
+                write_tables(collect(sweep, out, stale_after), out)
+            raise SweepInterrupted(
+                f"interrupted while planning: nothing was started; {done} of {len(specs)} runs are complete"
+                + (f" and in {out / TABLE}" if done and (out / SPEC).exists() else "")
+            ) from None
+        write_spec(sweep, out)
+        executor = executor or executors.get("local", jobs=jobs)
+        todo = [s for s in specs if run_status(Path(s.out_dir), stale_after) != "ok"]
+        for spec in todo:  # a received sweep folder's run folder that is a link is refused, not run into
+            safefiles.inside(out, Path(spec.out_dir) / results.SUMMARY)
+        done_before = len(specs) - len(todo)
+        if on_complete is not None:
+            for spec in specs:
+                if spec not in todo:
                     on_complete(spec)
-                bar.update(1)
-            todo = again
-    except KeyboardInterrupt:
-        executor.cancel()
-        bar.close()
-        for spec in specs:  # an incomplete run leaves no half-written file behind
-            if not RunDir(spec.out_dir).complete:
-                _remove_parts(Path(spec.out_dir))
-        done = _complete(specs)
-        write_tables(collect(sweep, out, stale_after), out)  # what completed can be analyzed at once
-        raise SweepInterrupted(
-            f"interrupted: {done} of {len(specs)} runs are complete ({done - done_before} finished in this session) "
-            f"and in {out / TABLE}; the runs under way were stopped and nothing else was started. Run the same "
-            f"command again to do the other {len(specs) - done}."
-        ) from None
-    finally:
-        bar.close()
-        executor.close()
-    table = collect(sweep, out, stale_after)
-    write_tables(table, out)
-    return table
+        bar = tqdm(total=len(specs), initial=done_before, unit="run", desc=sweep.name, disable=not progress)
+        fn = partial(execute, stale_after=stale_after, in_process=in_process)
+        retried: set[str] = set()
+        try:
+            while todo:
+                again = []
+                sizes = [resources_for(agents[s.scenario.name]) for s in todo]
+                for index, (state, detail) in executor.map(fn, todo, sizes):
+                    spec = todo[index]
+                    if state == "lost" and claims.holder(Path(spec.out_dir)) is None and spec.out_dir not in retried:
+                        retried.add(spec.out_dir)  # its worker died before it began: it never ran
+                        again.append(spec)
+                        continue
+                    if state != "ok":
+                        bar.write(f"{state}: {spec.out_dir}: {detail}", file=sys.stderr)
+                    elif on_complete is not None:
+                        on_complete(spec)
+                    bar.update(1)
+                todo = again
+        except KeyboardInterrupt:
+            executor.cancel()
+            bar.close()
+            for spec in specs:  # an incomplete run leaves no half-written file behind
+                if not RunDir(spec.out_dir).complete:
+                    _remove_parts(Path(spec.out_dir))
+            done = _complete(specs)
+            write_tables(collect(sweep, out, stale_after), out)  # what completed can be analyzed at once
+            raise SweepInterrupted(
+                f"interrupted: {done} of {len(specs)} runs are complete "
+                f"({done - done_before} finished in this session) and in {out / TABLE}; the runs under way "
+                f"were stopped and nothing else was started. Run the same command again to do the other "
+                f"{len(specs) - done}."
+            ) from None
+        finally:
+            bar.close()
+            executor.close()
+        table = collect(sweep, out, stale_after)
+        write_tables(table, out)
+        return table

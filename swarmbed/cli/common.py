@@ -102,6 +102,22 @@ def add_engine(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_live_view(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--foxglove [PORT]`` and ``--view-clients N``, as every command that serves a live view
+    declares them; ``what`` ends the --foxglove help: what the view shows."""
+    parser.add_argument(
+        "--foxglove",
+        nargs="?",
+        const=8765,
+        type=port_number,
+        metavar="PORT",
+        help=f"serve the run live to Foxglove over its WebSocket protocol on 127.0.0.1:PORT (default 8765; {what})",
+    )
+    parser.add_argument(
+        "--view-clients", type=positive, default=4, metavar="N", help="viewers --foxglove admits at once (default 4)"
+    )
+
+
 def positive(text: str) -> int:
     try:
         value = int(text)

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarmbed import config as cfg
-from swarmbed.cli.common import add_engine, engine_prefix, fmt, keys_epilog, port_number, positive, refusals, taken
+from swarmbed.cli.common import add_engine, add_live_view, engine_prefix, fmt, keys_epilog, refusals, taken
 from swarmbed.files import safefiles
 
 if TYPE_CHECKING:
@@ -196,18 +196,7 @@ def register_run(sub: Subparsers) -> None:
     )
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a dotted key")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
-    run.add_argument(
-        "--foxglove",
-        nargs="?",
-        const=8765,
-        type=port_number,
-        metavar="PORT",
-        help="serve the run live to Foxglove over its WebSocket protocol on 127.0.0.1:PORT (default 8765; "
-        "the channels of replay --mcap; the viewers extra)",
-    )
-    run.add_argument(
-        "--view-clients", type=positive, default=4, metavar="N", help="viewers --foxglove admits at once (default 4)"
-    )
+    add_live_view(run, "the channels of replay --mcap; the viewers extra")
     add_engine(run)
     run.add_argument(
         "--listen",

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from swarmbed.cli.common import client_session, port_number, positive
+from swarmbed.cli.common import add_live_view, client_session, port_number
 from swarmbed.wire.zenoh_session import add_zenoh_args
 
 if TYPE_CHECKING:
@@ -53,18 +53,7 @@ def register_watch(sub: Subparsers) -> None:
         "--wait", type=float, default=10.0, help="seconds to wait for the hub to listen and the run to answer"
     )
     wat.add_argument("--map", metavar="FILE.html", help="also keep a map of the run in FILE.html (reloads itself)")
-    wat.add_argument(
-        "--foxglove",
-        nargs="?",
-        const=8765,
-        type=port_number,
-        metavar="PORT",
-        help="also serve the run to Foxglove on 127.0.0.1:PORT (default 8765; 0: a free port): agents, poses "
-        "and markers from the run's progress samples (the viewers extra)",
-    )
-    wat.add_argument(
-        "--view-clients", type=positive, default=4, metavar="N", help="viewers --foxglove admits at once (default 4)"
-    )
+    add_live_view(wat, "0: a free port; agents, poses and markers from the run's progress samples; the viewers extra")
     add_zenoh_args(wat)
     wat.set_defaults(func=cmd_watch)
 
