@@ -54,7 +54,9 @@ def test_sweep_status_of_a_folder_with_a_fifo_claim_answers(swept, tmp_path):
 
     received = tmp_path / "received"
     shutil.copytree(swept, received, symlinks=True)
+    (received / "base" / "run_000" / "summary.json").unlink()  # not complete: its claim is read
     os.mkfifo(received / "base" / "run_000" / claims.CLAIM)
+    (received / "base" / "run_001" / "summary.json").unlink()
     (received / "base" / "run_001" / "attempts.jsonl").unlink()
     (received / "base" / "run_001" / "attempts.jsonl").symlink_to("/dev/zero")
     done = _swarmbed("sweep", "--status", received, timeout=60)
