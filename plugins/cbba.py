@@ -55,6 +55,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 from pydantic import ConfigDict, Field
 
+from swarmbed import kernels
 from swarmbed.extension import Allocator, LocalView, TaskInfo
 from swarmbed.extension.presets import Preset
 from swarmbed.plugins.consensus import ConsensusState
@@ -234,36 +235,25 @@ class CBBA(Allocator):
             st.add(cands[best], float(gains[best]), int(positions[best]))
 
     def _marginal_gains(self, view: LocalView, cands: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        """Best marginal score of each candidate over every insertion position, and that position."""
+        """Best marginal score of each candidate over every insertion position, and that position
+        (:func:`swarmbed.kernels.path_gains`, compiled where it could be built)."""
         p, v, rate = self.params, view.max_speed, view.work_rate
         log_l = math.log(p.discount)
         info = [self._task(view, t) for t in cands] if self.team_k else [view.tasks[t] for t in cands]
-        cx = np.array([t.x for t in info])
-        cy = np.array([t.y for t in info])
-        cr = np.array([t.remaining for t in info])
+        cx = np.array([t.x for t in info], dtype=float)
+        cy = np.array([t.y for t in info], dtype=float)
+        cr = np.array([t.remaining for t in info], dtype=float)
         if p.score == "distance_discounted":
-            d = np.hypot(cx - view.x, cy - view.y)
-            return np.exp(log_l * d / v) * cr, np.full(len(cands), len(self.state.path))
+            gains = kernels.distance_gains(view.x, view.y, v, log_l, cx, cy, cr)
+            return gains, np.full(len(cands), len(self.state.path))
         path = [self._task(view, t) for t in self.state.path]
-        nx = np.array([view.x] + [t.x for t in path])
-        ny = np.array([view.y] + [t.y for t in path])
-        seg = np.hypot(np.diff(nx), np.diff(ny))  # node n -> n+1
-        work = np.array([t.remaining / rate for t in path])
-        arrive = np.concatenate([[0.0], np.cumsum(seg / v + work) - work])  # tau of path task k (index k)
-        finish = np.concatenate([[0.0], arrive[1:] + work])  # when the agent leaves node n
-        disc = np.exp(log_l * arrive[1:]) * np.array([t.remaining for t in path])
-        suffix = np.concatenate([np.cumsum(disc[::-1])[::-1], [0.0]])  # suffix[n] = sum of disc[k >= n]
-        d = np.hypot(cx[:, None] - nx[None, :], cy[:, None] - ny[None, :])  # candidate x node
-        tau = finish[None, :] + d / v
-        delay = np.zeros_like(d)
-        if len(path):
-            delay[:, :-1] = (d[:, :-1] + d[:, 1:] - seg[None, :]) / v + (cr / rate)[:, None]
-        gain = np.exp(log_l * tau) * cr[:, None] + (np.exp(log_l * delay) - 1.0) * suffix[None, :]
-        best, where = gain.max(axis=1), gain.argmax(axis=1)
+        px = np.array([t.x for t in path], dtype=float)
+        py = np.array([t.y for t in path], dtype=float)
+        pr = np.array([t.remaining for t in path], dtype=float)
+        at_end = np.zeros(len(cands), np.uint8)
         if self.team_k:  # a team slot goes at the end of the path
-            team = np.array([self.team_k.get(task_of(t), 1) > 1 for t in cands])
-            best[team], where[team] = gain[team, -1], len(path)
-        return best, where
+            at_end[[self.team_k.get(task_of(t), 1) > 1 for t in cands]] = 1
+        return kernels.path_gains(view.x, view.y, v, rate, log_l, cx, cy, cr, px, py, pr, at_end)
 
     def _reset_if_idle(self, now: float) -> None:
         st = self.state

@@ -45,6 +45,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from swarmbed import kernels
 from swarmbed.extension import LocalView
 from swarmbed.plugins.external import FallbackParams, WithFallback
 from swarmbed.plugins.grape import utility as grape_utility
@@ -283,11 +284,11 @@ def sequential_greedy(
     if not agents or not tasks:
         return {}
     ids, tids = sorted(agents), sorted(tasks)
-    ax = np.array([agents[a] for a in ids])
-    tx = np.array([tasks[t][:2] for t in tids])
-    rem = np.array([tasks[t][2] for t in tids])
-    d = np.hypot(tx[None, :, 0] - ax[:, None, 0], tx[None, :, 1] - ax[:, None, 1])
-    score = np.exp(math.log(discount) * d / speed) * rem[None, :]
+    tx = np.array([tasks[t][0] for t in tids], dtype=float)
+    ty = np.array([tasks[t][1] for t in tids], dtype=float)
+    rem = np.array([tasks[t][2] for t in tids], dtype=float)
+    log_l = math.log(discount)
+    score = np.array([kernels.distance_gains(*agents[a], speed, log_l, tx, ty, rem) for a in ids])
     plan: dict[int, int] = {}
     live = score > 0
     for _ in range(min(len(ids), len(tids))):

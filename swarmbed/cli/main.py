@@ -60,6 +60,10 @@ VERBS: tuple[Callable[[Subparsers], None], ...] = (
 )
 
 
+#: the verbs that run allocators here: they say so in one line when the kernels are not compiled
+RUNS_ALLOCATORS = frozenset({"run", "soak", "sweep", "host", "check-allocator"})
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(prog="swarmbed", description="Zenoh-networked MRTA emulation testbed")
     ap.add_argument("--version", action="version", version=f"swarmbed {__version__}")
@@ -85,6 +89,11 @@ def main(argv: list[str] | None = None) -> int:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, on_sigterm)
+    if args.command in RUNS_ALLOCATORS:
+        from swarmbed.kernels import fallback_notice
+
+        if notice := fallback_notice():
+            print(notice, file=sys.stderr)
     try:
         return args.func(args)
     except (cfg.ConfigError, BTError, registry.PluginError) as exc:

@@ -1,0 +1,44 @@
+"""Compiled kernels for what every robot computes every tick, with their Python reference.
+
+``exp``, ``path_gains`` and ``distance_gains`` here are the compiled ones (``_compiled.pyx``,
+built by ``pip install`` with a C compiler) or, where none was built, the Python reference
+(:mod:`swarmbed.kernels.reference`): the same operations in the same order, so the same bits on
+every CPU either way (``tests/test_kernels.py`` compares them on recorded and random calls).
+``SWARMBED_KERNELS=python`` runs the reference even where the compiled ones exist (to compare, or
+to profile the Python). :func:`fallback_notice` is the one line a command says when it runs on the
+reference."""
+
+from __future__ import annotations
+
+import os
+
+from swarmbed.kernels import reference
+
+COMPILED = False
+if os.environ.get("SWARMBED_KERNELS", "compiled") != "python":
+    try:
+        from swarmbed.kernels import _compiled as _implementation
+
+        COMPILED = True
+    except ImportError:  # no C compiler at install time: the reference, slower, the same results
+        _implementation = reference
+else:
+    _implementation = reference
+
+exp = _implementation.exp
+path_gains = _implementation.path_gains
+distance_gains = _implementation.distance_gains
+
+__all__ = ["COMPILED", "distance_gains", "exp", "fallback_notice", "path_gains", "reference"]
+
+
+def fallback_notice() -> str | None:
+    """The line to say when the kernels run as Python (None when they are compiled)."""
+    if COMPILED:
+        return None
+    if os.environ.get("SWARMBED_KERNELS") == "python":
+        return "swarmbed: SWARMBED_KERNELS=python: the allocators' kernels run as Python (same results, slower)"
+    return (
+        "swarmbed: the compiled kernels were not built (no C compiler when swarmbed was installed): the "
+        "allocators run their Python reference, with the same results, slower; reinstall with gcc to build them"
+    )

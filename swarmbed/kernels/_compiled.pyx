@@ -1,0 +1,156 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""The kernels of :mod:`swarmbed.kernels.reference`, compiled: the same IEEE operations in the same
+order (built with ``-ffp-contract=off``: no fused multiply-add), so the same bits; a test compares
+the two on recorded and random calls."""
+
+import numpy as np
+
+from libc.math cimport ldexp, sqrt, isnan, INFINITY, NAN
+from libc.stdlib cimport malloc, free
+
+from swarmbed.kernels.reference import EXP_OVER as _OVER, EXP_UNDER as _UNDER
+from swarmbed.kernels.reference import EXP_TAYLOR as _TAYLOR, INV_LN2 as _INV_LN2
+from swarmbed.kernels.reference import LN2_HI as _LN2_HI, LN2_LO as _LN2_LO
+
+# the reference's constants, taken from it so that the two cannot part
+cdef double OVER = _OVER, UNDER = _UNDER, INV_LN2 = _INV_LN2, LN2_HI = _LN2_HI, LN2_LO = _LN2_LO
+cdef double C[12]
+for _n in range(12):
+    C[_n] = _TAYLOR[_n]
+
+
+cdef union _Bits:
+    double d
+    unsigned long long u
+
+
+cdef inline double _exp(double x) noexcept nogil:
+    cdef double t, k, r, q, p
+    cdef long long n
+    cdef _Bits scale
+    if isnan(x):
+        return NAN
+    if x > OVER:
+        return INFINITY
+    if x < UNDER:
+        return 0.0
+    t = x * INV_LN2 + 0.5
+    n = <long long>t  # floor(t), without a call: truncation, one less below zero
+    if <double>n > t:
+        n -= 1
+    k = <double>n
+    r = (x - k * LN2_HI) - k * LN2_LO
+    q = C[11]
+    q = q * r + C[10]
+    q = q * r + C[9]
+    q = q * r + C[8]
+    q = q * r + C[7]
+    q = q * r + C[6]
+    q = q * r + C[5]
+    q = q * r + C[4]
+    q = q * r + C[3]
+    q = q * r + C[2]
+    q = q * r + C[1]
+    q = q * r + C[0]
+    p = 1.0 + (r + (r * r) * q)
+    if -1021 <= n <= 1023:  # 2**n is a normal double: times it is exact, as ldexp
+        scale.u = <unsigned long long>(n + 1023) << 52
+        return p * scale.d
+    return ldexp(p, <int>n)
+
+
+cdef inline double _distance(double ax, double ay, double bx, double by) noexcept nogil:
+    cdef double dx = ax - bx, dy = ay - by
+    return sqrt(dx * dx + dy * dy)
+
+
+def exp(x):
+    """e**x, elementwise: :func:`swarmbed.kernels.reference.exp`."""
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    out = np.empty_like(a)
+    cdef const double[::1] src = a.reshape(-1)
+    cdef double[::1] dst = out.reshape(-1)
+    cdef Py_ssize_t i
+    with nogil:
+        for i in range(src.shape[0]):
+            dst[i] = _exp(src[i])
+    return out
+
+
+def path_gains(double x0, double y0, double speed, double rate, double log_discount,
+               const double[::1] cx, const double[::1] cy, const double[::1] cr,
+               const double[::1] px, const double[::1] py, const double[::1] pr,
+               const unsigned char[::1] at_end):
+    """:func:`swarmbed.kernels.reference.path_gains`."""
+    cdef Py_ssize_t nc = cx.shape[0], L = px.shape[0], c, n
+    best_out = np.empty(nc, dtype=np.float64)
+    where_out = np.empty(nc, dtype=np.int64)
+    cdef double[::1] best = best_out
+    cdef long long[::1] where = where_out
+    cdef double *buf = <double *>malloc((5 * (L + 1) + 1) * sizeof(double))
+    if buf == NULL:
+        raise MemoryError()
+    cdef double *nx = buf
+    cdef double *ny = buf + (L + 1)
+    cdef double *seg = buf + 2 * (L + 1)
+    cdef double *finish = buf + 3 * (L + 1)
+    cdef double *suffix = buf + 4 * (L + 1)
+    cdef double acc, work, arrive, g, top, d0, d1, delay, cw
+    cdef long long at
+    try:
+        with nogil:
+            nx[0] = x0
+            ny[0] = y0
+            for n in range(L):
+                nx[n + 1] = px[n]
+                ny[n + 1] = py[n]
+                seg[n] = _distance(nx[n + 1], ny[n + 1], nx[n], ny[n])
+            finish[0] = 0.0
+            acc = 0.0
+            for n in range(L):
+                work = pr[n] / rate
+                acc = acc + (seg[n] / speed + work)
+                arrive = acc - work
+                finish[n + 1] = arrive + work
+                suffix[n] = _exp(log_discount * arrive) * pr[n]  # disc, summed from the end below
+            suffix[L] = 0.0
+            if L:
+                acc = suffix[L - 1]
+                for n in range(L - 2, -1, -1):
+                    acc = acc + suffix[n]
+                    suffix[n] = acc
+            for c in range(nc):
+                cw = cr[c] / rate
+                d0 = _distance(cx[c], cy[c], nx[0], ny[0])
+                top = 0.0
+                at = 0
+                for n in range(L + 1):
+                    if n < L:
+                        d1 = _distance(cx[c], cy[c], nx[n + 1], ny[n + 1])
+                        delay = ((d0 + d1) - seg[n]) / speed + cw
+                    else:
+                        delay = 0.0
+                    g = _exp(log_discount * (finish[n] + d0 / speed)) * cr[c] + (
+                        _exp(log_discount * delay) - 1.0
+                    ) * suffix[n]
+                    if n == 0 or g > top or (at_end[c] and n == L):
+                        top = g
+                        at = n
+                    d0 = d1
+                best[c] = top
+                where[c] = at
+    finally:
+        free(buf)
+    return best_out, where_out
+
+
+def distance_gains(double x0, double y0, double speed, double log_discount,
+                   const double[::1] cx, const double[::1] cy, const double[::1] cr):
+    """:func:`swarmbed.kernels.reference.distance_gains`."""
+    cdef Py_ssize_t nc = cx.shape[0], c
+    out = np.empty(nc, dtype=np.float64)
+    cdef double[::1] dst = out
+    with nogil:
+        for c in range(nc):
+            dst[c] = _exp(log_discount * _distance(cx[c], cy[c], x0, y0) / speed) * cr[c]
+    return out

@@ -1,0 +1,210 @@
+"""The compiled kernels against their Python reference, bit for bit (on random calls and on the
+calls of a real run), the reference against the formulas it computes, and the same bits whatever
+the CPU's vector extensions."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import subprocess
+import sys
+from decimal import Decimal, getcontext
+
+import numpy as np
+import pytest
+
+from swarmbed import kernels
+from swarmbed.kernels import reference
+from tests.conftest import ROOT, experiment
+
+compiled = pytest.importorskip("swarmbed.kernels._compiled", reason="the kernels were not compiled at install")
+
+
+def bits(a: np.ndarray) -> bytes:
+    return np.ascontiguousarray(a).tobytes()
+
+
+def exp_arguments(rng: np.random.Generator) -> np.ndarray:
+    """Where the allocators call exp (small negative arguments), everywhere else, and every edge."""
+    edges = [0.0, -0.0, 1e-300, -1e-300, 709.78, 709.79, 710.0, -708.4, -745.0, -745.2, -800.0, 800.0]
+    edges += [np.inf, -np.inf, np.nan, math.log(2) / 2, -math.log(2) / 2, 0.5 * math.log(2) * 3]
+    return np.concatenate([rng.uniform(-10, 0, 200_000), rng.uniform(-740, 705, 200_000), edges])
+
+
+def test_compiled_exp_is_the_references_bit_for_bit():
+    x = exp_arguments(np.random.default_rng(1))
+    assert bits(compiled.exp(x)) == bits(reference.exp(x))
+
+
+def test_exp_is_within_one_ulp_of_the_exact_value():
+    """Against e**x to 40 digits (Python's decimal), on the allocators' range and beyond."""
+    getcontext().prec = 40
+    rng = np.random.default_rng(2)
+    x = np.concatenate([rng.uniform(-10, 0, 2000), rng.uniform(-700, 700, 2000)])
+    ours = reference.exp(x)
+    exact = np.array([float(Decimal(v).exp()) for v in x.tolist()])
+    ulps = np.abs(ours.view(np.int64) - exact.view(np.int64))
+    assert ulps.max() <= 1
+    edges = reference.exp(np.array([np.nan, np.inf, -np.inf, 710.0, -746.0, 0.0]))
+    assert np.isnan(edges[0]) and edges[1] == np.inf and edges[2] == 0.0 and edges[3] == np.inf
+    assert edges[4] == 0.0 and edges[5] == 1.0
+
+
+def random_call(rng: np.random.Generator) -> tuple:
+    """Arguments of a path_gains call: a path of 0-6 tasks, 0-40 candidates, some team slots."""
+    n_path, n_cand = int(rng.integers(0, 7)), int(rng.integers(0, 41))
+    px, py, cx, cy = (rng.uniform(-500, 500, n) for n in (n_path, n_path, n_cand, n_cand))
+    pr, cr = rng.uniform(0.5, 200, n_path), rng.uniform(0.5, 200, n_cand)
+    at_end = (rng.random(n_cand) < 0.2).astype(np.uint8)
+    x0, y0 = rng.uniform(-500, 500, 2)
+    speed, rate, log_l = rng.uniform(0.5, 12), rng.uniform(0.2, 3), math.log(rng.uniform(0.99, 0.99999))
+    return float(x0), float(y0), speed, rate, log_l, cx, cy, cr, px, py, pr, at_end
+
+
+def test_compiled_gains_are_the_references_bit_for_bit_on_random_calls():
+    rng = np.random.default_rng(3)
+    for _ in range(3000):
+        args = random_call(rng)
+        best, where = compiled.path_gains(*args)
+        ref_best, ref_where = reference.path_gains(*args)
+        assert bits(best) == bits(ref_best) and bits(where) == bits(ref_where.astype(np.int64))
+        x0, y0, speed, _rate, log_l, cx, cy, cr = args[:8]
+        assert bits(compiled.distance_gains(x0, y0, speed, log_l, cx, cy, cr)) == bits(
+            reference.distance_gains(x0, y0, speed, log_l, cx, cy, cr)
+        )
+
+
+def path_score(x0, y0, speed, rate, log_l, tasks) -> float:
+    """SPACE's Eq. 2 along a path, summed task by task: discount ** (arrival) * remaining, the
+    arrival the travel so far plus the work of the tasks before."""
+    t, x, y, total = 0.0, x0, y0, 0.0
+    for tx, ty, r in tasks:
+        t += math.hypot(tx - x, ty - y) / speed
+        total += math.exp(log_l * t) * r
+        t += r / rate
+        x, y = tx, ty
+    return total
+
+
+def test_the_gains_are_the_marginal_scores_of_eq_2():
+    """Each candidate's gain is the best, over insertion positions, of the path's score with it
+    minus without it; the position is where that best is."""
+    rng = np.random.default_rng(4)
+    for _ in range(300):
+        x0, y0, speed, rate, log_l, cx, cy, cr, px, py, pr, _ = random_call(rng)
+        path = list(zip(px, py, pr))
+        base = path_score(x0, y0, speed, rate, log_l, path)
+        best, where = reference.path_gains(
+            x0, y0, speed, rate, log_l, cx, cy, cr, px, py, pr, np.zeros(len(cx), np.uint8)
+        )
+        for c in range(len(cx)):
+            margins = [
+                path_score(x0, y0, speed, rate, log_l, [*path[:n], (cx[c], cy[c], cr[c]), *path[n:]]) - base
+                for n in range(len(path) + 1)
+            ]
+            assert best[c] == pytest.approx(max(margins), rel=1e-9, abs=1e-9)
+            assert margins[where[c]] == pytest.approx(max(margins), rel=1e-9, abs=1e-9)
+
+
+def test_compiled_gains_are_the_references_on_the_calls_of_a_real_run(monkeypatch, tmp_path):
+    """Every call CBBA made in a 12-robot MT-SR run, again through both."""
+    from swarmbed.launch.inprocess import run_in_process
+
+    calls = []
+
+    def recording(*args):
+        calls.append(tuple(np.copy(a) if isinstance(a, np.ndarray) else a for a in args))
+        return compiled.path_gains(*args)
+
+    monkeypatch.setattr(kernels, "path_gains", recording)
+    exp = experiment(
+        "allocator.name=cbba", "agents.count=12", "run.duration=800", base=ROOT / "experiments" / "space_mtsr.yaml"
+    )
+    run_in_process(exp, tmp_path / "run")
+    assert len(calls) > 100 and max(len(c[8]) for c in calls) >= 2  # paths of several tasks
+    for args in calls:
+        best, where = compiled.path_gains(*args)
+        ref_best, ref_where = reference.path_gains(*args)
+        assert bits(best) == bits(ref_best) and bits(where) == bits(ref_where.astype(np.int64))
+
+
+_PROBE = """
+import hashlib, math, numpy as np
+from swarmbed.kernels import reference, _compiled
+from tests.test_kernels import exp_arguments, random_call
+h = hashlib.sha256()
+for impl in (reference, _compiled):
+    h.update(impl.exp(exp_arguments(np.random.default_rng(5))).tobytes())
+    rng = np.random.default_rng(6)
+    for _ in range(300):
+        best, where = impl.path_gains(*random_call(rng))
+        h.update(best.tobytes() + where.astype(np.int64).tobytes())
+print(h.hexdigest())
+"""
+
+
+@pytest.mark.slow  # two Python processes
+def test_the_kernels_give_the_same_bits_with_and_without_avx512():
+    """numpy's own exp changes its last bit with AVX-512 on or off; ours (both twins) does not."""
+    import os
+
+    plain = {**os.environ, "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR AVX512F AVX512_SKX"}
+    run = [sys.executable, "-c", _PROBE]
+    here, without = (
+        subprocess.run(run, capture_output=True, text=True, env=env, cwd=ROOT, check=True).stdout
+        for env in (None, plain)
+    )
+    assert here == without and len(here) == 65
+
+
+@pytest.mark.slow  # a run in a process whose compiled kernels cannot be imported
+def test_without_the_compiled_kernels_a_run_says_so_once_and_writes_the_same_files(tmp_path):
+    from swarmbed.launch.inprocess import run_in_process
+
+    overrides = ["allocator.name=cbba", "agents.count=8", "run.duration=150"]
+    base = ROOT / "experiments" / "space_mtsr.yaml"
+    here = run_in_process(experiment(*overrides, base=base), tmp_path / "compiled")
+    blocker = tmp_path / "site" / "sitecustomize.py"
+    blocker.parent.mkdir()
+    blocker.write_text(
+        "import sys\n"
+        "class NoCompiledKernels:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'swarmbed.kernels._compiled':\n"
+        "            raise ImportError('no compiled kernels: a machine without a C compiler at install')\n"
+        "sys.meta_path.insert(0, NoCompiledKernels())\n"
+    )
+    import os
+
+    env = {**os.environ, "PYTHONPATH": str(blocker.parent)}
+    sets = [arg for value in overrides for arg in ("--set", value)]
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "swarmbed",
+            "run",
+            str(base),
+            "--engine",
+            "inprocess",
+            "--no-progress",
+            *sets,
+            "--out",
+            str(tmp_path / "python"),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+    assert done.returncode == 0, done.stderr
+    notices = [line for line in done.stderr.splitlines() if "compiled kernels were not built" in line]
+    assert len(notices) == 1
+    from tests.conftest import same_results
+
+    same_results(here.out_dir, tmp_path / "python")
+
+
+def test_the_package_uses_the_compiled_kernels_where_they_were_built():
+    assert kernels.COMPILED and kernels.path_gains is compiled.path_gains and kernels.fallback_notice() is None
+    digest = hashlib.sha256(bits(kernels.exp(np.linspace(-5, 0, 11)))).hexdigest()
+    assert digest == hashlib.sha256(bits(reference.exp(np.linspace(-5, 0, 11)))).hexdigest()
