@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from swarmbed import kernels
 from swarmbed.plugins.packed import pack_columns, pack_rows, read_array, read_tuples
 from swarmbed.wire.state import state_type
 
@@ -182,8 +183,9 @@ def table_masks(
     return update, reset
 
 
-#: below this many tasks to decide, Table 1 runs task by task (numpy's calls cost more than they save)
-FEW_TASKS = 24
+#: below this many tasks to decide, Table 1 runs task by task (building arrays costs more than the
+#: compiled kernel saves, or, without it, numpy's calls cost more than they save)
+FEW_TASKS = 8 if kernels.table_actions is not None else 24
 
 
 class Stamps(MutableMapping):
@@ -377,13 +379,23 @@ class ConsensusState:
     def _decide_over_arrays(
         self, order: list[int], theirs: dict[int, tuple[int, float]], mine: np.ndarray, their: np.ndarray, k: int
     ) -> None:
-        """:meth:`_decide` for many tasks: Table 1 as masks (:func:`table_masks`)."""
+        """:meth:`_decide` for many tasks: Table 1 compiled (``swarmbed.kernels.table_actions``), or
+        as numpy masks (:func:`table_masks`) where it was not."""
         i, z, y, out = self.agent_id, self.z, self.y, len(mine) - 1
         beliefs = [theirs.get(j, (NONE, 0.0)) for j in order]
         wk = np.array([w for w, _ in beliefs], dtype=np.int64)
         bk = np.array([b for _, b in beliefs], dtype=float)
         wi = np.array([z.get(j, NONE) for j in order], dtype=np.int64)
         bi = np.array([y.get(j, 0.0) for j in order], dtype=float)
+        if kernels.table_actions is not None:  # compiled: Table 1 task by task in C
+            actions = kernels.table_actions(i, k, wk, bk, wi, bi, mine, their).tolist()
+            for n in np.flatnonzero(actions).tolist():
+                j = order[n]
+                if actions[n] == 1:
+                    z[j], y[j] = int(wk[n]), float(bk[n])
+                else:
+                    self.reset(j)
+            return
         at_m = np.where((wk >= 0) & (wk < out), wk, out)
         at_n = np.where((wi >= 0) & (wi < out), wi, out)
         newer_m, older_m = their[at_m] > mine[at_m], their[at_m] < mine[at_m]

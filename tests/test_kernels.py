@@ -208,3 +208,68 @@ def test_the_package_uses_the_compiled_kernels_where_they_were_built():
     assert kernels.COMPILED and kernels.path_gains is compiled.path_gains and kernels.fallback_notice() is None
     digest = hashlib.sha256(bits(kernels.exp(np.linspace(-5, 0, 11)))).hexdigest()
     assert digest == hashlib.sha256(bits(reference.exp(np.linspace(-5, 0, 11)))).hexdigest()
+
+
+def test_compiled_table_1_takes_the_scalar_tables_action_in_every_case():
+    """Every combination of sender and receiver belief (agents NONE, 0-3; bids 0-2) and of how the
+    sender's news of the two winners compares with the receiver's (older, same, newer), for receiver
+    0 and sender 1: the compiled Table 1 gives plugins/consensus.table's action in all 3,600 cases
+    (an entry the same on both sides left, an update to nobody a reset, as a receive applies them)."""
+    import itertools
+
+    from swarmbed.plugins.consensus import NONE, table
+
+    agents, bids, cmps = (NONE, 0, 1, 2, 3), (0.0, 1.0, 2.0), (-1, 0, 1)
+    out = 4  # agent ids 0-3; the last entry stands for NONE
+    for a, ya, b, yb, cm, cn in itertools.product(agents, bids, agents, bids, cmps, cmps):
+        if a == b and cm != cn:
+            continue  # a winner named on both sides is one agent: one comparison
+        mine, their = np.zeros(out + 1), np.zeros(out + 1)
+        their[a if a >= 0 else out] = cm
+        their[b if b >= 0 else out] = cn
+        compare = {a: cm, b: cn}.get
+        want = table(0, 1, a, ya, b, yb, lambda m: compare(m, 0))  # noqa: B023 (called at once)
+        want = "reset" if want == "update" and a == NONE else want
+        want = "leave" if (a, ya) == (b, yb) else want
+        args = (np.array([a]), np.array([ya]), np.array([b]), np.array([yb]), mine, their)
+        got = ("leave", "update", "reset")[compiled.table_actions(0, 1, *args)[0]]
+        assert got == want, (a, ya, b, yb, cm, cn)
+
+
+@pytest.mark.parametrize("compiled_table", [True, False], ids=["compiled", "numpy masks"])
+def test_a_receive_decides_as_task_by_task_with_and_without_the_compiled_table(compiled_table, monkeypatch):
+    """Random beliefs, whole messages and deltas: a receive over arrays (compiled Table 1, or numpy's
+    masks where it is not) leaves the winners, bids and stamps that Table 1 task by task leaves."""
+    from swarmbed.plugins import consensus
+    from swarmbed.plugins.consensus import ConsensusState
+
+    if not compiled_table:
+        monkeypatch.setattr(kernels, "table_actions", None)
+    rng = np.random.default_rng(7)
+    for trial in range(300):
+        tasks = int(rng.integers(1, 80))
+        receiver = ConsensusState(0)
+        receiver.now = float(rng.integers(0, 4))
+        for t in range(tasks):
+            if rng.random() < 0.7:
+                receiver.z[t], receiver.y[t] = int(rng.integers(0, 5)), float(rng.integers(0, 3))
+        for a in range(1, 5):
+            if rng.random() < 0.8:
+                receiver.s[a] = float(rng.integers(0, 4))
+        sender = ConsensusState(1)
+        sender.z.update({t: int(w) for t, w in zip(range(tasks), rng.integers(0, 5, tasks)) if rng.random() < 0.7})
+        sender.y.update({t: float(rng.integers(0, 3)) for t in sender.z})
+        sender.s.update({a: float(rng.integers(0, 4)) for a in (0, 2, 3, 4) if rng.random() < 0.8})
+        sender.now = float(rng.integers(0, 4))
+        msg = sender.message()
+        if trial % 2:
+            msg["d"] = 1
+        states = []
+        for few in (10**9, 0):  # task by task; over arrays
+            st = ConsensusState(0)
+            st.now, st.z, st.y = receiver.now, dict(receiver.z), dict(receiver.y)
+            st.s.update(receiver.s)
+            monkeypatch.setattr(consensus, "FEW_TASKS", few)
+            st.receive(1, msg)
+            states.append((st.z, st.y, dict(st.s)))
+        assert states[0] == states[1], trial

@@ -1,6 +1,6 @@
 """Compiled kernels for what every robot computes every tick, with their Python reference.
 
-``exp``, ``path_gains`` and ``distance_gains`` here are the compiled ones (``_compiled.pyx``,
+``exp``, ``path_gains``, ``distance_gains`` (and ``table_actions``) here are the compiled ones (``_compiled.pyx``,
 built by ``pip install`` with a C compiler) or, where none was built, the Python reference
 (:mod:`swarmbed.kernels.reference`): the same operations in the same order, so the same bits on
 every CPU either way (``tests/test_kernels.py`` compares them on recorded and random calls).
@@ -28,8 +28,11 @@ else:
 exp = _implementation.exp
 path_gains = _implementation.path_gains
 distance_gains = _implementation.distance_gains
+#: CBBA's Table 1 over a message's tasks, compiled; None where it was not (plugins/consensus.py then
+#: decides task by task or with numpy masks, the Python it is compared with)
+table_actions = getattr(_implementation, "table_actions", None)
 
-__all__ = ["COMPILED", "distance_gains", "exp", "fallback_notice", "path_gains", "reference"]
+__all__ = ["COMPILED", "distance_gains", "exp", "fallback_notice", "path_gains", "reference", "table_actions"]
 
 
 def fallback_notice() -> str | None:

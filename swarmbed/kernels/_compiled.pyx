@@ -154,3 +154,76 @@ def distance_gains(double x0, double y0, double speed, double log_discount,
         for c in range(nc):
             dst[c] = _exp(log_discount * _distance(cx[c], cy[c], x0, y0) / speed) * cr[c]
     return out
+
+
+cdef enum:
+    LEAVE = 0
+    UPDATE = 1
+    RESET = 2
+    NONE = -1
+
+
+cdef inline bint _better(double y1, long long z1, double y2, long long z2) noexcept nogil:
+    return y1 > y2 or (y1 == y2 and z1 < z2)
+
+
+cdef inline int _table(long long i, long long k, long long zk, double yk, long long zi, double yi,
+                       int cmp_m, int cmp_n) noexcept nogil:
+    """plugins/consensus.table: receiver i's action on one task; cmp_m, cmp_n: how the sender's
+    news of agents zk and zi compares with the receiver's (1 newer, -1 older, 0 neither)."""
+    if zk == k:  # the sender thinks it wins
+        if zi == i:
+            return UPDATE if _better(yk, k, yi, i) else LEAVE  # 1
+        if zi == k or zi == NONE:
+            return UPDATE  # 2, 4
+        return UPDATE if (cmp_n > 0 or _better(yk, k, yi, zi)) else LEAVE  # 3
+    if zk == i:  # the sender thinks the receiver wins
+        if zi == k:
+            return RESET  # 6
+        if zi != i and zi != NONE and cmp_n > 0:
+            return RESET  # 7
+        return LEAVE  # 5, 7, 8
+    if zk == NONE:  # the sender thinks nobody wins
+        if zi == k:
+            return UPDATE  # 15
+        if zi != i and zi != NONE and cmp_n > 0:
+            return UPDATE  # 16
+        return LEAVE  # 14, 16, 17
+    if zi == i:  # a third agent m = zk
+        return UPDATE if (cmp_m > 0 and _better(yk, zk, yi, i)) else LEAVE  # 9
+    if zi == k:
+        return UPDATE if cmp_m > 0 else RESET  # 10
+    if zi == zk or zi == NONE:
+        return UPDATE if cmp_m > 0 else LEAVE  # 11, 13
+    if cmp_m > 0 and (cmp_n > 0 or _better(yk, zk, yi, zi)):  # 12: a fourth agent n = zi
+        return UPDATE
+    if cmp_n > 0 and cmp_m < 0:
+        return RESET
+    return LEAVE
+
+
+cdef inline int _compare(const double[::1] mine, const double[::1] their, long long m, Py_ssize_t out) noexcept nogil:
+    cdef Py_ssize_t at = m if 0 <= m < out else out
+    return (their[at] > mine[at]) - (their[at] < mine[at])
+
+
+def table_actions(long long i, long long k, const long long[::1] wk, const double[::1] bk,
+                  const long long[::1] wi, const double[::1] bi, const double[::1] mine, const double[::1] their):
+    """Table 1 on each task: 0 leave, 1 update (to the sender's belief), 2 reset; ``wk``, ``bk`` the
+    sender's winners and bids, ``wi``, ``bi`` the receiver's, ``mine``, ``their`` both sides'
+    timestamps over agent ids (the last entry for any id either holds none for). An entry the same
+    on both sides is left; an update to nobody is a reset (plugins/consensus.py, ``_decide``)."""
+    cdef Py_ssize_t n, tasks = wk.shape[0], out = mine.shape[0] - 1
+    actions_out = np.zeros(tasks, dtype=np.int8)
+    cdef signed char[::1] actions = actions_out
+    cdef int action
+    with nogil:
+        for n in range(tasks):
+            if wk[n] == wi[n] and bk[n] == bi[n]:
+                continue
+            action = _table(i, k, wk[n], bk[n], wi[n], bi[n],
+                            _compare(mine, their, wk[n], out), _compare(mine, their, wi[n], out))
+            if action == UPDATE and wk[n] == NONE:
+                action = RESET
+            actions[n] = action
+    return actions_out
