@@ -11,8 +11,8 @@ and each way's ratio to the compiled one measured in the same run:
 
 - gains: the compiled kernel, its Python reference (what runs where no C compiler was found), and
   the numpy code the kernel replaced (numpy's exp and hypot: other bits on other CPUs);
-- receive: Table 1 compiled (from 8 differing tasks), numpy masks (from 24, as without the kernel),
-  and task by task in Python.
+- receive: compiled (the task part of a receive in C), Table 1 alone compiled (from 8 differing
+  tasks), numpy masks (from 24, as without the kernels), and task by task in Python.
 
 CPU time of this process only: the figures do not move with other work on the machine as much as
 wall time would, but an idle machine gives the cleanest ones.
@@ -93,9 +93,9 @@ def time_gains(calls: list, fn) -> float:
     return (time.process_time() - t) / len(calls) * 1e6
 
 
-def time_receives(calls: list, few: int, table) -> float:
+def time_receives(calls: list, few: float, table, receive) -> float:
     spent = 0.0
-    consensus.FEW_TASKS, kernels.table_actions = few, table
+    consensus.FEW_TASKS, kernels.table_actions, kernels.receive_tasks = few, table, receive
     for (agent, now, z, y, stamps), sender, data, ignore, within in calls:
         st = ConsensusState(agent)
         st.now, st.z, st.y, st.stamps = now, dict(z), dict(y), stamps.copy()
@@ -116,23 +116,24 @@ def main() -> None:
         raise SystemExit("the compiled kernels were not built: nothing to compare")
     gains, received = record(args.agents, args.duration, args.receives)
     print(f"recorded {len(gains)} gain calls, {len(received)} receives ({args.agents} robots, {args.duration:g} s)")
-    compiled_table, few = kernels.table_actions, consensus.FEW_TASKS
+    compiled_table, compiled_receive, few = kernels.table_actions, kernels.receive_tasks, consensus.FEW_TASKS
     ways_gains = {"compiled": kernels.path_gains, "python reference": reference.path_gains, "numpy before": numpy_gains}
     ways_receive = {
-        "compiled table": (few, compiled_table),
-        "numpy masks": (24, None),
-        "task by task": (math.inf, None),
+        "compiled": (few, compiled_table, compiled_receive),
+        "compiled table only": (few, compiled_table, None),
+        "numpy masks": (24, None, None),
+        "task by task": (math.inf, None, None),
     }
     spent: dict[str, list[float]] = {}
     try:
         for _ in range(args.rounds):
             for name, fn in ways_gains.items():
                 spent.setdefault(f"gains, {name}", []).append(time_gains(gains, fn))
-            for name, (threshold, table) in ways_receive.items():
-                spent.setdefault(f"receive, {name}", []).append(time_receives(received, threshold, table))
+            for name, (threshold, table, receive) in ways_receive.items():
+                spent.setdefault(f"receive, {name}", []).append(time_receives(received, threshold, table, receive))
     finally:
-        consensus.FEW_TASKS, kernels.table_actions = few, compiled_table
-    floors = {"gains": min(spent["gains, compiled"]), "receive": min(spent["receive, compiled table"])}
+        consensus.FEW_TASKS, kernels.table_actions, kernels.receive_tasks = few, compiled_table, compiled_receive
+    floors = {"gains": min(spent["gains, compiled"]), "receive": min(spent["receive, compiled"])}
     for name, values in spent.items():
         best = min(values)
         print(f"{name:<28} {best:8.1f} us a call (best of {len(values)})   x{best / floors[name.split(',')[0]]:.2f}")

@@ -319,6 +319,37 @@ class ConsensusState:
                 first.setdefault(entry[0], entry)  # a task named twice: the first entry counts
             entries = [first[t] for t in sorted(first)]
             tasks = [e[0] for e in entries]
+        # the sender's timestamps over agent ids: every agent it names, itself at the message's time;
+        # an agent a delta leaves out is no news (its stamp as ours), one a whole message leaves out never heard of
+        agents, stamps = _stamp_array(data)
+        self._cover(max(k, int(agents.max()) if len(agents) else 0))
+        mine = np.append(self.stamps, _NEVER)  # the last entry: any id we hold no stamp for
+        mine[i] = self.now
+        their = mine.copy() if delta else np.full(len(mine), _NEVER)
+        their[agents] = stamps
+        their[k] = data["t"]
+        their[-1] = mine[-1] = _NEVER
+        skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
+        if kernels.receive_tasks is not None:  # compiled: the same steps as below, in C
+            kernels.receive_tasks(i, k, self.z, self.y, entries, delta, skip, within, mine, their)
+        else:
+            self._receive_tasks(entries, tasks, delta, skip, within, mine, their, k)
+        their[i] = _NEVER  # never news of ourselves
+        self.stamps = np.fmax(self.stamps, their[:-1])  # a NaN stamp is no news
+
+    def _receive_tasks(
+        self,
+        entries: list[tuple],
+        tasks: list[int],
+        delta: bool,
+        skip: set[int] | frozenset[int],
+        within: set[int] | None,
+        mine: np.ndarray,
+        their: np.ndarray,
+        k: int,
+    ) -> None:
+        """Table 1 on the tasks of a message (``entries``: sorted, each task once) whose belief
+        differs from ours; the Python that ``swarmbed.kernels.receive_tasks`` is compared with."""
         z, y = self.z, self.y
         # the tasks whose belief differs from ours (identical entries leave every table case unchanged):
         # a delta names only the tasks it changes (NONE: a winner the sender dropped); a whole message
@@ -331,22 +362,9 @@ class ConsensusState:
             differing.update(t for t in z if t not in named)
         if within is not None:
             differing = {t for t in differing if t in within and t in theirs}
-        skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
         order = [j for j in sorted(differing) if j not in skip]
-        # the sender's timestamps over agent ids: every agent it names, itself at the message's time;
-        # an agent a delta leaves out is no news (its stamp as ours), one a whole message leaves out never heard of
-        agents, stamps = _stamp_array(data)
-        self._cover(max(k, int(agents.max()) if len(agents) else 0))
-        mine = np.append(self.stamps, _NEVER)  # the last entry: any id we hold no stamp for
-        mine[i] = self.now
-        their = mine.copy() if delta else np.full(len(mine), _NEVER)
-        their[agents] = stamps
-        their[k] = data["t"]
-        their[-1] = mine[-1] = _NEVER
         if order:
             self._decide(order, theirs, mine, their, k)
-        their[i] = _NEVER  # never news of ourselves
-        self.stamps = np.fmax(self.stamps, their[:-1])  # a NaN stamp is no news
 
     def _decide(
         self, order: list[int], theirs: dict[int, tuple[int, float]], mine: np.ndarray, their: np.ndarray, k: int

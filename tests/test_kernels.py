@@ -236,17 +236,16 @@ def test_compiled_table_1_takes_the_scalar_tables_action_in_every_case():
         assert got == want, (a, ya, b, yb, cm, cn)
 
 
-@pytest.mark.parametrize("compiled_table", [True, False], ids=["compiled", "numpy masks"])
-def test_a_receive_decides_as_task_by_task_with_and_without_the_compiled_table(compiled_table, monkeypatch):
-    """Random beliefs, whole messages and deltas: a receive over arrays (compiled Table 1, or numpy's
-    masks where it is not) leaves the winners, bids and stamps that Table 1 task by task leaves."""
+@pytest.mark.parametrize("way", ["compiled receive", "compiled table", "numpy masks"])
+def test_a_receive_decides_as_task_by_task_in_python(way, monkeypatch):
+    """Random beliefs, whole messages and deltas, tasks to ignore and a scope (``within``): a
+    receive done by the compiled kernel, or in Python with Table 1 compiled or as numpy's masks,
+    leaves the winners, bids and stamps that Python task by task leaves."""
     from swarmbed.plugins import consensus
     from swarmbed.plugins.consensus import ConsensusState
 
-    if not compiled_table:
-        monkeypatch.setattr(kernels, "table_actions", None)
     rng = np.random.default_rng(7)
-    for trial in range(300):
+    for trial in range(400):
         tasks = int(rng.integers(1, 80))
         receiver = ConsensusState(0)
         receiver.now = float(rng.integers(0, 4))
@@ -264,12 +263,18 @@ def test_a_receive_decides_as_task_by_task_with_and_without_the_compiled_table(c
         msg = sender.message()
         if trial % 2:
             msg["d"] = 1
+        ignore = {t for t in range(tasks) if rng.random() < 0.1} if trial % 5 == 0 else ()
+        within = {t for t in range(tasks) if rng.random() < 0.5} if trial % 3 == 1 else None  # whole and delta
         states = []
-        for few in (10**9, 0):  # task by task; over arrays
+        for ours in ("python task by task", way):
             st = ConsensusState(0)
             st.now, st.z, st.y = receiver.now, dict(receiver.z), dict(receiver.y)
             st.s.update(receiver.s)
-            monkeypatch.setattr(consensus, "FEW_TASKS", few)
-            st.receive(1, msg)
-            states.append((st.z, st.y, dict(st.s)))
+            compiled_receive = ours == "compiled receive"
+            compiled_table = ours in ("compiled receive", "compiled table")
+            monkeypatch.setattr(kernels, "receive_tasks", compiled.receive_tasks if compiled_receive else None)
+            monkeypatch.setattr(kernels, "table_actions", compiled.table_actions if compiled_table else None)
+            monkeypatch.setattr(consensus, "FEW_TASKS", 10**9 if ours.startswith("python") else 0)
+            st.receive(1, msg, ignore=ignore, within=within)
+            states.append((list(st.z.items()), list(st.y.items()), dict(st.s)))
         assert states[0] == states[1], trial

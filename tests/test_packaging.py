@@ -172,3 +172,16 @@ def test_a_small_in_process_run_imports_no_analysis_library(tmp_path):
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip().splitlines()[-1] == "imported:", done.stdout[-500:]
+
+
+def test_the_kernels_are_compiled_where_a_c_compiler_is():
+    """setup.py builds the kernels as optional (an install without a compiler still works), so a
+    build that broke would pass unseen; where a C compiler is found, the compiled module must load."""
+    import os
+    import shutil
+    import sysconfig
+
+    compiler = (os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc").split()[0]
+    if not shutil.which(compiler):
+        pytest.skip(f"no C compiler ({compiler}) on this machine: the kernels run as their Python reference")
+    from swarmbed.kernels import _compiled  # noqa: F401 (an ImportError here is the failure)

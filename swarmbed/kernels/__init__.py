@@ -31,8 +31,19 @@ distance_gains = _implementation.distance_gains
 #: CBBA's Table 1 over a message's tasks, compiled; None where it was not (plugins/consensus.py then
 #: decides task by task or with numpy masks, the Python it is compared with)
 table_actions = getattr(_implementation, "table_actions", None)
+#: the task part of a CBBA receive (plugins/consensus.py), compiled; None where it was not
+receive_tasks = getattr(_implementation, "receive_tasks", None)
 
-__all__ = ["COMPILED", "distance_gains", "exp", "fallback_notice", "path_gains", "reference", "table_actions"]
+__all__ = [
+    "COMPILED",
+    "distance_gains",
+    "exp",
+    "fallback_notice",
+    "path_gains",
+    "receive_tasks",
+    "reference",
+    "table_actions",
+]
 
 
 def fallback_notice() -> str | None:

@@ -227,3 +227,55 @@ def table_actions(long long i, long long k, const long long[::1] wk, const doubl
                 action = RESET
             actions[n] = action
     return actions_out
+
+
+def receive_tasks(long long i, long long k, dict z, dict y, list entries, bint delta, skip, within,
+                  const double[::1] mine, const double[::1] their):
+    """The task part of plugins/consensus.ConsensusState.receive, on its own maps: ``entries`` the
+    message's (task, winner, bid) tuples, sorted by task and each task once; the tasks whose belief
+    differs from ours (and, for a whole message, the ones we hold that it does not name), less those
+    outside ``within`` (when given) or in ``skip``, in task order, each through Table 1; an update
+    sets ``z`` and ``y`` to the sender's objects, a reset removes the task from both."""
+    cdef dict theirs = {}
+    cdef set differing = set()
+    cdef set named
+    cdef tuple entry
+    cdef object t, zo, yo, got
+    cdef long long zk, zi
+    cdef double yk, yi
+    cdef Py_ssize_t out = mine.shape[0] - 1
+    cdef int action
+    for entry in entries:
+        t = entry[0]
+        zo, yo = z.get(t), y.get(t)
+        zi = NONE if zo is None else <long long>zo
+        yi = 0.0 if yo is None else <double>yo
+        if zi != <long long>entry[1] or yi != <double>entry[2]:
+            theirs[t] = entry
+            differing.add(t)
+    if not delta:
+        named = {entry[0] for entry in entries}
+        for t in z:
+            if t not in named:
+                differing.add(t)
+    if within is not None:
+        differing = {t for t in differing if t in within and t in theirs}
+    for t in sorted(differing):
+        if t in skip:
+            continue
+        got = theirs.get(t)
+        if got is None:
+            zk, yk = NONE, 0.0
+        else:
+            zk, yk = <long long>got[1], <double>got[2]
+        zo, yo = z.get(t), y.get(t)
+        zi = NONE if zo is None else <long long>zo
+        yi = 0.0 if yo is None else <double>yo
+        if zk == zi and yk == yi:
+            continue
+        action = _table(i, k, zk, yk, zi, yi, _compare(mine, their, zk, out), _compare(mine, their, zi, out))
+        if action == UPDATE and zk != NONE:
+            z[t], y[t] = got[1], got[2]
+        elif action != LEAVE:
+            z.pop(t, None)
+            y.pop(t, None)
