@@ -99,6 +99,16 @@ def _compact(t: float) -> float | int:
     return int(t) if float(t).is_integer() else t
 
 
+def winners_changed(
+    z: dict[int, int], y: dict[int, float], told: dict[int, tuple[int, float]]
+) -> tuple[dict[int, tuple[int, float]], list[tuple[int, int, float]]]:
+    """The map task -> (winner, bid) of ``z`` and ``y``, in ``z``'s order, and the (task, winner,
+    bid) entries that differ from ``told``'s (the last message's); ``swarmbed.kernels`` has it
+    compiled."""
+    winners = {t: (z[t], y[t]) for t in z}
+    return winners, [(t, w, b) for t, (w, b) in winners.items() if told.get(t) != (w, b)]
+
+
 def better(y1: float, z1: int, y2: float, z2: int) -> bool:
     """Bid (y1 by z1) beats bid (y2 by z2): higher, or equal and by the lower agent id."""
     return y1 > y2 or (y1 == y2 and z1 < z2)
@@ -281,11 +291,10 @@ class ConsensusState:
         self.sent += 1
         if self.full_every == 1:
             return self._whole()
-        winners = {t: (self.z[t], self.y[t]) for t in self.z}
+        winners, changed = (kernels.winners_changed or winners_changed)(self.z, self.y, self.told)
         delta = None
         if not due_whole:
             told = self.told
-            changed = [(t, w, b) for t, (w, b) in winners.items() if told.get(t) != (w, b)]
             dropped = [(t, NONE, 0.0) for t in told.keys() - winners.keys()]
             told_s = np.full(len(self.stamps), _NEVER)
             told_s[: len(self.told_s)] = self.told_s[: len(self.stamps)]

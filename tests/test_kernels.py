@@ -278,3 +278,18 @@ def test_a_receive_decides_as_task_by_task_in_python(way, monkeypatch):
             st.receive(1, msg, ignore=ignore, within=within)
             states.append((list(st.z.items()), list(st.y.items()), dict(st.s)))
         assert states[0] == states[1], trial
+
+
+def test_compiled_winners_changed_is_the_pythons():
+    """What a message tells and what changed since the last one: the same map, in the same order,
+    and the same changed entries, on random beliefs against random last messages."""
+    from swarmbed.plugins.consensus import winners_changed
+
+    rng = np.random.default_rng(8)
+    for _ in range(500):
+        tasks = rng.permutation(60)[: int(rng.integers(0, 60))].tolist()
+        z = {t: int(rng.integers(0, 5)) for t in tasks}
+        y = {t: float(rng.integers(0, 3)) for t in tasks}
+        told = {t: (int(rng.integers(0, 5)), float(rng.integers(0, 3))) for t in rng.permutation(60)[:30].tolist()}
+        ours, theirs = compiled.winners_changed(z, y, told), winners_changed(z, y, told)
+        assert list(ours[0].items()) == list(theirs[0].items()) and ours[1] == theirs[1]

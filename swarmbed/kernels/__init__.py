@@ -33,6 +33,8 @@ distance_gains = _implementation.distance_gains
 table_actions = getattr(_implementation, "table_actions", None)
 #: the task part of a CBBA receive (plugins/consensus.py), compiled; None where it was not
 receive_tasks = getattr(_implementation, "receive_tasks", None)
+#: what a CBBA message tells and what changed since the last one (plugins/consensus.py), compiled
+winners_changed = getattr(_implementation, "winners_changed", None)
 
 __all__ = [
     "COMPILED",
@@ -43,6 +45,7 @@ __all__ = [
     "receive_tasks",
     "reference",
     "table_actions",
+    "winners_changed",
 ]
 
 

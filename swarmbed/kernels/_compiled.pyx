@@ -279,3 +279,19 @@ def receive_tasks(long long i, long long k, dict z, dict y, list entries, bint d
         elif action != LEAVE:
             z.pop(t, None)
             y.pop(t, None)
+
+
+def winners_changed(dict z, dict y, dict told):
+    """plugins/consensus.winners_changed: the map task -> (winner, bid) of ``z`` and ``y``, in
+    ``z``'s order, and the (task, winner, bid) entries that differ from ``told``'s (the last message's)."""
+    cdef dict winners = {}
+    cdef list changed = []
+    cdef object t, w, b
+    cdef tuple pair
+    for t, w in z.items():
+        b = y[t]
+        pair = (w, b)
+        winners[t] = pair
+        if told.get(t) != pair:
+            changed.append((t, w, b))
+    return winners, changed
