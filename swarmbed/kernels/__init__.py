@@ -11,10 +11,12 @@ reference."""
 from __future__ import annotations
 
 import os
+from types import ModuleType
 
 from swarmbed.kernels import reference
 
 COMPILED = False
+_implementation: ModuleType
 if os.environ.get("SWARMBED_KERNELS", "compiled") != "python":
     try:
         from swarmbed.kernels import _compiled as _implementation

@@ -1,0 +1,42 @@
+# The compiled kernels' signatures (_compiled.pyx), for type checkers: each is its Python
+# reference's (reference.py, plugins/consensus.py).
+from collections.abc import Collection
+
+import numpy as np
+
+def exp(x: np.ndarray | float) -> np.ndarray: ...
+def path_gains(
+    x0: float,
+    y0: float,
+    speed: float,
+    rate: float,
+    log_discount: float,
+    cx: np.ndarray,
+    cy: np.ndarray,
+    cr: np.ndarray,
+    px: np.ndarray,
+    py: np.ndarray,
+    pr: np.ndarray,
+    at_end: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]: ...
+def distance_gains(
+    x0: float, y0: float, speed: float, log_discount: float, cx: np.ndarray, cy: np.ndarray, cr: np.ndarray
+) -> np.ndarray: ...
+def table_actions(
+    i: int, k: int, wk: np.ndarray, bk: np.ndarray, wi: np.ndarray, bi: np.ndarray, mine: np.ndarray, their: np.ndarray
+) -> np.ndarray: ...
+def receive_tasks(
+    i: int,
+    k: int,
+    z: dict[int, int],
+    y: dict[int, float],
+    entries: list[tuple],
+    delta: bool,
+    skip: Collection[int],
+    within: Collection[int] | None,
+    mine: np.ndarray,
+    their: np.ndarray,
+) -> None: ...
+def winners_changed(
+    z: dict[int, int], y: dict[int, float], told: dict[int, tuple[int, float]]
+) -> tuple[dict[int, tuple[int, float]], list[tuple[int, int, float]]]: ...
