@@ -185,3 +185,46 @@ def test_the_kernels_are_compiled_where_a_c_compiler_is():
     if not shutil.which(compiler):
         pytest.skip(f"no C compiler ({compiler}) on this machine: the kernels run as their Python reference")
     from swarmbed.kernels import _compiled  # noqa: F401 (an ImportError here is the failure)
+
+
+@pytest.mark.slow  # pip builds the package (about 15 s)
+def test_an_install_without_a_c_compiler_goes_on_without_the_kernels(tmp_path):
+    """A machine whose C compiler fails still installs the package (CC=/bin/false), without the
+    compiled module; what it installs runs on the Python reference."""
+    import os
+
+    pytest.importorskip("Cython", reason="the test extra's Cython builds the package without fetching it")
+    target = tmp_path / "site"
+    env = {**os.environ, "CC": "/bin/false"}
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--no-deps",
+            "--no-build-isolation",
+            "--no-compile",
+            "--target",
+            str(target),
+            str(ROOT),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    kernels = target / "swarmbed" / "kernels"
+    assert (kernels / "reference.py").exists() and not list(kernels.glob("_compiled*.so"))
+    probe = "import swarmbed.kernels as k; print(k.COMPILED, k.fallback_notice() is not None)"
+    shown = subprocess.run(
+        [sys.executable, "-P", "-c", probe],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(target)},
+        check=True,
+    )
+    assert shown.stdout.split() == ["False", "True"]
