@@ -293,3 +293,50 @@ def test_compiled_winners_changed_is_the_pythons():
         told = {t: (int(rng.integers(0, 5)), float(rng.integers(0, 3))) for t in rng.permutation(60)[:30].tolist()}
         ours, theirs = compiled.winners_changed(z, y, told), winners_changed(z, y, told)
         assert list(ours[0].items()) == list(theirs[0].items()) and ours[1] == theirs[1]
+
+
+def test_a_crafted_message_is_received_alike_by_the_compiled_and_the_python_receive(monkeypatch):
+    """Messages anyone in range could send: tasks out of order and named twice, winners that are no
+    agent (negative, huge), NaN and infinite bids and stamps, vectors of random bytes. The compiled
+    receive leaves the maps and stamps that Python task by task leaves, and neither raises."""
+    from swarmbed.plugins import consensus
+    from swarmbed.plugins.consensus import STAMP_KEYS, WINNER_KEYS, ConsensusState
+
+    rng = np.random.default_rng(9)
+    odd_bids = np.array([np.nan, np.inf, -np.inf, 0.0, -0.0, 1.0, 2.0, 1e308])
+    changed = 0
+    for trial in range(400):
+        msg: dict = {"t": float(rng.choice([0.0, 1.0, 3.0, np.nan, np.inf]))}
+        if trial % 2:
+            msg["d"] = 1
+        key, dtype = WINNER_KEYS[int(rng.integers(0, len(WINNER_KEYS)))]
+        n = int(rng.integers(0, 30))
+        if trial % 5 == 0:
+            msg[key] = rng.bytes(n * dtype.itemsize + int(rng.integers(0, 2)))  # random bytes, maybe torn
+        else:
+            rows = np.zeros(n, dtype)
+            rows["task"] = rng.integers(0, 40, n)
+            rows["winner"] = rng.choice([-1, -5, 0, 1, 2, 3, 100, np.iinfo(dtype["winner"]).max], n)
+            rows["bid"] = rng.choice(odd_bids, n)
+            msg[key] = rows.tobytes()
+        skey, sdtype = STAMP_KEYS[-1]
+        stamps = np.zeros(int(rng.integers(0, 6)), sdtype)
+        stamps["agent"] = rng.integers(-2, 8, len(stamps))
+        stamps["stamp"] = rng.choice([0.0, 1.0, 2.0, np.nan, np.inf], len(stamps))
+        msg[skey] = stamps.tobytes()
+        receiver = ConsensusState(0)
+        receiver.now = 1.0
+        for t in range(40):
+            if rng.random() < 0.6:
+                receiver.z[t], receiver.y[t] = int(rng.integers(0, 4)), float(rng.choice(odd_bids))
+        states = []
+        for compiled_receive in (False, True):
+            st = ConsensusState(0)
+            st.now, st.z, st.y = receiver.now, dict(receiver.z), dict(receiver.y)
+            monkeypatch.setattr(kernels, "receive_tasks", compiled.receive_tasks if compiled_receive else None)
+            monkeypatch.setattr(consensus, "FEW_TASKS", 0 if compiled_receive else 10**9)
+            st.receive(1, msg, ignore={3}, within=set(range(0, 40, 2)) if trial % 3 == 0 else None)
+            states.append((repr(list(st.z.items())), repr(list(st.y.items())), st.stamps.tobytes()))
+        assert states[0] == states[1], trial
+        changed += states[0][:2] != (repr(list(receiver.z.items())), repr(list(receiver.y.items())))
+    assert changed > 100  # the messages took decisions, not only refusals
