@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from swarmbed import kernels
 from swarmbed.checks.allocator_kit import CLEAN_NETWORK as CLEAN
 from swarmbed.checks.allocator_kit import random_instance, run_all, simulate
 from swarmbed.extension import HALT, HOLD, LocalView, Message, TaskInfo
@@ -167,48 +168,59 @@ def test_table_1_over_arrays_takes_the_scalar_tables_action_in_every_case():
         assert not (update[n] and reset[n])
 
 
-def test_a_receive_takes_the_same_decisions_task_by_task_and_over_arrays():
-    """Both paths of a receive (a few tasks decided one by one, many at once over arrays) leave the
-    same winners, bids and timestamps on random beliefs, whole messages and deltas."""
-    rng = np.random.default_rng(3)
-    for trial in range(300):
-        tasks = int(rng.integers(1, 3 * consensus.FEW_TASKS))
-        states = []
-        for _ in range(2):
-            st = ConsensusState(0)
-            st.now = float(rng.integers(0, 4))
-            for t in range(tasks):
-                if rng.random() < 0.7:
-                    st.z[t], st.y[t] = int(rng.integers(0, 5)), float(rng.integers(0, 3))
-            for a in range(1, 5):
-                if rng.random() < 0.8:
-                    st.s[a] = float(rng.integers(0, 4))
-            states.append(st)
-        sender = ConsensusState(1)
-        sender.z.update({t: int(w) for t, w in zip(range(tasks), rng.integers(0, 5, tasks)) if rng.random() < 0.7})
-        sender.y.update({t: float(rng.integers(0, 3)) for t in sender.z})
-        sender.s.update({a: float(rng.integers(0, 4)) for a in (0, 2, 3, 4) if rng.random() < 0.8})
-        sender.now = float(rng.integers(0, 4))
-        msg = sender.message()
-        if trial % 2:
-            msg["d"] = 1
-        ref, fast = (_copy_state(states[0]) for _ in range(2))
-        few = consensus.FEW_TASKS
-        try:
-            consensus.FEW_TASKS = 10**9  # task by task
-            ref.receive(1, msg)
-            consensus.FEW_TASKS = 0  # over arrays
-            fast.receive(1, msg)
-        finally:
-            consensus.FEW_TASKS = few
-        assert (ref.z, ref.y, dict(ref.s)) == (fast.z, fast.y, dict(fast.s)), trial
+def random_receive(rng: np.random.Generator, trial: int) -> tuple[ConsensusState, dict, set | tuple, set | None]:
+    """Receiver 0's random beliefs and stamps, and a random neighbour's message to it: whole on even
+    trials, a delta on odd ones; tasks to ignore on every fifth, a scope (``within``) on every third."""
+    tasks = int(rng.integers(1, 80))
+    receiver = ConsensusState(0)
+    receiver.now = float(rng.integers(0, 4))
+    for t in range(tasks):
+        if rng.random() < 0.7:
+            receiver.z[t], receiver.y[t] = int(rng.integers(0, 5)), float(rng.integers(0, 3))
+    for a in range(1, 5):
+        if rng.random() < 0.8:
+            receiver.s[a] = float(rng.integers(0, 4))
+    sender = ConsensusState(1)
+    sender.z.update({t: int(w) for t, w in zip(range(tasks), rng.integers(0, 5, tasks)) if rng.random() < 0.7})
+    sender.y.update({t: float(rng.integers(0, 3)) for t in sender.z})
+    sender.s.update({a: float(rng.integers(0, 4)) for a in (0, 2, 3, 4) if rng.random() < 0.8})
+    sender.now = float(rng.integers(0, 4))
+    msg = sender.message()
+    if trial % 2:
+        msg["d"] = 1
+    ignore = {t for t in range(tasks) if rng.random() < 0.1} if trial % 5 == 0 else ()
+    within = {t for t in range(tasks) if rng.random() < 0.5} if trial % 3 == 1 else None
+    return receiver, msg, ignore, within
 
 
-def _copy_state(st: ConsensusState) -> ConsensusState:
+def copy_state(st: ConsensusState) -> ConsensusState:
     out = ConsensusState(st.agent_id)
     out.now, out.z, out.y = st.now, dict(st.z), dict(st.y)
     out.s.update(st.s)
     return out
+
+
+def beliefs(st: ConsensusState) -> tuple:
+    """What a receive leaves: winners and bids with their maps' order, and the stamps."""
+    return list(st.z.items()), list(st.y.items()), dict(st.s)
+
+
+def test_a_receive_takes_the_same_decisions_task_by_task_and_over_arrays(monkeypatch):
+    """In Python (the compiled kernels off): both paths of a receive (a few tasks decided one by one,
+    many at once over numpy's masks) leave the same winners, bids and timestamps on random beliefs,
+    whole messages and deltas, with tasks to ignore and a scope."""
+    monkeypatch.setattr(kernels, "receive_tasks", None)
+    monkeypatch.setattr(kernels, "table_actions", None)
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        receiver, msg, ignore, within = random_receive(rng, trial)
+        left = []
+        for few in (10**9, 0):  # task by task; over arrays
+            st = copy_state(receiver)
+            monkeypatch.setattr(consensus, "FEW_TASKS", few)
+            st.receive(1, msg, ignore=ignore, within=within)
+            left.append(beliefs(st))
+        assert left[0] == left[1], trial
 
 
 def _grape_utility(inst, params, agent, task, size):

@@ -236,48 +236,29 @@ def test_compiled_table_1_takes_the_scalar_tables_action_in_every_case():
         assert got == want, (a, ya, b, yb, cm, cn)
 
 
-@pytest.mark.parametrize("way", ["compiled receive", "compiled table", "numpy masks"])
+@pytest.mark.parametrize("way", ["compiled receive", "compiled table"])
 def test_a_receive_decides_as_task_by_task_in_python(way, monkeypatch):
-    """Random beliefs, whole messages and deltas, tasks to ignore and a scope (``within``): a
-    receive done by the compiled kernel, or in Python with Table 1 compiled or as numpy's masks,
-    leaves the winners, bids and stamps that Python task by task leaves."""
+    """Random beliefs, whole messages and deltas, tasks to ignore and a scope: a receive done by the
+    compiled kernel, or in Python with Table 1 compiled, leaves the winners, bids (in their maps'
+    order) and stamps that Python task by task leaves (numpy's masks: tests/test_allocators.py)."""
     from swarmbed.plugins import consensus
-    from swarmbed.plugins.consensus import ConsensusState
+    from tests.test_allocators import beliefs, copy_state, random_receive
 
     rng = np.random.default_rng(7)
     for trial in range(400):
-        tasks = int(rng.integers(1, 80))
-        receiver = ConsensusState(0)
-        receiver.now = float(rng.integers(0, 4))
-        for t in range(tasks):
-            if rng.random() < 0.7:
-                receiver.z[t], receiver.y[t] = int(rng.integers(0, 5)), float(rng.integers(0, 3))
-        for a in range(1, 5):
-            if rng.random() < 0.8:
-                receiver.s[a] = float(rng.integers(0, 4))
-        sender = ConsensusState(1)
-        sender.z.update({t: int(w) for t, w in zip(range(tasks), rng.integers(0, 5, tasks)) if rng.random() < 0.7})
-        sender.y.update({t: float(rng.integers(0, 3)) for t in sender.z})
-        sender.s.update({a: float(rng.integers(0, 4)) for a in (0, 2, 3, 4) if rng.random() < 0.8})
-        sender.now = float(rng.integers(0, 4))
-        msg = sender.message()
-        if trial % 2:
-            msg["d"] = 1
-        ignore = {t for t in range(tasks) if rng.random() < 0.1} if trial % 5 == 0 else ()
-        within = {t for t in range(tasks) if rng.random() < 0.5} if trial % 3 == 1 else None  # whole and delta
-        states = []
+        receiver, msg, ignore, within = random_receive(rng, trial)
+        left = []
         for ours in ("python task by task", way):
-            st = ConsensusState(0)
-            st.now, st.z, st.y = receiver.now, dict(receiver.z), dict(receiver.y)
-            st.s.update(receiver.s)
-            compiled_receive = ours == "compiled receive"
-            compiled_table = ours in ("compiled receive", "compiled table")
-            monkeypatch.setattr(kernels, "receive_tasks", compiled.receive_tasks if compiled_receive else None)
-            monkeypatch.setattr(kernels, "table_actions", compiled.table_actions if compiled_table else None)
-            monkeypatch.setattr(consensus, "FEW_TASKS", 10**9 if ours.startswith("python") else 0)
+            st = copy_state(receiver)
+            python = ours.startswith("python")
+            monkeypatch.setattr(
+                kernels, "receive_tasks", compiled.receive_tasks if ours == "compiled receive" else None
+            )
+            monkeypatch.setattr(kernels, "table_actions", None if python else compiled.table_actions)
+            monkeypatch.setattr(consensus, "FEW_TASKS", 10**9 if python else 0)
             st.receive(1, msg, ignore=ignore, within=within)
-            states.append((list(st.z.items()), list(st.y.items()), dict(st.s)))
-        assert states[0] == states[1], trial
+            left.append(beliefs(st))
+        assert left[0] == left[1], trial
 
 
 def test_compiled_winners_changed_is_the_pythons():
