@@ -93,9 +93,9 @@ def time_gains(calls: list, fn) -> float:
     return (time.process_time() - t) / len(calls) * 1e6
 
 
-def time_receives(calls: list, few: float, table, receive) -> float:
+def time_receives(calls: list, few: float, receive) -> float:
     spent = 0.0
-    consensus.FEW_TASKS, kernels.table_actions, kernels.receive_tasks = few, table, receive
+    consensus.FEW_TASKS, kernels.receive_tasks = few, receive
     for (agent, now, z, y, stamps), sender, data, ignore, within in calls:
         st = ConsensusState(agent)
         st.now, st.z, st.y, st.stamps = now, dict(z), dict(y), stamps.copy()
@@ -116,23 +116,22 @@ def main() -> None:
         raise SystemExit("the compiled kernels were not built: nothing to compare")
     gains, received = record(args.agents, args.duration, args.receives)
     print(f"recorded {len(gains)} gain calls, {len(received)} receives ({args.agents} robots, {args.duration:g} s)")
-    compiled_table, compiled_receive, few = kernels.table_actions, kernels.receive_tasks, consensus.FEW_TASKS
+    compiled_receive, few = kernels.receive_tasks, consensus.FEW_TASKS
     ways_gains = {"compiled": kernels.path_gains, "python reference": reference.path_gains, "numpy before": numpy_gains}
     ways_receive = {
-        "compiled": (few, compiled_table, compiled_receive),
-        "compiled table only": (few, compiled_table, None),
-        "numpy masks": (24, None, None),
-        "task by task": (math.inf, None, None),
+        "compiled": (few, compiled_receive),
+        "numpy masks": (few, None),
+        "task by task": (math.inf, None),
     }
     spent: dict[str, list[float]] = {}
     try:
         for _ in range(args.rounds):
             for name, fn in ways_gains.items():
                 spent.setdefault(f"gains, {name}", []).append(time_gains(gains, fn))
-            for name, (threshold, table, receive) in ways_receive.items():
-                spent.setdefault(f"receive, {name}", []).append(time_receives(received, threshold, table, receive))
+            for name, (threshold, receive) in ways_receive.items():
+                spent.setdefault(f"receive, {name}", []).append(time_receives(received, threshold, receive))
     finally:
-        consensus.FEW_TASKS, kernels.table_actions, kernels.receive_tasks = few, compiled_table, compiled_receive
+        consensus.FEW_TASKS, kernels.receive_tasks = few, compiled_receive
     floors = {"gains": min(spent["gains, compiled"]), "receive": min(spent["receive, compiled"])}
     for name, values in spent.items():
         best = min(values)

@@ -99,13 +99,18 @@ def _compact(t: float) -> float | int:
     return int(t) if float(t).is_integer() else t
 
 
+def winners_of(z: dict[int, int], y: dict[int, float]) -> dict[int, tuple[int, float]]:
+    """The map task -> (winner, bid) of ``z`` and ``y``, in ``z``'s order."""
+    return {t: (z[t], y[t]) for t in z}
+
+
 def winners_changed(
     z: dict[int, int], y: dict[int, float], told: dict[int, tuple[int, float]]
 ) -> tuple[dict[int, tuple[int, float]], list[tuple[int, int, float]]]:
     """The map task -> (winner, bid) of ``z`` and ``y``, in ``z``'s order, and the (task, winner,
     bid) entries that differ from ``told``'s (the last message's); ``swarmbed.kernels`` has it
     compiled."""
-    winners = {t: (z[t], y[t]) for t in z}
+    winners = winners_of(z, y)
     return winners, [(t, w, b) for t, (w, b) in winners.items() if told.get(t) != (w, b)]
 
 
@@ -193,9 +198,10 @@ def table_masks(
     return update, reset
 
 
-#: below this many tasks to decide, Table 1 runs task by task (building arrays costs more than the
-#: compiled kernel saves, or, without it, numpy's calls cost more than they save)
-FEW_TASKS = 8 if kernels.table_actions is not None else 24
+#: below this many tasks to decide, the Python receive runs Table 1 task by task (building arrays
+#: for numpy's masks costs more than it saves); the compiled receive (``kernels.receive_tasks``)
+#: decides every task in C
+FEW_TASKS = 24
 
 
 class Stamps(MutableMapping):
@@ -291,9 +297,11 @@ class ConsensusState:
         self.sent += 1
         if self.full_every == 1:
             return self._whole()
-        winners, changed = (kernels.winners_changed or winners_changed)(self.z, self.y, self.told)
         delta = None
-        if not due_whole:
+        if due_whole:  # what it tells becomes the base of the next deltas; nothing to compare
+            winners = winners_of(self.z, self.y)
+        else:
+            winners, changed = (kernels.winners_changed or winners_changed)(self.z, self.y, self.told)
             told = self.told
             dropped = [(t, NONE, 0.0) for t in told.keys() - winners.keys()]
             told_s = np.full(len(self.stamps), _NEVER)
@@ -406,23 +414,13 @@ class ConsensusState:
     def _decide_over_arrays(
         self, order: list[int], theirs: dict[int, tuple[int, float]], mine: np.ndarray, their: np.ndarray, k: int
     ) -> None:
-        """:meth:`_decide` for many tasks: Table 1 compiled (``swarmbed.kernels.table_actions``), or
-        as numpy masks (:func:`table_masks`) where it was not."""
+        """:meth:`_decide` for many tasks, Table 1 as numpy masks (:func:`table_masks`)."""
         i, z, y, out = self.agent_id, self.z, self.y, len(mine) - 1
         beliefs = [theirs.get(j, (NONE, 0.0)) for j in order]
         wk = np.array([w for w, _ in beliefs], dtype=np.int64)
         bk = np.array([b for _, b in beliefs], dtype=float)
         wi = np.array([z.get(j, NONE) for j in order], dtype=np.int64)
         bi = np.array([y.get(j, 0.0) for j in order], dtype=float)
-        if kernels.table_actions is not None:  # compiled: Table 1 task by task in C
-            actions = kernels.table_actions(i, k, wk, bk, wi, bi, mine, their).tolist()
-            for n in np.flatnonzero(actions).tolist():
-                j = order[n]
-                if actions[n] == 1:
-                    z[j], y[j] = int(wk[n]), float(bk[n])
-                else:
-                    self.reset(j)
-            return
         at_m = np.where((wk >= 0) & (wk < out), wk, out)
         at_n = np.where((wi >= 0) & (wi < out), wi, out)
         newer_m, older_m = their[at_m] > mine[at_m], their[at_m] < mine[at_m]

@@ -236,11 +236,10 @@ def test_compiled_table_1_takes_the_scalar_tables_action_in_every_case():
         assert got == want, (a, ya, b, yb, cm, cn)
 
 
-@pytest.mark.parametrize("way", ["compiled receive", "compiled table"])
-def test_a_receive_decides_as_task_by_task_in_python(way, monkeypatch):
+def test_a_receive_decides_as_task_by_task_in_python(monkeypatch):
     """Random beliefs, whole messages and deltas, tasks to ignore and a scope: a receive done by the
-    compiled kernel, or in Python with Table 1 compiled, leaves the winners, bids (in their maps'
-    order) and stamps that Python task by task leaves (numpy's masks: tests/test_allocators.py)."""
+    compiled kernel leaves the winners, bids (in their maps' order) and stamps that Python task by
+    task leaves (numpy's masks: tests/test_allocators.py)."""
     from swarmbed.plugins import consensus
     from tests.test_allocators import beliefs, copy_state, random_receive
 
@@ -248,13 +247,9 @@ def test_a_receive_decides_as_task_by_task_in_python(way, monkeypatch):
     for trial in range(400):
         receiver, msg, ignore, within = random_receive(rng, trial)
         left = []
-        for ours in ("python task by task", way):
+        for python in (True, False):
             st = copy_state(receiver)
-            python = ours.startswith("python")
-            monkeypatch.setattr(
-                kernels, "receive_tasks", compiled.receive_tasks if ours == "compiled receive" else None
-            )
-            monkeypatch.setattr(kernels, "table_actions", None if python else compiled.table_actions)
+            monkeypatch.setattr(kernels, "receive_tasks", None if python else compiled.receive_tasks)
             monkeypatch.setattr(consensus, "FEW_TASKS", 10**9 if python else 0)
             st.receive(1, msg, ignore=ignore, within=within)
             left.append(beliefs(st))

@@ -1,6 +1,6 @@
 """Compiled kernels for what every robot computes every tick, with their Python reference.
 
-``exp``, ``path_gains``, ``distance_gains`` (and ``table_actions``) here are the compiled ones (``_compiled.pyx``,
+``exp``, ``path_gains``, ``distance_gains`` here are the compiled ones (``_compiled.pyx``,
 built by ``pip install`` with a C compiler) or, where none was built, the Python reference
 (:mod:`swarmbed.kernels.reference`): the same operations in the same order, so the same bits on
 every CPU either way (``tests/test_kernels.py`` compares them on recorded and random calls).
@@ -30,10 +30,9 @@ else:
 exp = _implementation.exp
 path_gains = _implementation.path_gains
 distance_gains = _implementation.distance_gains
-#: CBBA's Table 1 over a message's tasks, compiled; None where it was not (plugins/consensus.py then
-#: decides task by task or with numpy masks, the Python it is compared with)
-table_actions = getattr(_implementation, "table_actions", None)
-#: the task part of a CBBA receive (plugins/consensus.py), compiled; None where it was not
+#: the task part of a CBBA receive (plugins/consensus.py), Table 1 included, compiled; None where it
+#: was not (plugins/consensus.py then decides task by task or with numpy masks, the Python it is
+#: compared with)
 receive_tasks = getattr(_implementation, "receive_tasks", None)
 #: what a CBBA message tells and what changed since the last one (plugins/consensus.py), compiled
 winners_changed = getattr(_implementation, "winners_changed", None)
@@ -46,7 +45,6 @@ __all__ = [
     "path_gains",
     "receive_tasks",
     "reference",
-    "table_actions",
     "winners_changed",
 ]
 
