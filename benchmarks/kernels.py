@@ -95,7 +95,7 @@ def time_gains(calls: list, fn) -> float:
 
 def time_receives(calls: list, few: float, receive) -> float:
     spent = 0.0
-    consensus.FEW_TASKS, kernels.receive_tasks = few, receive
+    consensus.FEW_TASKS, kernels.receive = few, receive
     for (agent, now, z, y, stamps), sender, data, ignore, within in calls:
         st = ConsensusState(agent)
         st.now, st.z, st.y, st.stamps = now, dict(z), dict(y), stamps.copy()
@@ -116,7 +116,7 @@ def main() -> None:
         raise SystemExit("the compiled kernels were not built: nothing to compare")
     gains, received = record(args.agents, args.duration, args.receives)
     print(f"recorded {len(gains)} gain calls, {len(received)} receives ({args.agents} robots, {args.duration:g} s)")
-    compiled_receive, few = kernels.receive_tasks, consensus.FEW_TASKS
+    compiled_receive, few = kernels.receive, consensus.FEW_TASKS
     ways_gains = {"compiled": kernels.path_gains, "python reference": reference.path_gains, "numpy before": numpy_gains}
     ways_receive = {
         "compiled": (few, compiled_receive),
@@ -131,7 +131,7 @@ def main() -> None:
             for name, (threshold, receive) in ways_receive.items():
                 spent.setdefault(f"receive, {name}", []).append(time_receives(received, threshold, receive))
     finally:
-        consensus.FEW_TASKS, kernels.receive_tasks = few, compiled_receive
+        consensus.FEW_TASKS, kernels.receive = few, compiled_receive
     floors = {"gains": min(spent["gains, compiled"]), "receive": min(spent["receive, compiled"])}
     for name, values in spent.items():
         best = min(values)

@@ -78,10 +78,12 @@ def consensus_message(
     if delta:
         out["d"] = 1
     if winners:  # an empty vector is left out
-        key, packed = pack_rows(winners, WINNER_KEYS)
+        compiled = kernels.pack_winners(winners) if kernels.pack_winners is not None else None
+        key, packed = compiled or pack_rows(winners, WINNER_KEYS)
         out[key] = packed
     if stamp_columns is not None and len(stamp_columns[0]):
-        key, packed = pack_columns(stamp_columns, STAMP_KEYS)
+        compiled = kernels.pack_stamps(*stamp_columns) if kernels.pack_stamps is not None else None
+        key, packed = compiled or pack_columns(stamp_columns, STAMP_KEYS)
         out[key] = packed
     elif stamps:
         key, packed = pack_rows(stamps, STAMP_KEYS)
@@ -199,7 +201,7 @@ def table_masks(
 
 
 #: below this many tasks to decide, the Python receive runs Table 1 task by task (building arrays
-#: for numpy's masks costs more than it saves); the compiled receive (``kernels.receive_tasks``)
+#: for numpy's masks costs more than it saves); the compiled receive (``kernels.receive``)
 #: decides every task in C
 FEW_TASKS = 24
 
@@ -336,6 +338,17 @@ class ConsensusState:
                 first.setdefault(entry[0], entry)  # a task named twice: the first entry counts
             entries = [first[t] for t in sorted(first)]
             tasks = [e[0] for e in entries]
+        skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
+        if kernels.receive is not None:  # compiled: the same steps as below, in C
+            raw, layout = None, -1
+            for n, (key, _dtype) in enumerate(STAMP_KEYS):
+                if key in data:
+                    raw, layout = data[key], n
+                    break
+            self.stamps = kernels.receive(
+                i, k, self.now, float(data["t"]), delta, self.stamps, raw, layout, self.z, self.y, entries, skip, within
+            )
+            return
         # the sender's timestamps over agent ids: every agent it names, itself at the message's time;
         # an agent a delta leaves out is no news (its stamp as ours), one a whole message leaves out never heard of
         agents, stamps = _stamp_array(data)
@@ -346,13 +359,10 @@ class ConsensusState:
         their[agents] = stamps
         their[k] = data["t"]
         their[-1] = mine[-1] = _NEVER
-        skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
-        if kernels.receive_tasks is not None:  # compiled: the same steps as below, in C
-            kernels.receive_tasks(i, k, self.z, self.y, entries, delta, skip, within, mine, their)
-        else:
-            self._receive_tasks(entries, tasks, delta, skip, within, mine, their, k)
+        self._receive_tasks(entries, tasks, delta, skip, within, mine, their, k)
         their[i] = _NEVER  # never news of ourselves
-        self.stamps = np.fmax(self.stamps, their[:-1])  # a NaN stamp is no news
+        their = their[:-1]
+        self.stamps = np.where(their > self.stamps, their, self.stamps)  # a NaN stamp is no news
 
     def _receive_tasks(
         self,
@@ -366,7 +376,7 @@ class ConsensusState:
         k: int,
     ) -> None:
         """Table 1 on the tasks of a message (``entries``: sorted, each task once) whose belief
-        differs from ours; the Python that ``swarmbed.kernels.receive_tasks`` is compared with."""
+        differs from ours; the Python that ``swarmbed.kernels.receive`` is compared with."""
         z, y = self.z, self.y
         # the tasks whose belief differs from ours (identical entries leave every table case unchanged):
         # a delta names only the tasks it changes (NONE: a winner the sender dropped); a whole message

@@ -209,7 +209,7 @@ def test_a_receive_takes_the_same_decisions_task_by_task_and_over_arrays(monkeyp
     """In Python (the compiled kernels off): both paths of a receive (a few tasks decided one by one,
     many at once over numpy's masks) leave the same winners, bids and timestamps on random beliefs,
     whole messages and deltas, with tasks to ignore and a scope."""
-    monkeypatch.setattr(kernels, "receive_tasks", None)
+    monkeypatch.setattr(kernels, "receive", None)
     rng = np.random.default_rng(3)
     for trial in range(300):
         receiver, msg, ignore, within = random_receive(rng, trial)

@@ -249,7 +249,7 @@ def test_a_receive_decides_as_task_by_task_in_python(monkeypatch):
         left = []
         for python in (True, False):
             st = copy_state(receiver)
-            monkeypatch.setattr(kernels, "receive_tasks", None if python else compiled.receive_tasks)
+            monkeypatch.setattr(kernels, "receive", None if python else compiled.receive)
             monkeypatch.setattr(consensus, "FEW_TASKS", 10**9 if python else 0)
             st.receive(1, msg, ignore=ignore, within=within)
             left.append(beliefs(st))
@@ -271,9 +271,49 @@ def test_compiled_winners_changed_is_the_pythons():
         assert list(ours[0].items()) == list(theirs[0].items()) and ours[1] == theirs[1]
 
 
+def test_compiled_packing_is_the_pythons():
+    """A message's winner rows and timestamp columns packed by the kernels: the key and bytes of
+    ``pack_rows`` / ``pack_columns`` on CBBA's keys, for every layout (narrow ids, wide ids, whole
+    and fractional stamps, infinities), short and long vectors; what the kernels leave to the
+    Python (a NaN stamp, ids past the widest layout, another type) they say with None."""
+    from swarmbed.plugins.consensus import STAMP_KEYS, WINNER_KEYS
+    from swarmbed.plugins.packed import pack_columns, pack_rows
+
+    rng = np.random.default_rng(10)
+    keys_seen = set()
+    for trial in range(3000):
+        n = int(rng.choice([1, 2, 5, 31, 32, 33, 120]))
+        top_task = int(rng.choice([100, 65535, 65536, 4294967295]))
+        top_agent = int(rng.choice([127, 128, 32767]))
+        rows = [
+            (int(rng.integers(0, top_task + 1)), int(rng.integers(-1, top_agent + 1)), float(rng.normal()) * 100)
+            for _ in range(n)
+        ]
+        ours = compiled.pack_winners(rows)
+        assert ours == pack_rows(rows, WINNER_KEYS), trial
+        agents = np.sort(rng.choice(top_agent + 1, n, replace=False)).astype(np.int64)
+        kind = trial % 5
+        stamps = rng.integers(0, [100, 65535, 2**31 - 1, 2**40, 10][kind], n).astype(float)
+        if kind == 4:
+            stamps[int(rng.integers(0, n))] = float(rng.choice([0.5, np.inf, -np.inf, -3.0, 1e300]))
+        ours = compiled.pack_stamps(agents, stamps)
+        assert ours == pack_columns((agents, stamps), STAMP_KEYS), trial
+        keys_seen.update([ours[0], compiled.pack_winners(rows)[0]])
+    assert keys_seen == {"s", "r", "q", "p", "w", "v", "u"}  # every layout was made
+    one = np.array([3], np.int64)
+    assert compiled.pack_stamps(one, np.array([np.nan])) is None
+    assert compiled.pack_stamps(np.array([40000], np.int64), np.array([1.0])) is None
+    assert compiled.pack_stamps(np.zeros(0, np.int64), np.zeros(0)) is None
+    assert compiled.pack_winners([(1, 2, 3)]) is None  # an int bid: the Python's
+    assert compiled.pack_winners([(2**32, 1, 1.0)]) is None
+    assert compiled.pack_winners([(True, 1, 1.0)]) is None
+    assert compiled.pack_winners([]) is None
+
+
 def test_a_crafted_message_is_received_alike_by_the_compiled_and_the_python_receive(monkeypatch):
     """Messages anyone in range could send: tasks out of order and named twice, winners that are no
-    agent (negative, huge), NaN and infinite bids and stamps, vectors of random bytes. The compiled
+    agent (negative, huge), NaN and infinite bids and stamps, negative zeros, stamps in every layout
+    and torn, vectors of random bytes. The compiled
     receive leaves the maps and stamps that Python task by task leaves, and neither raises."""
     from swarmbed.plugins import consensus
     from swarmbed.plugins.consensus import STAMP_KEYS, WINNER_KEYS, ConsensusState
@@ -295,21 +335,28 @@ def test_a_crafted_message_is_received_alike_by_the_compiled_and_the_python_rece
             rows["winner"] = rng.choice([-1, -5, 0, 1, 2, 3, 100, np.iinfo(dtype["winner"]).max], n)
             rows["bid"] = rng.choice(odd_bids, n)
             msg[key] = rows.tobytes()
-        skey, sdtype = STAMP_KEYS[-1]
+        skey, sdtype = STAMP_KEYS[int(rng.integers(0, len(STAMP_KEYS)))]
         stamps = np.zeros(int(rng.integers(0, 6)), sdtype)
         stamps["agent"] = rng.integers(-2, 8, len(stamps))
-        stamps["stamp"] = rng.choice([0.0, 1.0, 2.0, np.nan, np.inf], len(stamps))
-        msg[skey] = stamps.tobytes()
+        if sdtype["stamp"].kind == "f":
+            stamps["stamp"] = rng.choice([0.0, -0.0, 1.0, 2.0, np.nan, np.inf, -np.inf], len(stamps))
+        else:
+            info = np.iinfo(sdtype["stamp"])
+            stamps["stamp"] = rng.choice([0, 1, 2, info.max, info.min], len(stamps))
+        raw = stamps.tobytes()
+        msg[skey] = raw + b"x" if trial % 7 == 0 else raw  # now and then torn: no stamps
         receiver = ConsensusState(0)
         receiver.now = 1.0
+        receiver.stamps = rng.choice([-np.inf, 0.0, 1.0, 2.0], int(rng.integers(1, 10)))
+        receiver.stamps[0] = -np.inf  # never news of itself
         for t in range(40):
             if rng.random() < 0.6:
                 receiver.z[t], receiver.y[t] = int(rng.integers(0, 4)), float(rng.choice(odd_bids))
         states = []
         for compiled_receive in (False, True):
             st = ConsensusState(0)
-            st.now, st.z, st.y = receiver.now, dict(receiver.z), dict(receiver.y)
-            monkeypatch.setattr(kernels, "receive_tasks", compiled.receive_tasks if compiled_receive else None)
+            st.now, st.z, st.y, st.stamps = receiver.now, dict(receiver.z), dict(receiver.y), receiver.stamps.copy()
+            monkeypatch.setattr(kernels, "receive", compiled.receive if compiled_receive else None)
             monkeypatch.setattr(consensus, "FEW_TASKS", 0 if compiled_receive else 10**9)
             st.receive(1, msg, ignore={3}, within=set(range(0, 40, 2)) if trial % 3 == 0 else None)
             states.append((repr(list(st.z.items())), repr(list(st.y.items())), st.stamps.tobytes()))

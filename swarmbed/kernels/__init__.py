@@ -30,20 +30,25 @@ else:
 exp = _implementation.exp
 path_gains = _implementation.path_gains
 distance_gains = _implementation.distance_gains
-#: the task part of a CBBA receive (plugins/consensus.py), Table 1 included, compiled; None where it
+#: a CBBA receive (plugins/consensus.py), timestamps and Table 1 included, compiled; None where it
 #: was not (plugins/consensus.py then decides task by task or with numpy masks, the Python it is
 #: compared with)
-receive_tasks = getattr(_implementation, "receive_tasks", None)
+receive = getattr(_implementation, "receive", None)
 #: what a CBBA message tells and what changed since the last one (plugins/consensus.py), compiled
 winners_changed = getattr(_implementation, "winners_changed", None)
+#: a CBBA message's winner rows and timestamp columns packed (plugins/consensus.py), compiled
+pack_winners = getattr(_implementation, "pack_winners", None)
+pack_stamps = getattr(_implementation, "pack_stamps", None)
 
 __all__ = [
     "COMPILED",
     "distance_gains",
     "exp",
     "fallback_notice",
+    "pack_stamps",
+    "pack_winners",
     "path_gains",
-    "receive_tasks",
+    "receive",
     "reference",
     "winners_changed",
 ]

@@ -40,3 +40,20 @@ def receive_tasks(
 def winners_changed(
     z: dict[int, int], y: dict[int, float], told: dict[int, tuple[int, float]]
 ) -> tuple[dict[int, tuple[int, float]], list[tuple[int, int, float]]]: ...
+def pack_stamps(agents: np.ndarray, stamps: np.ndarray) -> tuple[str, bytes] | None: ...
+def pack_winners(rows: list[tuple[int, int, float]]) -> tuple[str, bytes] | None: ...
+def receive(
+    i: int,
+    k: int,
+    now: float,
+    t: float,
+    delta: bool,
+    stamps: np.ndarray,
+    raw: object,
+    layout: int,
+    z: dict[int, int],
+    y: dict[int, float],
+    entries: list[tuple],
+    skip: Collection[int],
+    within: Collection[int] | None,
+) -> np.ndarray: ...

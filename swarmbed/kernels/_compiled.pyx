@@ -295,3 +295,205 @@ def winners_changed(dict z, dict y, dict told):
         if told.get(t) != pair:
             changed.append((t, w, b))
     return winners, changed
+
+
+# -- packing a CBBA message's vectors (plugins/consensus.py: pack_rows / pack_columns on its keys) ----
+from libc.math cimport floor
+from libc.string cimport memcpy
+from cpython.bytes cimport PyBytes_FromStringAndSize, PyBytes_AS_STRING
+
+
+cdef inline void _put_int(char* at, long long value, int size) noexcept nogil:
+    """``value``'s lowest ``size`` bytes, little-endian (two's complement: a cast that wraps)."""
+    cdef unsigned long long u = <unsigned long long>value
+    cdef int b
+    for b in range(size):
+        at[b] = <char>((u >> (8 * b)) & 0xFF)
+
+
+cdef inline void _put_double(char* at, double value) noexcept nogil:
+    cdef _Bits bits
+    bits.d = value
+    _put_int(at, <long long>bits.u, 8)
+
+
+def pack_stamps(const long long[::1] agents, const double[::1] stamps):
+    """``pack_columns((agents, stamps), STAMP_KEYS)``: the key of the narrowest layout that holds
+    every (agent, stamp) exactly ('s' i1/u2, 'r' i2/u2, 'q' i2/i4, 'p' i2/f8) and the packed bytes;
+    None where the Python must decide (no rows, a NaN stamp, an agent id beyond int16)."""
+    cdef Py_ssize_t n = agents.shape[0], j
+    cdef long long amin, amax
+    cdef double smin, smax, v
+    cdef bint whole = True
+    cdef int agent_size, stamp_size, size
+    cdef char* out
+    if n == 0 or stamps.shape[0] != n:
+        return None
+    amin = amax = agents[0]
+    smin = smax = stamps[0]
+    for j in range(n):
+        v = stamps[j]
+        if isnan(v):
+            return None
+        if v != floor(v):
+            whole = False
+        if v < smin:
+            smin = v
+        if v > smax:
+            smax = v
+        if agents[j] < amin:
+            amin = agents[j]
+        if agents[j] > amax:
+            amax = agents[j]
+    if amin < -32768 or amax > 32767:
+        return None
+    if whole and -128 <= amin and amax <= 127 and 0 <= smin and smax <= 65535:
+        key, agent_size, stamp_size = "s", 1, 2
+    elif whole and 0 <= smin and smax <= 65535:
+        key, agent_size, stamp_size = "r", 2, 2
+    elif whole and -2147483648.0 <= smin and smax <= 2147483647.0:
+        key, agent_size, stamp_size = "q", 2, 4
+    else:
+        key, agent_size, stamp_size = "p", 2, 8
+    size = agent_size + stamp_size
+    packed = PyBytes_FromStringAndSize(NULL, n * size)
+    out = PyBytes_AS_STRING(packed)
+    for j in range(n):
+        _put_int(out + j * size, agents[j], agent_size)
+        if stamp_size == 8:
+            _put_double(out + j * size + agent_size, stamps[j])
+        else:
+            _put_int(out + j * size + agent_size, <long long>stamps[j], stamp_size)
+    return key, packed
+
+
+def pack_winners(list rows):
+    """``pack_rows(rows, WINNER_KEYS)`` for (task, winner, bid) rows of Python ints and floats: the
+    key of the narrowest layout ('w' u2/i1/f8, 'v' u2/i2/f8, 'u' u4/i2/f8) and the packed bytes;
+    None where the Python must decide (no rows, another type, an id beyond the widest layout)."""
+    cdef Py_ssize_t n = len(rows), j
+    cdef long long tmin = 0, tmax = 0, wmin = 0, wmax = 0, t, w
+    cdef int task_size, winner_size, size
+    cdef char* out
+    cdef tuple row
+    if n == 0:
+        return None
+    tasks = np.empty(n, np.int64)
+    winners = np.empty(n, np.int64)
+    bids = np.empty(n, np.float64)
+    cdef long long[::1] ts = tasks, ws = winners
+    cdef double[::1] bs = bids
+    for j in range(n):
+        row = rows[j]
+        if len(row) != 3 or type(row[0]) is not int or type(row[1]) is not int or type(row[2]) is not float:
+            return None
+        try:
+            t, w = row[0], row[1]
+        except OverflowError:
+            return None
+        ts[j], ws[j], bs[j] = t, w, row[2]
+        if j == 0 or t < tmin:
+            tmin = t
+        if j == 0 or t > tmax:
+            tmax = t
+        if j == 0 or w < wmin:
+            wmin = w
+        if j == 0 or w > wmax:
+            wmax = w
+    if tmin < 0 or tmax > 4294967295 or wmin < -32768 or wmax > 32767:
+        return None
+    if tmax <= 65535 and -128 <= wmin and wmax <= 127:
+        key, task_size, winner_size = "w", 2, 1
+    elif tmax <= 65535:
+        key, task_size, winner_size = "v", 2, 2
+    else:
+        key, task_size, winner_size = "u", 4, 2
+    size = task_size + winner_size + 8
+    packed = PyBytes_FromStringAndSize(NULL, n * size)
+    out = PyBytes_AS_STRING(packed)
+    for j in range(n):
+        _put_int(out + j * size, ts[j], task_size)
+        _put_int(out + j * size + task_size, ws[j], winner_size)
+        _put_double(out + j * size + task_size + winner_size, bs[j])
+    return key, packed
+
+
+# -- a CBBA receive, timestamps and tasks (plugins/consensus.ConsensusState.receive) -----------------
+#: the timestamp layouts of plugins/consensus.STAMP_KEYS, in its order: (agent bytes, stamp bytes,
+#: stamp kind: 0 unsigned, 1 signed, 2 float64)
+cdef int _STAMP_LAYOUTS[4][3]
+_STAMP_LAYOUTS[0][:] = [1, 2, 0]
+_STAMP_LAYOUTS[1][:] = [2, 2, 0]
+_STAMP_LAYOUTS[2][:] = [2, 4, 1]
+_STAMP_LAYOUTS[3][:] = [2, 8, 2]
+
+
+cdef inline long long _get_int(const unsigned char* at, int size, bint signed) noexcept nogil:
+    """The little-endian integer of ``size`` bytes at ``at``."""
+    cdef unsigned long long u = 0
+    cdef int b
+    for b in range(size):
+        u |= (<unsigned long long>at[b]) << (8 * b)
+    if signed and size < 8 and (u >> (8 * size - 1)) & 1:
+        u |= ~((1ULL << (8 * size)) - 1)
+    return <long long>u
+
+
+cdef inline double _get_double(const unsigned char* at) noexcept nogil:
+    cdef _Bits bits
+    bits.u = <unsigned long long>_get_int(at, 8, False)
+    return bits.d
+
+
+def receive(long long i, long long k, double now, double t, bint delta, const double[::1] stamps,
+            raw, int layout, dict z, dict y, list entries, skip, within):
+    """plugins/consensus.ConsensusState.receive after its checks: the sender's timestamps (``raw``
+    packed in ``STAMP_KEYS[layout]``; no layout, or bytes that are not whole entries: none), both
+    sides' timestamps over agent ids, :func:`receive_tasks`, and the timestamps merged (a stamp
+    replaces ours only where it is greater: NaN is no news). Returns the new timestamps array."""
+    cdef Py_ssize_t n = 0, j, size = 0, known = stamps.shape[0], covered
+    cdef long long top = k, a
+    cdef const unsigned char* rows = NULL
+    cdef int agent_size = 0, stamp_size = 0, kind = 0
+    cdef double v
+    if 0 <= layout < 4 and isinstance(raw, bytes):
+        agent_size, stamp_size, kind = _STAMP_LAYOUTS[layout][0], _STAMP_LAYOUTS[layout][1], _STAMP_LAYOUTS[layout][2]
+        size = agent_size + stamp_size
+        if len(raw) % size == 0:
+            n = len(raw) // size
+            rows = <const unsigned char*>PyBytes_AS_STRING(raw)
+    for j in range(n):
+        a = _get_int(rows + j * size, agent_size, True)
+        if a > top:
+            top = a
+    covered = known if top < known else top + 1
+    if not 0 <= i < known:
+        raise ValueError(f"agent {i} holds no timestamp of its own in an array of {known}")
+    mine_out = np.empty(covered + 1)
+    their_out = np.empty(covered + 1)
+    cdef double[::1] mine = mine_out, their = their_out
+    for j in range(covered + 1):
+        mine[j] = stamps[j] if j < known else -INFINITY
+    mine[i] = now
+    for j in range(covered + 1):
+        their[j] = mine[j] if delta else -INFINITY
+    for j in range(n):
+        a = _get_int(rows + j * size, agent_size, True)
+        if a < 0:
+            continue  # no agent has a negative id: no news
+        if kind == 2:
+            v = _get_double(rows + j * size + agent_size)
+        else:
+            v = <double>_get_int(rows + j * size + agent_size, stamp_size, kind == 1)
+        their[a] = v
+    their[k] = t
+    their[covered] = -INFINITY
+    mine[covered] = -INFINITY
+    receive_tasks(i, k, z, y, entries, delta, skip, within, mine_out, their_out)
+    their[i] = -INFINITY  # never news of ourselves
+    merged_out = np.empty(covered)
+    cdef double[::1] merged = merged_out
+    for j in range(covered):
+        v = stamps[j] if j < known else -INFINITY
+        merged[j] = their[j] if their[j] > v else v
+    return merged_out
