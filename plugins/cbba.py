@@ -227,10 +227,8 @@ class CBBA(Allocator):
             if not cands:
                 return
             gains, positions = self._marginal_gains(view, cands)
-            eligible = np.array([st.eligible(t, g) for t, g in zip(cands, gains)])
-            masked = np.where(eligible & (gains > 0), gains, -np.inf)
-            best = int(np.argmax(masked))
-            if not np.isfinite(masked[best]):
+            best = kernels.best_bid(self.agent_id, cands, gains, st.z, st.y)
+            if best < 0:
                 return
             st.add(cands[best], float(gains[best]), int(positions[best]))
 
@@ -240,16 +238,11 @@ class CBBA(Allocator):
         p, v, rate = self.params, view.max_speed, view.work_rate
         log_l = math.log(p.discount)
         info = [self._task(view, t) for t in cands] if self.team_k else [view.tasks[t] for t in cands]
-        cx = np.array([t.x for t in info], dtype=float)
-        cy = np.array([t.y for t in info], dtype=float)
-        cr = np.array([t.remaining for t in info], dtype=float)
+        cx, cy, cr = kernels.task_columns(info)
         if p.score == "distance_discounted":
             gains = kernels.distance_gains(view.x, view.y, v, log_l, cx, cy, cr)
             return gains, np.full(len(cands), len(self.state.path))
-        path = [self._task(view, t) for t in self.state.path]
-        px = np.array([t.x for t in path], dtype=float)
-        py = np.array([t.y for t in path], dtype=float)
-        pr = np.array([t.remaining for t in path], dtype=float)
+        px, py, pr = kernels.task_columns([self._task(view, t) for t in self.state.path])
         at_end = np.zeros(len(cands), np.uint8)
         if self.team_k:  # a team slot goes at the end of the path
             at_end[[self.team_k.get(task_of(t), 1) > 1 for t in cands]] = 1

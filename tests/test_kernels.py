@@ -310,6 +310,41 @@ def test_compiled_packing_is_the_pythons():
     assert compiled.pack_winners([]) is None
 
 
+def test_the_bid_a_bundle_adds_is_the_same_in_each_way():
+    """Algorithm 3's choice of the next bid: the compiled and the reference ``best_bid`` agree with
+    each other and with the numpy formula CBBA used before them (eligible where the gain beats the
+    known winning bid, positive, the first highest, none where it is not finite), on random gains
+    with ties, zeros, NaN and infinities against random beliefs; ``task_columns`` reads the same
+    floats as the attributes do."""
+    from swarmbed.extension.view import TaskInfo
+    from swarmbed.plugins.consensus import ConsensusState
+
+    rng = np.random.default_rng(11)
+    chosen = 0
+    for trial in range(3000):
+        st = ConsensusState(int(rng.integers(0, 5)))
+        items = sorted(rng.choice(50, int(rng.integers(0, 12)), replace=False).tolist())
+        gains = rng.choice([0.0, -1.0, 1.0, 2.0, 2.5, np.nan, np.inf, -np.inf], len(items))
+        if trial % 3 == 0:
+            gains = rng.normal(1.0, 1.0, len(items))
+        for t in items:
+            if rng.random() < 0.5:
+                st.z[t], st.y[t] = int(rng.integers(0, 5)), float(rng.choice([0.0, 1.0, 2.0, 2.5]))
+        eligible = np.array([st.eligible(t, g) for t, g in zip(items, gains)], dtype=bool)
+        masked = np.where(eligible & (gains > 0), gains, -np.inf)
+        before = int(np.argmax(masked)) if len(items) and np.isfinite(masked[int(np.argmax(masked))]) else -1
+        ours = compiled.best_bid(st.agent_id, items, gains, st.z, st.y)
+        assert ours == reference.best_bid(st.agent_id, items, gains, st.z, st.y) == before, trial
+        chosen += ours >= 0
+    assert 500 < chosen < 2900  # both outcomes were exercised
+    tasks = [TaskInfo(int(i), float(x), float(y), float(r)) for i, x, y, r in rng.normal(0, 100, (40, 4))]
+    tasks.append(TaskInfo(7, 1, -0.0, np.float64(3.5)))  # an int, a negative zero, a numpy float
+    columns = compiled.task_columns(tasks)
+    want = [np.array([getattr(t, f) for t in tasks], dtype=float) for f in ("x", "y", "remaining")]
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(columns, want))
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(reference.task_columns(tasks), want))
+
+
 def test_a_crafted_message_is_received_alike_by_the_compiled_and_the_python_receive(monkeypatch):
     """Messages anyone in range could send: tasks out of order and named twice, winners that are no
     agent (negative, huge), NaN and infinite bids and stamps, negative zeros, stamps in every layout

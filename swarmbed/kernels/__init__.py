@@ -1,6 +1,6 @@
 """Compiled kernels for what every robot computes every tick, with their Python reference.
 
-``exp``, ``path_gains``, ``distance_gains`` here are the compiled ones (``_compiled.pyx``,
+``exp``, ``path_gains``, ``distance_gains``, ``task_columns`` and ``best_bid`` here are the compiled ones (``_compiled.pyx``,
 built by ``pip install`` with a C compiler) or, where none was built, the Python reference
 (:mod:`swarmbed.kernels.reference`): the same operations in the same order, so the same bits on
 every CPU either way (``tests/test_kernels.py`` compares them on recorded and random calls).
@@ -30,6 +30,8 @@ else:
 exp = _implementation.exp
 path_gains = _implementation.path_gains
 distance_gains = _implementation.distance_gains
+task_columns = _implementation.task_columns
+best_bid = _implementation.best_bid
 #: a CBBA receive (plugins/consensus.py), timestamps and Table 1 included, compiled; None where it
 #: was not (plugins/consensus.py then decides task by task or with numpy masks, the Python it is
 #: compared with)
@@ -42,6 +44,7 @@ pack_stamps = getattr(_implementation, "pack_stamps", None)
 
 __all__ = [
     "COMPILED",
+    "best_bid",
     "distance_gains",
     "exp",
     "fallback_notice",
@@ -50,6 +53,7 @@ __all__ = [
     "path_gains",
     "receive",
     "reference",
+    "task_columns",
     "winners_changed",
 ]
 

@@ -497,3 +497,36 @@ def receive(long long i, long long k, double now, double t, bint delta, const do
         v = stamps[j] if j < known else -INFINITY
         merged[j] = their[j] if their[j] > v else v
     return merged_out
+
+
+# -- CBBA's bundle building (plugins/cbba.py; reference.py has the Python) ----------------------------
+def task_columns(list tasks):
+    """reference.task_columns: the x, y and remaining fields of each task tuple, as float64 arrays."""
+    cdef Py_ssize_t n = len(tasks), j
+    cx_out, cy_out, cr_out = np.empty(n), np.empty(n), np.empty(n)
+    cdef double[::1] cx = cx_out, cy = cy_out, cr = cr_out
+    cdef object task  # a TaskInfo: a tuple's subclass
+    for j in range(n):
+        task = tasks[j]
+        cx[j], cy[j], cr[j] = task[1], task[2], task[3]
+    return cx_out, cy_out, cr_out
+
+
+def best_bid(long long agent, list items, const double[::1] gains, dict z, dict y):
+    """reference.best_bid: the first highest positive gain that beats the known winning bid, or -1."""
+    cdef Py_ssize_t n, at = -1
+    cdef double gain, best = -INFINITY, known
+    cdef object got
+    for n in range(len(items)):
+        gain = gains[n]
+        if not gain > 0 or not gain > best:
+            continue
+        got = y.get(items[n])
+        known = 0.0 if got is None else <double>got
+        if gain > known:
+            best, at = gain, n
+        elif gain == known:
+            got = z.get(items[n])
+            if got is None or agent < <long long>got:
+                best, at = gain, n
+    return at if best < INFINITY and best > -INFINITY else -1

@@ -10,6 +10,9 @@ same order."""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+
 import numpy as np
 
 #: ln 2 in two parts: the high one has 32 trailing zero bits, so that k * LN2_HI is exact for the
@@ -115,3 +118,28 @@ def distance_gains(
     """The score that does not depend on the path: ``discount ** (d / speed) * remaining``, d the
     distance from the robot at ``x0``, ``y0`` to each candidate."""
     return exp(log_discount * _distance(cx, cy, x0, y0) / speed) * cr
+
+
+def task_columns(tasks: Sequence[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The x, y and remaining columns (fields 1-3 of :class:`~swarmbed.extension.view.TaskInfo`)
+    of ``tasks``, as float64 arrays."""
+    return (
+        np.array([t[1] for t in tasks], dtype=float),
+        np.array([t[2] for t in tasks], dtype=float),
+        np.array([t[3] for t in tasks], dtype=float),
+    )
+
+
+def best_bid(agent: int, items: Sequence[int], gains: np.ndarray, z: dict[int, int], y: dict[int, float]) -> int:
+    """Where in ``items`` (with their ``gains``) the bid CBBA's Algorithm 3 adds is: the first
+    highest positive gain that beats the known winning bid (``y``, ``z``: higher, or equal and by a
+    higher agent id); -1 where none does, or the highest is infinite."""
+    best, at = -math.inf, -1
+    for n, item in enumerate(items):
+        gain = float(gains[n])
+        if not gain > 0 or not gain > best:
+            continue
+        known = y.get(item, 0.0)
+        if gain > known or (gain == known and agent < z.get(item, agent + 1)):
+            best, at = gain, n
+    return at if math.isfinite(best) else -1
