@@ -179,4 +179,4 @@ class FirstClaimedGreedy(Allocator):
 
 def _is_claim(data: Any) -> bool:
     """Whether a message has a claim's shape: [task, claim tick], two whole numbers."""
-    return isinstance(data, list) and len(data) == 2 and all(type(v) is int for v in data)
+    return isinstance(data, list) and len(data) == 2 and type(data[0]) is int and type(data[1]) is int

@@ -119,8 +119,10 @@ def _well_formed(data: object, numbered: bool) -> bool:
     """Whether ``data`` has a message's shape: [evolution, stamp, partition(, number(, 1))]."""
     if not isinstance(data, list) or not 3 + numbered <= len(data) <= 5:
         return False
-    numbers = data[:2] + data[3:4]
-    return all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in numbers)
+    for v in data[:2] + data[3:4]:  # a loop, not all() over a generator: called for every message heard
+        if v.__class__ is bool or not isinstance(v, (int, float)):
+            return False
+    return True
 
 
 class GRAPEParams(BaseModel):
@@ -322,8 +324,13 @@ class GRAPE(Allocator):
         else:
             current_u = self.utility(view, current, others[current] + 1)
         best_task, best_u = (VOID, 0.0) if self.params.void_task else (VOID, -math.inf)
-        for task in sorted(view.tasks):
-            u = self.utility(view, task, others[task] + 1)
+        # :meth:`utility` for every task in view, its lookups taken out of the loop
+        tasks, needs, x, y = view.tasks, self.needs, view.x, view.y
+        weight, inhibition = self.params.cost_weight, self.params.social_inhibition
+        for task in sorted(tasks):
+            t = tasks[task]
+            needed = needs[task][0] if task in needs else 1
+            u = utility(t.remaining, math.hypot(t.x - x, t.y - y), others[task] + 1, weight, inhibition, needed)
             if u > best_u:
                 best_task, best_u = task, u
         if best_task != current and best_u > current_u:
