@@ -14,13 +14,16 @@ launcher's, not the sum over the agents (docs/benchmarks.md has PSS per agent).
 The horizon shrinks with the team so that a cell takes about as long at every size (``--horizon``
 is the horizon at 50 agents; at N agents it is ``horizon x 50 / N``, at least 10 s: 600 s at 50,
 30 s at 1,000 with the default). Set up SPACE once with ``../shared/tools/space-bench/setup.sh``.
-Run from a non-editable install on an otherwise idle machine.
+Run from a non-editable install on an otherwise idle machine; ``--repeat N`` runs each side N
+times, interleaved, and shows the medians (take N >= 3 for a table: one run's wall time moves by up
+to a quarter on a shared virtual machine).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -45,6 +48,11 @@ def timed(cmd: list[str]) -> tuple[float, float]:
     return seconds, usage.ru_maxrss / 1024
 
 
+def median_run(runs: list[tuple[float, float]]) -> tuple[float, float]:
+    """The median wall seconds of a side's runs, and the largest peak RSS among them."""
+    return statistics.median(s for s, _ in runs), max(mb for _, mb in runs)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--agents", nargs="+", type=int, default=[50, 200, 500, 1000])
@@ -53,6 +61,7 @@ def main() -> None:
     ap.add_argument("--horizon", type=int, default=600, help="simulated seconds at 50 agents")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--engines", nargs="+", default=["inprocess", "processes"], choices=["inprocess", "processes"])
+    ap.add_argument("--repeat", type=int, default=1, help="runs of each side per cell, interleaved; medians shown")
     args = ap.parse_args()
     if not (Path(os.environ.get("SPACE_DIR", "/tmp/space")) / "main.py").exists():
         sys.exit("SPACE's code is not set up: run ../shared/tools/space-bench/setup.sh and export what it prints")
@@ -64,11 +73,17 @@ def main() -> None:
             horizon = max(10, round(args.horizon * 50 / n))
             for alg in args.alg:
                 base = Path(tmp) / f"{alg}_{n}"
-                bench = space_run(alg, n, args.comm, args.seed, horizon, base / "space")
-                space_s, space_mb = float(bench["total_wall_s"]), float(bench["peak_rss_mb"])
+                runs: dict[str, list[tuple[float, float]]] = {}
+                for r in range(args.repeat):  # SPACE, then each engine, then again: a slow minute falls on all
+                    bench = space_run(alg, n, args.comm, args.seed, horizon, base / f"space{r}")
+                    runs.setdefault("space", []).append((float(bench["total_wall_s"]), float(bench["peak_rss_mb"])))
+                    for engine in args.engines:
+                        cmd = our_command(alg, n, args.comm, args.seed, horizon, engine, base / f"{engine}{r}")
+                        runs.setdefault(engine, []).append(timed(cmd))
+                space_s, space_mb = median_run(runs["space"])
                 line = f"{n:>6} {horizon:>7} {OURS[alg]:>9} {space_s:>8.1f} {space_mb:>6.0f}"
                 for engine in args.engines:
-                    ours_s, ours_mb = timed(our_command(alg, n, args.comm, args.seed, horizon, engine, base / engine))
+                    ours_s, ours_mb = median_run(runs[engine])
                     line += f" {ours_s:>12.1f} {ours_mb:>6.0f} {space_s / ours_s:>8.2f}"
                 print(line, flush=True)
 

@@ -10,8 +10,9 @@ SPACE's wall seconds over ours (above 1: ours is faster).
     python benchmarks/space_side_by_side.py --alg cbba --range 300 --agents 50 --horizon 600
 
 Set up SPACE once with ``../shared/tools/space-bench/setup.sh`` (it prints the two variables). Run
-from a non-editable install on an otherwise idle machine; each figure is one run: repeat the command
-to see how much the machine's day moves them.
+from a non-editable install on an otherwise idle machine. Each figure is one run, or with
+``--repeat N`` the median of N runs of each side, interleaved (a run's wall time on a shared
+virtual machine moves by up to a quarter from one run to the next: take N >= 3 for a table).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -72,6 +74,7 @@ def main() -> None:
     ap.add_argument("--horizon", type=int, default=600)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--engines", nargs="+", default=["inprocess", "processes"], choices=["inprocess", "processes"])
+    ap.add_argument("--repeat", type=int, default=1, help="runs of each side per cell, interleaved; medians shown")
     args = ap.parse_args()
     if not (Path(os.environ.get("SPACE_DIR", "/tmp/space")) / "main.py").exists():
         sys.exit("SPACE's code is not set up: run ../shared/tools/space-bench/setup.sh and export what it prints")
@@ -83,10 +86,16 @@ def main() -> None:
         for comm in args.ranges:
             for alg in args.alg:
                 base = Path(tmp) / f"{alg}_{comm}"
-                space = space_seconds(alg, args.agents, comm, args.seed, args.horizon, base / "space")
+                seconds: dict[str, list[float]] = {}
+                for r in range(args.repeat):  # SPACE, then each engine, then again: a slow minute falls on all
+                    cell = (alg, args.agents, comm, args.seed, args.horizon)
+                    seconds.setdefault("space", []).append(space_seconds(*cell, base / f"space{r}"))
+                    for engine in args.engines:
+                        seconds.setdefault(engine, []).append(our_seconds(*cell, engine, base / f"{engine}{r}"))
+                space = statistics.median(seconds["space"])
                 line = f"{comm:>5} {OURS[alg]:>9} {space:>8.1f}"
                 for engine in args.engines:
-                    ours = our_seconds(alg, args.agents, comm, args.seed, args.horizon, engine, base / engine)
+                    ours = statistics.median(seconds[engine])
                     line += f" {ours:>12.1f} {space / ours:>8.2f}"
                 print(line, flush=True)
 
