@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import zenoh
 
 from swarmbed.engine.run_errors import RunError
-from swarmbed.wire.child_process import tune_malloc
+from swarmbed.wire.child_process import tune_gc, tune_malloc
 from swarmbed.wire.credentials import Identity
 from swarmbed.wire.zenoh_session import free_loopback_endpoint, zenoh_config
 
@@ -54,6 +54,7 @@ def open_hub(
     there) and on ``listen`` (where other hosts' routers connect); ``settings``: e.g. the run's
     authentication and access control (:meth:`RunAccess.hub_settings`)."""
     tune_malloc()  # the hub handles every tick's messages for as long as the run goes
+    tune_gc()
     last: Exception | None = None
     for _ in range(attempts):
         endpoint = free_loopback_endpoint()

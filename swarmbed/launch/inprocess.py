@@ -29,6 +29,7 @@ from swarmbed.launch.runner import RunResult, View, plan_run, start_result_dir
 from swarmbed.netem.exchange import Exchange, SplitExchange
 from swarmbed.records.run_folder import DEPLOYMENT
 from swarmbed.schema.experiment import Experiment, Targets, agent_spec, netem_spec
+from swarmbed.wire.child_process import tune_gc
 from swarmbed.wire.codec import EMPTY_INBOX, NetemStep, WorldSample, decode_agent_out, encode_agent_out
 from swarmbed.wire.control import Final, NetemFinal
 from swarmbed.wire.observation import Observation
@@ -85,6 +86,8 @@ class InProcessRun:
 
     def __init__(self, exp: Experiment, out_dir: Path, env: bool = False, views: Sequence[View] = ()) -> None:
         self.t0 = time.perf_counter()
+        if not env:  # a learner's process is its own: its collector's settings are left alone
+            tune_gc()
         plan = plan_run(exp, out_dir)
         resolved = plan.resolved
         why = refusals(exp, resolved.allocator_cls.decision_source, "inprocess", driven=env)

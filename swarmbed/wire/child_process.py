@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import gc
 import os
 import signal
 import sys
@@ -55,6 +56,19 @@ def tune_malloc(mmap_threshold: int = MMAP_THRESHOLD) -> bool:
     except (OSError, AttributeError):  # not glibc (musl has no mallopt)
         return False
     return bool(mallopt(M_MMAP_THRESHOLD, mmap_threshold))
+
+
+#: the cyclic garbage collector's thresholds in a run's processes (Python's own: 700, 10, 10)
+GC_THRESHOLDS = (10_000, 10, 10)
+
+
+def tune_gc() -> None:
+    """Run the cyclic garbage collector's youngest generation every 10,000 allocations instead of
+    700. A tick makes many short-lived objects (decoded messages, views, task records) and few
+    cycles; at Python's default the collections, and the older generations' walks they trigger
+    over a large heap, took about a sixth of a 1,000-robot in-process FCG run (5.9 s -> 5.0 s, CBBA
+    and GRAPE about 6 %). Collections never change what a run computes."""
+    gc.set_threshold(*GC_THRESHOLDS)
 
 
 _pinned_threads: set[int] = set()
@@ -112,5 +126,6 @@ def child_args(
     args = ap.parse_args(argv)
     die_with_parent(args.parent_pid)
     tune_malloc()
+    tune_gc()
     setup_logging(args.log_max_mb, args.log_backups)
     return args
