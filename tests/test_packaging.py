@@ -3,6 +3,7 @@ namespace, every package folder is listed, no two modules share a name, and the 
 downward."""
 
 import ast
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -178,7 +179,6 @@ def test_the_kernels_are_compiled_where_a_c_compiler_is():
     """setup.py builds the kernels as optional (an install without a compiler still works), so a
     build that broke would pass unseen; where a C compiler is found, the compiled module must load."""
     import os
-    import shutil
     import sysconfig
 
     compiler = (os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc").split()[0]
@@ -194,6 +194,11 @@ def test_an_install_without_a_c_compiler_goes_on_without_the_kernels(tmp_path):
     import os
 
     pytest.importorskip("Cython", reason="the test extra's Cython builds the package without fetching it")
+    # the sources without what a build left: a working tree's build/ folder or in-place module (an
+    # editable install's) would hand pip a compiled module that no compiler made here
+    source = tmp_path / "source"
+    left = shutil.ignore_patterns("build", "*.so", "_compiled.c", "*.egg-info", ".git", ".venv", "__pycache__")
+    shutil.copytree(ROOT, source, ignore=left)
     target = tmp_path / "site"
     env = {**os.environ, "CC": "/bin/false"}
     done = subprocess.run(
@@ -208,7 +213,7 @@ def test_an_install_without_a_c_compiler_goes_on_without_the_kernels(tmp_path):
             "--no-compile",
             "--target",
             str(target),
-            str(ROOT),
+            str(source),
         ],
         capture_output=True,
         text=True,
