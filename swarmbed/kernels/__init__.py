@@ -1,9 +1,9 @@
 """Compiled kernels for what every robot computes every tick, with their Python reference.
 
-``exp``, ``path_gains``, ``distance_gains``, ``task_columns`` and ``best_bid`` here are the compiled ones (``_compiled.pyx``,
-built by ``pip install`` with a C compiler) or, where none was built, the Python reference
-(:mod:`swarmbed.kernels.reference`): the same operations in the same order, so the same bits on
-every CPU either way (``tests/test_kernels.py`` compares them on recorded and random calls).
+``exp``, ``path_gains``, ``distance_gains``, ``task_columns`` and ``best_bid`` here are the compiled
+ones (``_compiled.pyx``, built by ``pip install`` with a C compiler) or, where none was built, the
+Python reference (:mod:`swarmbed.kernels.reference`): the same operations in the same order, so
+the same bits on every CPU either way (``tests/test_kernels.py`` compares them on recorded and random calls).
 ``SWARMBED_KERNELS=python`` runs the reference even where the compiled ones exist (to compare, or
 to profile the Python). :func:`fallback_notice` is the one line a command says when it runs on the
 reference."""
