@@ -56,13 +56,20 @@ STAMP_KEYS = (
 )
 
 
+def _first_vector(data: dict, keys: tuple[tuple[str, np.dtype], ...]) -> tuple[int, Any]:
+    """Which of ``keys`` (its index) a message carries a vector under, the first it has, and that
+    vector as it came; (-1, None) where it has none."""
+    for n, (key, _dtype) in enumerate(keys):
+        if key in data:
+            return n, data[key]
+    return -1, None
+
+
 def _read(data: dict, keys: tuple[tuple[str, np.dtype], ...]) -> list[tuple]:
     """The entries under the first of ``keys`` the message has, or none for anything that is not a
     packed vector (a torn or crafted message)."""
-    for key, dtype in keys:
-        if key in data:
-            return read_tuples(data[key], dtype)
-    return []
+    n, raw = _first_vector(data, keys)
+    return read_tuples(raw, keys[n][1]) if n >= 0 else []
 
 
 def consensus_message(
@@ -236,18 +243,16 @@ class Stamps(MutableMapping):
 def _stamp_array(data: dict) -> tuple[np.ndarray, np.ndarray]:
     """(agents, stamps) a message names, as arrays; an agent named twice keeps its last stamp (a
     map of them would), a negative agent id (no agent has one: a crafted message) is no news."""
-    for key, dtype in STAMP_KEYS:
-        if key in data:
-            rows = read_array(data[key], dtype)
-            if rows is None:
-                break
-            agents, stamps = rows["agent"].astype(np.int64), rows["stamp"].astype(float)
-            if len(agents) > 1 and not (agents[1:] > agents[:-1]).all():  # ours are sorted, each once
-                last = len(agents) - 1 - np.unique(agents[::-1], return_index=True)[1]
-                agents, stamps = agents[last], stamps[last]
-            keep = agents >= 0
-            return (agents, stamps) if keep.all() else (agents[keep], stamps[keep])
-    return np.zeros(0, np.int64), np.zeros(0)
+    n, raw = _first_vector(data, STAMP_KEYS)
+    rows = read_array(raw, STAMP_KEYS[n][1]) if n >= 0 else None
+    if rows is None:
+        return np.zeros(0, np.int64), np.zeros(0)
+    agents, stamps = rows["agent"].astype(np.int64), rows["stamp"].astype(float)
+    if len(agents) > 1 and not (agents[1:] > agents[:-1]).all():  # ours are sorted, each once
+        last = len(agents) - 1 - np.unique(agents[::-1], return_index=True)[1]
+        agents, stamps = agents[last], stamps[last]
+    keep = agents >= 0
+    return (agents, stamps) if keep.all() else (agents[keep], stamps[keep])
 
 
 @state_type
@@ -340,11 +345,7 @@ class ConsensusState:
             tasks = [e[0] for e in entries]
         skip = ignore if isinstance(ignore, (set, frozenset)) else set(ignore)
         if kernels.receive is not None:  # compiled: the same steps as below, in C
-            raw, layout = None, -1
-            for n, (key, _dtype) in enumerate(STAMP_KEYS):
-                if key in data:
-                    raw, layout = data[key], n
-                    break
+            layout, raw = _first_vector(data, STAMP_KEYS)
             self.stamps = kernels.receive(
                 i, k, self.now, float(data["t"]), delta, self.stamps, raw, layout, self.z, self.y, entries, skip, within
             )

@@ -25,18 +25,6 @@ def distance_gains(
 def table_actions(
     i: int, k: int, wk: np.ndarray, bk: np.ndarray, wi: np.ndarray, bi: np.ndarray, mine: np.ndarray, their: np.ndarray
 ) -> np.ndarray: ...
-def receive_tasks(
-    i: int,
-    k: int,
-    z: dict[int, int],
-    y: dict[int, float],
-    entries: list[tuple],
-    delta: bool,
-    skip: Collection[int],
-    within: Collection[int] | None,
-    mine: np.ndarray,
-    their: np.ndarray,
-) -> None: ...
 def winners_changed(
     z: dict[int, int], y: dict[int, float], told: dict[int, tuple[int, float]]
 ) -> tuple[dict[int, tuple[int, float]], list[tuple[int, int, float]]]: ...

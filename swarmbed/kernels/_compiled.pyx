@@ -229,8 +229,8 @@ def table_actions(long long i, long long k, const long long[::1] wk, const doubl
     return actions_out
 
 
-def receive_tasks(long long i, long long k, dict z, dict y, list entries, bint delta, skip, within,
-                  const double[::1] mine, const double[::1] their):
+cdef _receive_tasks(long long i, long long k, dict z, dict y, list entries, bint delta, skip, within,
+                    const double[::1] mine, const double[::1] their):
     """The task part of plugins/consensus.ConsensusState.receive, on its own maps: ``entries`` the
     message's (task, winner, bid) tuples, sorted by task and each task once; the tasks whose belief
     differs from ours (and, for a whole message, the ones we hold that it does not name), less those
@@ -449,7 +449,7 @@ def receive(long long i, long long k, double now, double t, bint delta, const do
             raw, int layout, dict z, dict y, list entries, skip, within):
     """plugins/consensus.ConsensusState.receive after its checks: the sender's timestamps (``raw``
     packed in ``STAMP_KEYS[layout]``; no layout, or bytes that are not whole entries: none), both
-    sides' timestamps over agent ids, :func:`receive_tasks`, and the timestamps merged (a stamp
+    sides' timestamps over agent ids, ``_receive_tasks``, and the timestamps merged (a stamp
     replaces ours only where it is greater: NaN is no news). Returns the new timestamps array."""
     cdef Py_ssize_t n = 0, j, size = 0, known = stamps.shape[0], covered
     cdef long long top = k, a
@@ -489,7 +489,7 @@ def receive(long long i, long long k, double now, double t, bint delta, const do
     their[k] = t
     their[covered] = -INFINITY
     mine[covered] = -INFINITY
-    receive_tasks(i, k, z, y, entries, delta, skip, within, mine_out, their_out)
+    _receive_tasks(i, k, z, y, entries, delta, skip, within, mine_out, their_out)
     their[i] = -INFINITY  # never news of ourselves
     merged_out = np.empty(covered)
     cdef double[::1] merged = merged_out

@@ -132,8 +132,8 @@ def task_columns(tasks: Sequence[tuple]) -> tuple[np.ndarray, np.ndarray, np.nda
 
 def best_bid(agent: int, items: Sequence[int], gains: np.ndarray, z: dict[int, int], y: dict[int, float]) -> int:
     """Where in ``items`` (with their ``gains``) the bid CBBA's Algorithm 3 adds is: the first
-    highest positive gain that beats the known winning bid (``y``, ``z``: higher, or equal and by a
-    higher agent id); -1 where none does, or the highest is infinite."""
+    highest positive gain that beats the known winning bid (``y``, ``z``: higher, or equal with the
+    known winner's id above ``agent``'s); -1 where none does, or the highest is infinite."""
     best, at = -math.inf, -1
     for n, item in enumerate(items):
         gain = float(gains[n])
