@@ -7,6 +7,7 @@ and its agent id: the experiment itself comes from the coordinator, so it can ru
 
 from __future__ import annotations
 
+import argparse
 import logging
 import queue
 import threading
@@ -38,6 +39,7 @@ from swarmbed.wire.control import (
     Transport,
     encode_report,
 )
+from swarmbed.wire.credentials import CredentialsError, check_host_name
 from swarmbed.wire.keys import Keys
 from swarmbed.wire.membership import JoinError, fetch_bytes, fetch_spec, hand_over, is_alive
 from swarmbed.wire.observation import Observation
@@ -66,6 +68,7 @@ def serve(
     restored: bool = False,
     malformed: int = 0,
     tick_in_callback: bool | None = None,
+    host: str | None = None,
 ) -> int:
     """Answer tick samples until the run stops this agent. Swap orders name an incarnation: on
     ``snapshot`` this process hands its state to the coordinator and freezes (answers no tick),
@@ -75,10 +78,13 @@ def serve(
     ``default`` and ``single`` have it): a tick is answered inside the subscriber's own callback, so
     a sample in and a sample out wake that one thread and nothing else. Whatever may block (orders,
     reports, a failing tick, an answer too large to put from there) goes to the main thread, and so
-    does every sample behind it, in arrival order."""
+    does every sample behind it, in arrival order.
+
+    ``host``: the host daemon that started this process; its answers go to that host's relay
+    (:mod:`swarmbed.hosts.relay`), which sends them on with the host's other agents'."""
     if tick_in_callback is None:
         tick_in_callback = one_receiving_worker()
-    with _Agent(session, keys, runtime, incarnation, malformed) as agent:
+    with _Agent(session, keys, runtime, incarnation, malformed, host) as agent:
         return agent.loop(tick_in_callback, restored)
 
 
@@ -86,9 +92,17 @@ class _Agent:
     """One agent process's session entities and the state its loop keeps between ticks."""
 
     def __init__(
-        self, session: zenoh.Session, keys: Keys, runtime: AgentRuntime, incarnation: int, malformed: int
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        runtime: AgentRuntime,
+        incarnation: int,
+        malformed: int,
+        host: str | None = None,
     ) -> None:
         self.session, self.keys, self.runtime, self.incarnation = session, keys, runtime, incarnation
+        agent_id = runtime.agent_id
+        self.out_key = keys.agent_out(agent_id) if host is None else keys.hosted_out(host, agent_id)
         self.malformed = malformed
         self.frozen = False
         self.sample_bytes = {"in": 0, "out": 0}  # this process's per-tick samples, for the wire-bytes accounting
@@ -113,7 +127,7 @@ class _Agent:
             (self.monitors.add if sample.kind == zenoh.SampleKind.PUT else self.monitors.discard)(str(sample.key_expr))
 
         self.watch = s.liveliness().declare_subscriber(keys.alive_coordinator, on_coordinator)
-        self.out = s.declare_publisher(keys.agent_out(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
+        self.out = s.declare_publisher(self.out_key, congestion_control=zenoh.CongestionControl.BLOCK)
         # before each answer, on the same session: the coordinator has a tick's changes before its end
         self.bt = s.declare_publisher(keys.agent_bt(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
         self.watched = s.liveliness().declare_subscriber(keys.monitor(agent_id), on_monitor, history=True)
@@ -335,10 +349,18 @@ def _checkpoint(runtime: AgentRuntime, incarnation: int, malformed: int, report,
     )
 
 
+def _host_name(text: str) -> str:
+    try:
+        return check_host_name(text)
+    except CredentialsError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _add_args(ap) -> None:
     ap.add_argument("--id", type=int, required=True, help="0 <= id < agents.count")
     ap.add_argument("--incarnation", type=int, default=0, help="which process of this agent (a swap starts the next)")
     ap.add_argument("--restore", action="store_true", help="continue from the snapshot the coordinator holds")
+    ap.add_argument("--host", type=_host_name, default=None, help="the host daemon that started it (set by it)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -376,7 +398,9 @@ def main(argv: list[str] | None = None) -> int:
                     ):
                         log.error("agent %d: the coordinator did not take the restore_failed report", args.id)
                     return EXIT_PLUGIN_ERROR
-            return serve(session, keys, runtime, args.incarnation, restored=args.restore, malformed=malformed)
+            return serve(
+                session, keys, runtime, args.incarnation, restored=args.restore, malformed=malformed, host=args.host
+            )
         except Exception:
             # logged while the session, and with it the liveliness token, is still held (see netem)
             log.exception("agent %d: failed", args.id)

@@ -36,7 +36,7 @@ from swarmbed.engine.run_errors import RunError
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario, World
 from swarmbed.records.summary import RunSummary
-from swarmbed.schema.experiment import Experiment, Targets, agent_spec, netem_spec
+from swarmbed.schema.experiment import LOCAL, Experiment, Targets, agent_spec, netem_spec
 from swarmbed.schema.obstacles import wall_lines
 from swarmbed.wire.codec import (
     EMPTY_INBOX,
@@ -44,6 +44,7 @@ from swarmbed.wire.codec import (
     WireError,
     WorldSample,
     decode_netem_step,
+    encode_host_tick,
     encode_netem_stop,
     encode_stop,
     encode_tick,
@@ -182,7 +183,7 @@ class ZenohTransport(TickHook):
         s, k, put = self.session, self.keys, self.events.put
         self._entities += [
             serve_text(s, k.agent_config, agent_spec(self.exp, self.targets).model_dump_json()),
-            serve_text(s, k.netem_config, netem_spec(self.exp).model_dump_json()),
+            serve_text(s, k.netem_config, netem_spec(self.exp, self.agents.carriers).model_dump_json()),
             s.declare_subscriber(k.netem_step, lambda x: put(("step", x.payload.to_bytes()))),
             accept_handovers(s, k.agent_report_all, lambda key, data: put(("report", (key, data)))),
             accept_handovers(s, k.netem_report, lambda _key, data: put(("netem_report", data))),
@@ -193,6 +194,7 @@ class ZenohTransport(TickHook):
         self._entities += TreeRelay(s, k, self.trees).declare()
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
         self.agents.agent_pubs = self.agent_pubs
+        self.host_pubs: dict[str, zenoh.Publisher] = {}  # the hosts' tick samples (swarmbed.hosts.relay)
         self.world_pub = s.declare_publisher(k.world, congestion_control=BLOCK)
         self.stop_pub = s.declare_publisher(k.netem_stop, congestion_control=BLOCK)
         # progress for watchers: dropped rather than waited for when a watcher is slow (never blocks a tick)
@@ -288,14 +290,32 @@ class ZenohTransport(TickHook):
         st, w = self.stages, self.world
         if self.commands is not None and not decisions:
             decisions = self.commands.decide(k, w, observed, inboxes)
+        where = self.agents.hosts
+        carried: dict[str, list[int]] = {}
         for i, obs in observed.items():
-            self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX), decisions.get(i)))
+            host = where.get(i, LOCAL)
+            if host == LOCAL:
+                self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX), decisions.get(i)))
+            else:
+                carried.setdefault(host, []).append(i)
+        for host, ids in carried.items():  # one sample per host; its relay hands each agent its own
+            obs_wire = [observed[i].to_wire() for i in ids]
+            host_inboxes = [inboxes.get(i, EMPTY_INBOX) for i in ids]
+            self._host_pub(host).put(encode_host_tick(k, ids, obs_wire, host_inboxes, [decisions.get(i) for i in ids]))
         if st is not None:
             st.mark("encode and put")
         step = self._await_step(k)
         if st is not None:
             st.mark("await step")
         return self.clock.answers(step)
+
+    def _host_pub(self, host: str) -> zenoh.Publisher:
+        pub = self.host_pubs.get(host)
+        if pub is None:
+            pub = self.session.declare_publisher(self.keys.host_in(host), congestion_control=BLOCK)
+            self.host_pubs[host] = pub
+            self._entities.append(pub)
+        return pub
 
     def tick_done(self, k: int, admitted: Mapping[int, list]) -> None:
         self.last_tick = k

@@ -33,6 +33,7 @@ from swarmbed.wire.codec import (
     WireError,
     WorldSample,
     decode_agent_out,
+    decode_host_out,
     decode_netem_control,
     decode_netem_stop,
     decode_world,
@@ -41,7 +42,7 @@ from swarmbed.wire.codec import (
     pack,
 )
 from swarmbed.wire.control import NetemFatal, Transport, encode_report
-from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of
+from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, run_host_of
 from swarmbed.wire.membership import fetch_spec, hand_over
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
@@ -97,6 +98,7 @@ class Proxy:
         self.traffic: dict[int, list[int]] = {}
         self.watched = False
         self.traffic_at = 0.0
+        self.carriers = None if spec.carriers is None else {h: frozenset(ids) for h, ids in spec.carriers.items()}
         self.ros2: Ros2Outboxes | None = Ros2Outboxes(session, spec) if spec.ros2 is not None else None
 
     # -- events ----------------------------------------------------------------------------------
@@ -121,6 +123,28 @@ class Proxy:
         if first:
             self.events.put(("outs", None))
 
+    def _on_host_out(self, sample: zenoh.Sample) -> None:
+        """A host relay's gathered outputs: each taken as if its agent had put it on its own key
+        (checked then like any other), if the run lets that host carry the agent."""
+        pin_thread_state()
+        key = str(sample.key_expr)
+        try:
+            host = run_host_of(key, self.keys.root)
+            entries = decode_host_out(sample.payload.to_bytes())
+            may = self.carriers.get(host, frozenset()) if self.carriers is not None else None
+            strangers = [a for a, _ in entries if may is not None and a not in may]
+            if strangers:
+                raise WireError(f"host {host} may not carry agents {strangers[:10]}")
+        except WireError as exc:
+            self.events.put(("malformed", (key, exc)))
+            return
+        items = [(self.keys.hosted_out(host, agent), data) for agent, data in entries]
+        with self.arrived_lock:
+            first = not self.arrived
+            self.arrived += items
+        if first and items:
+            self.events.put(("outs", None))
+
     def _on_awaiting_query(self, query: zenoh.Query) -> None:
         """Which tick is in hand and which agents have not answered it (for a coordinator that waited
         too long: it names them)."""
@@ -138,6 +162,7 @@ class Proxy:
         subs: list[Any] = [
             s.declare_subscriber(k.world, lambda x: put(("world", x.payload.to_bytes()))),
             s.declare_subscriber(k.agent_out_all, zenoh.handlers.Callback(self._on_out, indirect=False)),
+            s.declare_subscriber(k.host_out_all, zenoh.handlers.Callback(self._on_host_out, indirect=False)),
             s.declare_subscriber(k.netem_stop, lambda x: put(("stop", x.payload.to_bytes()))),
             s.declare_subscriber(k.netem_control, lambda x: put(("control", x.payload.to_bytes()))),
             s.liveliness().declare_subscriber(k.alive_agents, self._on_agent_alive),
@@ -184,6 +209,9 @@ class Proxy:
                 return 0
             if what == "control":
                 self._take_control(data)
+                continue
+            if what == "malformed":
+                self._malformed(*data)
                 continue
             if what == "left":  # lost only if that process is the agent's current one (not one swapped out)
                 self.gone.add(data)

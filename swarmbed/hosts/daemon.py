@@ -33,6 +33,7 @@ import psutil
 import zenoh
 
 from swarmbed.files import safefiles
+from swarmbed.hosts.relay import TickRelay
 from swarmbed.launch.access import EVERY_MESSAGE
 from swarmbed.launch.host_client import HostError
 from swarmbed.launch.launcher import AGENT_MODULE, Children, ForkServerError
@@ -68,6 +69,7 @@ class Host:
         self.endpoint = endpoint  # where this host's agents connect: its own router
         self.logs = logs
         self.runs: dict[str, Children] = {}
+        self.relays: dict[str, TickRelay] = {}  # per run: the hub's tick samples, handed to its agents here
         self.lock = threading.Lock()
         self._entities: list[Any] = []
 
@@ -110,12 +112,17 @@ class Host:
             ]
             if busy:
                 return HostAnswer(error=f"agents {busy} of run {run_id} already run on host {self.name}")
+            relay = self.relays.get(run_id)
+            if relay is None:
+                relay = self.relays[run_id] = TickRelay(self.session, Keys(run_id), self.name).open()
+            relay.carry(ids)  # before the agents start: the hub ticks once every agent holds its token
             identity = ["--credentials", self.agent_credentials] if self.agent_credentials else []
             for i in ids:
                 children.spawn(
                     process_name(i, incarnation),
                     AGENT_MODULE,
-                    ["--run-id", run_id, "--connect", self.endpoint, *identity, "--id", str(i), *request.agent_args()],
+                    ["--run-id", run_id, "--connect", self.endpoint, *identity, "--id", str(i), "--host", self.name]
+                    + request.agent_args(),
                 )
         log.info("host %s: started agents %s of run %s", self.name, ids, run_id)
         return HostAnswer(started=ids, logs=str(self.logs / run_id))
@@ -173,11 +180,17 @@ class Host:
         with self.lock:
             for run_id in [r for r, ch in self.runs.items() if all(p.poll() is not None for p in ch.procs.values())]:
                 self.runs.pop(run_id).kill_all()  # nothing left to kill but the run's fork server
+                relay = self.relays.pop(run_id, None)
+                if relay is not None:
+                    relay.close()
 
     def close(self) -> None:
         undeclare_all(self._entities)
         with self.lock:
             runs = list(self.runs.values())
+            relays, self.relays = list(self.relays.values()), {}
+        for relay in relays:
+            relay.close()
         for children in runs:
             children.kill_all()
 

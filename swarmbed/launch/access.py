@@ -20,7 +20,9 @@ hosts          files made with ``--role host``: a host daemon's router, bound to
                agents it may carry (placed on it, moved to it by a scripted swap, or listed in
                ``may_carry``) and nothing of any other
                agent, never an agent's input; it serves start/stop and holds a token only under
-               its own ``swarmbed/hosts/<name>``
+               its own ``swarmbed/hosts/<name>``, and takes the run's tick samples and sends its
+               agents' gathered outputs under its own name only (``host/<name>/in`` and
+               ``.../out``, :mod:`swarmbed.hosts.relay`)
 =============  =================================================================================
 
 The coordinator publishes the world, ticks and agent inputs from inside the hub, where no rule
@@ -108,7 +110,11 @@ def access_rules(
     rules = [
         _allow("deliver", EVERY_MESSAGE, ["**"], flow="egress"),  # what a subject may send is held at ingress
         _allow("netem", ["put"], [k.netem_step, k.view_traffic]),
-        _allow("netem-subscribe", ["declare_subscriber"], [k.world, k.agent_out_all, k.netem_stop, k.netem_control]),
+        _allow(
+            "netem-subscribe",
+            ["declare_subscriber"],
+            [k.world, k.agent_out_all, k.host_out_all, k.netem_stop, k.netem_control],
+        ),
         _allow("netem-query", ["query"], [k.netem_config, k.netem_report]),
         _allow("netem-serve", ["declare_queryable", "reply"], [k.netem_awaiting]),
         _allow("netem-alive", ["liveliness_token"], [k.alive_netem, k.alive_netem_shard_all]),
@@ -164,12 +170,24 @@ def access_rules(
         rules += own + [
             _allow(f"{subject}-serve", ["declare_queryable", "reply"], [f"{HOSTS}/{host}/*"]),
             _allow(f"{subject}-announce", ["liveliness_token"], [f"{HOSTS}/{host}"]),
+            # its relay (swarmbed.hosts.relay) takes the run's tick samples for this host, no other's,
+            # and sends on its agents' outputs (the proxy takes only those of agents it may carry)
+            _allow(f"{subject}-ticks", ["declare_subscriber"], [k.host_in(host)]),
+            _allow(f"{subject}-outputs", ["put"], [k.host_out(host)]),
         ]
         subjects.append({"id": subject, "usernames": [user]})
         policies.append(
             {
                 "subjects": [subject],
-                "rules": ["deliver", "host-watch", f"{subject}-serve", f"{subject}-announce", *(r["id"] for r in own)],
+                "rules": [
+                    "deliver",
+                    "host-watch",
+                    f"{subject}-serve",
+                    f"{subject}-announce",
+                    f"{subject}-ticks",
+                    f"{subject}-outputs",
+                    *(r["id"] for r in own),
+                ],
             }
         )
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}

@@ -14,6 +14,7 @@ JSON from the coordinator's queryables and are validated again on arrival.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, Literal
 
 from pydantic import (
@@ -407,6 +408,9 @@ class NetemSpec(Strict):
     ros2: Ros2Section | None = None  # publish what each robot sent as ROS 2 topics
     obstacles: ObstaclesSection | None = None  # the walls the radio's copies may cross
     split: RadioSplit = RadioSplit()  # the proxies the radio is split over (each is told its own index)
+    # host -> the agents whose outputs its relay may send on (the hub's access rules hold the host
+    # to them); None: the run has no access control, and any host may send any agent's
+    carriers: dict[str, list[int]] | None = None
 
 
 def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
@@ -421,7 +425,8 @@ def agent_spec(exp: Experiment, targets: Targets) -> AgentSpec:
     )
 
 
-def netem_spec(exp: Experiment) -> NetemSpec:
+def netem_spec(exp: Experiment, carried: Mapping[str, Iterable[int]] | None = None) -> NetemSpec:
+    """``carried``: the hosts' :func:`carriers`, in a run with access control."""
     r = exp.run
     within = r.deadline * r.dt / r.speed if r.clock == "realtime" else None
     return NetemSpec(
@@ -433,4 +438,5 @@ def netem_spec(exp: Experiment) -> NetemSpec:
         ros2=exp.ros2,
         obstacles=exp.obstacles,
         split=exp.radio_split,
+        carriers=None if carried is None else {host: sorted(ids) for host, ids in carried.items()},
     )

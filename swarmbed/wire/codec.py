@@ -172,6 +172,83 @@ def encode_tick(tick: int, obs: dict, inbox: bytes, decision: int | None = None)
     return pack([TAG_TICK, tick, obs, inbox, decision])
 
 
+# --- coordinator -> a host daemon: its agents' inputs of one tick, in one sample ----------------
+
+# A host's tick sample holds the inputs of every agent it carries: bounded for the same reason as
+# an agent's, with room for a few thousand agents.
+MAX_HOST_SAMPLE_BYTES = 256 * 2**20
+
+
+@dataclass(frozen=True, slots=True)
+class HostTick:
+    """The inputs of tick ``tick`` for the agents ``agents`` of one host, column by column: agent
+    ``agents[j]`` gets ``obs[j]``, ``inboxes[j]`` and ``decisions[j]`` (None: no outside decision)."""
+
+    tick: int
+    agents: list[int]
+    obs: list[dict]
+    inboxes: list[bytes]
+    decisions: list[int | None]
+
+    def samples(self) -> list[tuple[int, bytes]]:
+        """Each agent's own tick sample, the bytes :func:`encode_tick` makes of its column entries."""
+        tick = self.tick
+        return [
+            (agent, encode_tick(tick, obs, inbox, decision))
+            for agent, obs, inbox, decision in zip(self.agents, self.obs, self.inboxes, self.decisions, strict=True)
+        ]
+
+
+def encode_host_tick(tick: int, agents: list[int], obs: list[dict], inboxes: list[bytes], decisions: list) -> bytes:
+    """One sample for a host instead of one per agent: the per-agent encoding and puts are the
+    host's work (:mod:`swarmbed.hosts.relay`), the hub packs one list per host."""
+    return pack([tick, agents, obs, inboxes, decisions])
+
+
+def decode_host_tick(data: bytes) -> HostTick:
+    msg = unpack(data, MAX_HOST_SAMPLE_BYTES)
+    _expect(isinstance(msg, list) and len(msg) == 5, "host tick must be [tick, agents, obs, inboxes, decisions]")
+    tick, agents, obs, inboxes, decisions = msg
+    _expect(_is_int(tick) and tick >= 0, "host tick: tick must be a non-negative int")
+    _expect(
+        all(isinstance(c, list) for c in (agents, obs, inboxes, decisions))
+        and len(agents) == len(obs) == len(inboxes) == len(decisions),
+        "host tick: agents, obs, inboxes and decisions must be lists of one length",
+    )
+    _expect(all(_is_int(a) and a >= 0 for a in agents), "host tick: agents must be non-negative ints")
+    _expect(len(set(agents)) == len(agents), "host tick: an agent named twice")
+    _expect(all(isinstance(o, dict) for o in obs), "host tick: each obs must be a map")
+    _expect(all(isinstance(b, bytes) for b in inboxes), "host tick: each inbox must be bytes")
+    _expect(
+        all(d is None or (_is_int(d) and -(2**31) <= d < 2**31) for d in decisions),
+        "host tick: a decision must be a 32-bit int or nil",
+    )
+    return HostTick(tick, agents, obs, inboxes, decisions)
+
+
+def encode_host_out(agents: list[int], outputs: list[bytes]) -> bytes:
+    """A host's relay -> the proxy: the outputs its agents put (each as the agent encoded it)."""
+    return pack([agents, outputs])
+
+
+def decode_host_out(data: bytes) -> list[tuple[int, bytes]]:
+    """(agent, its output's bytes) of a host's gathered outputs; each output is decoded and checked
+    as one an agent put itself (:func:`decode_agent_out`)."""
+    msg = unpack(data, MAX_HOST_SAMPLE_BYTES)
+    _expect(
+        isinstance(msg, list)
+        and len(msg) == 2
+        and all(isinstance(c, list) for c in msg)
+        and len(msg[0]) == len(msg[1]),
+        "host output must be [agents, outputs], two lists of one length",
+    )
+    agents, outputs = msg
+    _expect(len(agents) == len(outputs), "host output must be [agents, outputs], two lists of one length")
+    _expect(all(_is_int(a) and a >= 0 for a in agents), "host output: agents must be non-negative ints")
+    _expect(all(isinstance(o, bytes) for o in outputs), "host output: each output must be bytes")
+    return list(zip(agents, outputs, strict=True))
+
+
 # --- launcher -> netem proxy: the radio's parameters changed (chaos) --------------------------
 
 NETEM_OVERRIDABLE = ("loss", "rate", "range", "latency")

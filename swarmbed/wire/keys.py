@@ -40,6 +40,27 @@ class Keys:
     def agent_in(self, agent_id: int) -> str:
         return f"{self.root}/agent/{agent_id}/in"
 
+    # coordinator -> the host daemon carrying some of the run's agents: one sample per tick holding
+    # their inputs (swarmbed.wire.codec.encode_host_tick), which its relay hands out as ``agent_in``
+    def host_in(self, host: str) -> str:
+        return f"{self.root}/host/{host}/in"
+
+    # agent i, started by host daemon ``host`` -> that host's relay, on the host's own router: its
+    # output, gathered there with the other agents' of the host into one sample for the proxy
+    def hosted_out(self, host: str, agent_id: int) -> str:
+        return f"{self.root}/host/{host}/agent/{agent_id}/out"
+
+    def hosted_out_all(self, host: str) -> str:
+        return f"{self.root}/host/{host}/agent/*/out"
+
+    # a host's relay -> netem proxy: the outputs of the host's agents, gathered
+    def host_out(self, host: str) -> str:
+        return f"{self.root}/host/{host}/out"
+
+    @property
+    def host_out_all(self) -> str:
+        return f"{self.root}/host/*/out"
+
     # agent i -> netem proxy: one sample per tick (action + radio messages)
     def agent_out(self, agent_id: int) -> str:
         return f"{self.root}/agent/{agent_id}/out"
@@ -231,6 +252,14 @@ class HostKeys:
     @property
     def stop(self) -> str:
         return f"{HOSTS}/{self.name}/stop"
+
+
+def run_host_of(key: str, root: str) -> str:
+    """The host name in ``<root>/host/<name>/...`` (a run's host keys); a WireError if there is none."""
+    parts, head = str(key).split("/"), f"{root}/host".split("/")
+    if len(parts) <= len(head) or parts[: len(head)] != head or not parts[len(head)]:
+        raise WireError(f"no host name in key {key!r}")
+    return parts[len(head)]
 
 
 def host_name_of(key: str) -> str:

@@ -1,0 +1,154 @@
+"""A host daemon's relay of one run: the hub's one tick sample for this host, handed out as each
+agent's own; the agents' outputs, gathered into one sample for the proxy.
+
+The coordinator puts one sample a tick on ``swarmbed/<run>/host/<name>/in`` for every host that
+carries agents (:func:`~swarmbed.wire.codec.encode_host_tick`), instead of one per agent; the relay,
+inside the host's router, encodes and puts each agent's tick sample on its ``agent/<i>/in``, where
+the agent's process reads it as before. The agents a host daemon starts put their outputs on
+``host/<name>/agent/<i>/out``, which only this router hears; the relay sends them on to the proxy
+together (``host/<name>/out``) once every agent of the tick answered, or :data:`HOLD_S` after the
+first it holds (an agent that died or is slow holds the others' up by no more). So the hub's puts,
+and its router's routing of a tick both ways, grow with the hosts, not the agents, and the agents'
+samples are byte for byte what the hub would have put and the proxy would have taken.
+
+A relay puts only for the agents it was asked to start (a swap that brings an agent here starts
+it here too); a sample that names another is dropped, counted and logged, never forwarded. The
+hub's access rules let no remote identity publish an agent's input, so the relay's puts reach the
+agents on this router only.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterable
+
+import zenoh
+
+from swarmbed.wire.codec import WireError, decode_host_tick, encode_host_out
+from swarmbed.wire.keys import Keys, agent_id_of
+
+log = logging.getLogger("swarmbed.host")
+BLOCK = zenoh.CongestionControl.BLOCK
+#: the longest the relay holds an output while it waits for the rest of its host's (seconds)
+HOLD_S = 0.005
+
+
+class TickRelay:
+    """Splits the hub's tick samples for host ``host`` of run ``keys`` into its agents' samples."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, host: str) -> None:
+        self.session, self.keys, self.host = session, keys, host
+        self.lock = threading.Lock()
+        self.publishers: dict[int, zenoh.Publisher] = {}  # the agents this host carries
+        self.malformed = 0
+        self.relayed = 0  # tick samples split
+        self.gathered = 0  # output samples sent on
+        self.entities: list = []
+        # outputs held for the proxy, the number the last tick asked for, and when the first came
+        self.held: list[tuple[int, bytes]] = []
+        self.expected = 0
+        self.held_since = 0.0
+        self.wake = threading.Condition(self.lock)
+        self.closed = False
+
+    def __enter__(self) -> TickRelay:
+        return self.open()
+
+    def open(self) -> TickRelay:
+        """Subscribe to the hub's tick samples for this host."""
+        s, k = self.session, self.keys
+        self.out = s.declare_publisher(k.host_out(self.host), congestion_control=BLOCK)
+        self.entities = [
+            self.out,
+            s.declare_subscriber(k.host_in(self.host), zenoh.handlers.Callback(self._on_sample, indirect=False)),
+            s.declare_subscriber(k.hosted_out_all(self.host), zenoh.handlers.Callback(self._on_output, indirect=False)),
+        ]
+        self.flusher = threading.Thread(target=self._flush_held, name=f"relay-{self.host}", daemon=True)
+        self.flusher.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        with self.lock:
+            entities = [*self.entities[::-1], *self.publishers.values()]
+            self.entities, self.publishers, self.closed = [], {}, True
+            self.wake.notify()
+        for entity in entities:
+            entity.undeclare()
+
+    def carry(self, agents: Iterable[int]) -> None:
+        """Relay the inputs of ``agents`` from now on (their processes start on this host)."""
+        with self.lock:
+            for agent in agents:
+                if agent not in self.publishers:
+                    self.publishers[agent] = self.session.declare_publisher(
+                        self.keys.agent_in(agent), congestion_control=BLOCK
+                    )
+
+    def carried(self) -> list[int]:
+        with self.lock:
+            return sorted(self.publishers)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            tick = decode_host_tick(sample.payload.to_bytes())
+            with self.lock:
+                strangers = [a for a in tick.agents if a not in self.publishers]
+                if strangers:
+                    raise WireError(f"tick {tick.tick} names agents {strangers[:10]} this host does not carry")
+                publishers = [self.publishers[a] for a in tick.agents]
+                self.expected = len(tick.agents)
+            for publisher, (_agent, data) in zip(publishers, tick.samples(), strict=True):
+                publisher.put(data)
+            self.relayed += 1
+        except WireError as exc:
+            self.malformed += 1
+            if self.malformed <= 20:
+                log.warning("host %s: malformed tick sample on %s dropped: %s", self.host, sample.key_expr, exc)
+
+    def _on_output(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        try:
+            agent = agent_id_of(key)
+            with self.lock:
+                if agent not in self.publishers:
+                    raise WireError(f"an output of agent {agent}, which this host does not carry")
+                if not self.held:
+                    self.held_since = time.monotonic()
+                    self.wake.notify()
+                self.held.append((agent, sample.payload.to_bytes()))
+                full = len(self.held) >= self.expected
+                held = self._take_held() if full else None
+            if held:
+                self._send(held)
+        except WireError as exc:
+            self.malformed += 1
+            if self.malformed <= 20:
+                log.warning("host %s: output on %s dropped: %s", self.host, key, exc)
+
+    def _take_held(self) -> list[tuple[int, bytes]]:
+        held, self.held = self.held, []
+        return held
+
+    def _send(self, held: list[tuple[int, bytes]]) -> None:
+        self.out.put(encode_host_out([a for a, _ in held], [data for _, data in held]))
+        self.gathered += 1
+
+    def _flush_held(self) -> None:
+        """Send on what has been held for :data:`HOLD_S` (the rest of its tick is slow or gone)."""
+        while True:
+            with self.lock:
+                while not self.closed and not self.held:
+                    self.wake.wait()
+                if self.closed:
+                    return
+                wait = self.held_since + HOLD_S - time.monotonic()
+                if wait > 0:
+                    self.wake.wait(wait)
+                    continue
+                held = self._take_held()
+            self._send(held)
