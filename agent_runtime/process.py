@@ -128,6 +128,7 @@ class _Agent:
 
         self.watch = s.liveliness().declare_subscriber(keys.alive_coordinator, on_coordinator)
         self.out = s.declare_publisher(self.out_key, congestion_control=zenoh.CongestionControl.BLOCK)
+        self.shard_outs: dict[int, zenoh.Publisher] = {}  # a radio split by region: one key per proxy
         # before each answer, on the same session: the coordinator has a tick's changes before its end
         self.bt = s.declare_publisher(keys.agent_bt(agent_id), congestion_control=zenoh.CongestionControl.BLOCK)
         self.watched = s.liveliness().declare_subscriber(keys.monitor(agent_id), on_monitor, history=True)
@@ -135,7 +136,7 @@ class _Agent:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        for entity in (self.sub, self.watch, self.watched, self.out, self.bt):
+        for entity in (self.sub, self.watch, self.watched, self.out, self.bt, *self.shard_outs.values()):
             if entity is not None:
                 entity.undeclare()
 
@@ -209,6 +210,10 @@ class _Agent:
             publisher, data = item
             publisher.put(data)
             return None
+        if kind == "answer":
+            shard, data = item
+            self._out(shard, inline=False).put(data)  # type: ignore[union-attr]
+            return None
         if kind == "fatal":
             self.report(item)
             return EXIT_PLUGIN_ERROR
@@ -270,7 +275,7 @@ class _Agent:
         except WireError as exc:  # blind for one tick: answer it (the clock must go on), count it
             self.malformed += 1
             log.warning("agent %d: malformed observation of tick %d dropped: %s", agent_id, msg.tick, exc)
-            self._put(self.out, encode_agent_out(msg.tick, agent_id, ["stop"], []), inline)
+            self._answer(msg.shard, None, encode_agent_out(msg.tick, agent_id, ["stop"], []), inline)
             return None
         if st is not None:
             st.mark("observation")
@@ -292,18 +297,39 @@ class _Agent:
         tree = encode_tree_changes(changes) if changes is not None else None
         answer = encode_agent_out(msg.tick, agent_id, action, messages, events)
         self.sample_bytes["out"] += len(answer)
-        if inline and len(answer) + len(tree or b"") > INLINE_PUT_MAX:
-            if tree is not None:
-                self._defer("put", (self.bt, tree))
-            self._defer("put", (self.out, answer))
-            return None
-        if tree is not None:
-            self._put(self.bt, tree, inline)
-        self._put(self.out, answer, inline)
+        self._answer(msg.shard, tree, answer, inline)
         if st is not None:
             st.mark("answer")
             st.ticks += 1
         return None
+
+    def _out(self, shard: int | None, inline: bool) -> zenoh.Publisher | None:
+        """Where this tick's answer goes: the output key, or below it the key of the proxy that
+        reads it (a radio split by region), declared on first use by the main thread (None from
+        the callback until then: the answer is deferred)."""
+        if shard is None:
+            return self.out
+        publisher = self.shard_outs.get(shard)
+        if publisher is None and not inline:
+            publisher = self.session.declare_publisher(
+                f"{self.out_key}/{shard}", congestion_control=zenoh.CongestionControl.BLOCK
+            )
+            self.shard_outs[shard] = publisher
+        return publisher
+
+    def _answer(self, shard: int | None, tree: bytes | None, answer: bytes, inline: bool) -> None:
+        """Put the tick's tree changes (if any) and then its answer; from the callback, only what
+        fits the transmit queue and has its publisher, the rest through the main thread in order."""
+        out = self._out(shard, inline)
+        if inline and (out is None or len(answer) + len(tree or b"") > INLINE_PUT_MAX):
+            if tree is not None:
+                self._defer("put", (self.bt, tree))
+            self._defer("answer", (shard, answer))
+            return
+        assert out is not None
+        if tree is not None:
+            self._put(self.bt, tree, inline)
+        self._put(out, answer, inline)
 
     def _put(self, publisher: zenoh.Publisher, data: bytes, inline: bool) -> None:
         if inline and len(data) > INLINE_PUT_MAX:

@@ -1,10 +1,12 @@
 """The coordinator: the Zenoh transport of a run's :class:`~swarmbed.engine.Session`.
 
 The session owns the world, the recorder and the tick loop; per tick k the coordinator publishes
-the world (positions, membership) to the proxy and one input sample to every live agent (its
-observation and its inbox of tick k), and waits for the proxy's step (every live agent's action
-and message of tick k taken, or on the real-time clock those that came before the deadline). What
-a run over processes adds around a tick are the hooks it hands the loop: the wall clock
+the world (positions, membership) to the proxy and the live agents' inputs (each one's
+observation and inbox of tick k: one sample for an agent on this machine, one for all of a host's,
+which the host's relay hands out, :mod:`swarmbed.hosts.relay`), and waits for the proxy's step
+(every live agent's action and message of tick k taken, or on the real-time clock those that came
+before the deadline). What a run over processes adds around a tick are the hooks it hands the
+loop: the wall clock
 (:mod:`~swarmbed.coordinator.clock`), the agents' lifecycle, which starts, swaps and restarts
 them and is the run's membership (:mod:`~swarmbed.coordinator.lifecycle`), ROS 2 topics
 (:mod:`~swarmbed.coordinator.ros2_hub`) and the run's progress (:mod:`~swarmbed.coordinator.live`).
@@ -28,6 +30,7 @@ from swarmbed.coordinator.events import CONSUMED, EventQueue
 from swarmbed.coordinator.lifecycle import AgentLifecycle
 from swarmbed.coordinator.live import Interval, LiveStatus, Watched
 from swarmbed.coordinator.process_control import Placement
+from swarmbed.coordinator.tick_inputs import TickInputs
 from swarmbed.coordinator.trees import TreeRecorder, TreeRelay
 from swarmbed.engine import Session, StopWhenAsked, TickHook, refusals
 from swarmbed.engine.hooks import Profile
@@ -36,18 +39,15 @@ from swarmbed.engine.run_errors import RunError
 from swarmbed.extension.allocator import Allocator
 from swarmbed.extension.scenario import Scenario, World
 from swarmbed.records.summary import RunSummary
-from swarmbed.schema.experiment import LOCAL, Experiment, Targets, agent_spec, netem_spec
+from swarmbed.schema.experiment import Experiment, Targets, agent_spec, netem_spec
 from swarmbed.schema.obstacles import wall_lines
 from swarmbed.wire.codec import (
-    EMPTY_INBOX,
     NetemStep,
     WireError,
     WorldSample,
     decode_netem_step,
-    encode_host_tick,
     encode_netem_stop,
     encode_stop,
-    encode_tick,
     encode_world,
     unpack,
 )
@@ -64,6 +64,7 @@ from swarmbed.wire.control import (
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, incarnation_of, proxy_name
 from swarmbed.wire.membership import accept_handovers, serve_text
 from swarmbed.wire.observation import Observation
+from swarmbed.wire.regions import by_region
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.zenoh_session import undeclare_all
@@ -194,7 +195,8 @@ class ZenohTransport(TickHook):
         self._entities += TreeRelay(s, k, self.trees).declare()
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
         self.agents.agent_pubs = self.agent_pubs
-        self.host_pubs: dict[str, zenoh.Publisher] = {}  # the hosts' tick samples (swarmbed.hosts.relay)
+        split = self.exp.radio_split if by_region(self.exp.radio_split, self.exp.network) else None
+        self.inputs = TickInputs(s, k, self.agent_pubs, split)
         self.world_pub = s.declare_publisher(k.world, congestion_control=BLOCK)
         self.stop_pub = s.declare_publisher(k.netem_stop, congestion_control=BLOCK)
         # progress for watchers: dropped rather than waited for when a watcher is slow (never blocks a tick)
@@ -231,6 +233,8 @@ class ZenohTransport(TickHook):
         return 2.0 * float(getattr(self.scenario.params, "arrival_radius", 0.5))
 
     def close(self) -> None:
+        if hasattr(self, "inputs"):
+            self.inputs.close()
         self.commands = None  # its entities are the node's, closed with it
         if self.ros2 is not None:
             self.ros2.close()
@@ -290,32 +294,13 @@ class ZenohTransport(TickHook):
         st, w = self.stages, self.world
         if self.commands is not None and not decisions:
             decisions = self.commands.decide(k, w, observed, inboxes)
-        where = self.agents.hosts
-        carried: dict[str, list[int]] = {}
-        for i, obs in observed.items():
-            host = where.get(i, LOCAL)
-            if host == LOCAL:
-                self.agent_pubs[i].put(encode_tick(k, obs.to_wire(), inboxes.get(i, EMPTY_INBOX), decisions.get(i)))
-            else:
-                carried.setdefault(host, []).append(i)
-        for host, ids in carried.items():  # one sample per host; its relay hands each agent its own
-            obs_wire = [observed[i].to_wire() for i in ids]
-            host_inboxes = [inboxes.get(i, EMPTY_INBOX) for i in ids]
-            self._host_pub(host).put(encode_host_tick(k, ids, obs_wire, host_inboxes, [decisions.get(i) for i in ids]))
+        self.inputs.put(k, sample, observed, inboxes, decisions, self.agents.hosts)
         if st is not None:
             st.mark("encode and put")
         step = self._await_step(k)
         if st is not None:
             st.mark("await step")
         return self.clock.answers(step)
-
-    def _host_pub(self, host: str) -> zenoh.Publisher:
-        pub = self.host_pubs.get(host)
-        if pub is None:
-            pub = self.session.declare_publisher(self.keys.host_in(host), congestion_control=BLOCK)
-            self.host_pubs[host] = pub
-            self._entities.append(pub)
-        return pub
 
     def tick_done(self, k: int, admitted: Mapping[int, list]) -> None:
         self.last_tick = k

@@ -12,13 +12,14 @@ from pathlib import Path
 from swarmbed.files.safefiles import rename
 from swarmbed.netem.ledger import Ledger, ReceiverLog
 from swarmbed.netem.radio import Radio, drop_reasons, measured
-from swarmbed.netem.radio_split import BATCH_COLUMNS, merge_finals, merge_ledgers, merge_steps, owners
+from swarmbed.netem.radio_split import BATCH_COLUMNS, merge_finals, merge_ledgers, merge_steps
 from swarmbed.records.rowfile import RowFile
 from swarmbed.records.run_folder import LEDGER, LEDGER_COLUMNS, RECEIVER_LEDGER, ledger_part
 from swarmbed.schema.experiment import NetemSpec
 from swarmbed.schema.radio_sections import WallsSection
 from swarmbed.wire.codec import AgentOut, NetemStep, WorldSample, encode_inbox
 from swarmbed.wire.control import NetemFinal, Transport
+from swarmbed.wire.regions import by_region, owners
 from swarmbed.wire.seeds import NETEM, component_rng
 
 
@@ -33,6 +34,8 @@ class Exchange:
         self.out_dir = out_dir
         self.split = spec.split if spec.split.shards > 1 else None
         self.shard = shard
+        # each proxy of the split reads only the outputs of the agents it owns (no rate cap)
+        self.by_region = by_region(spec.split, spec.network)
         if self.split is None:
             self.sink = RowFile(out_dir / LEDGER, LEDGER_COLUMNS)
         else:
@@ -64,14 +67,17 @@ class Exchange:
         of tick k+1 for those alive then and not ``lost``. ``newly_lost``: agents whose process left
         since the last step (reported once); ``events``: counts carried in (late answers)."""
         gone = set(lost)
-        late = [a for a in w.ids if a not in outs and a not in gone]  # only ever on the real-time clock
         members = set(w.ids)
-        sent = {a: o.messages for a, o in outs.items() if a in members}
         owned: set[int] | None = None
         order: dict[int, list[int]] | None = None
         if self.split is not None:
             owned = {a for a, o in zip(w.ids, owners(w.xs, self.split).tolist(), strict=True) if o == self.shard}
             order = {}
+            if self.by_region:  # what a proxy reads: its own agents' outputs (all it is sent)
+                outs = {a: o for a, o in outs.items() if a in owned}
+        expected = w.ids if owned is None or not self.by_region else [a for a in w.ids if a in owned]
+        late = [a for a in expected if a not in outs and a not in gone]  # only ever on the real-time clock
+        sent = {a: o.messages for a, o in outs.items() if a in members}
         self.radio.route(w.tick, w.ids, w.xs, w.ys, sent, owned)
         inboxes = self.radio.deliver(w.tick + 1, [a for a in w.alive_next if a not in gone], order)
         led = self.ledger
@@ -88,8 +94,10 @@ class Exchange:
         self._last_drops = dict(led.dropped)
         actions = {a: o.action for a, o in outs.items() if a in members}
         lost_now = list(newly_lost or ())
-        if self.shard:  # proxy 0 of a split radio carries the agents' actions, events and losses
-            actions, events, lost_now, late = {}, {}, [], []
+        if self.shard:  # proxy 0 of a split radio carries the losses, and without regions every action
+            lost_now, late = [], []
+            if not self.by_region:
+                actions, events = {}, {}
         return NetemStep(
             w.tick,
             actions,

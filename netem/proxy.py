@@ -44,6 +44,7 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.control import NetemFatal, Transport, encode_report
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, run_host_of
 from swarmbed.wire.membership import fetch_spec, hand_over
+from swarmbed.wire.regions import by_region, owners
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.tcp_counters import tcp_counters
@@ -84,6 +85,7 @@ class Proxy:
         self.world: WorldSample | None = None
         self.awaited: set[int] = set()  # agents of the tick in hand not yet answered nor lost
         self.malformed = 0
+        self.read = 0  # agents' outputs taken (a proxy of a radio split by region: its region's)
         # the real-time clock: a tick is routed when every agent answered or `answer_within` wall
         # seconds after its world sample arrived, whichever comes first; later answers are late
         self.answer_by: float | None = None
@@ -98,6 +100,8 @@ class Proxy:
         self.traffic: dict[int, list[int]] = {}
         self.watched = False
         self.traffic_at = 0.0
+        # a radio split by region: this proxy reads only the outputs of the agents it owns at the tick
+        self.by_region = by_region(spec.split, spec.network)
         self.carriers = None if spec.carriers is None else {h: frozenset(ids) for h, ids in spec.carriers.items()}
         self.ros2: Ros2Outboxes | None = Ros2Outboxes(session, spec) if spec.ros2 is not None else None
 
@@ -161,8 +165,11 @@ class Proxy:
         put = self.events.put
         subs: list[Any] = [
             s.declare_subscriber(k.world, lambda x: put(("world", x.payload.to_bytes()))),
-            s.declare_subscriber(k.agent_out_all, zenoh.handlers.Callback(self._on_out, indirect=False)),
-            s.declare_subscriber(k.host_out_all, zenoh.handlers.Callback(self._on_host_out, indirect=False)),
+            *(
+                s.declare_subscriber(f"{key}{mine}", zenoh.handlers.Callback(take, indirect=False))
+                for key, take in ((k.agent_out_all, self._on_out), (k.host_out_all, self._on_host_out))
+                for mine in ("", *((f"/{self.shard}",) if self.by_region else ()))
+            ),
             s.declare_subscriber(k.netem_stop, lambda x: put(("stop", x.payload.to_bytes()))),
             s.declare_subscriber(k.netem_control, lambda x: put(("control", x.payload.to_bytes()))),
             s.liveliness().declare_subscriber(k.alive_agents, self._on_agent_alive),
@@ -230,7 +237,7 @@ class Proxy:
                 self.radio.confirm()  # tick `world.tick` happens: the inboxes made for it arrived
                 self.world = world
                 self._note_losses(world)
-                self.awaited = set(world.ids).difference(self.outs.get(world.tick, ()), self.lost)
+                self.awaited = set(self._readers(world)).difference(self.outs.get(world.tick, ()), self.lost)
                 if self.spec.answer_within is not None:
                     self.answer_by = time.monotonic() + self.spec.answer_within
                     self.members[world.tick] = list(world.ids)
@@ -252,6 +259,14 @@ class Proxy:
                 self._route(self.world)
                 self.world = None
 
+    def _readers(self, world: WorldSample) -> list[int]:
+        """The agents whose answers to tick ``world.tick`` this proxy reads: every one, or in a
+        radio split by region those it owns then."""
+        if not self.by_region:
+            return world.ids
+        mine = owners(world.xs, self.spec.split).tolist()
+        return [a for a, owner in zip(world.ids, mine, strict=True) if owner == self.shard]
+
     def _take_out(self, key: str, data: bytes) -> AgentOut | None:
         """An agent's output, if it follows the contract: decodable, sent on its own agent's key,
         for the tick in hand (or, on the real-time clock, a late answer to one already routed),
@@ -272,6 +287,7 @@ class Proxy:
             self._malformed(key, exc)
             return None
         self.answered[out.agent_id] = out.tick
+        self.read += 1
         return out
 
     def _take_control(self, data: bytes) -> None:
@@ -282,6 +298,8 @@ class Proxy:
             if control.from_tick <= self.routed:
                 raise WireError(f"control for tick {control.from_tick}, already routed")
             self.spec.network.model_validate({**self.spec.network.model_dump(), **control.overrides})
+            if self.by_region and control.overrides.get("rate") is not None:  # the launcher refuses it first
+                raise WireError("a rate cap in a radio split by region: no proxy keeps every sender's queue")
         except (WireError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
             self._malformed(self.keys.netem_control, exc)
             return
@@ -388,6 +406,7 @@ class Proxy:
             self.ros2.close()
         if self.stages is not None:
             log.info("netem: %s", self.stages.line())
+        log.info("netem: read %d agent outputs over %d ticks", self.read, last_tick + 1)
         if self.watched:  # the totals as the run ends
             self.traffic_pub.put(encode_traffic(self.traffic))
         report = self.exchange.finish(last_tick, self.malformed, Transport.model_validate({"tcp": tcp_counters()}))

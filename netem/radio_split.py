@@ -1,14 +1,16 @@
 """A radio split over K netem proxies (``radio_split``): who decides which copies, and the merge of
 the K proxies' steps, ledgers and reports into what one proxy gives.
 
-Regions are strips of ``strip_width`` across x, dealt to the proxies in turn: the agent at x is in
-strip ``floor(x / strip_width)``, owned by proxy ``strip mod K``. The owner of a copy is the owner
-of its sender at the tick it is sent (the world sample of that tick); an agent that crosses into
-another strip changes owner at the next tick. Every proxy receives every agent's output: each
-keeps every sender's transmit queue (so a sender's queue moves with it for free) and decides the
-copies of its own senders; proxy 0 also carries every agent's action, events and losses. Copies
-decided by a proxy stay with it until they are delivered or dropped, so a copy is booked once,
-by one proxy, whatever happens to its sender meanwhile.
+Regions are strips of ``strip_width`` across x, dealt to the proxies in turn
+(:func:`swarmbed.wire.regions.owners`). The owner of a copy is the owner of its sender at the tick
+it is sent (the world sample of that tick); an agent that crosses into another strip changes owner
+at the next tick. Without a rate cap an agent's output goes to its owner only (the hub tells each
+agent its owner in its tick sample), which decides its copies and carries its action and events;
+with one, every proxy receives every output and keeps every sender's transmit queue (so a sender's
+queue moves with it for free), and proxy 0 carries every action and event
+(:func:`swarmbed.wire.regions.by_region`). Proxy 0 reports the losses. Copies decided by a proxy
+stay with it until they are delivered or dropped, so a copy is booked once, by one proxy, whatever
+happens to its sender meanwhile.
 
 The merge gives byte for byte what one radio gives (``tests/test_radio_split.py``): counters and
 drops add up; a receiver's inbox is its parts merged in the order one radio delivers (by send
@@ -26,23 +28,17 @@ import heapq
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
 from swarmbed.files.safefiles import remove
 from swarmbed.records.rowfile import RowFile
 from swarmbed.records.run_folder import LEDGER, LEDGER_COLUMNS, ledger_part
-from swarmbed.schema.experiment import RadioSplit
 from swarmbed.wire.codec import NetemStep, WireError, encode_inbox, unpack
 from swarmbed.wire.control import NetemFinal
+from swarmbed.wire.regions import owners
+
+__all__ = ["BATCH_COLUMNS", "merge_finals", "merge_inbox", "merge_ledgers", "merge_steps", "owners"]
 
 #: the ledger part a proxy of a split radio writes, with a ``batch`` column before the ledger's
 BATCH_COLUMNS = ("batch", *LEDGER_COLUMNS)
-
-
-def owners(xs: Sequence[float] | np.ndarray, split: RadioSplit) -> np.ndarray:
-    """The proxy that owns each agent at positions ``xs``."""
-    strips = np.floor(np.asarray(xs, dtype=float) / split.strip_width).astype(np.int64)
-    return strips % split.shards
 
 
 def merge_inbox(parts: Sequence[tuple[bytes, Sequence[int]]]) -> bytes:
@@ -65,8 +61,17 @@ def merge_inbox(parts: Sequence[tuple[bytes, Sequence[int]]]) -> bytes:
 
 def merge_steps(steps: Sequence[NetemStep]) -> NetemStep:
     """The step one radio would give, from its proxies' steps of one tick (``steps[i]`` from proxy
-    i; proxy 0 carries the actions, events, losses and late answers)."""
+    i; each carries the actions and events of the agents whose outputs it read, proxy 0 the losses
+    and late answers). Raises WireError where two proxies carry one agent's action."""
     first = steps[0]
+    actions: dict[int, list] = {}
+    events: dict[str, int] = {}
+    for step in steps:
+        twice = actions.keys() & step.actions.keys()
+        if twice:
+            raise WireError(f"the actions of agents {sorted(twice)[:10]} come from two proxies")
+        actions.update(step.actions)
+        _add(events, step.events)
     parts: dict[int, list[tuple[bytes, Sequence[int]]]] = {}
     for step in steps:
         for receiver, data in step.inboxes.items():
@@ -76,7 +81,7 @@ def merge_steps(steps: Sequence[NetemStep]) -> NetemStep:
     drops: dict[str, int] = {}
     for step in steps:
         _add(drops, step.drops)
-    return NetemStep(first.tick, first.actions, inboxes, counters, first.lost, first.events, drops, first.late)
+    return NetemStep(first.tick, actions, inboxes, counters, first.lost, events, drops, first.late)
 
 
 def _add(into: dict[str, int], more: dict[str, int]) -> None:

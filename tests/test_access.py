@@ -226,6 +226,51 @@ def test_an_agent_may_publish_only_on_its_own_keys(tmp_path):
     same_results(tmp_path / "clean", tmp_path / "attacked")
 
 
+def test_each_proxy_of_a_split_radio_reads_only_what_goes_to_it_and_holds_only_its_token(tmp_path):
+    """A radio split by region over two proxies, each with its own identity: with proxy 1's
+    credentials a second process hears the outputs sent to proxy 1 and none sent to proxy 0, and
+    cannot hold a proxy token that is not proxy 1's; the run's files are those of a clean run."""
+    seen: dict = {}
+    threads: list[threading.Thread] = []
+
+    def impostor(keys: Keys, endpoint: str) -> None:
+        who = str(stolen(keys, "netem-1"))
+        with (
+            zenoh.open(zenoh_config("client", [endpoint], credentials=who)) as s,
+            zenoh.open(zenoh_config("client", [endpoint], credentials=who)) as looker,
+        ):  # a session of its own: it sees only the tokens the hub took
+            heard = {"0": [], "1": []}
+            subs = [
+                s.declare_subscriber(f"{keys.agent_out_all}/{shard}", lambda _s, shard=shard: heard[shard].append(1))
+                for shard in heard
+            ]
+            tokens = [s.liveliness().declare_token(key) for key in (keys.alive_netem, keys.alive_netem_shard(5))]
+            time.sleep(1.5)
+            seen["tokens"] = sorted(
+                str(r.ok.key_expr).rsplit("/", 1)[1]
+                for r in looker.liveliness().get(f"{keys.root}/alive/netem/**", timeout=2)
+                if r.ok is not None
+            )
+            for entity in subs + tokens:
+                entity.undeclare()
+            seen["heard"] = {shard: len(n) > 0 for shard, n in heard.items()}
+
+    def in_the_background(keys: Keys, endpoint: str) -> None:
+        threads.append(threading.Thread(target=impostor, args=(keys, endpoint)))
+        threads[-1].start()
+
+    sets = ["agents.count=8", "allocator={name: noop, peers: 3}", "scenario.initial_tasks=0"]
+    sets += ["run.stop_when_done=false", "run.duration=3000", "network.draws=per_copy", "radio_split.strip_width=30"]
+    attacked = run_experiment(
+        experiment(*sets, "radio_split.shards=2"), tmp_path / "attacked", progress=False, on_ready=in_the_background
+    )
+    threads[0].join(timeout=30)
+    reference_run(experiment(*sets), tmp_path / "clean")
+    assert seen == {"heard": {"0": False, "1": True}, "tokens": ["0", "1"]}
+    assert attacked.summary["network"]["malformed"] == {"coordinator": 0, "netem": 0, "agents": 0}
+    same_results(tmp_path / "clean", tmp_path / "attacked")
+
+
 def test_an_operator_watches_and_asks_but_cannot_publish(tmp_path, operator):
     seen: dict = {}
 

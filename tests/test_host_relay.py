@@ -1,6 +1,7 @@
 """A host daemon's relay (swarmbed.hosts.relay) over real Zenoh sessions on loopback: the hub's one
 tick sample for a host becomes, on the host's router, each carried agent's own sample, byte for
-byte what the hub puts for an agent on its own machine; a crafted sample is dropped whole."""
+byte what the hub puts for an agent on its own machine; a crafted sample is dropped whole, the
+input of an agent the host does not carry alone."""
 
 from __future__ import annotations
 
@@ -94,7 +95,6 @@ CRAFTED = {
     "an obs that is not a map": pack([1, [0], [[1, 2]], [b""], [None]]),
     "an inbox that is text": pack([1, [0], [{}], ["x"], [None]]),
     "a decision past 32 bits": pack([1, [0], [{}], [b""], [2**31]]),
-    "an agent this host does not carry": pack([1, [0, 4], [{}, {}], [b"", b""], [None, None]]),
 }
 
 
@@ -116,11 +116,25 @@ def test_a_crafted_host_sample_is_dropped_whole_and_counted(host_router):
 
 @pytest.mark.parametrize("name", sorted(CRAFTED))
 def test_each_crafted_host_sample_is_refused_with_what_is_wrong(name):
-    if name == "an agent this host does not carry":
-        decode_host_tick(CRAFTED[name])  # well formed: the relay refuses it
-        return
     with pytest.raises(WireError):
         decode_host_tick(CRAFTED[name])
+
+
+def test_the_input_of_an_agent_not_carried_here_is_dropped_and_the_others_go_on(host_router):
+    """An agent whose process is not on this host (one being restarted elsewhere, or a crafted
+    name): its input is dropped and counted, the carried agents get theirs, and the answers are
+    gathered for the carried ones only."""
+    router, hub, agents = host_router
+    heard, subs = _listen(agents, range(6))
+    with TickRelay(router, KEYS, "h1") as relay:
+        relay.carry([0, 1])
+        time.sleep(0.3)
+        hub.put(KEYS.host_in("h1"), encode_host_tick(3, [4, 0, 1], [{}] * 3, [b""] * 3, [None] * 3))
+        _settle(heard, 2)
+        assert (relay.malformed, relay.relayed, relay.expected) == (1, 1, 2)
+    for sub in subs:
+        sub.undeclare()
+    assert heard[0] == [encode_tick(3, {}, b"")] and heard[1] == [encode_tick(3, {}, b"")] and not heard[4]
 
 
 def test_agents_carried_while_samples_arrive_are_relayed_from_their_first_tick(host_router):
@@ -192,3 +206,35 @@ def test_the_proxy_takes_a_hosts_gathered_outputs_only_for_agents_that_host_may_
     # an agent's own (its key's agent, its tick)
     open_spec = netem_spec(experiment("agents.count=6"))
     assert open_spec.carriers is None
+
+
+def test_gathered_outputs_go_one_sample_per_proxy_that_reads_them(host_router):
+    """A radio split by region: the agents answer below their output key on the key of the proxy
+    that owns them at the tick; the relay sends each proxy its own, once all answered."""
+    from swarmbed.wire.codec import decode_host_out
+
+    router, hub, agents = host_router
+    got: list[tuple[str, list]] = []
+    subs = [
+        hub.declare_subscriber(key, lambda s: got.append((str(s.key_expr), decode_host_out(s.payload.to_bytes()))))
+        for key in (KEYS.host_out_all, f"{KEYS.host_out_all}/*")
+    ]
+    with TickRelay(router, KEYS, "h1") as relay:
+        relay.carry([0, 1, 2])
+        time.sleep(0.3)
+        hub.put(KEYS.host_in("h1"), encode_host_tick(0, [0, 1, 2], [{}] * 3, [b""] * 3, [None] * 3, [2, 0, 2]))
+        time.sleep(0.2)
+        for agent, shard in ((0, 2), (1, 0), (2, 2)):
+            agents.put(f"{KEYS.hosted_out('h1', agent)}/{shard}", bytes([agent]))
+        agents.put(f"{KEYS.hosted_out('h1', 5)}/0", b"not carried")
+        deadline = time.monotonic() + 5
+        while len(got) < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        time.sleep(0.2)
+        assert relay.malformed == 1
+    for sub in subs:
+        sub.undeclare()
+    assert sorted(got) == [
+        (f"{KEYS.host_out('h1')}/0", [(1, b"\x01")]),
+        (f"{KEYS.host_out('h1')}/2", [(0, b"\x00"), (2, b"\x02")]),
+    ]

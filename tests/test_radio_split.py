@@ -2,6 +2,9 @@
 loss draws against their formula, K radios deciding what one radio decides, and K proxy
 processes giving one proxy's result files byte for byte."""
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -174,3 +177,39 @@ def test_three_proxy_processes_give_one_proxys_result_files(tmp_path):
     logs = sorted(p.name for p in (tmp_path / "three" / "logs").glob("netem*.log"))
     assert logs == ["netem-1.log", "netem-2.log", "netem.log"]
     assert not list((tmp_path / "three").glob("network_ledger.shard*"))
+    # with a rate cap every proxy reads every output (each keeps every sender's transmit queue)
+    one, ticks = proxy_reads(tmp_path / "one")[0]
+    assert one == 8 * ticks and proxy_reads(tmp_path / "three") == [(one, ticks)] * 3
+
+
+def proxy_reads(run_dir: Path) -> list[tuple[int, int]]:
+    """(outputs read, ticks) of each proxy of a run, from its log: netem.log, netem-1.log, ..."""
+    found = []
+    for shard in range(64):
+        log = run_dir / "logs" / ("netem.log" if shard == 0 else f"netem-{shard}.log")
+        if not log.exists():
+            break
+        match = re.search(r"netem: read (\d+) agent outputs over (\d+) ticks", log.read_text())
+        assert match, f"{log.name} says nothing of what it read"
+        found.append((int(match[1]), int(match[2])))
+    return found
+
+
+@pytest.mark.slow
+def test_without_a_rate_cap_each_proxy_reads_only_its_regions_outputs_and_the_files_are_one_proxys(tmp_path):
+    """No rate cap, so no transmit queue spans ticks: the hub tells each agent its owner at every
+    tick, the agent answers on that proxy's key, and each of three proxies reads only the outputs
+    of the agents in its strips (they wander across strips over the run), carrying their actions
+    and events; the merged files are still one proxy's, byte for byte."""
+    from swarmbed.launch.runner import run_experiment
+
+    sets = ["agents.count=12", "allocator={name: cbba}", "run.duration=400", "run.stop_when_done=false"]
+    sets += ["network.loss=0.2", "network.range=80", *SPLIT]
+    reference_run(experiment(*sets), tmp_path / "reference")
+    run_experiment(experiment(*sets, "radio_split.shards=3"), tmp_path / "three", progress=False)
+    same_results(tmp_path / "reference", tmp_path / "three")
+    reads = proxy_reads(tmp_path / "three")
+    ticks = reads[0][1]
+    assert len(reads) == 3 and all(t == ticks for _, t in reads), reads
+    assert sum(n for n, _ in reads) == 12 * ticks, reads  # each output read once, by one proxy
+    assert all(0 < n < 12 * ticks for n, _ in reads), reads

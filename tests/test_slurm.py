@@ -15,6 +15,7 @@ from swarmbed.hosts.netns import LabError
 from swarmbed.hosts.slurm_lab import make_slurm_lab
 from swarmbed.launch.slurm_allocation import spread
 from tests.conftest import QUICKSTART, experiment, reference_run, same_results
+from tests.test_radio_split import proxy_reads
 
 
 @pytest.fixture
@@ -96,6 +97,10 @@ def test_a_run_in_an_allocation_spreads_its_agents_over_the_nodes_and_gives_the_
             name = "netem" if shard == 0 else f"netem-{shard}"
             text = (tmp_path / "slurm_run" / "logs" / f"{name}.log").read_text()
             assert f"proxy {shard} of 3 on Slurm node {node}" in text, text[-2000:]
+        # the nodes' relays sent each output to the one proxy that owns its agent at the tick
+        reads = proxy_reads(tmp_path / "slurm_run")
+        ticks = reads[0][1]
+        assert sum(n for n, _ in reads) == 9 * ticks and all(0 < n < 9 * ticks for n, _ in reads), reads
     # each node's daemon ran in its own namespace and logged its agents there
     for node, agent in (("n1", 0), ("n2", 4), ("n3", 8)):
         assert list((tmp_path / "runs" / "hosts").glob(f"slurm-*/{node}/*/agent_{agent}.log")), (node, agent)

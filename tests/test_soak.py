@@ -18,7 +18,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from swarmbed.campaigns.chaos import CHAOS_COLUMNS, CUT_SHORT, Chaos, ChaosError, ChaosPlan, load_chaos
+from swarmbed import config as cfg
+from swarmbed.campaigns.chaos import CHAOS_COLUMNS, CUT_SHORT, Chaos, ChaosError, ChaosPlan, check_plan, load_chaos
 from swarmbed.campaigns.soak import (
     PROCESSES,
     RUN,
@@ -157,6 +158,24 @@ def test_durations_and_chaos_files_are_checked_with_clear_errors(tmp_path):
         cwd=tmp_path,
     )
     assert out.returncode == 2 and "melt_cpu" not in out.stdout and "action" in out.stderr
+    # a rate cap mid-run in a radio split by region (no proxy keeps every sender's queue): refused
+    capped = tmp_path / "capped.yaml"
+    capped.write_text("events:\n  - action: rate_cap\n    at: [3]\n    for: 2\n    rate: 500\n")
+    split = ["--set", "radio_split.shards=2", "--set", "network.draws=per_copy"]
+    for rate, refused in ((["--set", "network.rate=null"], True), (["--set", "network.rate=4000"], False)):
+        exp = cfg.load(SOAK, [a for a in split + rate if a != "--set"])
+        if refused:
+            with pytest.raises(ChaosError, match="rate_cap: the radio is split by region"):
+                check_plan(load_chaos(capped), exp)
+        else:
+            check_plan(load_chaos(capped), exp)
+    out = subprocess.run(
+        [sys.executable, "-m", "swarmbed", "soak", str(SOAK), "--duration", "15s", "--chaos", str(capped), *split],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert out.returncode == 2 and out.stderr.count("\n") == 1 and "split by region" in out.stderr, out.stderr
 
 
 def test_faults_are_scheduled_only_where_their_window_ends_in_the_run_and_one_cut_short_is_no_breach(tmp_path):

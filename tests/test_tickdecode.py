@@ -65,7 +65,7 @@ def _old_way(obs_cls: type[Observation], data: bytes) -> object:
     if not isinstance(msg, TickIn):
         return msg
     try:
-        return TickIn(msg.tick, obs_cls.from_wire(msg.obs), msg.inbox, msg.decision)
+        return TickIn(msg.tick, obs_cls.from_wire(msg.obs), msg.inbox, msg.decision, msg.shard)
     except WireError as exc:
         return f"observation: {exc}"
 
@@ -78,7 +78,7 @@ def _new_way(decoder: TickDecoder, data: bytes) -> object:
     if not isinstance(msg, TickIn) or isinstance(msg.obs, Observation):
         return msg
     try:
-        return TickIn(msg.tick, decoder.obs_cls.from_wire(msg.obs), msg.inbox, msg.decision)
+        return TickIn(msg.tick, decoder.obs_cls.from_wire(msg.obs), msg.inbox, msg.decision, msg.shard)
     except WireError as exc:
         return f"observation: {exc}"
 
@@ -110,10 +110,17 @@ def test_the_typed_decoder_reads_every_sample_as_the_python_checks_do(name):
         for wire in _variants(obs.to_wire()):
             samples.append(encode_tick(9, wire, inbox))
             samples.append(encode_tick(9, wire, inbox, decision=-1))
+            samples.append(encode_tick(9, wire, inbox, shard=3))
         samples += [
             pack([0, 9, obs.to_wire(), inbox, None]),  # an explicit nil is no decision
             pack([0, 9, obs.to_wire(), inbox, 2**31]),
-            pack([0, 9, obs.to_wire(), inbox, 1, 2]),
+            pack([0, 9, obs.to_wire(), inbox, 1, 2]),  # a decision and the proxy that reads the answer
+            pack([0, 9, obs.to_wire(), inbox, None, 63]),
+            pack([0, 9, obs.to_wire(), inbox, None, 64]),
+            pack([0, 9, obs.to_wire(), inbox, None, -1]),
+            pack([0, 9, obs.to_wire(), inbox, None, True]),
+            pack([0, 9, obs.to_wire(), inbox, None, None]),
+            pack([0, 9, obs.to_wire(), inbox, 1, 2, 3]),
             pack([0, -1, obs.to_wire(), inbox]),
             pack([0, True, obs.to_wire(), inbox]),
             pack([0, 9, obs.to_wire(), "inbox"]),
@@ -134,10 +141,12 @@ def test_the_typed_decoder_reads_every_sample_as_the_python_checks_do(name):
             pass
         fast += isinstance(msg, TickIn) and isinstance(msg.obs, Observation)
     # the well-formed ticks took the typed way (not the old one behind it)
-    assert fast >= 4 * len(observations), fast
+    assert fast >= 6 * len(observations), fast
     obs = observations[0]
     msg = decoder.decode(encode_tick(9, obs.to_wire(), inbox, decision=5))
     assert isinstance(msg, TickIn) and _same(msg.obs, obs) and msg.decision == 5 and msg.inbox == inbox
+    msg = decoder.decode(encode_tick(9, obs.to_wire(), inbox, shard=7))
+    assert isinstance(msg, TickIn) and (msg.decision, msg.shard) == (None, 7) and _same(msg.obs, obs)
 
 
 @pytest.mark.parametrize("name", sorted(SCENARIOS))

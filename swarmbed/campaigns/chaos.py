@@ -62,8 +62,10 @@ from swarmbed.hosts import netns
 from swarmbed.launch.runner import LiveRun
 from swarmbed.records.rowfile import RowFile
 from swarmbed.results.campaign_folders import CHAOS as CHAOS_FILE
+from swarmbed.schema.experiment import Experiment
 from swarmbed.wire.child_process import process_name
 from swarmbed.wire.codec import NetemControl, encode_netem_control
+from swarmbed.wire.regions import by_region
 from swarmbed.wire.validation import validation_lines
 
 log = logging.getLogger("swarmbed.chaos")
@@ -104,6 +106,18 @@ class ChaosPlan(BaseModel):
     model_config = ConfigDict(extra="forbid")
     seed: int | None = Field(None, ge=0, description="seed of the draws; the run's seed when absent")
     events: list[ChaosEvent] = Field(default_factory=list)
+
+
+def check_plan(plan: ChaosPlan, exp: Experiment) -> None:
+    """Refuse, in one line, a plan the experiment cannot take: a rate cap in a radio split by region
+    (:func:`swarmbed.wire.regions.by_region`), whose proxies keep no transmit queue of senders
+    outside their region."""
+    if any(event.action == "rate_cap" for event in plan.events) and by_region(exp.radio_split, exp.network):
+        raise ChaosError(
+            "rate_cap: the radio is split by region (radio_split.shards > 1 and no network.rate), so no proxy "
+            "keeps the transmit queues of senders outside its region; set network.rate (every proxy then reads "
+            "every output) or leave rate_cap out"
+        )
 
 
 def load_chaos(path: Path) -> ChaosPlan:

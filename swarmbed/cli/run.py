@@ -233,7 +233,7 @@ def register_run(sub: Subparsers) -> None:
 
 
 def cmd_soak(args: argparse.Namespace) -> int:
-    from swarmbed.campaigns.chaos import ChaosError, load_chaos
+    from swarmbed.campaigns.chaos import ChaosError, check_plan, load_chaos
     from swarmbed.campaigns.soak import Thresholds, format_verdict, parse_duration, soak
     from swarmbed.launch.hub import HubOptions
 
@@ -244,6 +244,12 @@ def cmd_soak(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     exp = cfg.load(args.experiment, args.set, args.seed)
+    try:
+        if plan is not None:
+            check_plan(plan, exp)
+    except ChaosError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path("runs") / f"soak-{exp.name}" / f"seed{exp.run.seed}-{stamp}"
     limits = Thresholds(args.max_rss_slope, args.max_fd_growth, args.max_stall)

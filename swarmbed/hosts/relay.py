@@ -11,8 +11,9 @@ first it holds (an agent that died or is slow holds the others' up by no more). 
 and its router's routing of a tick both ways, grow with the hosts, not the agents, and the agents'
 samples are byte for byte what the hub would have put and the proxy would have taken.
 
-A relay puts only for the agents it was asked to start (a swap that brings an agent here starts
-it here too); a sample that names another is dropped, counted and logged, never forwarded. The
+A relay puts only for the agents it was asked to start (a swap or a restart that brings an agent
+here starts it here too); the inputs of any other agent a sample names are dropped, counted and
+logged, never forwarded, and the rest go on. The
 hub's access rules let no remote identity publish an agent's input, so the relay's puts reach the
 agents on this router only.
 """
@@ -27,7 +28,7 @@ from collections.abc import Iterable
 import zenoh
 
 from swarmbed.wire.codec import WireError, decode_host_tick, encode_host_out
-from swarmbed.wire.keys import Keys, agent_id_of
+from swarmbed.wire.keys import Keys, agent_id_of, out_shard_of
 
 log = logging.getLogger("swarmbed.host")
 BLOCK = zenoh.CongestionControl.BLOCK
@@ -47,7 +48,7 @@ class TickRelay:
         self.gathered = 0  # output samples sent on
         self.entities: list = []
         # outputs held for the proxy, the number the last tick asked for, and when the first came
-        self.held: list[tuple[int, bytes]] = []
+        self.held: list[tuple[int, int | None, bytes]] = []  # (agent, the proxy that reads it, output)
         self.expected = 0
         self.held_since = 0.0
         self.wake = threading.Condition(self.lock)
@@ -63,7 +64,10 @@ class TickRelay:
         self.entities = [
             self.out,
             s.declare_subscriber(k.host_in(self.host), zenoh.handlers.Callback(self._on_sample, indirect=False)),
-            s.declare_subscriber(k.hosted_out_all(self.host), zenoh.handlers.Callback(self._on_output, indirect=False)),
+            *(  # an answer on its agent's key, or below it on the key of the proxy that reads it
+                s.declare_subscriber(key, zenoh.handlers.Callback(self._on_output, indirect=False))
+                for key in (k.hosted_out_all(self.host), f"{k.hosted_out_all(self.host)}/*")
+            ),
         ]
         self.flusher = threading.Thread(target=self._flush_held, name=f"relay-{self.host}", daemon=True)
         self.flusher.start()
@@ -96,47 +100,59 @@ class TickRelay:
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
             tick = decode_host_tick(sample.payload.to_bytes())
-            with self.lock:
-                strangers = [a for a in tick.agents if a not in self.publishers]
-                if strangers:
-                    raise WireError(f"tick {tick.tick} names agents {strangers[:10]} this host does not carry")
-                publishers = [self.publishers[a] for a in tick.agents]
-                self.expected = len(tick.agents)
-            for publisher, (_agent, data) in zip(publishers, tick.samples(), strict=True):
-                publisher.put(data)
-            self.relayed += 1
         except WireError as exc:
-            self.malformed += 1
-            if self.malformed <= 20:
-                log.warning("host %s: malformed tick sample on %s dropped: %s", self.host, sample.key_expr, exc)
+            self._malformed(f"malformed tick sample on {sample.key_expr} dropped: {exc}")
+            return
+        with self.lock:
+            publishers = [self.publishers.get(a) for a in tick.agents]
+            self.expected = len(publishers) - publishers.count(None)
+        for publisher, (_agent, data) in zip(publishers, tick.samples(), strict=True):
+            if publisher is not None:
+                publisher.put(data)
+        self.relayed += 1
+        strangers = [a for a, p in zip(tick.agents, publishers, strict=True) if p is None]
+        if strangers:  # an agent whose process is not (or no longer) here: the others go on
+            self._malformed(f"tick {tick.tick}: inputs of agents {strangers[:10]}, not carried here, dropped")
+
+    def _malformed(self, what: str) -> None:
+        self.malformed += 1
+        if self.malformed <= 20:
+            log.warning("host %s: %s", self.host, what)
 
     def _on_output(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
         try:
-            agent = agent_id_of(key)
+            agent, shard = agent_id_of(key), out_shard_of(key)
             with self.lock:
                 if agent not in self.publishers:
                     raise WireError(f"an output of agent {agent}, which this host does not carry")
                 if not self.held:
                     self.held_since = time.monotonic()
                     self.wake.notify()
-                self.held.append((agent, sample.payload.to_bytes()))
+                self.held.append((agent, shard, sample.payload.to_bytes()))
                 full = len(self.held) >= self.expected
                 held = self._take_held() if full else None
             if held:
                 self._send(held)
         except WireError as exc:
-            self.malformed += 1
-            if self.malformed <= 20:
-                log.warning("host %s: output on %s dropped: %s", self.host, key, exc)
+            self._malformed(f"output on {key} dropped: {exc}")
 
-    def _take_held(self) -> list[tuple[int, bytes]]:
+    def _take_held(self) -> list[tuple[int, int | None, bytes]]:
         held, self.held = self.held, []
         return held
 
-    def _send(self, held: list[tuple[int, bytes]]) -> None:
-        self.out.put(encode_host_out([a for a, _ in held], [data for _, data in held]))
-        self.gathered += 1
+    def _send(self, held: list[tuple[int, int | None, bytes]]) -> None:
+        """One sample per proxy the outputs go to (one, unless the radio is split by region)."""
+        by_shard: dict[int | None, list[tuple[int, bytes]]] = {}
+        for agent, shard, data in held:
+            by_shard.setdefault(shard, []).append((agent, data))
+        for shard, outputs in by_shard.items():
+            data = encode_host_out([a for a, _ in outputs], [data for _, data in outputs])
+            if shard is None:
+                self.out.put(data)
+            else:  # a put: no publisher to keep per proxy
+                self.session.put(f"{self.keys.host_out(self.host)}/{shard}", data, congestion_control=BLOCK)
+            self.gathered += 1
 
     def _flush_held(self) -> None:
         """Send on what has been held for :data:`HOLD_S` (the rest of its tick is slow or gone)."""

@@ -8,7 +8,9 @@ message a subject is not allowed, before it reaches any subscriber.
 Identities of one run (users in the hub's dictionary):
 
 =============  =================================================================================
-``netem``      the proxy: takes agents' outputs, the world and the stop order; publishes steps
+``netem``      the proxy: takes agents' outputs, the world and the stop order; publishes steps.
+``netem-<i>``  proxy i of a radio split over proxies: as ``netem``, but holds only its own token
+               and reads, of the outputs split by region, only those sent to it
 ``agent-<i>``  agent i: publishes only ``agent/<i>/out``, reports and snapshots only for itself,
                receives only ``agent/<i>/in``
 operators      files made by ``swarmbed credentials --role operator`` and admitted with
@@ -43,7 +45,7 @@ import psutil
 from swarmbed.files import safefiles
 from swarmbed.wire.child_process import process_alive
 from swarmbed.wire.credentials import Identity, check_admitted, write_credentials, write_dictionary
-from swarmbed.wire.keys import HOSTS, PREFIX, Keys
+from swarmbed.wire.keys import HOSTS, PREFIX, Keys, proxy_name
 from swarmbed.wire.ros2_conventions import ADMIN_SPACE as ROS2_ADMIN_SPACE
 from swarmbed.wire.ros2_conventions import NODE_PREFIX as ROS2_NODE_PREFIX
 
@@ -79,7 +81,12 @@ def _agent_rules(k: Keys, user: str, ids: Iterable[int]) -> list[dict]:
     if not ids:
         return []
     return [
-        _allow(f"{user}-put", ["put"], [key for i in ids for key in (k.agent_out(i), k.agent_bt(i))]),
+        # an output goes on its key, or below it on the key of the proxy that reads it (a radio split by region)
+        _allow(
+            f"{user}-put",
+            ["put"],
+            [key for i in ids for key in (k.agent_out(i), f"{k.agent_out(i)}/*", k.agent_bt(i))],
+        ),
         _allow(f"{user}-subscribe", ["declare_subscriber"], [k.agent_in(i) for i in ids]),
         _allow(
             f"{user}-query",
@@ -98,8 +105,11 @@ def access_rules(
     hosts: Mapping[str, tuple[str, Iterable[int]]],
     ros2_domain: int | None = None,
     commanders: Iterable[str] = (),
+    proxies: int = 1,
 ) -> dict:
-    """The hub's ``access_control`` section for one run (default deny). ``hosts``: each admitted
+    """The hub's ``access_control`` section for one run (default deny). ``proxies``: the netem
+    proxies of the run, each its own identity (:func:`~swarmbed.wire.keys.proxy_name`: ``netem``,
+    ``netem-1``, ...) holding only its own token and reading only what goes to it. ``hosts``: each admitted
     host's user name -> (the host name it is bound to, the agents it may carry, as
     :func:`~swarmbed.schema.experiment.carriers` gives them). ``ros2_domain``: the ROS 2 domain the run
     publishes on, if it does; operators may then read its topics and join its graph (a ROS 2 node
@@ -110,14 +120,9 @@ def access_rules(
     rules = [
         _allow("deliver", EVERY_MESSAGE, ["**"], flow="egress"),  # what a subject may send is held at ingress
         _allow("netem", ["put"], [k.netem_step, k.view_traffic]),
-        _allow(
-            "netem-subscribe",
-            ["declare_subscriber"],
-            [k.world, k.agent_out_all, k.host_out_all, k.netem_stop, k.netem_control],
-        ),
+        _allow("netem-subscribe", ["declare_subscriber"], [k.world, k.netem_stop, k.netem_control]),
         _allow("netem-query", ["query"], [k.netem_config, k.netem_report]),
         _allow("netem-serve", ["declare_queryable", "reply"], [k.netem_awaiting]),
-        _allow("netem-alive", ["liveliness_token"], [k.alive_netem, k.alive_netem_shard_all]),
         _allow("watch-alive", ["declare_liveliness_subscriber", "liveliness_query"], [alive]),
         # operators read only what is published with DROP (progress, views): a reader that stops
         # reading must never hold up a key the run blocks on (ticks, outputs, steps, the world)
@@ -134,22 +139,23 @@ def access_rules(
         ros2, readers, netem_ros2 = _ros2_rules(ros2_domain)
         rules += ros2
         operator_rules += readers
-    subjects: list[dict] = [{"id": "netem", "usernames": ["netem"]}]
-    policies: list[dict] = [
-        {
-            "subjects": ["netem"],
-            "rules": [
-                "deliver",
-                "netem",
-                "netem-subscribe",
-                "netem-query",
-                "netem-serve",
-                "netem-alive",
-                "watch-alive",
-                *netem_ros2,
-            ],
-        }
-    ]
+    subjects: list[dict] = []
+    policies: list[dict] = []
+    tokens = k.netem_tokens(proxies)
+    for shard in range(proxies):
+        user = proxy_name(shard)
+        own = [  # every output not split by region, and those below the keys of this proxy
+            _allow(
+                f"{user}-outputs",
+                ["declare_subscriber"],
+                [f"{key}{below}" for key in (k.agent_out_all, k.host_out_all) for below in ("", f"/{shard}")],
+            ),
+            _allow(f"{user}-alive", ["liveliness_token"], [tokens[shard]]),
+        ]
+        rules += own
+        subjects.append({"id": user, "usernames": [user]})
+        base = ["deliver", "netem", "netem-subscribe", "netem-query", "netem-serve", "watch-alive", *netem_ros2]
+        policies.append({"subjects": [user], "rules": [*base, *(r["id"] for r in own)]})
     for i in agent_ids:
         user = agent_user(i)
         own = _agent_rules(k, user, [i])
@@ -173,7 +179,7 @@ def access_rules(
             # its relay (swarmbed.hosts.relay) takes the run's tick samples for this host, no other's,
             # and sends on its agents' outputs (the proxy takes only those of agents it may carry)
             _allow(f"{subject}-ticks", ["declare_subscriber"], [k.host_in(host)]),
-            _allow(f"{subject}-outputs", ["put"], [k.host_out(host)]),
+            _allow(f"{subject}-outputs", ["put"], [k.host_out(host), f"{k.host_out(host)}/*"]),
         ]
         subjects.append({"id": subject, "usernames": [user]})
         policies.append(
@@ -232,27 +238,31 @@ class RunAccess:
         admitted: Iterable[Identity] = (),
         carriers: Mapping[str, Iterable[int]] | None = None,
         ros2_domain: int | None = None,
+        proxies: int = 1,
     ) -> None:
         self.keys = keys
+        self.proxies = proxies
         self.ros2_domain = ros2_domain
         self.agent_ids = sorted(agent_ids)
         self.admitted = check_admitted(admitted)
         self.carriers = {host: sorted(ids) for host, ids in (carriers or {}).items()}  # host -> agents it may carry
-        taken = {"netem", *map(agent_user, self.agent_ids)}
+        proxy_users = [proxy_name(shard) for shard in range(proxies)]
+        taken = {*proxy_users, *map(agent_user, self.agent_ids)}
         for identity in self.admitted:
             if identity.user in taken:
                 raise ValueError(f"admitted user {identity.user!r} clashes with a name the run gives its own processes")
         remove_orphaned_folders()
         self.folder = Path(tempfile.mkdtemp(prefix=f"swarmbed-{keys.run_id}-"))  # mode 700
         claim_folder(self.folder)
-        own = [Identity.new("netem", "netem")] + [Identity.new(agent_user(i), "agent") for i in self.agent_ids]
+        own = [Identity.new(user, "netem") for user in proxy_users]
+        own += [Identity.new(agent_user(i), "agent") for i in self.agent_ids]
         self.files = {
             identity.user: write_credentials(self.folder / f"{identity.user}.json", identity) for identity in own
         }
         self.dictionary = write_dictionary(self.folder / "hub.dictionary", own + self.admitted)
 
     def credentials(self, process: str) -> str:
-        """The credentials file of ``netem`` or ``agent-<i>``."""
+        """The credentials file of a proxy (``netem``, ``netem-<i>``) or an agent (``agent-<i>``)."""
         return str(self.files[process])
 
     def hub_settings(self) -> dict[str, object]:
@@ -267,6 +277,7 @@ class RunAccess:
                     i.user: (i.host_name, self.carriers.get(i.host_name, [])) for i in self.admitted if i.role == "host"
                 },
                 ros2_domain=self.ros2_domain,
+                proxies=self.proxies,
             ),
         }
 

@@ -186,6 +186,7 @@ def _set_up(plan: RunPlan, fork_agents: bool, decider: Any) -> _Setup:
                 options.admit,
                 carriers(exp),
                 ros2_domain=exp.ros2.domain if exp.ros2 else None,
+                proxies=exp.radio_split.shards,
             )
             if options.auth
             else None
@@ -255,7 +256,7 @@ def _start_processes(plan: RunPlan, setup: _Setup) -> dict[str, Any]:
     try:
         shards = exp.radio_split.shards
         for shard in range(shards):  # a split radio's proxy i>0 logs to logs/netem-i.log
-            args = [*placement.common, *setup.identity("netem"), "--out", str(plan.out_dir.resolve())]
+            args = [*placement.common, *setup.identity(proxy_name(shard)), "--out", str(plan.out_dir.resolve())]
             args += ["--shard", str(shard)]
             if shards > 1 and plan.hub.remote_proxy is not None:
                 children.adopt(proxy_name(shard), plan.hub.remote_proxy(shard, args))

@@ -35,6 +35,7 @@ from swarmbed.files import safefiles
 from swarmbed.files.safefiles import open_fresh
 from swarmbed.launch.launcher import python_env
 from swarmbed.wire.credentials import CredentialsError, Identity, check_host_name, write_credentials
+from swarmbed.wire.keys import proxy_name
 from swarmbed.wire.zenoh_session import free_port
 
 
@@ -187,15 +188,15 @@ class SlurmHosts:
 
     def proxy_command(self, shard: int, args: list[str]) -> list[str]:
         """Proxy ``shard`` of a radio split over proxies as a job step on node ``shard`` mod the
-        nodes, connecting to the hub where the daemons do, with the run's proxy credentials copied
-        to the shared private folder (the run's own are in this machine's temporary folder)."""
+        nodes, connecting to the hub where the daemons do, with its own credentials copied to the
+        shared private folder (the run's own are in this machine's temporary folder)."""
         assert self._private is not None
         node = self.allocation.nodes[shard % len(self.allocation.nodes)]
         args = list(args)
         args[args.index("--connect") + 1] = self.hub
         if "--credentials" in args:
             at = args.index("--credentials") + 1
-            shared = self._private / "netem.credentials"
+            shared = self._private / f"{proxy_name(shard)}.credentials"
             if not shared.exists():
                 safefiles.write_bytes(shared, safefiles.read_regular(args[at], 1 << 20), mode=0o600)
             args[at] = str(shared)

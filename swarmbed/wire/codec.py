@@ -164,9 +164,17 @@ def decode_task_table(data: object) -> np.ndarray:
     return np.frombuffer(data, dtype=TASK_DTYPE)
 
 
-def encode_tick(tick: int, obs: dict, inbox: bytes, decision: int | None = None) -> bytes:
+#: the most proxies a radio may be split over (``radio_split.shards``)
+MAX_SHARDS = 64
+
+
+def encode_tick(tick: int, obs: dict, inbox: bytes, decision: int | None = None, shard: int | None = None) -> bytes:
     """A tick's input; ``decision``: what an outside decision maker chose for this agent's tick
-    (only for allocators that take their decisions from outside; the sample is unchanged otherwise)."""
+    (only for allocators that take their decisions from outside); ``shard``: the proxy of a radio
+    split by region that reads this agent's output of the tick (docs/machines.md). The sample is
+    unchanged where they are None."""
+    if shard is not None:
+        return pack([TAG_TICK, tick, obs, inbox, decision, shard])
     if decision is None:
         return pack([TAG_TICK, tick, obs, inbox])
     return pack([TAG_TICK, tick, obs, inbox, decision])
@@ -189,26 +197,43 @@ class HostTick:
     obs: list[dict]
     inboxes: list[bytes]
     decisions: list[int | None]
+    shards: list[int] | None = None  # each agent's proxy, in a radio split by region
 
     def samples(self) -> list[tuple[int, bytes]]:
         """Each agent's own tick sample, the bytes :func:`encode_tick` makes of its column entries."""
         tick = self.tick
+        shards = self.shards if self.shards is not None else [None] * len(self.agents)
         return [
-            (agent, encode_tick(tick, obs, inbox, decision))
-            for agent, obs, inbox, decision in zip(self.agents, self.obs, self.inboxes, self.decisions, strict=True)
+            (agent, encode_tick(tick, obs, inbox, decision, shard))
+            for agent, obs, inbox, decision, shard in zip(
+                self.agents, self.obs, self.inboxes, self.decisions, shards, strict=True
+            )
         ]
 
 
-def encode_host_tick(tick: int, agents: list[int], obs: list[dict], inboxes: list[bytes], decisions: list) -> bytes:
+def encode_host_tick(
+    tick: int,
+    agents: list[int],
+    obs: list[dict],
+    inboxes: list[bytes],
+    decisions: list,
+    shards: list[int] | None = None,
+) -> bytes:
     """One sample for a host instead of one per agent: the per-agent encoding and puts are the
     host's work (:mod:`swarmbed.hosts.relay`), the hub packs one list per host."""
-    return pack([tick, agents, obs, inboxes, decisions])
+    if shards is None:
+        return pack([tick, agents, obs, inboxes, decisions])
+    return pack([tick, agents, obs, inboxes, decisions, shards])
 
 
 def decode_host_tick(data: bytes) -> HostTick:
     msg = unpack(data, MAX_HOST_SAMPLE_BYTES)
-    _expect(isinstance(msg, list) and len(msg) == 5, "host tick must be [tick, agents, obs, inboxes, decisions]")
-    tick, agents, obs, inboxes, decisions = msg
+    _expect(
+        isinstance(msg, list) and len(msg) in (5, 6),
+        "host tick must be [tick, agents, obs, inboxes, decisions] or [..., shards]",
+    )
+    tick, agents, obs, inboxes, decisions = msg[:5]
+    shards = msg[5] if len(msg) == 6 else None
     _expect(_is_int(tick) and tick >= 0, "host tick: tick must be a non-negative int")
     _expect(
         all(isinstance(c, list) for c in (agents, obs, inboxes, decisions))
@@ -216,6 +241,15 @@ def decode_host_tick(data: bytes) -> HostTick:
         "host tick: agents, obs, inboxes and decisions must be lists of one length",
     )
     _expect(all(_is_int(a) and a >= 0 for a in agents), "host tick: agents must be non-negative ints")
+    _expect(
+        shards is None
+        or (
+            isinstance(shards, list)
+            and len(shards) == len(agents)
+            and all(_is_int(s) and 0 <= s < MAX_SHARDS for s in shards)
+        ),
+        f"host tick: shards must be one int in 0..{MAX_SHARDS - 1} per agent",
+    )
     _expect(len(set(agents)) == len(agents), "host tick: an agent named twice")
     _expect(all(isinstance(o, dict) for o in obs), "host tick: each obs must be a map")
     _expect(all(isinstance(b, bytes) for b in inboxes), "host tick: each inbox must be bytes")
@@ -223,7 +257,7 @@ def decode_host_tick(data: bytes) -> HostTick:
         all(d is None or (_is_int(d) and -(2**31) <= d < 2**31) for d in decisions),
         "host tick: a decision must be a 32-bit int or nil",
     )
-    return HostTick(tick, agents, obs, inboxes, decisions)
+    return HostTick(tick, agents, obs, inboxes, decisions, shards)
 
 
 def encode_host_out(agents: list[int], outputs: list[bytes]) -> bytes:
@@ -296,6 +330,7 @@ class TickIn:
     obs: Any  # the observation's wire map, or the typed observation (``swarmbed.wire.tickdecode``)
     inbox: bytes
     decision: int | None = None  # a decision made outside the agent (the ``ros2`` allocator's), if any
+    shard: int | None = None  # the proxy that reads this tick's output (a radio split by region), if any
 
 
 @dataclass(frozen=True, slots=True)
@@ -316,7 +351,10 @@ def decode_agent_in(data: bytes) -> TickIn | StopIn | ControlIn:
     msg = unpack(data, MAX_AGENT_SAMPLE_BYTES)
     _expect(isinstance(msg, list) and bool(msg) and _is_int(msg[0]), "agent input must be [tag, ...]")
     if msg[0] == TAG_TICK:
-        _expect(len(msg) in (4, 5), "tick must be [0, tick, obs, inbox] or [0, tick, obs, inbox, decision]")
+        _expect(
+            len(msg) in (4, 5, 6),
+            "tick must be [0, tick, obs, inbox], [0, tick, obs, inbox, decision] or [..., decision, shard]",
+        )
         tick, obs, inbox = msg[1:4]
         _expect(_is_int(tick) and tick >= 0, "tick must be a non-negative int")
         _expect(isinstance(obs, dict), "obs must be a map")
@@ -324,8 +362,15 @@ def decode_agent_in(data: bytes) -> TickIn | StopIn | ControlIn:
         if len(msg) == 4:
             return TickIn(tick, obs, inbox)
         decision = msg[4]
-        _expect(_is_int(decision) and -(2**31) <= decision < 2**31, "a decision must be a 32-bit int")
-        return TickIn(tick, obs, inbox, decision)
+        _expect(
+            (decision is None and len(msg) == 6) or (_is_int(decision) and -(2**31) <= decision < 2**31),
+            "a decision must be a 32-bit int",
+        )
+        if len(msg) == 5:
+            return TickIn(tick, obs, inbox, decision)
+        shard = msg[5]
+        _expect(_is_int(shard) and 0 <= shard < MAX_SHARDS, f"a shard must be an int in 0..{MAX_SHARDS - 1}")
+        return TickIn(tick, obs, inbox, decision, shard)
     if msg[0] == TAG_STOP:
         _expect(len(msg) == 2 and isinstance(msg[1], str), "stop must be [1, reason]")
         return StopIn(msg[1])

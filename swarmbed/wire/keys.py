@@ -254,6 +254,16 @@ class HostKeys:
         return f"{HOSTS}/{self.name}/stop"
 
 
+def out_shard_of(key: str) -> int | None:
+    """The proxy an output key names below ``.../out`` (a radio split by region), None for ``.../out``."""
+    head, _, last = str(key).rpartition("/")
+    if last == "out":
+        return None
+    if not head.endswith("/out"):
+        raise WireError(f"not an output key: {key!r}")
+    return _number(last)
+
+
 def run_host_of(key: str, root: str) -> str:
     """The host name in ``<root>/host/<name>/...`` (a run's host keys); a WireError if there is none."""
     parts, head = str(key).split("/"), f"{root}/host".split("/")

@@ -24,6 +24,7 @@ import numpy as np
 
 from swarmbed.wire.codec import (
     MAX_AGENT_SAMPLE_BYTES,
+    MAX_SHARDS,
     TAG_TICK,
     TASK_DTYPE,
     ControlIn,
@@ -35,6 +36,7 @@ from swarmbed.wire.observation import Observation, _is_union, _optional
 
 _TICK = Annotated[int, msgspec.Meta(ge=0)]
 _DECISION = Annotated[int, msgspec.Meta(ge=-(2**31), lt=2**31)]
+_SHARD = Annotated[int, msgspec.Meta(ge=0, lt=MAX_SHARDS)]
 _SCALARS = (int, float, bool, str, bytes)
 
 
@@ -79,7 +81,9 @@ class TickDecoder:
                 ("tick", _TICK),
                 ("obs", obs_wire),
                 ("inbox", bytes),
-                ("decision", _DECISION | msgspec.UnsetType, msgspec.UNSET),  # only where one is sent
+                # only where one is sent; nil only before a shard
+                ("decision", _DECISION | None | msgspec.UnsetType, msgspec.UNSET),
+                ("shard", _SHARD | msgspec.UnsetType, msgspec.UNSET),  # a radio split by region's
             ],
             array_like=True,
             tag=TAG_TICK,
@@ -98,9 +102,11 @@ class TickDecoder:
                 pass  # not a tick, or not a well-formed one: the old way says which
             else:
                 typed = self._typed(wire.obs)
-                if typed is not None:
-                    decision = None if wire.decision is msgspec.UNSET else wire.decision
-                    return TickIn(wire.tick, typed, wire.inbox, decision)
+                unset = msgspec.UNSET
+                if typed is not None and (wire.decision is not None or wire.shard is not unset):
+                    decision = None if wire.decision is unset else wire.decision
+                    shard = None if wire.shard is unset else wire.shard
+                    return TickIn(wire.tick, typed, wire.inbox, decision, shard)
         return decode_agent_in(data)
 
     def observation(self, raw: dict[str, Any]) -> Observation:
