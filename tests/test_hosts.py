@@ -272,3 +272,23 @@ def test_a_host_the_hub_does_not_admit_says_so_and_one_it_admits_says_connected(
     assert "not connected to" in refused and "does not admit this host's credentials" in refused, refused
     admitted = _host_says(True, tmp_path / "admitted")
     assert "host lab1: connected to" in admitted and "not connected" not in admitted, admitted
+
+
+def test_on_the_real_time_clock_a_hosts_relay_misses_exactly_the_ticks_its_slow_agent_missed(lab, tmp_path):
+    """The real-time case of tests/test_realtime.py with its sleeper (agent 1) and agent 0 on a
+    host: the relay sends agent 0's answers on without waiting for the sleeper's late ones, so the
+    same four ticks, and only those, are missed, each late message booked dropped ``late``."""
+    from tests.test_realtime import SLEEPY, SLOW_TICKS
+
+    lab.add_host("h1")
+    (tmp_path / "sleepy.py").write_text(SLEEPY)
+    allocator = f"allocator={{name: '{tmp_path / 'sleepy.py'}:Sleepy', peers: 2, ticks: {SLOW_TICKS}, sleep: 0.35}}"
+    sets = [allocator, "agents.count=4", "run.duration=20", "run.stop_when_done=false", "placement={h1: '0-1'}"]
+    sets += ["run.clock=realtime", "run.speed=2", "run.deadline=0.5"]
+    run = run_experiment(experiment(*sets), tmp_path / "rt", progress=False, hub=lab.hub_options())
+    clock, net = run.summary["realtime"], run.summary["network"]
+    assert clock["late_ticks"] == {"1": len(SLOW_TICKS)}, clock
+    assert net["dropped"]["late"] == 2 * len(SLOW_TICKS) and net["copies"] == net["delivered"] + sum(
+        net["dropped"].values()
+    )
+    assert list((lab.logs / "h1").glob("*/agent_1.log")), "agent 1 did not run on host h1"

@@ -7,7 +7,8 @@ inside the host's router, encodes and puts each agent's tick sample on its ``age
 the agent's process reads it as before. The agents a host daemon starts put their outputs on
 ``host/<name>/agent/<i>/out``, which only this router hears; the relay sends them on to the proxy
 together (``host/<name>/out``) once every agent of the tick answered, or :data:`HOLD_S` after the
-first it holds (an agent that died or is slow holds the others' up by no more). So the hub's puts,
+first it holds (an agent that died or is slow holds the others' up by no more; an answer after
+that goes on at once, before its agent can do anything else). So the hub's puts,
 and its router's routing of a tick both ways, grow with the hosts, not the agents, and the agents'
 samples are byte for byte what the hub would have put and the proxy would have taken.
 
@@ -47,10 +48,13 @@ class TickRelay:
         self.relayed = 0  # tick samples split
         self.gathered = 0  # output samples sent on
         self.entities: list = []
-        # outputs held for the proxy, the number the last tick asked for, and when the first came
+        # outputs held for the proxy, the number the last tick asked for, how many came, and when
+        # the first held came
         self.held: list[tuple[int, int | None, bytes]] = []  # (agent, the proxy that reads it, output)
         self.expected = 0
+        self.answers = 0
         self.held_since = 0.0
+        self.waited_out = False  # the hold ran out this tick: what comes later goes on at once
         self.wake = threading.Condition(self.lock)
         self.closed = False
 
@@ -106,6 +110,7 @@ class TickRelay:
         with self.lock:
             publishers = [self.publishers.get(a) for a in tick.agents]
             self.expected = len(publishers) - publishers.count(None)
+            self.answers, self.waited_out = 0, False
         for publisher, (_agent, data) in zip(publishers, tick.samples(), strict=True):
             if publisher is not None:
                 publisher.put(data)
@@ -130,8 +135,11 @@ class TickRelay:
                     self.held_since = time.monotonic()
                     self.wake.notify()
                 self.held.append((agent, shard, sample.payload.to_bytes()))
-                full = len(self.held) >= self.expected
-                held = self._take_held() if full else None
+                self.answers += 1
+                # the last of the tick, or one after the hold ran out: sent on at once, before its
+                # agent can do anything else (leave, say), as it would reach the proxy directly
+                done = self.answers >= self.expected or self.waited_out
+                held = self._take_held() if done else None
             if held:
                 self._send(held)
         except WireError as exc:
@@ -167,4 +175,5 @@ class TickRelay:
                     self.wake.wait(wait)
                     continue
                 held = self._take_held()
+                self.waited_out = True
             self._send(held)
