@@ -5,9 +5,10 @@
 
 For each K, the same lock-step run in processes: the no-op allocator, every agent messaging every
 other a tick (so the copies, N x (N - 1) a tick, are the proxies' work), range 60 and loss 0.1 on
-the quick start's 200 x 150 arena, per-copy draws, strips 50 wide (``--strip-width``). Printed
-per K: ticks per second; the proxies' CPU per tick, all of them together and the busiest one (the critical path
-once each proxy has its own core); and whether the result files equal K = 1's. Run it from a
+the quick start's 200 x 150 arena, per-copy draws, regions as bands of equal shares of the agents
+(``--regions strips --strip-width 50`` for strips). Printed per K: ticks per second; the proxies'
+CPU per tick, all of them together and the busiest one (the critical path once each proxy has its
+own core); and whether the result files equal K = 1's. Run it from a
 separate non-editable install on an otherwise idle machine; on a machine with fewer cores than
 K + 1 the proxies share cores with the agents, and ticks per second say little.
 """
@@ -26,7 +27,7 @@ ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ("summary.json", "timeseries.csv", "agents.csv", "network_ledger.csv")
 
 
-def measure(agents: int, ticks: int, shards: int, out: Path, strip_width: float = 50.0) -> dict:
+def measure(agents: int, ticks: int, shards: int, out: Path, regions: str = "bands", strip_width: float = 50.0) -> dict:
     sets = [
         f"agents.count={agents}",
         f"allocator={{name: noop, peers: {agents - 1}}}",
@@ -35,6 +36,7 @@ def measure(agents: int, ticks: int, shards: int, out: Path, strip_width: float 
         "network.range=60",
         "network.loss=0.1",
         "network.draws=per_copy",
+        f"radio_split.regions={regions}",
         f"radio_split.strip_width={strip_width}",
         f"radio_split.shards={shards}",
     ]
@@ -54,22 +56,22 @@ def main() -> None:
     ap.add_argument("--ticks", type=int, default=100)
     ap.add_argument("--shards", type=int, nargs="+", default=[1, 2, 4])
     ap.add_argument(
-        "--strip-width",
-        type=float,
-        default=50.0,
-        help="regions' width (default 50); narrower strips spread clustered agents more evenly over the proxies",
+        "--regions", choices=["bands", "strips"], default="bands", help="radio_split.regions (default bands)"
+    )
+    ap.add_argument(
+        "--strip-width", type=float, default=50.0, help="the strips' width, with --regions strips (default 50)"
     )
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         first: Path | None = None
         print(
-            f"{args.agents} agents, {args.ticks} ticks, {args.agents * (args.agents - 1):,} copies a tick, "
-            f"strips {args.strip_width:g} wide"
+            f"{args.agents} agents, {args.ticks} ticks, {args.agents * (args.agents - 1):,} copies a tick, regions: "
+            + ("bands of equal shares" if args.regions == "bands" else f"strips {args.strip_width:g} wide")
         )
         print(f"{'K':>3} {'ticks/s':>8} {'proxies ms/tick':>16} {'busiest ms/tick':>16}  results")
         for k in args.shards:
             out = Path(tmp) / f"k{k}"
-            m = measure(args.agents, args.ticks, k, out, args.strip_width)
+            m = measure(args.agents, args.ticks, k, out, args.regions, args.strip_width)
             first = first or out
             same = all((first / f).read_bytes() == (out / f).read_bytes() for f in RESULTS)
             print(

@@ -67,8 +67,18 @@ def test_per_copy_loss_drops_the_configured_share(tmp_path):
 
 
 def test_owners_are_strips_dealt_in_turn():
-    split = RadioSplit(shards=3, strip_width=10.0)
+    split = RadioSplit(shards=3, regions="strips", strip_width=10.0)
     assert owners([0.0, 9.99, 10.0, 25.0, 30.0, 41.0, -0.5], split).tolist() == [0, 0, 1, 2, 0, 1, 2]
+
+
+def test_owners_are_bands_of_equal_shares_of_the_agents_by_x():
+    """Ranked by x, ties in the sample's order; K bands of N / K agents (where K does not divide N,
+    some bands one more), however the agents crowd."""
+    split = RadioSplit(shards=3)
+    assert owners([5.0, 1.0, 9.0, 1.0, 100.0, 2.0, 3.0], split).tolist() == [1, 0, 2, 0, 2, 0, 1]
+    crowd = np.concatenate([np.full(70, 10.0), np.linspace(0, 200, 30)])
+    assert np.bincount(owners(crowd, RadioSplit(shards=4))).tolist() == [25, 25, 25, 25]
+    assert owners([], split).tolist() == [] and owners([3.0], split).tolist() == [0]
 
 
 def test_a_receivers_inbox_parts_merge_in_the_order_one_radio_delivers():
@@ -82,12 +92,22 @@ def test_a_receivers_inbox_parts_merge_in_the_order_one_radio_delivers():
             merge_inbox(bad)
 
 
-def test_k_exchanges_give_one_exchanges_steps_and_ledger_as_agents_wander_across_regions(tmp_path):
-    """Thirty agents on a random walk over strips of 20 (so owners change), broadcasting and
-    unicasting with a rate cap, a queue limit, latency and per-copy loss: the merged step of three
+@pytest.mark.parametrize("regions", ["strips", "bands"])
+@pytest.mark.parametrize("capped", [True, False], ids=["rate-capped", "by-region"])
+def test_k_exchanges_give_one_exchanges_steps_and_ledger_as_agents_wander_across_regions(tmp_path, regions, capped):
+    """Thirty agents on a random walk over strips of 20 or bands (so owners change), broadcasting
+    and unicasting with latency and per-copy loss, with a rate cap and a queue limit (each exchange
+    reads every output) or without (each reads its own region's): the merged step of three
     exchanges equals one exchange's every tick (inboxes byte for byte), and so does the ledger."""
-    sets = ["agents.count=30", "run.duration=80", *SPLIT, "radio_split.strip_width=20"]
-    net = ["network.loss=0.25", "network.rate=120", "network.limit=3", "network.latency=1", "network.range=60"]
+    sets = [
+        "agents.count=30",
+        "run.duration=80",
+        *SPLIT,
+        "radio_split.strip_width=20",
+        f"radio_split.regions={regions}",
+    ]
+    net = ["network.loss=0.25", "network.latency=1", "network.range=60"]
+    net += ["network.rate=120", "network.limit=3"] if capped else []
     (tmp_path / "one").mkdir()
     (tmp_path / "three").mkdir()
     one = Exchange(netem_spec(experiment(*sets, *net)), tmp_path / "one")

@@ -260,11 +260,12 @@ class RadioSplit(Strict):
     Where the copies are decided is not part of the results: config.yaml leaves this out."""
 
     shards: int = Field(1, ge=1, le=64, description="netem proxies; each decides the copies its region's agents send")
-    strip_width: float = Field(
-        50.0,
-        gt=0,
-        description="regions are strips this wide across x, dealt to the proxies in turn (strip j: proxy j mod shards)",
+    regions: Literal["bands", "strips"] = Field(
+        "bands",
+        description="bands: at every tick, proxy j owns the j-th of K bands across x holding an equal share of the "
+        "agents; strips: strips strip_width wide across x, dealt to the proxies in turn (strip j: proxy j mod shards)",
     )
+    strip_width: float = Field(50.0, gt=0, description="the width of a strip (regions: strips)")
 
 
 #: what a radio split over proxies cannot do yet, each with why (refused before any process starts)

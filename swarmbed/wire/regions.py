@@ -1,8 +1,11 @@
 """Which netem proxy of a radio split over regions owns each agent (``radio_split``,
-docs/machines.md), as the hub, the proxies and the in-process engine all compute it.
+docs/machines.md), as the hub, the proxies and the in-process engine all compute it, from the
+agents' x in the world sample of the tick.
 
-Regions are strips of ``strip_width`` across x, dealt to the proxies in turn: the agent at x is in
-strip ``floor(x / strip_width)``, owned by proxy ``strip mod K``, from the world sample of the tick.
+``bands`` (the default): the agents ranked by x (ties by their order in the sample, which is by
+id), proxy j owns ranks ``j N / K`` up to ``(j + 1) N / K``: K bands across x holding an equal
+share of the agents however they crowd. ``strips``: the agent at x is in strip
+``floor(x / strip_width)``, owned by proxy ``strip mod K``.
 """
 
 from __future__ import annotations
@@ -20,6 +23,9 @@ class RadioSplit(Protocol):
     def shards(self) -> int: ...
 
     @property
+    def regions(self) -> str: ...
+
+    @property
     def strip_width(self) -> float: ...
 
 
@@ -32,8 +38,12 @@ class Network(Protocol):
 
 def owners(xs: Sequence[float] | np.ndarray, split: RadioSplit) -> np.ndarray:
     """The proxy that owns each agent at positions ``xs``."""
-    strips = np.floor(np.asarray(xs, dtype=float) / split.strip_width).astype(np.int64)
-    return strips % split.shards
+    x = np.asarray(xs, dtype=float)
+    if split.regions == "strips":
+        return np.floor(x / split.strip_width).astype(np.int64) % split.shards
+    rank = np.empty(len(x), dtype=np.int64)
+    rank[np.argsort(x, kind="stable")] = np.arange(len(x))
+    return rank * split.shards // max(len(x), 1)
 
 
 def by_region(split: RadioSplit, network: Network) -> bool:
