@@ -19,12 +19,12 @@ BLOCK = zenoh.CongestionControl.BLOCK
 
 
 class TickInputs:
-    """The publishers of agents' and hosts' tick samples. ``split``: a radio split by region, else None."""
+    """The publishers of agents' and hosts' tick samples. ``split``: a radio split by region, else
+    None. ``agent_pubs``, one per agent, are the coordinator's (it orders agents on them too)."""
 
-    def __init__(
-        self, session: zenoh.Session, keys: Keys, agent_pubs: Sequence[zenoh.Publisher], split: RadioSplit | None
-    ) -> None:
-        self.session, self.keys, self.agent_pubs, self.split = session, keys, agent_pubs, split
+    def __init__(self, session: zenoh.Session, keys: Keys, split: RadioSplit | None) -> None:
+        self.session, self.keys, self.split = session, keys, split
+        self.agent_pubs: Sequence[zenoh.Publisher] = ()
         self.host_pubs: dict[str, zenoh.Publisher] = {}
 
     def put(

@@ -163,6 +163,8 @@ class ZenohTransport(TickHook):
         self.decision_source = allocator.decision_source
         self.commands: Any = decider if self.decision_source == "env" else None
         self.stages = Stages() if stages_enabled() else None  # benchmarks/profile_tick.py
+        split = exp.radio_split if by_region(exp.radio_split, exp.network) else None
+        self.inputs = TickInputs(session, keys, split)  # where each tick's inputs go
         self.watched = Watched(exp, self.world, self.recorder, self.agents, self.clock, self._put_status)
 
     def hooks(self) -> list[TickHook]:
@@ -195,8 +197,7 @@ class ZenohTransport(TickHook):
         self._entities += TreeRelay(s, k, self.trees).declare()
         self.agent_pubs = [s.declare_publisher(k.agent_in(i), congestion_control=BLOCK) for i in range(self.n)]
         self.agents.agent_pubs = self.agent_pubs
-        split = self.exp.radio_split if by_region(self.exp.radio_split, self.exp.network) else None
-        self.inputs = TickInputs(s, k, self.agent_pubs, split)
+        self.inputs.agent_pubs = self.agent_pubs
         self.world_pub = s.declare_publisher(k.world, congestion_control=BLOCK)
         self.stop_pub = s.declare_publisher(k.netem_stop, congestion_control=BLOCK)
         # progress for watchers: dropped rather than waited for when a watcher is slow (never blocks a tick)
@@ -233,8 +234,7 @@ class ZenohTransport(TickHook):
         return 2.0 * float(getattr(self.scenario.params, "arrival_radius", 0.5))
 
     def close(self) -> None:
-        if hasattr(self, "inputs"):
-            self.inputs.close()
+        self.inputs.close()
         self.commands = None  # its entities are the node's, closed with it
         if self.ros2 is not None:
             self.ros2.close()

@@ -36,6 +36,7 @@ class Exchange:
         self.shard = shard
         # each proxy of the split reads only the outputs of the agents it owns (no rate cap)
         self.by_region = by_region(spec.split, spec.network)
+        self._owned: tuple[int, set[int]] = (-1, set())  # (tick, owned then): the proxy asks first
         if self.split is None:
             self.sink = RowFile(out_dir / LEDGER, LEDGER_COLUMNS)
         else:
@@ -55,6 +56,16 @@ class Exchange:
         """The inboxes made for the tick about to be routed arrived (:meth:`Radio.confirm`)."""
         self.radio.confirm()
 
+    def owned(self, w: WorldSample) -> set[int] | None:
+        """The agents whose copies this part of a split radio decides at tick ``w.tick`` (the
+        owners of :mod:`swarmbed.wire.regions`); None where the radio is not split."""
+        if self.split is None:
+            return None
+        if self._owned[0] != w.tick:
+            mine = owners(w.xs, self.split).tolist()
+            self._owned = (w.tick, {a for a, o in zip(w.ids, mine, strict=True) if o == self.shard})
+        return self._owned[1]
+
     def route(
         self,
         w: WorldSample,
@@ -68,10 +79,9 @@ class Exchange:
         since the last step (reported once); ``events``: counts carried in (late answers)."""
         gone = set(lost)
         members = set(w.ids)
-        owned: set[int] | None = None
+        owned = self.owned(w)
         order: dict[int, list[int]] | None = None
-        if self.split is not None:
-            owned = {a for a, o in zip(w.ids, owners(w.xs, self.split).tolist(), strict=True) if o == self.shard}
+        if owned is not None:
             order = {}
             if self.by_region:  # what a proxy reads: its own agents' outputs (all it is sent)
                 outs = {a: o for a, o in outs.items() if a in owned}

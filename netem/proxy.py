@@ -44,7 +44,7 @@ from swarmbed.wire.codec import (
 from swarmbed.wire.control import NetemFatal, Transport, encode_report
 from swarmbed.wire.keys import Keys, agent_id_of, alive_agent_of, run_host_of
 from swarmbed.wire.membership import fetch_spec, hand_over
-from swarmbed.wire.regions import by_region, owners
+from swarmbed.wire.regions import by_region
 from swarmbed.wire.stages import Stages
 from swarmbed.wire.stages import enabled as stages_enabled
 from swarmbed.wire.tcp_counters import tcp_counters
@@ -262,10 +262,8 @@ class Proxy:
     def _readers(self, world: WorldSample) -> list[int]:
         """The agents whose answers to tick ``world.tick`` this proxy reads: every one, or in a
         radio split by region those it owns then."""
-        if not self.by_region:
-            return world.ids
-        mine = owners(world.xs, self.spec.split).tolist()
-        return [a for a, owner in zip(world.ids, mine, strict=True) if owner == self.shard]
+        owned = self.exchange.owned(world) if self.by_region else None
+        return world.ids if owned is None else [a for a in world.ids if a in owned]
 
     def _take_out(self, key: str, data: bytes) -> AgentOut | None:
         """An agent's output, if it follows the contract: decodable, sent on its own agent's key,

@@ -1,10 +1,10 @@
 """A radio split over K netem proxies (``radio_split``): who decides which copies, and the merge of
 the K proxies' steps, ledgers and reports into what one proxy gives.
 
-Regions are strips of ``strip_width`` across x, dealt to the proxies in turn
-(:func:`swarmbed.wire.regions.owners`). The owner of a copy is the owner of its sender at the tick
-it is sent (the world sample of that tick); an agent that crosses into another strip changes owner
-at the next tick. Without a rate cap an agent's output goes to its owner only (the hub tells each
+Regions are bands across x holding equal shares of the agents, or strips dealt to the proxies in
+turn (:func:`swarmbed.wire.regions.owners`). The owner of a copy is the owner of its sender at the
+tick it is sent (the world sample of that tick); an agent that crosses into another region changes
+owner at the next tick. Without a rate cap an agent's output goes to its owner only (the hub tells each
 agent its owner in its tick sample), which decides its copies and carries its action and events;
 with one, every proxy receives every output and keeps every sender's transmit queue (so a sender's
 queue moves with it for free), and proxy 0 carries every action and event
